@@ -38,7 +38,7 @@ def rotation_matrices(roll: np.ndarray, pitch: np.ndarray, yaw: np.ndarray) -> n
     cr, sr = np.cos(roll), np.sin(roll)
     cp, sp = np.cos(pitch), np.sin(pitch)
     cy, sy = np.cos(yaw), np.sin(yaw)
-    r = np.empty(np.shape(roll) + (3, 3))
+    r = np.empty((*np.shape(roll), 3, 3))
     r[..., 0, 0] = cy * cp
     r[..., 0, 1] = cy * sp * sr - sy * cr
     r[..., 0, 2] = cy * sp * cr + sy * sr

@@ -1,0 +1,275 @@
+"""Maximum-likelihood fit of one output axis of a triad: eq. (1) with the drift of eq. (3).
+
+Model for axis k over block means (see :mod:`station.fit.blocks`):
+
+    y_b = X_b beta + d * E_b(T_c) + s(t_b) + e_b
+
+* ``X_b beta``: the linear part of eq. (1): row k of M times the reference, the static
+  bias b_stat, and optional extra regressors (gyro g-sensitivity);
+* ``d * E_b``: the deterministic part of the Gauss-Markov drift, g(0) = 1 decaying as
+  exp(-t/T_c) (eq. 3 without its driving noise), averaged over the block;
+* ``s(t)``: the stochastic part of eq. (3), a GM process started at 0 at power-on, with
+  stationary variance ``q``: Cov(s_i, s_j) = q (exp(-|t_i-t_j|/T_c) - exp(-(t_i+t_j)/T_c));
+* ``e_b``: white noise, variance sigma_w^2 / n_b (sigma_w known from sample differences).
+
+The linear parameters are profiled out by generalized least squares; (T_c, q) are found
+by maximizing the Gaussian likelihood. Uncertainties of (beta, d, T_c) come from the
+Fisher information of the mean with the fitted covariance; q from the curvature of the
+profile likelihood in log q. This is the "better estimator" that replaces the paper's
+ACF reading of eq. (4) (see :mod:`station.fit.acf`), and it uses all settled data of
+the session, not only the power-on rest.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import linalg, optimize
+
+from station.fit.blocks import Blocks, block_exp_mean
+
+_LOG_TC_MIN = np.log(2.0)
+_LOG_Q_MIN, _LOG_Q_MAX = -25.0, 12.0  # q relative to the white variance of a block
+
+
+@dataclass(frozen=True, eq=False)
+class AxisFit:
+    """Result for one axis.
+
+    Attributes:
+        beta: linear parameters (columns of the design, then ``d`` last if resolved).
+        beta_cov: their covariance (including the T_c uncertainty when resolved).
+        tc_s, tc_std_s: correlation time and its standard uncertainty (NaN if unresolved).
+        drift_noise, drift_noise_std: stationary std of the stochastic drift sqrt(q).
+        drift_resolved: whether the exponential drift is significant (Wald test).
+        nll: negative log-likelihood at the optimum; lr: Wald statistic of the drift.
+        residual: block residuals y - mean model, (m,).
+    """
+
+    beta: np.ndarray
+    beta_cov: np.ndarray
+    tc_s: float
+    tc_std_s: float
+    drift_noise: float
+    drift_noise_std: float
+    drift_resolved: bool
+    nll: float
+    lr: float
+    residual: np.ndarray
+
+
+class _Problem:
+    """Concentrated likelihood of one axis for given (T_c, q)."""
+
+    def __init__(self, blocks: Blocks, y: np.ndarray, design: np.ndarray, sigma_w: float, with_drift: bool) -> None:
+        self.t = blocks.t_s
+        self.h = blocks.width_s
+        self.y = y
+        self.design = design
+        self.white = sigma_w**2 / blocks.count
+        self.with_drift = with_drift
+        self.dist = np.abs(self.t[:, None] - self.t[None, :])
+        self.tsum = self.t[:, None] + self.t[None, :]
+        # scale of q: the white variance of a typical block
+        self.q0 = float(np.median(self.white))
+
+    def covariance(self, tc: float, q: float) -> np.ndarray:
+        cov = q * (np.exp(-self.dist / tc) - np.exp(-self.tsum / tc))
+        cov[np.diag_indices_from(cov)] += self.white
+        return cov
+
+    def columns(self, tc: float) -> np.ndarray:
+        if not self.with_drift:
+            return self.design
+        return np.column_stack([self.design, block_exp_mean(self.t, self.h, tc)])
+
+    def solve(self, tc: float, q: float) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+        """(nll, beta, whitened design, cholesky factor) at (tc, q)."""
+        chol = linalg.cholesky(self.covariance(tc, q), lower=True, check_finite=False)
+        x = self.columns(tc)
+        xw = linalg.solve_triangular(chol, x, lower=True, check_finite=False)
+        yw = linalg.solve_triangular(chol, self.y, lower=True, check_finite=False)
+        beta, *_ = linalg.lstsq(xw, yw, check_finite=False)
+        r = yw - xw @ beta
+        nll = 0.5 * float(r @ r) + float(np.log(np.diag(chol)).sum())
+        # REML: the linear parameters absorb part of the slow stochastic drift; without
+        # this term its variance q is biased towards zero (and with it every uncertainty).
+        # Only the fixed design enters: the drift column depends on T_c, and its collinearity
+        # with the static bias at long T_c would otherwise be rewarded.
+        x0 = xw[:, : self.design.shape[1]]
+        sign, logdet = np.linalg.slogdet(x0.T @ x0)
+        nll += 0.5 * float(logdet) if sign > 0 else np.inf
+        return nll, beta, xw, chol
+
+    def nll(self, theta: np.ndarray) -> float:
+        tc, q = float(np.exp(theta[0])), self.q0 * float(np.exp(theta[1]))
+        try:
+            return self.solve(tc, q)[0]
+        except (linalg.LinAlgError, ValueError):
+            return np.inf
+
+
+def _optimize(problem: _Problem, log_tc_max: float) -> np.ndarray:
+    """Coarse grid over (log T_c, log q), then Nelder-Mead within bounds."""
+    grid_tc = np.linspace(np.log(5.0), log_tc_max, 10)
+    grid_q = np.array([-10.0, -2.0, 2.0])
+    best = min(((problem.nll(np.array([a, b])), a, b) for a in grid_tc for b in grid_q), key=lambda z: z[0])
+    lo = np.array([_LOG_TC_MIN, _LOG_Q_MIN])
+    hi = np.array([log_tc_max + 1.0, _LOG_Q_MAX])
+
+    def bounded(theta: np.ndarray) -> float:
+        if np.any(theta < lo) or np.any(theta > hi):
+            return np.inf
+        return problem.nll(theta)
+
+    res = optimize.minimize(
+        bounded,
+        np.array([best[1], best[2]]),
+        method="Nelder-Mead",
+        options={"xatol": 2e-3, "fatol": 1e-3, "maxiter": 120},
+    )
+    return np.asarray(res.x)
+
+
+def fit_axis(
+    blocks: Blocks,
+    axis: int,
+    design: np.ndarray,
+    sigma_w: float,
+    *,
+    lr_threshold: float = 9.0,
+) -> AxisFit:
+    """Fit axis ``axis`` of ``blocks.y`` with linear ``design`` (m, p) plus GM drift.
+
+    ``sigma_w`` is the white-noise std per sample (sensor unit). The exponential drift
+    is kept when its Wald statistic ``d^2 / var(d)`` at the fitted T_c exceeds
+    ``lr_threshold`` (9: 3 sigma) at the fitted T_c or at any T_c up to the record's span;
+    otherwise ``d`` is reported as 0 and T_c as NaN.
+    """
+    y = blocks.y[:, axis]
+    span = float(blocks.t_s.max() + 0.5 * blocks.width_s.max())
+    log_tc_max = np.log(max(50.0 * span, 100.0))
+
+    full = _Problem(blocks, y, design, sigma_w, with_drift=True)
+    theta = _optimize(full, log_tc_max)
+    tc, q = float(np.exp(theta[0])), full.q0 * float(np.exp(theta[1]))
+    nll, beta, xw, chol = full.solve(tc, q)
+    p = xw.shape[1]
+    # Wald statistic of d, z^2 = d^2 / var(d | T_c), at the fitted T_c and, since d and b_stat
+    # trade off at long T_c, its largest value over T_c from 5 s to the record's span.
+    lr = 0.0
+    for tc_g in (tc, *np.exp(np.linspace(np.log(5.0), np.log(max(span, 10.0)), 8))):
+        _, beta_g, xw_g, _ = full.solve(float(tc_g), q)
+        lr = max(lr, float(beta_g[-1] ** 2 / _inverse(xw_g.T @ xw_g)[-1, -1]))
+    resolved = bool(lr > lr_threshold)
+    problem = full if resolved else _Problem(blocks, y, design, sigma_w, with_drift=False)
+    theta_q = theta if resolved else np.array([theta[0], _optimize_q(problem, theta)])
+    q = problem.q0 * float(np.exp(theta_q[1]))
+    # The stochastic drift q is often poorly determined (a Gauss-Markov process slower than
+    # the record looks like a random offset and trend). ML underestimates it, and with it
+    # every other uncertainty, so uncertainties are evaluated at the upper end of q's
+    # 1-sigma profile interval.
+    q_lo_edge, q_hi_edge = _profile_interval(lambda u: problem.nll(np.array([theta_q[0], u])), theta_q[1],
+                                             _LOG_Q_MIN, _LOG_Q_MAX)
+    sq = np.sqrt(problem.q0 * np.exp(np.array([q_lo_edge, theta_q[1], q_hi_edge])))
+    sq_std = float(max(sq[2] - sq[1], sq[1] - sq[0]))
+    q_unc = problem.q0 * float(np.exp(q_hi_edge))
+    if resolved:
+        nll, beta, _, _ = full.solve(tc, q)
+        _, _, xw, chol = full.solve(tc, q_unc)
+        # Fisher information of the mean parameters (beta, d, T_c).
+        d = beta[-1]
+        step = 1e-4 * tc
+        de_dtc = (block_exp_mean(blocks.t_s, blocks.width_s, tc + step)
+                  - block_exp_mean(blocks.t_s, blocks.width_s, tc - step)) / (2 * step)
+        jw = np.column_stack([xw, linalg.solve_triangular(chol, d * de_dtc, lower=True, check_finite=False)])
+        beta_cov = _inverse(jw.T @ jw)[:p, :p]
+        # T_c is non-linear: its uncertainty from the profile likelihood (beta re-fitted)
+        lo, hi = _profile_interval(lambda u: full.solve(float(np.exp(u)), q_unc)[0], float(np.log(tc)),
+                                   _LOG_TC_MIN, log_tc_max + 1.0)
+        tc_std = 0.5 * float(np.exp(hi) - np.exp(lo))
+        residual = y - full.columns(tc) @ beta
+    else:
+        # No significant drift: report d = 0 and the level from the model without drift,
+        # widening the uncertainties by what an unresolved drift could hide. T_c is not
+        # known then, so take the worst case over T_c from 5 s to the record's span (a
+        # drift much slower than the record is indistinguishable from the static bias
+        # and cannot be bounded by any recording of this length).
+        nll, beta, _, _ = problem.solve(tc, q)
+        _, _, xw, chol = problem.solve(tc, q_unc)
+        cov0 = _inverse(xw.T @ xw)
+        inflation = np.zeros(p - 1)
+        hidden_d = 0.0
+        for tc_g in np.exp(np.linspace(np.log(5.0), np.log(max(span, 10.0)), 8)):
+            _, beta_g, xw_g, _ = full.solve(tc_g, q_unc)
+            var_g = _inverse(xw_g.T @ xw_g)
+            hidden = float(beta_g[-1] ** 2 + var_g[-1, -1])
+            # GLS regression of the drift column on the design: how much of it each beta absorbs
+            absorbed = cov0 @ (xw.T @ xw_g[:, -1])
+            inflation = np.maximum(inflation, hidden * absorbed**2)
+            hidden_d = max(hidden_d, hidden)
+        beta_cov = np.zeros((p, p))
+        beta_cov[:-1, :-1] = cov0 + np.diag(inflation)
+        beta_cov[-1, -1] = hidden_d
+        beta = np.append(beta, 0.0)
+        residual = y - design @ beta[:-1]
+        tc, tc_std = float("nan"), float("nan")
+    return AxisFit(
+        beta=beta,
+        beta_cov=beta_cov,
+        tc_s=tc,
+        tc_std_s=tc_std,
+        drift_noise=float(np.sqrt(q)),
+        drift_noise_std=sq_std,
+        drift_resolved=resolved,
+        nll=nll,
+        lr=lr,
+        residual=residual,
+    )
+
+
+def _optimize_q(problem: _Problem, theta: np.ndarray) -> float:
+    """log q (relative to q0) maximizing the likelihood at fixed T_c."""
+    res = optimize.minimize_scalar(
+        lambda u: problem.nll(np.array([theta[0], u])), bounds=(_LOG_Q_MIN, _LOG_Q_MAX), method="bounded",
+        options={"xatol": 1e-2},
+    )
+    return float(res.x)
+
+
+def _profile_interval(f: Callable[[float], float], x0: float, lo: float, hi: float) -> tuple[float, float]:
+    """Where ``f`` (a negative log-likelihood) rises by 1/2 from ``f(x0)`` on each side.
+
+    A side on which it never rises that much within [lo, hi] extends to the bound.
+    """
+    f0 = f(x0)
+    edges = []
+    for bound in (lo, hi):
+        inside, edge = x0, bound
+        for x in np.linspace(x0, bound, 9)[1:]:
+            if f(x) - f0 > 0.5:
+                edge = x
+                break
+            inside = x
+        if edge != bound or f(bound) - f0 > 0.5:
+            for _ in range(6):  # bisect between the last point inside and the first outside
+                mid = 0.5 * (inside + edge)
+                if f(mid) - f0 > 0.5:
+                    edge = mid
+                else:
+                    inside = mid
+        edges.append(edge)
+    return edges[0], edges[1]
+
+
+def _inverse(info: np.ndarray) -> np.ndarray:
+    """Inverse of an information matrix, with Jacobi scaling (columns differ by many decades)."""
+    d = np.sqrt(np.clip(np.diag(info), 1e-300, None))
+    scaled = info / np.outer(d, d)
+    try:
+        inv = linalg.inv(scaled, check_finite=False)
+    except linalg.LinAlgError:
+        inv = linalg.pinv(scaled)
+    return inv / np.outer(d, d)

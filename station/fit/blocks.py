@@ -1,0 +1,117 @@
+"""Block means of settled samples: the sufficient statistics of the triad fit.
+
+Within a block the rig reference is constant (a settled rest, pose or rate step)
+and the drift ``exp(-t/T_c)`` varies little, so the least-squares problem over
+all samples equals the problem over block means weighted by their counts (the
+exponential is averaged exactly over each block, see :func:`block_exp_mean`).
+This keeps the joint fit of eq. (1) over a whole session small and fast.
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True, eq=False)
+class Blocks:
+    """Block means of one triad's samples.
+
+    Attributes:
+        t_s: block centre time since power-on (s), shape (m,).
+        width_s: time spanned by the block's samples plus one sample period (s), (m,).
+        count: samples in the block, (m,).
+        y: mean measurement per axis (sensor unit), (m, 3).
+        ref: mean rig reference (sensor unit), (m, 3).
+        force: mean rig specific-force reference (m/s^2), (m, 3); for g-sensitivity.
+        segment: segment index the block belongs to, (m,).
+    """
+
+    t_s: np.ndarray
+    width_s: np.ndarray
+    count: np.ndarray
+    y: np.ndarray
+    ref: np.ndarray
+    force: np.ndarray
+    segment: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.t_s.shape[0])
+
+
+def make_blocks(
+    t_s: np.ndarray,
+    y: np.ndarray,
+    ref: np.ndarray,
+    force: np.ndarray,
+    keep: np.ndarray,
+    runs: list[tuple[int, int, int]],
+    sample_period_s: float,
+    max_blocks: int,
+) -> Blocks:
+    """Cut each run ``(segment, start, stop)`` into blocks and average the kept samples.
+
+    The block length is chosen so that the whole session gives about ``max_blocks``
+    blocks; every run gives at least one. ``keep`` masks out outliers.
+    """
+    total = sum(float(t_s[b - 1] - t_s[a]) + sample_period_s for _, a, b in runs)
+    block_s = max(total / max_blocks, 20 * sample_period_s)
+    bounds: list[tuple[int, int, int]] = []
+    for seg, a, b in runs:
+        dur = float(t_s[b - 1] - t_s[a]) + sample_period_s
+        k = max(1, round(dur / block_s))
+        edges = np.linspace(a, b, k + 1).round().astype(int)
+        bounds.extend((seg, int(lo), int(hi)) for lo, hi in itertools.pairwise(edges) if hi > lo)
+    starts = np.array([lo for _, lo, _ in bounds])
+    stops = np.array([hi for _, _, hi in bounds])
+    # label each sample with its block (samples outside blocks get label -1)
+    label = np.full(len(t_s), -1, dtype=np.int64)
+    for i, (lo, hi) in enumerate(zip(starts, stops, strict=True)):
+        label[lo:hi] = i
+    sel = (label >= 0) & keep
+    lab = label[sel]
+    m = len(bounds)
+    count = np.bincount(lab, minlength=m).astype(np.float64)
+    if np.any(count == 0):
+        raise ValueError("a block has no usable sample")
+
+    def mean(values: np.ndarray) -> np.ndarray:
+        v = values[sel]
+        if v.ndim == 1:
+            return np.bincount(lab, weights=v, minlength=m) / count
+        return np.stack([np.bincount(lab, weights=v[:, j], minlength=m) for j in range(v.shape[1])], axis=1) / count[
+            :, None
+        ]
+
+    t_first = t_s[starts]
+    t_last = t_s[stops - 1]
+    return Blocks(
+        t_s=0.5 * (t_first + t_last),
+        width_s=t_last - t_first + sample_period_s,
+        count=count,
+        y=mean(y),
+        ref=mean(ref),
+        force=mean(force),
+        segment=np.array([seg for seg, _, _ in bounds]),
+    )
+
+
+def block_exp_mean(t_s: np.ndarray, width_s: np.ndarray, tc_s: float) -> np.ndarray:
+    """Mean of ``exp(-t/T_c)`` over blocks centred at ``t_s`` of width ``width_s``.
+
+    For a block [t - h/2, t + h/2]: ``exp(-t/T_c) * sinh(x)/x`` with ``x = h/(2 T_c)``.
+    """
+    x = 0.5 * width_s / tc_s
+    return np.exp(-t_s / tc_s) * _sinhc(x)
+
+
+def _sinhc(x: np.ndarray) -> np.ndarray:
+    """sinh(x)/x, accurate near 0."""
+    small = np.abs(x) < 1e-4
+    out = np.empty_like(x)
+    xs = x[~small]
+    out[~small] = np.sinh(xs) / xs
+    out[small] = 1.0 + x[small] ** 2 / 6.0
+    return out

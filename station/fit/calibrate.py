@@ -1,0 +1,307 @@
+"""The full parameter fit of one session: eq. (1) for both triads, with the drift of eq. (3).
+
+Everything is read from the recording (segments, kinds, references, metadata): no
+pose order, rate list, duration or sample rate is assumed.
+
+* Accelerometer: all settled rest and pose samples in one maximum-likelihood problem per
+  output axis (row of M_a, b_stat, b_drift, T_c; :mod:`station.fit.axis_ml`).
+* Gyroscope: all settled rest, pose and rate samples likewise (row of M_w, optionally
+  g-sensitivity); without rate steps, M_w from known-angle rotations (``angle.N``,
+  :mod:`station.fit.angle`).
+* Noise: white-noise std per sample (the paper's sigma) from sample differences, Allan
+  deviation with IEEE 952 coefficients on the rest residual.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy.ndimage import uniform_filter1d
+from threadpoolctl import threadpool_limits
+
+from station import __version__
+from station.fit import allan
+from station.fit.angle import fit_known_angles
+from station.fit.axis_ml import AxisFit, fit_axis
+from station.fit.blocks import Blocks, block_exp_mean, make_blocks
+from station.fit.checks import check_session
+from station.fit.params import AllanCoefficients, ParameterSet, TriadParams
+from station.session.model import Kind, Session
+
+AXES = "xyz"
+
+
+@dataclass(frozen=True)
+class FitOptions:
+    """Knobs of the fit.
+
+    Attributes:
+        max_blocks: about how many block means the session is reduced to per triad.
+        g_sensitivity: also fit the gyro's response to specific force (rad/s per m/s^2).
+        min_pose_samples: a settled segment shorter than this is refused.
+        outlier_sigma: samples further than this many robust sigmas from their local
+            mean are outliers and left out of the fit.
+        drift_lr_threshold: Wald-statistic threshold for keeping the exponential drift (9: 3 sigma).
+        moving_average_length: n of Algorithm 1's moving average (eq. 6); the paper uses 40.
+    """
+
+    max_blocks: int = 100
+    g_sensitivity: bool = False
+    min_pose_samples: int = 50
+    outlier_sigma: float = 6.0
+    drift_lr_threshold: float = 9.0
+    moving_average_length: int = 40
+
+
+@dataclass(frozen=True)
+class _Noise:
+    sigma: np.ndarray  # (3,) white-noise std per sample
+    sigma_std: np.ndarray  # (3,)
+    keep: np.ndarray  # (n,) bool: not an outlier on any axis
+    outliers: np.ndarray  # (3,) count per axis
+
+
+def _settled_runs(session: Session, kinds: tuple[Kind, ...], ref: np.ndarray) -> list[tuple[int, int, int]]:
+    runs = []
+    for seg in session.segments_of(*kinds):
+        if np.all(np.isfinite(ref[seg.start:seg.stop])):
+            runs.append((seg.index, seg.start, seg.stop))
+    return runs
+
+
+def _noise(session: Session, data: np.ndarray, runs: list[tuple[int, int, int]], outlier_sigma: float) -> _Noise:
+    """White-noise std from first differences within settled runs (robust to outliers), and outlier flags."""
+    keep = np.ones(len(session), dtype=bool)
+    diffs: list[np.ndarray] = []
+    for _, a, b in runs:
+        diffs.append(np.diff(data[a:b], axis=0))
+    d = np.concatenate(diffs)
+    # robust std of a difference of two samples is sqrt(2) sigma
+    sigma_robust = 1.4826 * np.median(np.abs(d - np.median(d, axis=0)), axis=0) / np.sqrt(2.0)
+    sigma_robust = np.maximum(sigma_robust, 1e-12)
+    outliers = np.zeros(3, dtype=int)
+    for _, a, b in runs:
+        x = data[a:b]
+        window = max(3, min(b - a, 101))
+        local = uniform_filter1d(x, size=window, axis=0, mode="nearest")
+        bad = np.abs(x - local) > outlier_sigma * sigma_robust
+        outliers += bad.sum(axis=0)
+        keep[a:b] &= ~bad.any(axis=1)
+    # the plain std of the clean differences is efficient; use it for the value
+    clean: list[np.ndarray] = []
+    for _, a, b in runs:
+        k = keep[a:b]
+        pair = k[1:] & k[:-1]
+        clean.append(np.diff(data[a:b], axis=0)[pair])
+    dc = np.concatenate(clean)
+    sigma = dc.std(axis=0) / np.sqrt(2.0)
+    # differences of white noise: lag-1 correlation -1/2 inflates the variance of the estimate by 1.5
+    sigma_std = sigma * np.sqrt(1.5 / (2.0 * max(len(dc) - 1, 1)))
+    return _Noise(sigma=sigma, sigma_std=sigma_std, keep=keep, outliers=outliers)
+
+
+@dataclass(frozen=True)
+class _TriadLinear:
+    """Per-axis fits of one triad, and how to evaluate the mean model."""
+
+    fits: list[AxisFit]
+    n_ref: int  # number of reference columns (3 with M, 0 when M comes from angles)
+    extra: int  # extra regressor columns (3 for g-sensitivity)
+
+
+def _design(blocks: Blocks, with_ref: bool, g_sens: bool) -> np.ndarray:
+    cols = [blocks.ref] if with_ref else []
+    cols.append(np.ones((len(blocks), 1)))
+    if g_sens:
+        cols.append(blocks.force)
+    return np.column_stack(cols)
+
+
+def _fit_triad(
+    session: Session,
+    data: np.ndarray,
+    ref: np.ndarray,
+    runs: list[tuple[int, int, int]],
+    noise: _Noise,
+    options: FitOptions,
+    *,
+    with_ref: bool,
+    g_sens: bool,
+) -> tuple[_TriadLinear, Blocks]:
+    force = np.nan_to_num(session.ref_accel_mps2)
+    blocks = make_blocks(
+        session.t_s, data, np.nan_to_num(ref), force, noise.keep, runs, 1.0 / session.sample_rate_hz, options.max_blocks
+    )
+    design = _design(blocks, with_ref, g_sens)
+    fits = [
+        fit_axis(blocks, k, design, float(noise.sigma[k]), lr_threshold=options.drift_lr_threshold) for k in range(3)
+    ]
+    return _TriadLinear(fits=fits, n_ref=3 if with_ref else 0, extra=3 if g_sens else 0), blocks
+
+
+def _unpack(tri: _TriadLinear) -> dict[str, np.ndarray]:
+    """Arrange per-axis results into M, b_stat, b_drift, T_c, ... with uncertainties."""
+    m = np.full((3, 3), np.nan)
+    m_std = np.full((3, 3), np.nan)
+    g = np.zeros((3, 3))
+    g_std = np.zeros((3, 3))
+    out: dict[str, np.ndarray] = {k: np.zeros(3) for k in (
+        "bias_static", "bias_static_std", "bias_drift", "bias_drift_std", "correlation_time_s",
+        "correlation_time_s_std", "drift_noise", "drift_noise_std",
+    )}
+    for k, f in enumerate(tri.fits):
+        std = np.sqrt(np.clip(np.diag(f.beta_cov), 0.0, None))
+        r = tri.n_ref
+        if r:
+            m[k], m_std[k] = f.beta[:r], std[:r]
+        out["bias_static"][k], out["bias_static_std"][k] = f.beta[r], std[r]
+        if tri.extra:
+            g[k], g_std[k] = f.beta[r + 1:r + 1 + tri.extra], std[r + 1:r + 1 + tri.extra]
+        out["bias_drift"][k], out["bias_drift_std"][k] = f.beta[-1], std[-1]  # 0 when unresolved
+        out["correlation_time_s"][k], out["correlation_time_s_std"][k] = f.tc_s, f.tc_std_s
+        out["drift_noise"][k], out["drift_noise_std"][k] = f.drift_noise, f.drift_noise_std
+    out.update(misalignment=m, misalignment_std=m_std, g_sensitivity=g, g_sensitivity_std=g_std)
+    return out
+
+
+def mean_model(p: dict[str, np.ndarray], t_s: np.ndarray, ref: np.ndarray, force: np.ndarray) -> np.ndarray:
+    """The fitted eq. (1) without noise: M ref + b_stat + b_drift exp(-t/T_c) (+ G force)."""
+    out = np.nan_to_num(ref) @ p["misalignment"].T + p["bias_static"]
+    tc = p["correlation_time_s"]
+    for k in range(3):
+        if np.isfinite(tc[k]) and p["bias_drift"][k] != 0.0:
+            out[:, k] += p["bias_drift"][k] * np.exp(-t_s / tc[k])
+    if np.any(p["g_sensitivity"]):
+        out += np.nan_to_num(force) @ p["g_sensitivity"].T
+    return out
+
+
+def _allan(session: Session, residual: np.ndarray, keep: np.ndarray) -> AllanCoefficients:
+    """IEEE 952 coefficients from the longest still segment's residual."""
+    still = session.segments_of(Kind.REST) or session.segments_of(Kind.POSE)
+    seg = max(still, key=len)
+    x = residual[seg.start:seg.stop]
+    k = keep[seg.start:seg.stop]
+    x = np.where(k[:, None], x, np.nan)
+    # replace outliers by the local mean: the Allan variance needs a gap-free record
+    x = np.where(np.isnan(x), np.nanmean(x, axis=0), x)
+    vals: dict[str, list[float]] = {n: [] for n in (
+        "random_walk", "random_walk_std", "bias_instability", "bias_instability_std",
+        "rate_random_walk", "rate_random_walk_std",
+    )}
+    for j in range(3):
+        fit = allan.fit_ieee952(allan.overlapping_allan_deviation(x[:, j], session.sample_rate_hz))
+        for name in vals:
+            vals[name].append(float(getattr(fit, name)))
+    return AllanCoefficients(**{n: np.array(v) for n, v in vals.items()})
+
+
+def _quality(
+    session: Session, name: str, residual: np.ndarray, runs: list[tuple[int, int, int]], keep: np.ndarray
+) -> dict[str, Any]:
+    rms_seg = {}
+    parts = []
+    for seg, a, b in runs:
+        r = residual[a:b][keep[a:b]]
+        parts.append(r)
+        rms_seg[str(seg)] = np.sqrt(np.mean(r**2, axis=0)).round(9).tolist()
+    allr = np.concatenate(parts)
+    return {"rms": np.sqrt(np.mean(allr**2, axis=0)).round(9).tolist(), "segments": rms_seg, "samples": len(allr)}
+
+
+def fit_session(session: Session, options: FitOptions | None = None) -> ParameterSet:
+    """Fit the full parameter set of eq. (1) to a session recording.
+
+    Raises :class:`station.errors.FitError` with a one-line reason when the recording
+    cannot give a trustworthy result (see :mod:`station.fit.checks`).
+    """
+    # The linear algebra here is on ~100x100 matrices: BLAS threads only spin.
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _fit_session(session, options or FitOptions())
+
+
+def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
+    gyro_method = check_session(session, min_pose_samples=options.min_pose_samples)
+    ts = 1.0 / session.sample_rate_hz
+
+    # --- accelerometer: rest + poses -----------------------------------------
+    a_runs = _settled_runs(session, (Kind.REST, Kind.POSE), session.ref_accel_mps2)
+    a_noise = _noise(session, session.accel_mps2, a_runs, options.outlier_sigma)
+    a_tri, _ = _fit_triad(session, session.accel_mps2, session.ref_accel_mps2, a_runs, a_noise, options,
+                          with_ref=True, g_sens=False)
+    a = _unpack(a_tri)
+
+    # --- gyroscope: rest + poses + rate steps, or static + known angles --------
+    static_ref = np.where(np.isnan(session.ref_gyro_radps), 0.0, session.ref_gyro_radps)
+    if gyro_method == "rate":
+        g_runs = _settled_runs(session, (Kind.REST, Kind.POSE, Kind.RATE), session.ref_gyro_radps)
+        g_ref = session.ref_gyro_radps
+    else:
+        g_runs = _settled_runs(session, (Kind.REST, Kind.POSE), static_ref)
+        g_ref = static_ref
+    g_noise = _noise(session, session.gyro_radps, g_runs, options.outlier_sigma)
+    g_tri, _ = _fit_triad(session, session.gyro_radps, g_ref, g_runs, g_noise, options,
+                          with_ref=gyro_method == "rate", g_sens=options.g_sensitivity)
+    g = _unpack(g_tri)
+    angle_report: dict[str, Any] = {}
+    if gyro_method == "angle":
+        bias_t = g["bias_static"] + np.zeros((len(session), 3))
+        for k in range(3):
+            if np.isfinite(g["correlation_time_s"][k]) and g["bias_drift"][k] != 0:
+                bias_t[:, k] += g["bias_drift"][k] * np.exp(-session.t_s / g["correlation_time_s"][k])
+        if np.any(g["g_sensitivity"]):
+            bias_t += np.nan_to_num(session.ref_accel_mps2) @ g["g_sensitivity"].T
+        angle_fit = fit_known_angles(session, bias_t, g["bias_static_std"], g_noise.sigma)
+        g["misalignment"], g["misalignment_std"] = angle_fit.misalignment, angle_fit.misalignment_std
+        angle_report = angle_fit.report
+
+    # --- residuals, noise figures and quality ----------------------------------
+    a_res = session.accel_mps2 - mean_model(a, session.t_s, session.ref_accel_mps2, session.ref_accel_mps2)
+    g_res = session.gyro_radps - mean_model(g, session.t_s, g_ref, session.ref_accel_mps2)
+    quality = {
+        "accel": _quality(session, "accel", a_res, a_runs, a_noise.keep),
+        "gyro": _quality(session, "gyro", g_res, g_runs, g_noise.keep),
+        "gyro_scale_method": gyro_method,
+        "outliers": {"accel": a_noise.outliers.tolist(), "gyro": g_noise.outliers.tolist()},
+        "drift_likelihood_ratio": {
+            "accel": [round(f.lr, 3) for f in a_tri.fits],
+            "gyro": [round(f.lr, 3) for f in g_tri.fits],
+        },
+    }
+    if angle_report:
+        quality["known_angle"] = angle_report
+
+    def triad(
+        p: dict[str, np.ndarray], noise: _Noise, res: np.ndarray, runs: list[tuple[int, int, int]]
+    ) -> TriadParams:
+        mask = np.zeros(len(session), dtype=bool)
+        for _, s0, s1 in runs:
+            mask[s0:s1] = True
+        mask &= noise.keep
+        return TriadParams(
+            noise_std=noise.sigma,
+            noise_std_std=noise.sigma_std,
+            allan=_allan(session, res, noise.keep),
+            residual_rms=np.sqrt(np.mean(res[mask] ** 2, axis=0)),
+            **p,
+        )
+
+    return ParameterSet(
+        serial=session.serial,
+        sample_period_s=ts,
+        moving_average_length=options.moving_average_length,
+        accel=triad(a, a_noise, a_res, a_runs),
+        gyro=triad(g, g_noise, g_res, g_runs),
+        quality=quality,
+        source={
+            "software": f"station {__version__}",
+            "samples": len(session),
+            "duration_s": round(session.duration_s, 6),
+            "sample_rate_hz": session.sample_rate_hz,
+        },
+    )
+
+
+__all__ = ["FitOptions", "block_exp_mean", "fit_session", "mean_model"]

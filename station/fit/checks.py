@@ -1,0 +1,113 @@
+"""Input checks before a fit: a recording that cannot give a trustworthy parameter set is
+refused with a one-line reason (which sensor, axis or segment, and why).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from station.errors import FitError
+from station.session.model import Kind, Session
+
+AXES = "xyz"
+
+
+def check_time(session: Session) -> None:
+    """Refuse empty sessions, non-finite or non-increasing time."""
+    if len(session) < 2:
+        raise FitError("session has fewer than 2 samples")
+    t = session.t_s
+    if not np.all(np.isfinite(t)):
+        i = int(np.flatnonzero(~np.isfinite(t))[0])
+        raise FitError(f"time is not finite at sample {i}")
+    bad = np.flatnonzero(np.diff(t) <= 0)
+    if bad.size:
+        i = int(bad[0]) + 1
+        raise FitError(f"time does not increase at sample {i} (t={t[i]:.6f} s after {t[i - 1]:.6f} s)")
+
+
+def check_finite(session: Session) -> None:
+    """Refuse NaN or infinite measurements."""
+    for name, data in (("accel", session.accel_mps2), ("gyro", session.gyro_radps)):
+        bad = ~np.isfinite(data)
+        if bad.any():
+            i, j = np.argwhere(bad)[0]
+            raise FitError(f"{name} {AXES[j]} is NaN or infinite at sample {i} (t={session.t_s[i]:.4f} s)")
+
+
+def check_axes_alive(session: Session, name: str, data: np.ndarray, mask: np.ndarray) -> None:
+    """Refuse a dead (constant) axis and a saturated (clipped) axis among the ``mask``ed samples."""
+    index = np.flatnonzero(mask)
+    for j in range(3):
+        x = data[index, j]
+        if np.ptp(x) == 0.0:
+            raise FitError(f"{name} {AXES[j]} is constant at {x[0]:.6g} over the whole session (dead axis)")
+        for label, value in (("maximum", x.max()), ("minimum", x.min())):
+            at = x == value
+            n = int(at.sum())
+            if n >= 20 and n >= 0.002 * len(x):
+                seg = int(session.segment[index[np.flatnonzero(at)[0]]])
+                raise FitError(
+                    f"{name} {AXES[j]} is saturated: {n} samples sit at its {label} {value:.6g} "
+                    f"(first in segment {seg})"
+                )
+
+
+def check_pose_lengths(session: Session, min_samples: int) -> None:
+    """Refuse settled segments too short to give a mean."""
+    for seg in session.segments_of(Kind.POSE, Kind.RATE, Kind.REST):
+        if len(seg) < min_samples:
+            raise FitError(
+                f"{seg.kind.label} segment {seg.index} has {len(seg)} samples; at least {min_samples} are needed"
+            )
+
+
+def check_accel_design(session: Session) -> None:
+    """The static references must point both ways along every axis, or M_a and b_a mix."""
+    mask = np.isin(session.kind, (Kind.REST, Kind.POSE)) & np.all(np.isfinite(session.ref_accel_mps2), axis=1)
+    if not mask.any():
+        raise FitError("no rest or pose segment with an accelerometer reference: M_a cannot be fitted")
+    ref = session.ref_accel_mps2[mask]
+    g = session.gravity_mps2
+    for j in range(3):
+        for sign, word in ((1, "up"), (-1, "down")):
+            if not np.any(sign * ref[:, j] > 0.5 * g):
+                raise FitError(
+                    f"missing pose: no settled pose with {AXES[j]} pointing {word} "
+                    f"(ref_a{AXES[j]} {'>' if sign > 0 else '<'} {'+' if sign > 0 else '-'}g/2), "
+                    "so M_a and the bias along it cannot be separated"
+                )
+    design = np.column_stack([ref, np.ones(len(ref))])
+    if np.linalg.matrix_rank(design, tol=1e-6 * g * np.sqrt(len(ref))) < 4:
+        raise FitError("the pose references do not span three dimensions: M_a cannot be fitted")
+
+
+def check_gyro_design(session: Session) -> str:
+    """Which gyro scale fit the recording supports: 'rate' (rate steps) or 'angle' (angle.N)."""
+    rate_mask = (session.kind == Kind.RATE) & np.all(np.isfinite(session.ref_gyro_radps), axis=1)
+    if rate_mask.any():
+        ref = session.ref_gyro_radps[rate_mask]
+        missing = [AXES[j] for j in range(3) if not np.any(np.abs(ref[:, j]) > np.radians(1.0))]
+        if missing:
+            raise FitError(f"no rate step about {', '.join(missing)}: M_w cannot be fitted")
+        return "rate"
+    if session.angles_deg:
+        angles = np.array(list(session.angles_deg.values()))
+        if np.linalg.matrix_rank(angles, tol=1.0) < 3:
+            raise FitError("the known-angle rotations (angle.N) do not span three axes: M_w cannot be fitted")
+        return "angle"
+    raise FitError("no rate step and no known-angle rotation (angle.N): M_w cannot be fitted")
+
+
+def check_session(session: Session, *, min_pose_samples: int) -> str:
+    """Run every check; returns the gyro scale method ('rate' or 'angle')."""
+    check_time(session)
+    check_finite(session)
+    check_pose_lengths(session, min_pose_samples)
+    settled = np.isin(session.kind, (Kind.REST, Kind.POSE, Kind.RATE))
+    if not settled.any():
+        raise FitError("no settled segment (rest, pose or rate) in the session")
+    check_axes_alive(session, "accel", session.accel_mps2, settled)
+    check_axes_alive(session, "gyro", session.gyro_radps, settled)
+    check_accel_design(session)
+    return check_gyro_design(session)
