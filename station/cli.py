@@ -70,7 +70,9 @@ def _print_params(params: object) -> None:
         for ax in "xyz":
             table.add_column(ax, justify="right")
 
-        def row(label: str, v: np.ndarray, s: np.ndarray, k: float = scale, fmt: str = "{:.6f}") -> None:
+        def row(
+            label: str, v: np.ndarray, s: np.ndarray, k: float = scale, fmt: str = "{:.6f}", table: Table = table
+        ) -> None:
             cells = []
             for a, b in zip(v, s, strict=True):
                 if not np.isfinite(a):

@@ -47,7 +47,7 @@ def _settled_means(session: Session, kind: Kind, skip: int) -> tuple[np.ndarray,
 
 @pytest.fixture(scope="module", params=CASES, ids=[c[0] for c in CASES])
 def corrected(request: pytest.FixtureRequest) -> tuple[Session, Session, Session, object]:
-    name, plan, seed = request.param
+    _, plan, seed = request.param
     sim = simulate_session(seed, plan=plan)
     params = fit_session(sim.session)
     return sim.session, correct_session(sim.session, params), reference_session(sim.session, params), params
@@ -97,7 +97,7 @@ def test_paper_std_reduction_and_mean_error(corrected: tuple) -> None:
 
 
 def test_online_matches_post_processed(corrected: tuple) -> None:
-    raw, out, ref, _ = corrected
+    _raw, out, ref, _ = corrected
     online = np.hstack([out.accel_mps2, out.gyro_radps])
     post = np.hstack([ref.accel_mps2, ref.gyro_radps])
     cc = cross_correlation(online, post)

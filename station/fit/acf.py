@@ -318,6 +318,9 @@ def correlation_time_acf(
     lags = np.arange(n) / rec.rate_hz
     record_s = n / rec.rate_hz
     s0 = float(s[0])
+    # a record flat to rounding (|y| at the 1e-10 relative level) has no transient to read
+    if not np.max(np.abs(y)) > 1e-10 * np.max(np.abs(rec.values)):
+        s0 = 0.0
     if not s0 > 0.0:
         r = np.full(n, np.nan)
         below = np.empty(0, dtype=np.int64)

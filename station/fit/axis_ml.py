@@ -170,21 +170,22 @@ def fit_axis(
     # The stochastic drift q is often poorly determined (a Gauss-Markov process slower than
     # the record looks like a random offset and trend). ML underestimates it, and with it
     # every other uncertainty, so uncertainties are evaluated at the upper end of q's
-    # 1-sigma profile interval.
-    q_lo_edge, q_hi_edge = _profile_interval(lambda u: problem.nll(np.array([theta_q[0], u])), theta_q[1],
-                                             _LOG_Q_MIN, _LOG_Q_MAX)
+    # 95 % profile interval. The std of sqrt(q) is the mean half-width of its 1-sigma interval.
+    def profile_q(u: float) -> float:
+        return problem.nll(np.array([theta_q[0], u]))
+
+    q_lo_edge, q_hi_edge = _profile_interval(profile_q, theta_q[1], _LOG_Q_MIN, _LOG_Q_MAX)
     sq = np.sqrt(problem.q0 * np.exp(np.array([q_lo_edge, theta_q[1], q_hi_edge])))
-    sq_std = float(max(sq[2] - sq[1], sq[1] - sq[0]))
-    q_unc = problem.q0 * float(np.exp(q_hi_edge))
+    sq_std = float(0.5 * (sq[2] - sq[0]))
+    q_unc = problem.q0 * float(np.exp(_profile_interval(profile_q, theta_q[1], _LOG_Q_MIN, _LOG_Q_MAX, 1.92)[1]))
     if resolved:
         nll, beta, _, _ = full.solve(tc, q)
-        _, _, xw, chol = full.solve(tc, q_unc)
-        # Fisher information of the mean parameters (beta, d, T_c).
-        d = beta[-1]
         step = 1e-4 * tc
         de_dtc = (block_exp_mean(blocks.t_s, blocks.width_s, tc + step)
                   - block_exp_mean(blocks.t_s, blocks.width_s, tc - step)) / (2 * step)
-        jw = np.column_stack([xw, linalg.solve_triangular(chol, d * de_dtc, lower=True, check_finite=False)])
+        _, _, xw, chol = full.solve(tc, q_unc)
+        # Fisher information of the mean parameters (beta, d, T_c), at the upper end of q's interval.
+        jw = np.column_stack([xw, linalg.solve_triangular(chol, beta[-1] * de_dtc, lower=True, check_finite=False)])
         beta_cov = _inverse(jw.T @ jw)[:p, :p]
         # T_c is non-linear: its uncertainty from the profile likelihood (beta re-fitted)
         lo, hi = _profile_interval(lambda u: full.solve(float(np.exp(u)), q_unc)[0], float(np.log(tc)),
@@ -239,8 +240,12 @@ def _optimize_q(problem: _Problem, theta: np.ndarray) -> float:
     return float(res.x)
 
 
-def _profile_interval(f: Callable[[float], float], x0: float, lo: float, hi: float) -> tuple[float, float]:
-    """Where ``f`` (a negative log-likelihood) rises by 1/2 from ``f(x0)`` on each side.
+def _profile_interval(
+    f: Callable[[float], float], x0: float, lo: float, hi: float, rise: float = 0.5
+) -> tuple[float, float]:
+    """Where ``f`` (a negative log-likelihood) rises by ``rise`` from ``f(x0)`` on each side.
+
+    ``rise`` = 1/2 gives the 1-sigma interval, 1.92 the 95 % interval.
 
     A side on which it never rises that much within [lo, hi] extends to the bound.
     """
@@ -249,14 +254,14 @@ def _profile_interval(f: Callable[[float], float], x0: float, lo: float, hi: flo
     for bound in (lo, hi):
         inside, edge = x0, bound
         for x in np.linspace(x0, bound, 9)[1:]:
-            if f(x) - f0 > 0.5:
+            if f(x) - f0 > rise:
                 edge = x
                 break
             inside = x
-        if edge != bound or f(bound) - f0 > 0.5:
+        if edge != bound or f(bound) - f0 > rise:
             for _ in range(6):  # bisect between the last point inside and the first outside
                 mid = 0.5 * (inside + edge)
-                if f(mid) - f0 > 0.5:
+                if f(mid) - f0 > rise:
                     edge = mid
                 else:
                     inside = mid

@@ -36,21 +36,31 @@ def check_finite(session: Session) -> None:
 
 
 def check_axes_alive(session: Session, name: str, data: np.ndarray, mask: np.ndarray) -> None:
-    """Refuse a dead (constant) axis and a saturated (clipped) axis among the ``mask``ed samples."""
+    """Refuse a dead (constant) axis and a saturated (clipped) axis among the ``mask``ed samples.
+
+    Saturated: in some settled segment the axis sits at its session-wide maximum or minimum
+    for most samples, while it is not stuck in most other settled segments (a quantized
+    axis quieter than one LSB is constant everywhere and is not saturated).
+    """
     index = np.flatnonzero(mask)
+    segments = [s for s in session.segments_of(Kind.REST, Kind.POSE, Kind.RATE) if len(s) >= 20]
     for j in range(3):
         x = data[index, j]
         if np.ptp(x) == 0.0:
             raise FitError(f"{name} {AXES[j]} is constant at {x[0]:.6g} over the whole session (dead axis)")
-        for label, value in (("maximum", x.max()), ("minimum", x.min())):
-            at = x == value
-            n = int(at.sum())
-            if n >= 20 and n >= 0.002 * len(x):
-                seg = int(session.segment[index[np.flatnonzero(at)[0]]])
-                raise FitError(
-                    f"{name} {AXES[j]} is saturated: {n} samples sit at its {label} {value:.6g} "
-                    f"(first in segment {seg})"
-                )
+        hi, lo = x.max(), x.min()
+        stuck = [np.ptp(data[s.start:s.stop, j]) == 0.0 for s in segments]
+        if sum(stuck) > len(segments) // 2:
+            continue
+        for seg in segments:
+            v = data[seg.start:seg.stop, j]
+            for label, value in (("maximum", hi), ("minimum", lo)):
+                at = int(np.count_nonzero(v == value))
+                if at >= 0.5 * len(v):
+                    raise FitError(
+                        f"{name} {AXES[j]} is saturated: {at} of {len(v)} samples of {seg.kind.label} segment "
+                        f"{seg.index} sit at its {label} {value:.6g}"
+                    )
 
 
 def check_pose_lengths(session: Session, min_samples: int) -> None:

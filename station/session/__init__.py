@@ -1,5 +1,15 @@
 """Session recordings: the in-memory model and the CSV v1 file format."""
 
+from station.session.csv_v1 import format_session, parse_session, read_session, write_session
 from station.session.model import KIND_LABELS, Kind, Segment, Session
 
-__all__ = ["KIND_LABELS", "Kind", "Segment", "Session"]
+__all__ = [
+    "KIND_LABELS",
+    "Kind",
+    "Segment",
+    "Session",
+    "format_session",
+    "parse_session",
+    "read_session",
+    "write_session",
+]

@@ -1,0 +1,207 @@
+"""Algorithm 1 of Kolhoff & Kemper, sample by sample, as the unit's firmware runs it.
+
+Per time step i and per channel j of six (ax, ay, az in m/s^2, gx, gy, gz in rad/s):
+
+    line 4:  g_ij = (1 - T_sampl / T_c,j) * g_(i-1),j        forward Euler of eq. (3), w_g neglected
+    line 5:  x_drift,ij = g_ij * b_drift,j
+    line 6:  x_temp,j = x~_ij - x_drift,ij - b_stat,j
+    line 7:  x_MA,j = one-sided moving average of the last n values of x_temp,j, eq. (6)
+    line 8:  solve M x_i = x_MA per triad (accelerometer, gyroscope)
+
+Conventions (shared with :mod:`station.correct.batch`):
+
+* Sample index i counts samples since power-on; the power-on sample i = 0 has g = 1, so
+  sample i sees g_i = (1 - T_sampl/T_c)^i. A corrector started later (``start_index`` = k)
+  begins with g = (1 - T_sampl/T_c)^k and an empty moving-average buffer.
+* During the first n - 1 samples the moving average is over the samples available.
+* Where T_c is NaN (unresolved) or b_drift is 0 or NaN, the drift term is 0. T_c = inf
+  keeps the drift constant. For 0 < T_c <= T_sampl the Euler factor would be <= 0
+  (unstable); it is clamped to 0, i.e. the drift is removed at the power-on sample only.
+* A non-finite input makes the n outputs whose averaging window holds it non-finite;
+  the corrector recovers once it has left the window.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from station.errors import FormatError
+from station.fit.params import ParameterSet, TriadParams
+
+CHANNELS: tuple[str, ...] = ("ax", "ay", "az", "gx", "gy", "gz")
+
+# A misalignment matrix whose condition number exceeds this cannot be inverted usefully.
+_MAX_CONDITION = 1e10
+
+
+def _triad_inverse(triad: TriadParams, name: str) -> np.ndarray:
+    """Inverse of the misalignment matrix M (dimensionless), checked."""
+    m = np.asarray(triad.misalignment, dtype=np.float64)
+    if not np.isfinite(m).all():
+        raise FormatError(f"parameter set: {name} misalignment matrix has non-finite entries")
+    cond = np.linalg.cond(m)
+    if not np.isfinite(cond) or cond > _MAX_CONDITION:
+        raise FormatError(f"parameter set: {name} misalignment matrix is singular (condition {cond:.3g})")
+    return np.linalg.inv(m)
+
+
+def _channel_drift(triad: TriadParams, sample_period_s: float, name: str) -> tuple[np.ndarray, np.ndarray]:
+    """Per-axis Euler factor rho = 1 - T_sampl/T_c and the effective b_drift (0 where unused)."""
+    tc = np.asarray(triad.correlation_time_s, dtype=np.float64)
+    bd = np.asarray(triad.bias_drift, dtype=np.float64)
+    if np.any(tc <= 0):
+        raise FormatError(f"parameter set: {name} correlation time must be positive, got {tc.tolist()}")
+    active = np.isfinite(bd) & (bd != 0) & ~np.isnan(tc)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rho = np.where(active, 1.0 - sample_period_s / np.where(active, tc, 1.0), 1.0)
+    rho = np.maximum(rho, 0.0)
+    return rho, np.where(active, bd, 0.0)
+
+
+@dataclass(frozen=True, eq=False)
+class CorrectionConstants:
+    """What the firmware computes once when it loads a parameter set.
+
+    Attributes:
+        sample_period_s: T_sampl (s).
+        ma_length: n of the moving average, eq. (6).
+        rho: Euler factor 1 - T_sampl/T_c per channel (ax..gz), shape (6,); 1 where unused.
+        bias_drift: b_drift per channel (m/s^2 for ax..az, rad/s for gx..gz), 0 where the
+            drift term is dropped, shape (6,).
+        bias_static: b_stat per channel (same units), shape (6,).
+        accel_inverse: M_a^-1, shape (3, 3).
+        gyro_inverse: M_w^-1, shape (3, 3).
+    """
+
+    sample_period_s: float
+    ma_length: int
+    rho: np.ndarray
+    bias_drift: np.ndarray
+    bias_static: np.ndarray
+    accel_inverse: np.ndarray
+    gyro_inverse: np.ndarray
+
+    @classmethod
+    def from_params(cls, params: ParameterSet) -> CorrectionConstants:
+        ts = float(params.sample_period_s)
+        if not (math.isfinite(ts) and ts > 0):
+            raise FormatError(f"parameter set: sample period must be a positive number of seconds, got {ts}")
+        n = int(params.moving_average_length)
+        if n < 1:
+            raise FormatError(f"parameter set: moving average length must be >= 1, got {n}")
+        bias = np.concatenate([params.accel.bias_static, params.gyro.bias_static]).astype(np.float64)
+        if not np.isfinite(bias).all():
+            raise FormatError("parameter set: static bias has non-finite entries; cannot correct")
+        rho_a, bd_a = _channel_drift(params.accel, ts, "accel")
+        rho_g, bd_g = _channel_drift(params.gyro, ts, "gyro")
+        out = cls(
+            sample_period_s=ts,
+            ma_length=n,
+            rho=np.concatenate([rho_a, rho_g]),
+            bias_drift=np.concatenate([bd_a, bd_g]),
+            bias_static=bias,
+            accel_inverse=_triad_inverse(params.accel, "accel"),
+            gyro_inverse=_triad_inverse(params.gyro, "gyro"),
+        )
+        for name in ("rho", "bias_drift", "bias_static", "accel_inverse", "gyro_inverse"):
+            getattr(out, name).flags.writeable = False
+        return out
+
+
+Vec3 = tuple[float, float, float]
+
+
+class StreamingCorrector:
+    """Algorithm 1, one 6-channel sample per :meth:`step`, in plain floating point.
+
+    Args:
+        params: the unit's parameter set (SI: accel m/s^2, gyro rad/s, times s).
+        start_index: samples elapsed since power-on before the first :meth:`step`
+            (0 when the corrector runs from power-on).
+    """
+
+    def __init__(self, params: ParameterSet, start_index: int = 0) -> None:
+        c = CorrectionConstants.from_params(params)
+        # Loading: everything the loop needs as plain floats (firmware would keep them in RAM).
+        self._n = c.ma_length
+        self._rho = [float(v) for v in c.rho]
+        self._b_drift = [float(v) for v in c.bias_drift]
+        self._b_stat = [float(v) for v in c.bias_static]
+        self._ainv = [float(v) for v in c.accel_inverse.ravel()]
+        self._ginv = [float(v) for v in c.gyro_inverse.ravel()]
+        self.reset(start_index)
+
+    def reset(self, start_index: int = 0) -> None:
+        """Restart as if ``start_index`` samples had passed since power-on (empty MA buffer)."""
+        if int(start_index) != start_index or start_index < 0:
+            raise ValueError(f"start_index must be a non-negative integer, got {start_index!r}")
+        k = int(start_index)
+        self._index = k
+        self._g = [rho**k for rho in self._rho]  # g_k = (1 - T_sampl/T_c)^k, g_0 = 1 at power-on
+        self._buf = [[0.0] * self._n for _ in range(6)]  # ring buffers of x_temp, eq. (6)
+        self._slot = 0
+        self._count = 0
+
+    @property
+    def index(self) -> int:
+        """Samples since power-on of the next sample :meth:`step` will process."""
+        return self._index
+
+    def step(self, accel_mps2: Sequence[float], gyro_radps: Sequence[float]) -> tuple[Vec3, Vec3]:
+        """Correct one sample.
+
+        Args:
+            accel_mps2: raw specific force (ax, ay, az) in m/s^2.
+            gyro_radps: raw angular rate (gx, gy, gz) in rad/s.
+
+        Returns:
+            (corrected specific force in m/s^2, corrected angular rate in rad/s), each a 3-tuple.
+        """
+        raw = (*accel_mps2, *gyro_radps)
+        if len(raw) != 6:
+            raise ValueError("step() needs three accelerometer and three gyroscope values")
+        slot = self._slot
+        count = self._count + 1 if self._count < self._n else self._n
+        x_ma = [0.0] * 6
+        for j in range(6):
+            g = self._g[j]  # line 4 (g of this sample)
+            x_drift = g * self._b_drift[j]  # line 5
+            x_temp = raw[j] - x_drift - self._b_stat[j]  # line 6
+            buf = self._buf[j]
+            buf[slot] = x_temp  # line 7: drop the oldest value, add the new one, eq. (6)
+            x_ma[j] = sum(buf) / count  # unfilled slots hold 0 during the first n - 1 samples
+            self._g[j] = self._rho[j] * g  # line 4 for the next sample
+        self._slot = slot + 1 if slot + 1 < self._n else 0
+        self._count = count
+        self._index += 1
+        # line 8: M x = x_MA per triad, with the inverse precomputed at load time
+        a, w = self._ainv, self._ginv
+        m0, m1, m2, m3, m4, m5 = x_ma
+        accel = (
+            a[0] * m0 + a[1] * m1 + a[2] * m2,
+            a[3] * m0 + a[4] * m1 + a[5] * m2,
+            a[6] * m0 + a[7] * m1 + a[8] * m2,
+        )
+        gyro = (
+            w[0] * m3 + w[1] * m4 + w[2] * m5,
+            w[3] * m3 + w[4] * m4 + w[5] * m5,
+            w[6] * m3 + w[7] * m4 + w[8] * m5,
+        )
+        return accel, gyro
+
+    def run(self, accel_mps2: np.ndarray, gyro_radps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Feed a whole record through :meth:`step`; arrays (n, 3) in m/s^2 and rad/s."""
+        a = np.asarray(accel_mps2, dtype=np.float64)
+        w = np.asarray(gyro_radps, dtype=np.float64)
+        if a.ndim != 2 or a.shape[1] != 3 or w.shape != a.shape:
+            raise ValueError(f"expected two (n, 3) arrays, got {a.shape} and {w.shape}")
+        out_a = np.empty_like(a)
+        out_w = np.empty_like(w)
+        step = self.step
+        for i, (ra, rw) in enumerate(zip(a.tolist(), w.tolist(), strict=True)):
+            out_a[i], out_w[i] = step(ra, rw)
+        return out_a, out_w

@@ -1,0 +1,34 @@
+"""The test rig: register map, the station's :class:`Rig` protocol and the Modbus client."""
+
+from station.rig.modbus import ModbusRig, open_rig
+from station.rig.protocol import (
+    Orientation,
+    Rig,
+    RigCommandRejected,
+    RigError,
+    RigFault,
+    RigIdentity,
+    RigMotionTimeout,
+    RigProtocolError,
+    RigState,
+    RigTimeout,
+)
+from station.rig.url import RigUrl, RigUrlError, parse_rig_url
+
+__all__ = [
+    "ModbusRig",
+    "Orientation",
+    "Rig",
+    "RigCommandRejected",
+    "RigError",
+    "RigFault",
+    "RigIdentity",
+    "RigMotionTimeout",
+    "RigProtocolError",
+    "RigState",
+    "RigTimeout",
+    "RigUrl",
+    "RigUrlError",
+    "open_rig",
+    "parse_rig_url",
+]

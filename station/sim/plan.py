@@ -1,0 +1,316 @@
+"""The rig's calibration plan and the trajectory it drives.
+
+A :class:`RigPlan` says what the rig does: a still rest from power-on, the six gravity
+poses reached by tumbling, then constant-rate steps about each sensor axis (the rig
+tumbles that axis up, then spins the rate table about the vertical). :func:`build_trajectory`
+turns it into the three axis trajectories (roll, pitch, yaw; :mod:`station.sim.motion`)
+and a segment table with the rig's reference (spec session-csv-v1: what the rig knows).
+
+Angles in the plan are degrees, rates deg/s, accelerations deg/s^2, times s; inside the
+trajectory everything is rad, rad/s, rad/s^2.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from station.errors import StationError
+from station.session.model import Kind
+from station.sim.geometry import AXIS_INDEX, POSE_ANGLES_DEG, Kinematics, kinematics_from_angles, up_vector
+from station.sim.motion import AxisTrajectory
+
+_DEG = math.pi / 180.0
+
+
+class PlanError(StationError):
+    """A rig plan that cannot be run (unknown pose or axis, non-positive duration, ...)."""
+
+
+@dataclass(frozen=True)
+class RigPlan:
+    """What the rig does during one session.
+
+    Attributes:
+        sample_rate_hz: sensor sample rate (Hz).
+        rest_s: still period from power-on (s), in ``rest_pose``.
+        rest_pose: orientation during the rest ('+z' = z axis up), also the rig's home.
+        poses: gravity poses in order ('+x', '-x', ...), each held ``pose_hold_s`` (s).
+        tumble_rate_dps, tumble_accel_dps2: max rate (deg/s) and acceleration (deg/s^2) of
+            the roll and pitch gimbal axes while tumbling.
+        rate_steps: (axis, rate_dps) constant-rate steps, rate about the sensor's nominal
+            axis 'x'|'y'|'z' in deg/s; consecutive steps about the same axis share one
+            tumble. Each is held ``rate_hold_s`` (s) after the ramp and a settle.
+        rate_flip: axes for which the rig puts the negative axis up before spinning (the
+            table then spins the other way so the sensor still sees ``rate_dps``).
+        table_accel_dps2: rate-table acceleration for rate ramps (deg/s^2).
+        settle_s: settling time after every tumble and ramp (s), part of the ``move``.
+        gravity_mps2: local gravity (m/s^2).
+        latitude_deg: site latitude (deg); heading_deg: azimuth of the rig's world y axis
+            (yaw = 0) from true north, clockwise (deg).
+        serial: serial number for the session, None to use the simulated unit's.
+    """
+
+    sample_rate_hz: float = 100.0
+    rest_s: float = 300.0
+    rest_pose: str = "+z"
+    poses: tuple[str, ...] = ("+z", "-z", "+x", "-x", "+y", "-y")
+    pose_hold_s: float = 30.0
+    tumble_rate_dps: float = 60.0
+    tumble_accel_dps2: float = 120.0
+    rate_steps: tuple[tuple[str, float], ...] = tuple(
+        (axis, sign * rate) for axis in "xyz" for rate in (50.0, 100.0, 200.0) for sign in (1.0, -1.0)
+    )
+    rate_flip: tuple[str, ...] = ()
+    rate_hold_s: float = 12.0
+    table_accel_dps2: float = 100.0
+    settle_s: float = 2.0
+    gravity_mps2: float = 9.8128
+    latitude_deg: float = 52.61
+    heading_deg: float = 0.0
+    serial: str | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "poses", tuple(self.poses))
+        object.__setattr__(self, "rate_steps", tuple((str(a), float(r)) for a, r in self.rate_steps))
+        object.__setattr__(self, "rate_flip", tuple(self.rate_flip))
+        for pose in (self.rest_pose, *self.poses):
+            if pose not in POSE_ANGLES_DEG:
+                raise PlanError(f"unknown pose {pose!r}; poses are {', '.join(POSE_ANGLES_DEG)}")
+        for axis, _ in self.rate_steps:
+            if axis not in AXIS_INDEX:
+                raise PlanError(f"unknown rate axis {axis!r}; axes are x, y, z")
+        for axis in self.rate_flip:
+            if axis not in AXIS_INDEX:
+                raise PlanError(f"unknown rate_flip axis {axis!r}; axes are x, y, z")
+        for name in ("sample_rate_hz", "tumble_rate_dps", "tumble_accel_dps2", "table_accel_dps2", "gravity_mps2"):
+            if not getattr(self, name) > 0:
+                raise PlanError(f"plan: {name} must be > 0, got {getattr(self, name)!r}")
+        for name in ("rest_s", "pose_hold_s", "rate_hold_s", "settle_s"):
+            if not getattr(self, name) >= 0:
+                raise PlanError(f"plan: {name} must be >= 0, got {getattr(self, name)!r}")
+
+    def trajectory(self) -> RigTrajectory:
+        return build_trajectory(self)
+
+
+def default_plan() -> RigPlan:
+    """A ~14-minute session at 100 Hz: 300 s rest, six 30 s poses, +-50/100/200 deg/s about each axis."""
+    return RigPlan()
+
+
+def random_plan(rng: np.random.Generator) -> RigPlan:
+    """A plan with random pose order, rates, durations and sample rate, for robustness tests."""
+    poses = tuple(str(p) for p in rng.permutation(list(POSE_ANGLES_DEG)))
+    rates = sorted(rng.choice([20.0, 50.0, 100.0, 150.0, 200.0, 300.0], size=int(rng.integers(1, 4)), replace=False))
+    axes = [str(a) for a in rng.permutation(["x", "y", "z"])]
+    steps: list[tuple[str, float]] = []
+    for axis in axes:
+        for rate in rates:
+            signs = (1.0, -1.0) if rng.random() < 0.5 else (-1.0, 1.0)
+            steps.extend((axis, s * float(rate)) for s in signs)
+    flip = tuple(a for a in "xyz" if rng.random() < 0.5)
+    return RigPlan(
+        sample_rate_hz=float(rng.choice([100.0, 200.0, 400.0])),
+        rest_s=float(np.round(rng.uniform(60.0, 400.0), 1)),
+        rest_pose=str(rng.choice(list(POSE_ANGLES_DEG))),
+        poses=poses,
+        pose_hold_s=float(np.round(rng.uniform(10.0, 40.0), 1)),
+        tumble_rate_dps=float(rng.choice([30.0, 60.0, 90.0])),
+        tumble_accel_dps2=float(rng.choice([60.0, 120.0, 240.0])),
+        rate_steps=tuple(steps),
+        rate_flip=flip,
+        rate_hold_s=float(np.round(rng.uniform(5.0, 15.0), 1)),
+        table_accel_dps2=float(rng.choice([50.0, 100.0, 200.0])),
+        settle_s=float(np.round(rng.uniform(0.5, 3.0), 1)),
+        gravity_mps2=float(np.round(rng.uniform(9.78, 9.83), 4)),
+        latitude_deg=float(np.round(rng.uniform(-60.0, 70.0), 2)),
+        heading_deg=float(np.round(rng.uniform(0.0, 360.0), 1)),
+    )
+
+
+@dataclass(frozen=True)
+class PlanSegment:
+    """One rig step: a segment of the session.
+
+    Attributes:
+        index: segment number (the CSV ``segment`` column).
+        kind: rest, pose, rate or move.
+        t_start_s, t_stop_s: rig time range [start, stop) (s).
+        up: for rest/pose/rate, the pose whose axis points up ('+x', ...); None for moves.
+        rate_axis: for rate, the nominal sensor axis 'x'|'y'|'z'; else None.
+        rate_dps: for rate, the commanded rate about ``+rate_axis`` (deg/s); else 0.
+    """
+
+    index: int
+    kind: Kind
+    t_start_s: float
+    t_stop_s: float
+    up: str | None = None
+    rate_axis: str | None = None
+    rate_dps: float = 0.0
+
+
+@dataclass(frozen=True, eq=False)
+class RigTrajectory:
+    """The rig's axes over time and its segment table; evaluate it at sample times."""
+
+    plan: RigPlan
+    roll: AxisTrajectory = field(repr=False)
+    pitch: AxisTrajectory = field(repr=False)
+    yaw: AxisTrajectory = field(repr=False)
+    segments: tuple[PlanSegment, ...]
+    duration_s: float
+
+    def sample_times(self) -> np.ndarray:
+        """Sample times ``k / sample_rate_hz`` from 0 (power-on) up to the end of the plan (s)."""
+        fs = self.plan.sample_rate_hz
+        n = math.floor(self.duration_s * fs - 1e-9) + 1
+        return np.arange(n) / fs
+
+    def axis_states(self, t_rig_s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(angle rad, rate rad/s, accel rad/s^2), each (n, 3) with columns roll, pitch, yaw."""
+        t = np.asarray(t_rig_s, dtype=float)
+        states = [ax.state(t) for ax in (self.roll, self.pitch, self.yaw)]
+        return tuple(np.stack([s[i] for s in states], axis=1) for i in range(3))  # type: ignore[return-value]
+
+    def kinematics(self, t_s: np.ndarray, time_offset_s: float = 0.0) -> Kinematics:
+        """Sensor kinematics at rig time ``t_s - time_offset_s``, stamped with ``t_s`` (sensor time)."""
+        t = np.asarray(t_s, dtype=float)
+        angle, rate, accel = self.axis_states(t - time_offset_s)
+        kin = kinematics_from_angles(t, angle, rate, accel)
+        return kin
+
+    def segment_of(self, t_s: np.ndarray) -> np.ndarray:
+        """Index into :attr:`segments` of each time (rig time, s); the last segment extends to the end."""
+        starts = np.array([s.t_start_s for s in self.segments])
+        return np.clip(np.searchsorted(starts, np.asarray(t_s, dtype=float), side="right") - 1, 0, len(starts) - 1)
+
+    def labels(self, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(segment index, :class:`Kind` code) per time: the CSV ``segment`` and ``kind`` columns."""
+        idx = self.segment_of(t_s)
+        seg_index = np.array([s.index for s in self.segments], dtype=np.int64)
+        kinds = np.array([int(s.kind) for s in self.segments], dtype=np.int8)
+        return seg_index[idx], kinds[idx]
+
+    def reference(self, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """What the rig knows at rig time ``t_s``: (specific force m/s^2, angular rate rad/s), (n, 3) each.
+
+        rest/pose: gravity times the commanded up axis, zero rate; rate: gravity times the
+        up axis and the commanded rate about the nominal axis; move: from the rig's encoders
+        (up vector and body rates of the gimbal and table angles). No centripetal, Earth rate
+        or other physics the rig does not know.
+        """
+        t = np.asarray(t_s, dtype=float)
+        g = self.plan.gravity_mps2
+        idx = self.segment_of(t)
+        ref_f = np.empty((len(t), 3))
+        ref_w = np.zeros((len(t), 3))
+        kinds = np.array([int(s.kind) for s in self.segments])[idx]
+        moving = kinds == int(Kind.MOVE)
+        if np.any(moving):
+            enc = self.kinematics(t[moving])
+            ref_f[moving] = enc.specific_force(g)
+            ref_w[moving] = enc.omega_radps
+        for i, seg in enumerate(self.segments):
+            if seg.kind == Kind.MOVE:
+                continue
+            sel = idx == i
+            if not np.any(sel):
+                continue
+            ref_f[sel] = g * up_vector(seg.up)  # type: ignore[arg-type]
+            if seg.kind == Kind.RATE:
+                w = np.zeros(3)
+                w[AXIS_INDEX[seg.rate_axis]] = seg.rate_dps * _DEG  # type: ignore[index]
+                ref_w[sel] = w
+        return ref_f, ref_w
+
+
+class _Builder:
+    """Drives the three axes in lockstep and records the segment table."""
+
+    def __init__(self, plan: RigPlan) -> None:
+        self.plan = plan
+        roll0, pitch0 = POSE_ANGLES_DEG[plan.rest_pose]
+        self.axes = (
+            AxisTrajectory(p0=roll0 * _DEG),
+            AxisTrajectory(p0=pitch0 * _DEG),
+            AxisTrajectory(p0=0.0),
+        )
+        self.t = 0.0
+        self.pose = plan.rest_pose
+        self.table_rate = 0.0  # rad/s
+        self.segments: list[PlanSegment] = []
+        self._move_start: float | None = None
+
+    def _sync(self, t_end: float) -> None:
+        for ax in self.axes:
+            ax.hold_until(t_end)
+        self.t = t_end
+
+    def _begin_move(self) -> None:
+        if self._move_start is None:
+            self._move_start = self.t
+
+    def _end_move(self) -> None:
+        if self._move_start is not None and self.t > self._move_start:
+            self._add(Kind.MOVE, self._move_start, self.t)
+        self._move_start = None
+
+    def _add(self, kind: Kind, t0: float, t1: float, **kw: object) -> None:
+        self.segments.append(PlanSegment(len(self.segments), kind, t0, t1, **kw))  # type: ignore[arg-type]
+
+    def hold(self, kind: Kind, duration: float, **kw: object) -> None:
+        self._end_move()
+        if duration <= 0:
+            return
+        t0 = self.t
+        self._sync(t0 + duration)
+        self._add(kind, t0, self.t, **kw)
+
+    def tumble(self, pose: str) -> None:
+        """Move the gimbal (roll, pitch) to ``pose``, then settle; the table must be still."""
+        if pose == self.pose:
+            return
+        self._begin_move()
+        p = self.plan
+        roll, pitch = POSE_ANGLES_DEG[pose]
+        rate, acc = p.tumble_rate_dps * _DEG, p.tumble_accel_dps2 * _DEG
+        d_roll = self.axes[0].move_to(roll * _DEG, rate, acc)
+        d_pitch = self.axes[1].move_to(pitch * _DEG, rate, acc)
+        self._sync(self.t + max(d_roll, d_pitch) + p.settle_s)
+        self.pose = pose
+
+    def ramp(self, rate_radps: float) -> None:
+        """Ramp the table to ``rate_radps``, then settle."""
+        if rate_radps == self.table_rate:
+            return
+        self._begin_move()
+        duration = self.axes[2].ramp_rate(rate_radps, self.plan.table_accel_dps2 * _DEG)
+        self.table_rate = rate_radps
+        self._sync(self.t + duration + self.plan.settle_s)
+
+
+def build_trajectory(plan: RigPlan) -> RigTrajectory:
+    """The trajectory and segment table of ``plan`` (see the module docstring)."""
+    b = _Builder(plan)
+    b.hold(Kind.REST, plan.rest_s, up=plan.rest_pose)
+    for pose in plan.poses:
+        b.tumble(pose)
+        b.hold(Kind.POSE, plan.pose_hold_s, up=pose)
+    current_axis: str | None = None
+    for axis, rate_dps in plan.rate_steps:
+        sign = -1.0 if axis in plan.rate_flip else 1.0
+        if axis != current_axis:
+            b.ramp(0.0)
+            b.tumble(("-" if sign < 0 else "+") + axis)
+            current_axis = axis
+        b.ramp(sign * rate_dps * _DEG)
+        b.hold(Kind.RATE, plan.rate_hold_s, up=b.pose, rate_axis=axis, rate_dps=rate_dps)
+    b.ramp(0.0)
+    b._end_move()
+    if not b.segments:
+        raise PlanError("plan: nothing to do (all durations are zero)")
+    return RigTrajectory(plan, b.axes[0], b.axes[1], b.axes[2], tuple(b.segments), b.t)
