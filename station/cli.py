@@ -154,6 +154,104 @@ def import_imucal(
     typer.echo(f"wrote {output} ({len(session)} samples)")
 
 
+_OUTCOME_EXIT = {"PASS": 0, "FAIL": 1, "ERROR": 2, "ABORTED": 130}
+
+
+@app.command()
+def demo(
+    units: Annotated[int, typer.Option(min=1, max=64, help="units in the fixture")] = 4,
+    scale: Annotated[float, typer.Option(min=0.1, help="simulated seconds per wall second")] = 30.0,
+    seed: Annotated[int, typer.Option(help="seed: the same seed gives the same units")] = 0,
+    out: Annotated[Path, typer.Option(help="directory for session CSVs and parameter JSONs")] = Path("demo-out"),
+) -> None:
+    """Simulated rig + N sensors, the whole sequence, fit, limits, summary: the station end to end.
+
+    Exit code: 0 all PASS, 1 a unit FAILed, 2 ERROR (station fault), 130 ABORTED.
+    """
+    from station.sequence.demo import run_demo
+
+    try:
+        result = run_demo(units, scale, seed, out)
+    except StationError as exc:
+        raise _fail(exc) from None
+    raise typer.Exit(_OUTCOME_EXIT[result.outcome.value])
+
+
+@app.command("run")
+def run_station(
+    rig: Annotated[str, typer.Option("--rig", help="rig URL: modbus-tcp://HOST:PORT or modbus-rtu:///dev/ttyX?baud=N")],
+    sensor: Annotated[list[str], typer.Option("--sensor", help="sensor URL serial:///dev/ttyX (repeat per unit)")],
+    out: Annotated[Path, typer.Option(help="directory for session CSVs and parameter JSONs")] = Path("runs"),
+    scale: Annotated[float, typer.Option(min=0.1, help="clock scale; 1 = real time (as `station sim`)")] = 1.0,
+    gravity: Annotated[float | None, typer.Option(help="local gravity (m/s^2); default from the plan")] = None,
+    latitude: Annotated[float | None, typer.Option(help="site latitude (deg); default from the plan")] = None,
+    name: Annotated[str, typer.Option("--station", help="station name for the records")] = "station",
+) -> None:
+    """Run the calibration sequence against any rig and sensors (real ones, or `station sim`).
+
+    Exit code: 0 all PASS, 1 a unit FAILed, 2 ERROR (station fault), 130 ABORTED.
+    """
+    from dataclasses import replace
+
+    from rich.console import Console
+
+    from station.sequence.demo import ProgressDisplay, summary_table
+    from station.sequence.options import SequenceOptions, rig_client_options
+    from station.sequence.runner import run_sequence
+    from station.sim.clock import SimClock, WallClock
+    from station.sim.plan import default_plan
+
+    plan = default_plan()
+    if gravity is not None:
+        plan = replace(plan, gravity_mps2=gravity)
+    if latitude is not None:
+        plan = replace(plan, latitude_deg=latitude)
+    clock = WallClock() if scale == 1.0 else SimClock(scale)
+    console = Console()
+    display = ProgressDisplay(console, list(sensor), scale)
+    try:
+        with display:
+            result = run_sequence(
+                rig, sensor, clock, rig_options=rig_client_options(scale), plan=plan,
+                options=SequenceOptions().for_scale(scale), out_dir=out, station=name, subscribers=[display],
+            )
+    except StationError as exc:
+        raise _fail(exc) from None
+    console.print(summary_table(result))
+    raise typer.Exit(_OUTCOME_EXIT[result.outcome.value])
+
+
+@app.command()
+def sim(
+    units: Annotated[int, typer.Option(min=1, max=64, help="simulated sensors")] = 4,
+    scale: Annotated[float, typer.Option(min=0.1, help="simulated seconds per wall second")] = 1.0,
+    seed: Annotated[int, typer.Option(help="seed: the same seed gives the same units")] = 0,
+    port: Annotated[int, typer.Option(help="Modbus/TCP port of the rig (0: a free port)")] = 0,
+) -> None:
+    """Start a simulated rig and sensors, print their URLs, run until Ctrl-C (or SIGTERM)."""
+    import signal
+    import threading
+
+    from station.sim.station_sim import SimStation
+
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+
+    with SimStation(units, scale, seed, port=port) as station:
+        typer.echo(f"rig: {station.rig_url}")
+        for unit in station.units:
+            typer.echo(f"sensor {unit.slot}: {unit.sensor.url} (serial {unit.truth.serial})")
+        args = " ".join(f"--sensor {u}" for u in station.sensor_urls)
+        typer.echo(f"run the sequence with:\n  station run --rig '{station.rig_url}' {args} --scale {scale:g}")
+        typer.echo("Ctrl-C stops the simulation.")
+        try:
+            while not stop.wait(0.5):
+                pass
+        except KeyboardInterrupt:
+            pass
+        typer.echo("stopped")
+
+
 def main() -> None:  # pragma: no cover - console entry
     app()
 

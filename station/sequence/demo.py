@@ -1,0 +1,228 @@
+"""``station demo``: a whole simulated station, end to end, in one command.
+
+:func:`run_demo` starts a simulated rig (real Modbus/TCP server on 127.0.0.1) and N
+simulated sensors (real ptys) on one simulated clock, opens them with the same
+client code a real station uses, runs the default sequence (300 s power-on rest,
+six 30 s poses, 18 rate steps of 12 s: about 15 minutes of rig time) for all units
+concurrently, fits each unit, checks the Table 1 limits, saves every session CSV
+and parameter JSON, and prints a live progress display and a summary table.
+
+At the default clock scale (30 simulated seconds per wall second) the sequence
+takes about 30 s of wall time; fits and set-up add a few seconds per unit.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+from typing import Any
+
+from rich.console import Console, Group, RenderableType
+from rich.live import Live
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Table
+
+from station.sensor import open_sensor
+from station.sequence.options import SequenceOptions
+from station.sequence.records import (
+    Measurement,
+    Outcome,
+    Record,
+    RunFinished,
+    RunStarted,
+    StepFinished,
+    StepStarted,
+    UnitFinished,
+)
+from station.sequence.runner import RunResult, SequenceRunner
+from station.sim.effects import Effects
+from station.sim.plan import RigPlan, default_plan
+from station.sim.station_sim import SimStation
+
+DEMO_UNITS = 4
+DEMO_SCALE = 30.0
+DEMO_OUT = Path("demo-out")
+
+_STYLE = {Outcome.PASS: "green", Outcome.FAIL: "red", Outcome.ERROR: "magenta", Outcome.ABORTED: "yellow"}
+
+
+class ProgressDisplay:
+    """A record subscriber that shows the run: a step progress bar and one row per unit.
+
+    On a terminal it is a live (refreshing) display; elsewhere it prints one line per
+    finished step and unit. Use as a context manager around the run.
+    """
+
+    def __init__(self, console: Console, serials: list[str], clock_scale: float) -> None:
+        self.console = console
+        self.serials = serials
+        self.scale = clock_scale
+        self.state = ["waiting"] * len(serials)
+        self.step_name = ""
+        self.steps_total = 1
+        self.t_start = 0.0
+        self.t_now = 0.0
+        self._wall0 = time.monotonic()
+        self.progress = Progress(
+            TextColumn("[bold]{task.description}"),
+            BarColumn(),
+            TextColumn("{task.completed}/{task.total} steps"),
+            TimeElapsedColumn(),
+            console=console,
+        )
+        self.task = self.progress.add_task("starting", total=1)
+        self.live: Live | None = Live(self, console=console, refresh_per_second=4) if console.is_terminal else None
+
+    def __enter__(self) -> ProgressDisplay:
+        if self.live is not None:
+            self.live.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self.live is not None:
+            self.live.stop()
+
+    def __rich__(self) -> RenderableType:
+        table = Table(expand=False, show_edge=False, pad_edge=False)
+        table.add_column("slot", justify="right")
+        table.add_column("serial")
+        table.add_column("state")
+        for k, (serial, state) in enumerate(zip(self.serials, self.state, strict=True)):
+            table.add_row(str(k), serial, state)
+        sim_t = self.t_now - self.t_start
+        clock = f"rig time {sim_t:7.1f} s  (clock x{self.scale:g}, wall {time.monotonic() - self._wall0:5.1f} s)"
+        return Group(self.progress, clock, table)
+
+    def __call__(self, record: Record) -> None:
+        if isinstance(record, RunStarted):
+            self.steps_total = len(record.steps)
+            self.t_start = self.t_now = record.t_s
+            self.progress.update(self.task, total=self.steps_total, description="run")
+            self.state = ["measuring"] * len(self.serials)
+        elif isinstance(record, StepStarted):
+            self.t_now = record.t_s
+            self.step_name = record.name
+            self.progress.update(self.task, description=record.name)
+        elif isinstance(record, StepFinished):
+            self.t_now = record.t_s
+            self.progress.advance(self.task)
+            if self.live is None:
+                mark = "ok" if record.ok else f"PROBLEM: {record.message}"
+                self.console.print(
+                    f"step {record.index + 1:2d}/{self.steps_total} {record.name:<12} "
+                    f"{record.duration_s:6.1f} s rig time, {record.units_active} unit(s) active  {mark}"
+                )
+            for k in range(len(self.state)):
+                if self.state[k].startswith("measuring"):
+                    self.state[k] = f"measuring: {record.name} done"
+            if record.index + 1 == self.steps_total:
+                self.state = ["fitting" if st.startswith("measuring") else st for st in self.state]
+        elif isinstance(record, Measurement):
+            if not record.passed and record.step != "limits":
+                self.state[record.slot] = f"[red]{record.step}: {record.name} = {record.value:.4g} out of limits"
+        elif isinstance(record, UnitFinished):
+            style = _STYLE[record.outcome]
+            text = f"[{style}]{record.outcome.value}[/{style}]"
+            if record.message:
+                text += f" {record.message}"
+            self.state[record.slot] = text
+            if record.serial:
+                self.serials[record.slot] = record.serial
+        elif isinstance(record, RunFinished):
+            self.t_now = record.t_s
+            self.progress.update(self.task, description=f"done: {record.outcome.value}")
+
+
+def _fmt(values: Any, scale: float = 1.0, digits: int = 4) -> str:
+    return "\n".join("—" if not math.isfinite(float(v)) else f"{float(v) * scale:+.{digits}f}" for v in values)
+
+
+def summary_table(result: RunResult) -> Table:
+    """One row per unit: outcome, key parameters, recording; caption with cycle time."""
+    table = Table(title=f"run {result.run_id}: {result.outcome.value}", show_lines=False)
+    table.add_column("slot", justify="right")
+    table.add_column("serial", no_wrap=True)
+    table.add_column("outcome")
+    table.add_column("scale-1 (ppm)\nM_a xx yy zz", justify="right")
+    table.add_column("b_stat a\n(m/s²) x y z", justify="right")
+    table.add_column("b_stat w\n(deg/s) x y z", justify="right")
+    for u in result.units:
+        style = _STYLE[u.outcome]
+        cells = ["", "", ""]
+        if u.params is not None:
+            a, g = u.params.accel, u.params.gyro
+            diag = [a.misalignment[i, i] - 1.0 for i in range(3)]
+            cells = [_fmt(diag, 1e6, 0), _fmt(a.bias_static), _fmt(g.bias_static, 180.0 / math.pi, 3)]
+        outcome = f"[{style}]{u.outcome.value}[/{style}]"
+        if u.message:
+            outcome += f"\n{u.message}"
+        table.add_row(str(u.slot), u.serial or "?", outcome, *cells)
+    n = len(result.units)
+    per_unit = result.cycle_time_per_unit_s
+    if result.outcome in (Outcome.PASS, Outcome.FAIL):
+        table.caption = (
+            f"rig time {result.sequence_s:.0f} s for {n} unit(s), then fit and save {result.post_wall_s:.1f} s: "
+            f"{per_unit:.0f} s per unit on a real rig, {3600.0 / per_unit:.1f} units/h; "
+            f"wall time {result.wall_s:.1f} s"
+        )
+    else:
+        table.caption = f"rig time {result.sequence_s:.0f} s; wall time {result.wall_s:.1f} s; {result.message}"
+    return table
+
+
+def run_demo(
+    units: int = DEMO_UNITS,
+    scale: float = DEMO_SCALE,
+    seed: int = 0,
+    out_dir: Path | None = DEMO_OUT,
+    *,
+    plan: RigPlan | None = None,
+    effects: Effects | None = None,
+    options: SequenceOptions | None = None,
+    console: Console | None = None,
+) -> RunResult:
+    """Start the simulated station, run the sequence for ``units`` units at clock ``scale``, print, return.
+
+    Args:
+        units: sensors in the fixture.
+        scale: simulated seconds per wall second.
+        seed: the same seed gives the same units.
+        out_dir: where session CSVs and parameter JSONs go (None: not saved).
+        plan: the sequence (default: :func:`station.sim.plan.default_plan`).
+        effects: optional physics of the simulated units.
+        options: sequence options (polling is adapted to ``scale``).
+        console: where to print (default: stdout).
+    """
+    console = console if console is not None else Console()
+    plan = plan if plan is not None else default_plan()
+    options = (options if options is not None else SequenceOptions()).for_scale(scale)
+    wall0 = time.monotonic()
+    with SimStation(units, scale, seed, plan=plan, effects=effects) as sim:
+        console.print(f"simulated rig at {sim.rig_url}; {units} sensor(s) on "
+                      f"{', '.join(u.sensor.device for u in sim.units)}; clock x{scale:g}")
+        from station.rig import open_rig
+
+        rig = open_rig(sim.rig_url, sim.clock, **sim.rig_client_options())
+        sensors = []
+        try:
+            for url in sim.sensor_urls:
+                sensors.append(open_sensor(url, sim.clock))
+            ident = rig.identify()
+            display = ProgressDisplay(console, [u.truth.serial for u in sim.units], scale)
+            runner = SequenceRunner(
+                rig, sensors, sim.clock, plan=plan, options=options, out_dir=out_dir, station="demo",
+                rig_name=f"{ident.firmware_id} {ident.firmware_version}", sensor_urls=sim.sensor_urls,
+                subscribers=[display],
+            )
+            with display:
+                result = runner.run()
+        finally:
+            for s in sensors:
+                s.close()
+            rig.close()
+    console.print(summary_table(result))
+    if out_dir is not None:
+        console.print(f"recordings in {out_dir}/")
+    console.print(f"demo finished in {time.monotonic() - wall0:.1f} s wall time")
+    return result

@@ -1,0 +1,133 @@
+"""Capture quality gates: is one unit's capture of one step good enough to fit?
+
+Each gate measures one value of the samples captured in a step window and
+compares it with its limits (:class:`~station.sequence.options.SequenceOptions`):
+
+* ``sample_fraction``: received / expected samples (the link delivered the window);
+* ``dropped_fraction``: frames lost to sequence-counter gaps inside the window;
+* ``stillness_gyro`` / ``stillness_accel``: rest and poses, the largest per-axis std of
+  the linearly detrended samples (a slow drift, eq. 3, is not motion);
+* ``gravity_ratio``: rest and poses, ``|mean specific force| / g``;
+* ``rate_error`` / ``rate_steadiness``: rate steps, the mean gyro rate about the commanded
+  axis minus the command, and its detrended std.
+
+A failed link gate (sample count, dropped frames) is a station fault: ERROR. A
+failed physics gate (stillness, gravity, rate) says the unit measures nonsense in a
+step the rig confirmed: the unit FAILs. Units: m/s^2, rad/s, s, 1.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from station.sensor.client import SampleBlock
+from station.sequence.options import SequenceOptions
+from station.session.model import Kind
+from station.sim.geometry import AXIS_INDEX
+
+SEQ_MODULUS = 1 << 16
+
+
+@dataclass(frozen=True)
+class GateResult:
+    """One gate's measured value against its limits.
+
+    Attributes:
+        name: gate name; value: measured value (``unit``); low, high: limits (``unit``).
+        passed: within limits; link: a link gate (failure = station ERROR, else unit FAIL).
+    """
+
+    name: str
+    value: float
+    low: float
+    high: float
+    unit: str
+    passed: bool
+    link: bool = False
+
+    def describe(self) -> str:
+        return f"{self.name} = {self.value:.6g} {self.unit} outside [{self.low:.6g}, {self.high:.6g}]"
+
+
+def _gate(name: str, value: float, low: float, high: float, unit: str, link: bool = False) -> GateResult:
+    ok = bool(math.isfinite(value) and low <= value <= high)
+    return GateResult(name, float(value), float(low), float(high), unit, ok, link)
+
+
+def detrended_std(t_s: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Per-column std of ``x`` (n, k) about its least-squares line in ``t_s`` (same unit as ``x``)."""
+    if len(t_s) < 3:
+        return np.full(x.shape[1], np.nan)
+    tc = t_s - t_s.mean()
+    xc = x - x.mean(axis=0)
+    denom = float(tc @ tc)
+    slope = (tc @ xc) / denom if denom > 0 else np.zeros(x.shape[1])
+    return (xc - np.outer(tc, slope)).std(axis=0)
+
+
+def dropped_frames(seq: np.ndarray) -> int:
+    """Frames missing between consecutive sequence numbers (u16, wrapping)."""
+    if len(seq) < 2:
+        return 0
+    d = np.diff(seq.astype(np.int64)) % SEQ_MODULUS
+    return int(np.sum(np.where(d > 0, d - 1, 0)))
+
+
+def link_gates(block: SampleBlock, t0_s: float, t1_s: float, rate_hz: float, opt: SequenceOptions) -> list[GateResult]:
+    """Sample count and dropped frames of the window [t0_s, t1_s) (sensor time, s)."""
+    expected = max(math.floor((t1_s - t0_s) * rate_hz + 1e-6), 1)
+    n = len(block)
+    return [
+        _gate("sample_fraction", n / expected, opt.min_sample_fraction, math.inf, "1", link=True),
+        _gate("dropped_fraction", dropped_frames(block.seq) / expected, 0.0, opt.max_dropped_fraction, "1", link=True),
+    ]
+
+
+def still_gates(block: SampleBlock, gravity_mps2: float, opt: SequenceOptions) -> list[GateResult]:
+    """Stillness and gravity magnitude of a rest or pose window."""
+    if len(block) < 3:
+        return []
+    g_std = float(np.max(detrended_std(block.t_s, block.gyro_radps)))
+    a_std = float(np.max(detrended_std(block.t_s, block.accel_mps2)))
+    ratio = float(np.linalg.norm(block.accel_mps2.mean(axis=0)) / gravity_mps2)
+    return [
+        _gate("stillness_gyro", g_std, 0.0, opt.stillness_gyro_radps, "rad/s"),
+        _gate("stillness_accel", a_std, 0.0, opt.stillness_accel_mps2, "m/s^2"),
+        _gate("gravity_ratio", ratio, 1.0 - opt.gravity_tolerance, 1.0 + opt.gravity_tolerance, "1"),
+    ]
+
+
+def rate_gates(block: SampleBlock, axis: str, rate_radps: float, opt: SequenceOptions) -> list[GateResult]:
+    """Mean rate error and steadiness about the commanded axis of a rate-step window."""
+    if len(block) < 3:
+        return []
+    w = block.gyro_radps[:, AXIS_INDEX[axis]]
+    tol = opt.rate_tolerance * abs(rate_radps) + opt.rate_offset_radps
+    steady = float(detrended_std(block.t_s, w[:, None])[0])
+    return [
+        _gate("rate_error", float(w.mean()) - rate_radps, -tol, tol, "rad/s"),
+        _gate("rate_steadiness", steady, 0.0, opt.rate_steadiness_radps, "rad/s"),
+    ]
+
+
+def evaluate(
+    block: SampleBlock,
+    kind: Kind,
+    t0_s: float,
+    t1_s: float,
+    rate_hz: float,
+    gravity_mps2: float,
+    opt: SequenceOptions,
+    rate_axis: str | None = None,
+    rate_radps: float = 0.0,
+) -> list[GateResult]:
+    """Every gate that applies to a window of ``kind``: link gates first, then physics gates."""
+    out = link_gates(block, t0_s, t1_s, rate_hz, opt)
+    if kind in (Kind.REST, Kind.POSE):
+        out += still_gates(block, gravity_mps2, opt)
+    elif kind == Kind.RATE and rate_axis is not None:
+        out += rate_gates(block, rate_axis, rate_radps, opt)
+    return out

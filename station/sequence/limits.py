@@ -1,0 +1,137 @@
+"""Product limits on a fitted parameter set (minimal: the paper's Table 1 ranges).
+
+A :class:`ProductLimits` holds one range per parameter family of eq. (1) and (3)
+(SI: m/s^2 for the accelerometer, rad/s for the gyroscope, s, 1). A fitted value
+fails its limit when it lies outside the range by more than ``k_sigma`` of its
+own standard uncertainty: Table 1 describes the population of true values, so an
+estimate of a unit at the edge of the range may scatter across it without the unit
+being bad. Unresolved estimates (NaN: a drift too small to resolve) are not checked.
+
+The correlation time T_c is not checked by default: a 300 s power-on rest cannot
+resolve the gyro's 1000-3800 s T_c, and the fit then may return T_c at its search
+bound with a local (Wald) uncertainty far too small, which failed 5 of 40 simulated
+Table 1 units (``table1_limits(check_correlation_time=True)`` checks it anyway).
+Proper versioned limits files come with the unit records (issue 4).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from station.fit.params import ParameterSet, TriadParams
+from station.sim.sensor_class import TABLE1, SensorClass
+
+AXES = "xyz"
+Range = tuple[float, float]
+
+
+@dataclass(frozen=True)
+class TriadLimits:
+    """Ranges for one triad (unit U = m/s^2 or rad/s).
+
+    Attributes:
+        scale: diagonal of M (1); cross_axis: off-diagonal of M (1).
+        bias_static, bias_drift: (U); noise_std: (U).
+        correlation_time_s: T_c (s), None: not checked.
+    """
+
+    scale: Range
+    cross_axis: Range
+    bias_static: Range
+    bias_drift: Range
+    noise_std: Range
+    correlation_time_s: Range | None = None
+
+
+@dataclass(frozen=True)
+class ProductLimits:
+    """Limits for a product: both triads, and the widening in standard uncertainties."""
+
+    name: str
+    accel: TriadLimits
+    gyro: TriadLimits
+    k_sigma: float = 3.0
+
+
+def table1_limits(
+    sensor_class: SensorClass = TABLE1, k_sigma: float = 3.0, *, check_correlation_time: bool = False
+) -> ProductLimits:
+    """Table 1 of the paper as product limits (converted to SI); T_c only if ``check_correlation_time``."""
+    c = sensor_class
+    d = math.pi / 180.0
+
+    def dps(r: Range) -> Range:
+        return (r[0] * d, r[1] * d)
+
+    # white noise seen by the fit includes ADC quantization (LSB^2 / 12), far below the range
+    accel = TriadLimits(
+        scale=c.accel_scale,
+        cross_axis=c.accel_cross_axis,
+        bias_static=c.accel_bias_static_mps2,
+        bias_drift=c.accel_bias_drift_mps2,
+        correlation_time_s=c.accel_correlation_time_s if check_correlation_time else None,
+        noise_std=c.accel_noise_std_mps2,
+    )
+    gyro = TriadLimits(
+        scale=c.gyro_scale,
+        cross_axis=c.gyro_cross_axis,
+        bias_static=dps(c.gyro_bias_static_dps),
+        bias_drift=dps(c.gyro_bias_drift_dps),
+        correlation_time_s=c.gyro_correlation_time_s if check_correlation_time else None,
+        noise_std=dps(c.gyro_noise_std_dps),
+    )
+    return ProductLimits(name=f"{c.name}-ranges", accel=accel, gyro=gyro, k_sigma=k_sigma)
+
+
+@dataclass(frozen=True)
+class LimitCheck:
+    """One parameter against its range: passed when within ``[low - k std, high + k std]``."""
+
+    name: str
+    value: float
+    std: float
+    low: float
+    high: float
+    unit: str
+    passed: bool
+
+
+def _check(name: str, value: float, std: float, rng: Range, unit: str, k: float) -> LimitCheck | None:
+    if not math.isfinite(value):
+        return None
+    s = std if math.isfinite(std) else 0.0
+    ok = rng[0] - k * s <= value <= rng[1] + k * s
+    return LimitCheck(name, float(value), float(std), float(rng[0]), float(rng[1]), unit, bool(ok))
+
+
+def _triad_checks(prefix: str, tri: TriadParams, lim: TriadLimits, unit: str, k: float) -> list[LimitCheck]:
+    out: list[LimitCheck | None] = []
+    m, ms = np.asarray(tri.misalignment), np.asarray(tri.misalignment_std)
+    for i in range(3):
+        for j in range(3):
+            rng = lim.scale if i == j else lim.cross_axis
+            out.append(_check(f"{prefix}.M.{AXES[i]}{AXES[j]}", m[i, j], ms[i, j], rng, "1", k))
+    families: list[tuple[str, Range, str]] = [
+        ("bias_static", lim.bias_static, unit),
+        ("bias_drift", lim.bias_drift, unit),
+        ("noise_std", lim.noise_std, unit),
+    ]
+    if lim.correlation_time_s is not None:
+        families.append(("correlation_time_s", lim.correlation_time_s, "s"))
+    for field, rng, u in families:
+        v, s = np.asarray(getattr(tri, field)), np.asarray(getattr(tri, f"{field}_std"))
+        for i in range(3):
+            if field in ("bias_drift", "correlation_time_s") and not math.isfinite(float(tri.correlation_time_s[i])):
+                continue  # drift not resolved: nothing to check
+            out.append(_check(f"{prefix}.{field}.{AXES[i]}", float(v[i]), float(s[i]), rng, u, k))
+    return [c for c in out if c is not None]
+
+
+def check_limits(params: ParameterSet, limits: ProductLimits) -> list[LimitCheck]:
+    """Every checked parameter of ``params`` against ``limits``, accelerometer first."""
+    return _triad_checks("accel", params.accel, limits.accel, "m/s^2", limits.k_sigma) + _triad_checks(
+        "gyro", params.gyro, limits.gyro, "rad/s", limits.k_sigma
+    )

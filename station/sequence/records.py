@@ -1,0 +1,176 @@
+"""Immutable records a sequence run emits to its subscribers.
+
+A run emits, in order: one :class:`RunStarted`; per step a :class:`StepStarted`,
+the step's :class:`Measurement` records (one per unit and quality gate) and a
+:class:`StepFinished`; after the fit the limit :class:`Measurement` records; one
+:class:`UnitFinished` per fixture slot; and one :class:`RunFinished`. Every record
+carries the ``run_id``. Times ``t_s`` are station clock seconds (rig seconds);
+``at`` is the wall-clock time (UTC, ISO 8601) for people and databases.
+
+Outcomes: PASS (the unit is within limits), FAIL (the unit is out of limits or a
+measurement gate showed it defective), ERROR (the station failed: rig timeout or
+fault, serial link fault, lost samples) and ABORTED (the operator stopped the run).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass
+from enum import Enum
+
+
+class Outcome(Enum):
+    """Result of a unit or a run; the severity order is PASS < FAIL < ERROR < ABORTED."""
+
+    PASS = "PASS"
+    FAIL = "FAIL"
+    ERROR = "ERROR"
+    ABORTED = "ABORTED"
+
+    @property
+    def severity(self) -> int:
+        return _SEVERITY[self]
+
+
+_SEVERITY = {Outcome.PASS: 0, Outcome.FAIL: 1, Outcome.ERROR: 2, Outcome.ABORTED: 3}
+
+
+def worst(outcomes: Iterable[Outcome]) -> Outcome:
+    """The most severe of ``outcomes`` (PASS for none)."""
+    return max(outcomes, key=lambda o: o.severity, default=Outcome.PASS)
+
+
+@dataclass(frozen=True)
+class RunStarted:
+    """A run began.
+
+    Attributes:
+        run_id: unique id of the run.
+        at: wall-clock start (UTC, ISO 8601).
+        t_s: station clock time (s).
+        station: station name.
+        rig: rig description (URL or firmware id).
+        sensors: sensor URLs, one per fixture slot.
+        steps: names of the planned steps, in order.
+    """
+
+    run_id: str
+    at: str
+    t_s: float
+    station: str
+    rig: str
+    sensors: tuple[str, ...]
+    steps: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class StepStarted:
+    """A step began (before the rig moves for it).
+
+    Attributes:
+        index: 0-based step number; name: e.g. ``'rest'``, ``'pose -z'``, ``'rate x +50'``;
+        kind: ``'rest'``, ``'pose'`` or ``'rate'``; t_s: station clock (s);
+        hold_s: planned capture duration (s).
+    """
+
+    run_id: str
+    index: int
+    name: str
+    kind: str
+    t_s: float
+    hold_s: float
+
+
+@dataclass(frozen=True)
+class StepFinished:
+    """A step ended.
+
+    Attributes:
+        ok: the rig did its part and every unit still active passed the step's gates.
+        duration_s: station clock time the step took, rig motion included (s).
+        units_active: units still being measured after this step.
+        message: why not ok ('' if ok).
+    """
+
+    run_id: str
+    index: int
+    name: str
+    t_s: float
+    duration_s: float
+    ok: bool
+    units_active: int
+    message: str = ""
+
+
+@dataclass(frozen=True)
+class Measurement:
+    """One measured value of one unit against its limits (a capture gate or a product limit).
+
+    Attributes:
+        slot: fixture slot; serial: the unit's serial number ('' if unknown yet).
+        step: the step name, or ``'limits'`` for the product limits after the fit.
+        name: what was measured, e.g. ``'gravity_ratio'``, ``'accel.bias_static.x'``.
+        value: the measured value (``unit``); low, high: its limits (``unit``).
+        unit: SI unit or ``'1'``.
+        passed: ``low <= value <= high`` (limit checks may widen by the uncertainty, see
+            :mod:`station.sequence.limits`).
+        std: standard uncertainty of ``value`` (NaN if none).
+    """
+
+    run_id: str
+    slot: int
+    serial: str
+    step: str
+    name: str
+    value: float
+    low: float
+    high: float
+    unit: str
+    passed: bool
+    std: float = float("nan")
+
+
+@dataclass(frozen=True)
+class UnitFinished:
+    """A unit's result.
+
+    Attributes:
+        outcome: PASS, FAIL, ERROR or ABORTED.
+        message: the reason for anything but PASS ('' for PASS).
+        session_path: the saved session recording, or None.
+        params_path: the saved parameter set (JSON), or None.
+    """
+
+    run_id: str
+    slot: int
+    serial: str
+    outcome: Outcome
+    message: str
+    session_path: str | None = None
+    params_path: str | None = None
+
+
+@dataclass(frozen=True)
+class RunFinished:
+    """The run ended (teardown done).
+
+    Attributes:
+        outcome: the most severe unit outcome (ABORTED/ERROR also when no unit got that far).
+        t_s: station clock (s); duration_s: station clock time of the whole run (s).
+        wall_s: wall-clock duration (s).
+        units: every slot's result.
+        message: why the run as a whole did not complete ('' otherwise).
+        rig_at_rest: the rig confirmed rest during teardown.
+    """
+
+    run_id: str
+    outcome: Outcome
+    t_s: float
+    duration_s: float
+    wall_s: float
+    units: tuple[UnitFinished, ...]
+    message: str = ""
+    rig_at_rest: bool = True
+
+
+Record = RunStarted | StepStarted | StepFinished | Measurement | UnitFinished | RunFinished

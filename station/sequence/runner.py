@@ -1,0 +1,564 @@
+"""Run the calibration sequence for the N units of a fixture on one rig.
+
+:class:`SequenceRunner` runs the steps of :mod:`station.sequence.steps` (power-on
+rest, six gravity poses, rate steps about each axis) for every unit concurrently,
+emits :mod:`~station.sequence.records` to its subscribers, and afterwards builds
+each unit's :class:`~station.session.model.Session` from the captured frames,
+fits it (:func:`station.fit.calibrate.fit_session`), checks the product limits
+(:mod:`station.sequence.limits`) and saves the session CSV (and the parameter
+JSON) of every unit that recorded anything.
+
+Outcomes: a unit out of limits (or failing a physics gate) is FAIL; a station
+fault (:class:`~station.errors.HardwareError`: rig timeout, rig fault, serial
+fault, lost samples) is ERROR, for all units when it is the rig's and for one unit
+when it is its sensor's; ``KeyboardInterrupt`` (Ctrl-C) or :meth:`SequenceRunner.abort`
+is ABORTED. ``run()`` returns the result in every case and does not re-raise
+``KeyboardInterrupt``.
+
+Guaranteed teardown: whatever happens, the rig is told to stop and the runner
+waits for it to report rest; streams are stopped. Nothing is written to any
+sensor: the only path that writes is the optional :class:`Provisioner`, called
+once per unit whose outcome is PASS, and only when the run was neither aborted
+nor hit by a station fault.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+import uuid
+from collections.abc import Callable, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor, wait
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Protocol
+
+from station.errors import FitError, HardwareError, StationError
+from station.fit.calibrate import FitOptions, fit_session
+from station.fit.params import ParameterSet
+from station.rig.protocol import Rig
+from station.sensor.client import SerialSensor
+from station.sequence.capture import UnitChannel, build_session
+from station.sequence.limits import ProductLimits, check_limits, table1_limits
+from station.sequence.options import SequenceOptions
+from station.sequence.records import (
+    Measurement,
+    Outcome,
+    Record,
+    RunFinished,
+    RunStarted,
+    StepFinished,
+    StepStarted,
+    UnitFinished,
+    worst,
+)
+from station.sequence.steps import STEP_FUNCTIONS, Fixture, Step, StepReport, bring_to_rest, plan_steps
+from station.session import format_session, parse_session
+from station.session.model import Session
+from station.sim.clock import Clock
+from station.sim.plan import RigPlan, default_plan
+
+log = logging.getLogger(__name__)
+
+Subscriber = Callable[[Record], None]
+
+
+class RigLinkError(HardwareError):
+    """The rig link dropped and had to be re-established during the run."""
+
+
+@dataclass(frozen=True, eq=False)
+class UnitResult:
+    """One fixture slot's result.
+
+    Attributes:
+        slot: fixture slot; url: its sensor URL; serial: the unit's serial ('' if never identified).
+        outcome, message: the verdict and its reason ('' for PASS).
+        session: the recording (None if nothing was captured); params: the fit (None if not fitted).
+        session_path, params_path: where they were saved (None if not saved).
+        measurements: every gate and limit measurement of the unit.
+    """
+
+    slot: int
+    url: str
+    serial: str
+    outcome: Outcome
+    message: str
+    session: Session | None = None
+    params: ParameterSet | None = None
+    session_path: Path | None = None
+    params_path: Path | None = None
+    measurements: tuple[Measurement, ...] = ()
+
+
+@dataclass(frozen=True, eq=False)
+class RunResult:
+    """A finished run.
+
+    Attributes:
+        run_id: unique id; outcome: the most severe unit outcome (or the run's own).
+        units: per slot; records: everything emitted, in order.
+        sequence_s: station clock time from start until the rig was confirmed at rest (s).
+        duration_s: station clock time of the whole run incl. fit and saving (s).
+        wall_s: wall-clock time of the whole run (s).
+        post_wall_s: wall-clock time after the teardown: fits, limits, saving (s). On a fast
+            simulated clock, ``sequence_s + post_wall_s`` is what the run takes on a real rig.
+        message: why the run as a whole did not complete ('' if it did).
+        rig_at_rest: teardown confirmed the rig at rest.
+    """
+
+    run_id: str
+    outcome: Outcome
+    units: tuple[UnitResult, ...]
+    records: tuple[Record, ...]
+    sequence_s: float
+    duration_s: float
+    wall_s: float
+    post_wall_s: float = 0.0
+    message: str = ""
+    rig_at_rest: bool = True
+
+    @property
+    def cycle_time_per_unit_s(self) -> float:
+        """Real-rig time per unit: (rig sequence + post-processing) / units (s)."""
+        return (self.sequence_s + self.post_wall_s) / max(len(self.units), 1)
+
+    def unit(self, slot: int) -> UnitResult:
+        return self.units[slot]
+
+
+class Provisioner(Protocol):
+    """Writes a passed unit's calibration into the sensor (EEPROM); issue 4 provides the real one."""
+
+    def provision(self, unit: UnitResult, sensor: SerialSensor) -> None: ...
+
+
+@dataclass
+class _Verdict:
+    outcome: Outcome | None = None
+    message: str = ""
+    measurements: list[Measurement] = field(default_factory=list)
+
+
+def _new_run_id() -> str:
+    return datetime.now(UTC).strftime("%Y%m%dT%H%M%SZ") + "-" + uuid.uuid4().hex[:6]
+
+
+class SequenceRunner:
+    """Runs the sequence for the sensors of one fixture on one rig.
+
+    Args:
+        rig: an open rig (:func:`station.rig.open_rig`).
+        sensors: open sensor clients, one per fixture slot (:func:`station.sensor.open_sensor`).
+        clock: the station clock the rig and sensors were opened with.
+        plan: steps and durations (default :func:`station.sim.plan.default_plan`), site gravity.
+        options: timeouts and capture gates.
+        limits: product limits (default: Table 1 ranges).
+        out_dir: where session CSVs and parameter JSONs go (None: not saved).
+        fit_options: passed to :func:`fit_session`.
+        provisioner: called for each PASS unit after a complete, fault-free run.
+        station, rig_name: names for records and session metadata.
+        sensor_urls: for records and results (default ``slotN``).
+        subscribers: called with every record, in order, from the thread calling :meth:`run`.
+    """
+
+    def __init__(
+        self,
+        rig: Rig,
+        sensors: Sequence[SerialSensor],
+        clock: Clock,
+        *,
+        plan: RigPlan | None = None,
+        options: SequenceOptions | None = None,
+        limits: ProductLimits | None = None,
+        out_dir: Path | None = None,
+        fit_options: FitOptions | None = None,
+        provisioner: Provisioner | None = None,
+        station: str = "station",
+        rig_name: str = "rig",
+        sensor_urls: Sequence[str] | None = None,
+        subscribers: Sequence[Subscriber] = (),
+    ) -> None:
+        if not sensors:
+            raise ValueError("a run needs at least one sensor")
+        self.rig = rig
+        self.sensors = list(sensors)
+        self.clock = clock
+        self.plan = plan if plan is not None else default_plan()
+        self.options = options if options is not None else SequenceOptions()
+        self.limits = limits if limits is not None else table1_limits()
+        self.out_dir = out_dir
+        self.fit_options = fit_options
+        self.provisioner = provisioner
+        self.station = station
+        self.rig_name = rig_name
+        self.sensor_urls = list(sensor_urls) if sensor_urls is not None else [f"slot{k}" for k in range(len(sensors))]
+        self.steps: list[Step] = plan_steps(self.plan)
+        self._subscribers: list[Subscriber] = list(subscribers)
+        self._records: list[Record] = []
+        self._abort_requested = False
+        self._fixture: Fixture | None = None
+        self.run_id = _new_run_id()
+
+    # --- records ----------------------------------------------------------------------------------
+
+    def subscribe(self, fn: Subscriber) -> None:
+        """Call ``fn`` with every record emitted from now on."""
+        self._subscribers.append(fn)
+
+    def _emit(self, record: Record) -> None:
+        self._records.append(record)
+        for fn in self._subscribers:
+            try:
+                fn(record)
+            except Exception:  # a display or logger bug must not break the run
+                log.exception("record subscriber %r failed", fn)
+
+    def abort(self) -> None:
+        """Ask the run to stop as soon as possible (thread-safe); the outcome becomes ABORTED."""
+        self._abort_requested = True
+        if self._fixture is not None:
+            self._fixture.abort.set()
+
+    # --- the run ------------------------------------------------------------------------------------
+
+    def run(self) -> RunResult:
+        """Run every step, tear down, fit, check limits, save; see the module docstring."""
+        clock = self.clock
+        t_start, wall0 = clock.now(), time.monotonic()
+        channels = [
+            UnitChannel(k, url, s, clock) for k, (url, s) in enumerate(zip(self.sensor_urls, self.sensors, strict=True))
+        ]
+        verdicts = [_Verdict() for _ in channels]
+        self._emit(
+            RunStarted(
+                self.run_id, datetime.now(UTC).isoformat(), t_start, self.station, self.rig_name,
+                tuple(self.sensor_urls), tuple(s.name for s in self.steps),
+            )
+        )
+        aborted = self._abort_requested
+        run_message = ""
+        completed = False
+        rig_at_rest = False
+        pool = ThreadPoolExecutor(max_workers=len(channels), thread_name_prefix="capture")
+        fx = Fixture(
+            self.rig, channels, clock, self.options, self.plan.gravity_mps2, int(self.plan.sample_rate_hz), pool
+        )
+        self._fixture = fx
+        if aborted:
+            fx.abort.set()
+        reconnects0 = int(getattr(self.rig, "reconnects", 0))
+        try:
+            try:
+                if not aborted:
+                    self._run_steps(fx, verdicts, reconnects0)
+                    completed = bool(fx.active)
+            except KeyboardInterrupt:
+                aborted = True
+                run_message = "aborted by the operator"
+            except HardwareError as exc:
+                run_message = f"station fault: {exc}"
+                log.warning("run %s: %s", self.run_id, run_message)
+            finally:
+                fx.abort.set()
+                rig_at_rest, teardown_message, interrupted = self._teardown(channels)
+                aborted = aborted or interrupted
+                if teardown_message:
+                    run_message = f"{run_message}; {teardown_message}" if run_message else teardown_message
+            sequence_s = clock.now() - t_start
+            post_wall0 = time.monotonic()
+            units = self._finish_units(channels, verdicts, aborted, run_message, completed)
+        finally:
+            pool.shutdown(wait=True, cancel_futures=True)
+            self._fixture = None
+        outcome = worst(u.outcome for u in units)
+        if aborted:
+            outcome = Outcome.ABORTED
+        elif run_message and outcome == Outcome.PASS:
+            outcome = Outcome.ERROR
+        finished = tuple(
+            UnitFinished(self.run_id, u.slot, u.serial, u.outcome, u.message,
+                         str(u.session_path) if u.session_path else None,
+                         str(u.params_path) if u.params_path else None)
+            for u in units
+        )
+        for rec in finished:
+            self._emit(rec)
+        duration = clock.now() - t_start
+        wall = time.monotonic() - wall0
+        post_wall = time.monotonic() - post_wall0
+        self._emit(RunFinished(self.run_id, outcome, clock.now(), duration, wall, finished, run_message, rig_at_rest))
+        return RunResult(
+            self.run_id, outcome, tuple(units), tuple(self._records), sequence_s, duration, wall, post_wall,
+            run_message, rig_at_rest,
+        )
+
+    def _run_steps(self, fx: Fixture, verdicts: list[_Verdict], reconnects0: int) -> None:
+        for step in self.steps:
+            if not fx.active:
+                log.warning("run %s: no unit left to measure; stopping before '%s'", self.run_id, step.name)
+                return
+            if fx.abort.is_set():
+                raise KeyboardInterrupt
+            t0 = self.clock.now()
+            self._emit(StepStarted(self.run_id, step.index, step.name, step.kind.label, t0, step.hold_s))
+            try:
+                report = STEP_FUNCTIONS[step.kind](fx, step)
+                reconnects = int(getattr(fx.rig, "reconnects", 0))
+                if self.options.rig_reconnect_is_error and reconnects > reconnects0:
+                    raise RigLinkError(
+                        f"the rig link dropped during the run and was re-established ({reconnects - reconnects0} "
+                        f"reconnect(s)); the rig went unsupervised, the run is not trusted"
+                    )
+            except BaseException as exc:
+                aborted = isinstance(exc, KeyboardInterrupt)
+                why = "aborted by the operator" if aborted else f"{type(exc).__name__}: {exc}"
+                self._emit(StepFinished(self.run_id, step.index, step.name, self.clock.now(),
+                                        self.clock.now() - t0, False, len(fx.active), why))
+                raise
+            problems = self._apply_report(fx, step, report, verdicts)
+            self._emit(StepFinished(self.run_id, step.index, step.name, self.clock.now(), self.clock.now() - t0,
+                                    not problems, len(fx.active), "; ".join(problems)))
+
+    def _apply_report(self, fx: Fixture, step: Step, report: StepReport, verdicts: list[_Verdict]) -> list[str]:
+        """Emit the step's measurements; end units with a sensor fault (ERROR) or a failed gate."""
+        problems: list[str] = []
+        for unit in fx.units:
+            v = verdicts[unit.slot]
+            if unit.slot in report.errors:
+                exc = report.errors[unit.slot]
+                self._end_unit(fx, unit, v, Outcome.ERROR, f"step '{step.name}': {type(exc).__name__}: {exc}")
+                problems.append(f"slot {unit.slot}: {exc}")
+                continue
+            gates = report.gates.get(unit.slot)
+            if gates is None:
+                continue
+            for g in gates:
+                m = Measurement(self.run_id, unit.slot, unit.serial, step.name, g.name, g.value, g.low, g.high,
+                                g.unit, g.passed)
+                v.measurements.append(m)
+                self._emit(m)
+            failed = [g for g in gates if not g.passed]
+            if failed:
+                link = [g for g in failed if g.link]
+                outcome = Outcome.ERROR if link else Outcome.FAIL
+                text = "; ".join(g.describe() for g in (link or failed))
+                self._end_unit(fx, unit, v, outcome, f"step '{step.name}': {text}")
+                problems.append(f"slot {unit.slot}: {text}")
+        return problems
+
+    def _end_unit(self, fx: Fixture, unit: UnitChannel, v: _Verdict, outcome: Outcome, message: str) -> None:
+        unit.active = False
+        v.outcome, v.message = outcome, message
+        fx.pool.submit(unit.stop_stream)  # not on the rig's critical path: a silent sensor takes a while
+
+    # --- teardown -----------------------------------------------------------------------------------
+
+    def _teardown(self, channels: list[UnitChannel]) -> tuple[bool, str, bool]:
+        """Stop the rig and wait for rest (retried once after a Ctrl-C), stop the streams.
+
+        Returns (rig confirmed at rest, message about a failed teardown, interrupted by Ctrl-C).
+        """
+        at_rest, message, interrupted = False, "", False
+        for _ in range(2):
+            try:
+                bring_to_rest(self.rig, self.options.rest_timeout_s)
+                at_rest, message = True, ""
+                break
+            except KeyboardInterrupt:
+                interrupted = True
+                message = "teardown interrupted; rig stop was retried"
+            except HardwareError as exc:
+                message = f"could not confirm the rig at rest ({type(exc).__name__}: {exc}); its watchdog must stop it"
+                log.error("run %s: %s", self.run_id, message)
+                break
+        try:
+            futures = [self._fixture.pool.submit(u.stop_stream) for u in channels] if self._fixture else []
+            wait(futures)
+        except KeyboardInterrupt:
+            interrupted = True
+        return at_rest, message, interrupted
+
+    # --- after the rig: sessions, fits, limits, files -------------------------------------------------
+
+    def _metadata(self, unit: UnitChannel) -> dict[str, str]:
+        p = self.plan
+        return {
+            "latitude_deg": repr(float(p.latitude_deg)),
+            "heading_deg": repr(float(p.heading_deg)),
+            "station": self.station,
+            "rig": self.rig_name,
+            "run_id": self.run_id,
+            "slot": str(unit.slot),
+        }
+
+    def _fit_one(self, session: Session) -> ParameterSet:
+        return fit_session(session, self.fit_options)
+
+    def _finish_units(
+        self,
+        channels: list[UnitChannel],
+        verdicts: list[_Verdict],
+        aborted: bool,
+        run_message: str,
+        completed: bool,
+    ) -> list[UnitResult]:
+        sessions: list[Session | None] = []
+        texts: list[str | None] = []
+        for unit, v in zip(channels, verdicts, strict=True):
+            if v.outcome is None and unit.active:
+                if aborted:
+                    v.outcome, v.message = Outcome.ABORTED, run_message or "aborted by the operator"
+                elif run_message:
+                    v.outcome, v.message = Outcome.ERROR, run_message
+                elif not completed:
+                    v.outcome, v.message = Outcome.ERROR, "the sequence did not complete"
+            elif v.outcome is None:
+                v.outcome, v.message = Outcome.ERROR, run_message or "the unit was not measured"
+            try:
+                built = build_session(unit, self.plan.gravity_mps2, self._metadata(unit))
+                # fit exactly what is saved: re-fitting the CSV reproduces the parameter set
+                text = format_session(built) if built is not None else None
+                texts.append(text)
+                sessions.append(parse_session(text) if text is not None else None)
+            except StationError as exc:
+                log.error("slot %d: could not assemble the session: %s", unit.slot, exc)
+                texts.append(None)
+                sessions.append(None)
+        params: list[ParameterSet | None] = [None] * len(channels)
+        to_fit = [k for k, v in enumerate(verdicts) if v.outcome is None and sessions[k] is not None]
+        if to_fit:
+            assert self._fixture is not None
+            futures: dict[int, Future[ParameterSet]] = {
+                k: self._fixture.pool.submit(self._fit_one, sessions[k]) for k in to_fit  # type: ignore[arg-type]
+            }
+            try:
+                wait(futures.values())
+            except KeyboardInterrupt:
+                aborted = True
+            for k, fut in futures.items():
+                v = verdicts[k]
+                if aborted and not fut.done():
+                    v.outcome, v.message = Outcome.ABORTED, "aborted by the operator during the fit"
+                    continue
+                exc = fut.exception()
+                if isinstance(exc, FitError):
+                    v.outcome, v.message = Outcome.FAIL, f"fit refused the recording: {exc}"
+                elif exc is not None:
+                    raise exc
+                else:
+                    params[k] = fut.result()
+                    self._check_unit_limits(channels[k], v, params[k])  # type: ignore[arg-type]
+        results: list[UnitResult] = []
+        for k, (unit, v) in enumerate(zip(channels, verdicts, strict=True)):
+            if v.outcome is None:
+                v.outcome = Outcome.ABORTED if aborted else Outcome.ERROR
+                v.message = v.message or "not finished"
+            session_path, params_path = self._save(unit, v, sessions[k], texts[k], params[k])
+            results.append(
+                UnitResult(unit.slot, unit.url, unit.serial, v.outcome, v.message, sessions[k], params[k],
+                           session_path, params_path, tuple(v.measurements))
+            )
+        if self.provisioner is not None and not aborted and not run_message:
+            results = self._provision(results)
+        return results
+
+    def _check_unit_limits(self, unit: UnitChannel, v: _Verdict, params: ParameterSet) -> None:
+        checks = check_limits(params, self.limits)
+        for c in checks:
+            m = Measurement(self.run_id, unit.slot, unit.serial, "limits", c.name, c.value, c.low, c.high, c.unit,
+                            c.passed, c.std)
+            v.measurements.append(m)
+            self._emit(m)
+        failed = [c for c in checks if not c.passed]
+        if failed:
+            shown = ", ".join(f"{c.name}={c.value:.4g} not in [{c.low:.4g}, {c.high:.4g}]" for c in failed[:3])
+            more = f" (+{len(failed) - 3} more)" if len(failed) > 3 else ""
+            v.outcome, v.message = Outcome.FAIL, f"out of limits ({self.limits.name}): {shown}{more}"
+        else:
+            v.outcome, v.message = Outcome.PASS, ""
+
+    def _save(
+        self,
+        unit: UnitChannel,
+        v: _Verdict,
+        session: Session | None,
+        text: str | None,
+        params: ParameterSet | None,
+    ) -> tuple[Path | None, Path | None]:
+        if self.out_dir is None or session is None or text is None:
+            return None, None
+        stem = f"{session.serial}_{self.run_id}"
+        try:
+            self.out_dir.mkdir(parents=True, exist_ok=True)
+            session_path = self.out_dir / f"{stem}.csv"
+            session_path.write_bytes(text.encode("utf-8"))
+            params_path = None
+            if params is not None:
+                params_path = self.out_dir / f"{stem}.params.json"
+                params_path.write_text(params.to_json() + "\n")
+        except (OSError, StationError) as exc:
+            if v.outcome in (Outcome.PASS, Outcome.FAIL):
+                v.outcome, v.message = Outcome.ERROR, f"could not save the recording: {exc}"
+            log.error("slot %d: could not save the recording: %s", unit.slot, exc)
+            return None, None
+        return session_path, params_path
+
+    def _provision(self, results: list[UnitResult]) -> list[UnitResult]:
+        assert self.provisioner is not None
+        out: list[UnitResult] = []
+        stop = False
+        for r in results:
+            if r.outcome != Outcome.PASS or stop:
+                out.append(r)
+                continue
+            try:
+                self.provisioner.provision(r, self.sensors[r.slot])
+                out.append(r)
+            except HardwareError as exc:
+                out.append(_replace_outcome(r, Outcome.ERROR, f"provisioning failed: {exc}"))
+            except KeyboardInterrupt:
+                stop = True
+                out.append(_replace_outcome(r, Outcome.ABORTED, "aborted by the operator during provisioning"))
+        return out
+
+
+def _replace_outcome(r: UnitResult, outcome: Outcome, message: str) -> UnitResult:
+    return UnitResult(r.slot, r.url, r.serial, outcome, message, r.session, r.params, r.session_path, r.params_path,
+                      r.measurements)
+
+
+def run_sequence(
+    rig_url: str,
+    sensor_urls: Sequence[str],
+    clock: Clock,
+    *,
+    rig_options: dict[str, object] | None = None,
+    sensor_options: dict[str, object] | None = None,
+    **runner_options: object,
+) -> RunResult:
+    """Open the rig and the sensors by URL, run the sequence, close them again.
+
+    ``rig_options`` go to :func:`station.rig.open_rig` (e.g. :func:`~station.sequence.options.rig_client_options`),
+    ``sensor_options`` to :func:`station.sensor.open_sensor`, the rest to :class:`SequenceRunner`.
+    Raises :class:`~station.errors.HardwareError` if the rig or a sensor cannot be opened.
+    """
+    from station.rig import open_rig
+    from station.sensor import open_sensor
+
+    rig = open_rig(rig_url, clock, **(rig_options or {}))  # type: ignore[arg-type]
+    sensors: list[SerialSensor] = []
+    try:
+        for url in sensor_urls:
+            sensors.append(open_sensor(url, clock, **(sensor_options or {})))  # type: ignore[arg-type]
+        ident = rig.identify()
+        runner = SequenceRunner(
+            rig, sensors, clock, rig_name=f"{ident.firmware_id} {ident.firmware_version}",
+            sensor_urls=list(sensor_urls), **runner_options,  # type: ignore[arg-type]
+        )
+        return runner.run()
+    finally:
+        for s in sensors:
+            s.close()
+        rig.close()

@@ -1,0 +1,163 @@
+"""A whole simulated station: one simulated rig and N simulated sensors on one clock.
+
+:class:`SimStation` starts a :class:`~station.sim.rig_server.SimulatedRig` (a real
+pymodbus server) and N :class:`~station.sim.sensor_peer.SimulatedSensor` (each on
+its own pty), all on one :class:`~station.sim.clock.SimClock`. Each sensor's
+physics is a :class:`~station.sim.physics_source.PhysicsSource` bound to the rig,
+so all units feel whatever the rig is commanded to do. The station code talks to
+them only through :attr:`SimStation.rig_url` and :attr:`SimStation.sensor_urls`,
+exactly as it would to hardware. Used by ``station sim``, ``station demo`` and the
+tests; a context manager.
+
+Seeds: unit ``k`` of ``seed`` is drawn from ``SeedSequence(seed, spawn_key=(k,))``:
+the same seed gives the same units (truth, serial numbers) and the same noise per
+power cycle.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from station.sequence.options import rig_client_options
+from station.sim.clock import SimClock
+from station.sim.eeprom import Eeprom
+from station.sim.effects import Effects
+from station.sim.physics_source import PhysicsSource
+from station.sim.plan import RigPlan, default_plan
+from station.sim.rig_server import SimulatedRig
+from station.sim.sensor_class import TABLE1, SensorClass, UnitTruth, draw_unit
+from station.sim.sensor_peer import SimulatedSensor
+
+
+@dataclass(frozen=True, eq=False)
+class SimUnit:
+    """One simulated unit in the fixture.
+
+    Attributes:
+        slot: fixture slot (0-based).
+        truth: its true parameters (SI).
+        source: its physics, bound to the rig.
+        sensor: the simulated firmware on a pty (``sensor.url``, ``sensor.eeprom``, fault switches).
+    """
+
+    slot: int
+    truth: UnitTruth
+    source: PhysicsSource
+    sensor: SimulatedSensor
+
+
+class SimStation:
+    """Simulated rig + ``units`` simulated sensors sharing one ``SimClock(scale)``.
+
+    Args:
+        units: number of sensors in the fixture.
+        scale: simulated seconds per wall second.
+        seed: seeds the units and their noise.
+        plan: site values (gravity, latitude, heading) and the sensors' power-on sample rate.
+        sensor_class: distribution the units are drawn from (default: the paper's Table 1).
+        effects: optional physics for every unit.
+        host, port: where the rig's Modbus/TCP server listens (port 0: a free port).
+        rig_transport: 'tcp' or 'rtu' (RTU over a pty pair).
+        rig_options: extra keyword arguments of :class:`SimulatedRig` (motion limits, settle time).
+    """
+
+    def __init__(
+        self,
+        units: int = 4,
+        scale: float = 30.0,
+        seed: int = 0,
+        *,
+        plan: RigPlan | None = None,
+        sensor_class: SensorClass = TABLE1,
+        effects: Effects | None = None,
+        host: str = "127.0.0.1",
+        port: int = 0,
+        rig_transport: str = "tcp",
+        rig_options: dict[str, Any] | None = None,
+    ) -> None:
+        if units < 1:
+            raise ValueError("a simulated station needs at least one unit")
+        self.n_units = int(units)
+        self.seed = int(seed)
+        self.plan = plan if plan is not None else default_plan()
+        self.sensor_class = sensor_class
+        self.effects = effects
+        self.clock = SimClock(scale)
+        self._host, self._port, self._transport = host, port, rig_transport
+        self._rig_options = dict(rig_options or {})
+        self.rig: SimulatedRig | None = None
+        self.units: list[SimUnit] = []
+
+    @property
+    def scale(self) -> float:
+        return self.clock.scale
+
+    def start(self) -> SimStation:
+        """Start the rig server and the sensors; returns self."""
+        if self.rig is not None:
+            return self
+        try:
+            opts = {"watchdog_s": rig_client_options(self.scale)["watchdog_s"], **self._rig_options}
+            self.rig = SimulatedRig(self.clock, self._host, self._port, transport=self._transport, **opts).start()
+            rate = int(self.plan.sample_rate_hz)
+            for k in range(self.n_units):
+                unit_ss, imu_ss, fault_ss = np.random.SeedSequence(self.seed, spawn_key=(k,)).spawn(3)
+                truth = draw_unit(self.sensor_class, np.random.default_rng(unit_ss))
+                source = PhysicsSource(
+                    self.rig,
+                    self.clock,
+                    truth,
+                    sensor_class=self.sensor_class,
+                    effects=self.effects,
+                    seed=int(imu_ss.generate_state(1)[0]),
+                    gravity_mps2=self.plan.gravity_mps2,
+                    latitude_deg=self.plan.latitude_deg,
+                    heading_deg=self.plan.heading_deg,
+                )
+                sensor = SimulatedSensor(
+                    source,
+                    self.clock,
+                    serial=truth.serial,
+                    default_rate_hz=rate,
+                    eeprom=Eeprom(clock=self.clock),
+                    seed=int(fault_ss.generate_state(1)[0]),
+                )
+                self.units.append(SimUnit(k, truth, source, sensor))
+        except BaseException:
+            self.stop()
+            raise
+        return self
+
+    def stop(self) -> None:
+        """Stop the sensors and the rig server (idempotent)."""
+        for unit in self.units:
+            unit.sensor.close()
+        self.units = []
+        if self.rig is not None:
+            self.rig.stop()
+            self.rig = None
+
+    def __enter__(self) -> SimStation:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    @property
+    def rig_url(self) -> str:
+        """The rig's URL for :func:`station.rig.open_rig`."""
+        if self.rig is None:
+            raise RuntimeError("the simulated station is not started")
+        return self.rig.url
+
+    @property
+    def sensor_urls(self) -> list[str]:
+        """The sensors' URLs for :func:`station.sensor.open_sensor`, in slot order."""
+        return [u.sensor.url for u in self.units]
+
+    def rig_client_options(self) -> dict[str, Any]:
+        """:func:`station.rig.open_rig` keyword arguments suited to this station's clock scale."""
+        return rig_client_options(self.scale)

@@ -1,0 +1,294 @@
+"""Injected faults during the sequence: the outcome is ERROR (never PASS), the rig ends at rest, no EEPROM write.
+
+Each test starts a fresh simulated station (Modbus/TCP rig on 127.0.0.1, two sensors
+on ptys), injects one fault when a chosen step starts (through a record subscriber,
+the way an operator display would see the run), and runs a short sequence on a fast
+clock. A provisioner that writes the EEPROM of every PASS unit is installed, so "no
+write" is a real check: a faulted unit, or every unit when the rig faulted, must keep
+its EEPROM untouched. Rig faults end every unit with ERROR; a sensor fault ends its own
+unit with ERROR, the other unit is measured to the end.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+
+from station.rig import open_rig
+from station.rig.registers import FaultCode, Status
+from station.sensor import open_sensor
+from station.sensor.client import SerialSensor
+from station.sequence import (
+    Outcome,
+    Record,
+    RunFinished,
+    RunResult,
+    SequenceOptions,
+    SequenceRunner,
+    StepFinished,
+    StepStarted,
+    UnitResult,
+)
+from station.sequence.limits import table1_limits
+from station.sim.eeprom import ERASED
+from station.sim.plan import RigPlan
+from station.sim.station_sim import SimStation
+
+pytestmark = pytest.mark.integration
+
+SCALE = 100.0
+PLAN = RigPlan(
+    sample_rate_hz=50.0,
+    rest_s=20.0,
+    pose_hold_s=2.0,
+    rate_steps=(("x", 100.0), ("y", 100.0), ("z", 100.0)),
+    rate_hold_s=2.0,
+)
+OPTIONS = SequenceOptions(move_timeout_s=30.0, spin_timeout_s=30.0, rest_timeout_s=60.0).for_scale(SCALE)
+RIG_QUERY = "&timeout=0.2&retries=1"  # fail fast when the rig does not answer (wall seconds)
+SENSOR_OPTIONS = {"command_timeout_s": 0.2, "attempts": 2}
+
+
+class EepromWriter:
+    """Writes one page into the EEPROM of every PASS unit."""
+
+    def __init__(self) -> None:
+        self.calls: list[int] = []
+
+    def provision(self, unit: UnitResult, sensor: SerialSensor) -> None:
+        self.calls.append(unit.slot)
+        sensor.eeprom_write_page(0, b"CAL:" + unit.serial.encode())
+
+
+def at_step(name: str, action: Callable[[], None]) -> Callable[[Record], None]:
+    """A subscriber that runs ``action`` once, when step ``name`` starts."""
+    fired = []
+
+    def subscriber(record: Record) -> None:
+        if isinstance(record, StepStarted) and record.name == name and not fired:
+            fired.append(True)
+            action()
+
+    return subscriber
+
+
+@pytest.fixture
+def sim() -> Iterator[SimStation]:
+    with SimStation(2, SCALE, seed=3, plan=PLAN) as station:
+        yield station
+
+
+def run(
+    sim: SimStation,
+    *subscribers: Callable[[Record], None],
+    out_dir: Path | None = None,
+    limits: object = None,
+    plan: RigPlan = PLAN,
+) -> tuple[RunResult, EepromWriter]:
+    writer = EepromWriter()
+    rig = open_rig(sim.rig_url + RIG_QUERY, sim.clock, **sim.rig_client_options())
+    sensors = [open_sensor(url, sim.clock, **SENSOR_OPTIONS) for url in sim.sensor_urls]  # type: ignore[arg-type]
+    try:
+        runner = SequenceRunner(
+            rig, sensors, sim.clock, plan=plan, options=OPTIONS, provisioner=writer, out_dir=out_dir,
+            subscribers=list(subscribers), limits=limits or table1_limits(),  # type: ignore[arg-type]
+        )
+        result = runner.run()
+    finally:
+        for s in sensors:
+            s.close()
+        rig.close()
+    return result, writer
+
+
+def rig_comes_to_rest(sim: SimStation, wall_timeout_s: float = 10.0) -> bool:
+    """The simulated rig reports rest (all axes still) within the wall timeout (its watchdog may do it)."""
+    assert sim.rig is not None
+    deadline = time.monotonic() + wall_timeout_s
+    while time.monotonic() < deadline:
+        _, _, _, rate, status = sim.rig.readback()
+        if status & Status.AT_REST and rate == 0.0:
+            return True
+        time.sleep(0.05)
+    return False
+
+
+def assert_no_eeprom_write(sim: SimStation, slots: tuple[int, ...] = (0, 1)) -> None:
+    for k in slots:
+        eeprom = sim.units[k].sensor.eeprom
+        assert eeprom.page_writes == 0, f"slot {k}: {eeprom.page_writes} EEPROM page writes"
+        assert eeprom.image() == bytes([ERASED]) * eeprom.size
+
+
+def assert_rig_fault_outcome(result: RunResult, writer: EepromWriter, *words: str) -> None:
+    print(f"run {result.outcome.value}: {result.message}")
+    assert result.outcome == Outcome.ERROR
+    assert [u.outcome for u in result.units] == [Outcome.ERROR, Outcome.ERROR]
+    assert writer.calls == []
+    finished = result.records[-1]
+    assert isinstance(finished, RunFinished) and finished.outcome == Outcome.ERROR
+    for word in words:
+        assert word in result.message, result.message
+
+
+# --- rig faults ------------------------------------------------------------------------------------
+
+
+def test_rig_no_answer_while_spinning(sim: SimStation) -> None:
+    assert sim.rig is not None
+    faults = sim.rig.faults
+    result, writer = run(sim, at_step("rate y +100", lambda: setattr(faults, "no_answer", True)))
+    assert_rig_fault_outcome(result, writer, "no answer")
+    assert not result.rig_at_rest  # the station could not confirm it ...
+    assert rig_comes_to_rest(sim)  # ... the rig's watchdog stopped the spinning table
+    assert sim.rig.model.fault_code == FaultCode.WATCHDOG
+    assert_no_eeprom_write(sim)
+
+
+def test_rig_exception_replies(sim: SimStation) -> None:
+    assert sim.rig is not None
+    faults = sim.rig.faults
+    result, writer = run(sim, at_step("rate y +100", lambda: setattr(faults, "exception_replies", 4)))
+    assert_rig_fault_outcome(result, writer, "Modbus exception 4")
+    assert rig_comes_to_rest(sim)
+    assert_no_eeprom_write(sim)
+
+
+def test_rig_stuck_in_position(sim: SimStation) -> None:
+    assert sim.rig is not None
+    faults = sim.rig.faults
+    result, writer = run(sim, at_step("pose -z", lambda: setattr(faults, "stuck_in_position", True)))
+    assert_rig_fault_outcome(result, writer, "not in position")
+    assert result.rig_at_rest and rig_comes_to_rest(sim, 0.5)
+    assert_no_eeprom_write(sim)
+
+
+def test_rig_fault_bit_during_rate_step(sim: SimStation) -> None:
+    assert sim.rig is not None
+    faults = sim.rig.faults
+    result, writer = run(sim, at_step("rate y +100", lambda: setattr(faults, "fault_code", int(FaultCode.DRIVE_YAW))))
+    assert_rig_fault_outcome(result, writer, "DRIVE_YAW", "5")
+    assert result.rig_at_rest and rig_comes_to_rest(sim, 0.5)
+    assert_no_eeprom_write(sim)
+
+
+def test_rig_connection_dropped_mid_motion(sim: SimStation) -> None:
+    assert sim.rig is not None
+    faults = sim.rig.faults
+    result, writer = run(sim, at_step("pose -z", lambda: setattr(faults, "drop_connection_mid_motion", True)))
+    assert sim.rig.connections_dropped >= 1
+    assert_rig_fault_outcome(result, writer, "rig link dropped")
+    assert result.rig_at_rest and rig_comes_to_rest(sim, 0.5)
+    assert_no_eeprom_write(sim)
+
+
+# --- sensor faults (slot 1); slot 0 is measured to the end ------------------------------------------------
+
+
+def assert_sensor_fault_outcome(result: RunResult, *words: str) -> None:
+    print(f"slot 1 {result.units[1].outcome.value}: {result.units[1].message}; slot 0 {result.units[0].outcome.value}")
+    assert result.outcome == Outcome.ERROR
+    bad, good = result.units[1], result.units[0]
+    assert bad.outcome == Outcome.ERROR
+    assert any(w in bad.message for w in words), bad.message
+    assert good.outcome in (Outcome.PASS, Outcome.FAIL) and good.params is not None, good.message
+    assert result.rig_at_rest and result.message == ""
+
+
+def when_streaming(sim: SimStation, slot: int, action: Callable[[], None], delay_wall_s: float = 0.0) -> None:
+    """Run ``action`` from a thread once slot's sensor has sent its first sample frame (plus a delay)."""
+    peer = sim.units[slot].sensor
+
+    def wait_then_act() -> None:
+        while peer.stats().sample_frames == 0:
+            time.sleep(0.001)
+        time.sleep(delay_wall_s)
+        action()
+
+    threading.Thread(target=wait_then_act, daemon=True).start()
+
+
+def test_sensor_bit_errors_crc_storm(sim: SimStation) -> None:
+    peer = sim.units[1].sensor
+
+    def once_streaming() -> None:  # bit errors from the first sample frame of the rest on
+        when_streaming(sim, 1, lambda: setattr(peer, "bit_error_rate", 2e-3))
+
+    result, _ = run(sim, at_step("rest", once_streaming))
+    assert_sensor_fault_outcome(result, "CRC storm", "dropped_fraction")
+    assert "CrcStormError" in result.units[1].message
+    assert rig_comes_to_rest(sim, 0.5)
+    assert_no_eeprom_write(sim, (1,))
+
+
+def test_sensor_dropped_frames(sim: SimStation) -> None:
+    peer = sim.units[1].sensor
+    result, _ = run(sim, at_step("pose -z", lambda: setattr(peer, "drop_frame_rate", 0.05)))
+    assert_sensor_fault_outcome(result, "dropped_fraction")
+    assert "pose -z" in result.units[1].message
+    assert rig_comes_to_rest(sim, 0.5)
+    assert_no_eeprom_write(sim, (1,))
+
+
+def test_sensor_going_silent(sim: SimStation) -> None:
+    peer = sim.units[1].sensor
+
+    def mid_rest() -> None:  # ~5 s of rig time into the 20 s rest: silence while capturing
+        when_streaming(sim, 1, lambda: setattr(peer, "go_silent", True), delay_wall_s=0.05)
+
+    result, _ = run(sim, at_step("rest", mid_rest))
+    # "went silent": no samples while capturing; "did not answer": the clock sync got no reply
+    assert_sensor_fault_outcome(result, "went silent", "did not answer")
+    assert "SensorTimeout" in result.units[1].message and "step 'rest'" in result.units[1].message
+    assert rig_comes_to_rest(sim, 0.5)
+    assert_no_eeprom_write(sim, (1,))
+
+
+# --- operator abort and out-of-limits units ----------------------------------------------------------------
+
+
+def test_ctrl_c_aborts_brings_rig_to_rest_and_writes_nothing(sim: SimStation, tmp_path: Path) -> None:
+    def ctrl_c() -> None:
+        raise KeyboardInterrupt
+
+    result, writer = run(sim, at_step("rate x +100", ctrl_c), out_dir=tmp_path)
+    assert result.outcome == Outcome.ABORTED
+    assert [u.outcome for u in result.units] == [Outcome.ABORTED, Outcome.ABORTED]
+    assert result.rig_at_rest and rig_comes_to_rest(sim, 0.5)
+    assert writer.calls == []
+    assert_no_eeprom_write(sim)
+    # what was captured before the abort is kept for diagnosis
+    assert all(u.session_path is not None and u.session_path.exists() for u in result.units)
+    assert all(u.params is None for u in result.units)
+
+
+def test_unit_out_of_limits_is_fail_and_writes_nothing(sim: SimStation) -> None:
+    lim = table1_limits()
+    tight = replace(lim, name="too-tight", gyro=replace(lim.gyro, noise_std=(0.0, 1e-9)))
+    result, writer = run(sim, limits=tight)
+    assert result.outcome == Outcome.FAIL
+    for unit in result.units:
+        assert unit.outcome == Outcome.FAIL and "gyro.noise_std" in unit.message
+    assert writer.calls == [] and result.rig_at_rest
+    assert_no_eeprom_write(sim)
+
+
+def test_next_run_clears_the_watchdog_fault_the_last_one_left(sim: SimStation) -> None:
+    """Closing the station stops the heartbeat, so the rig latches WATCHDOG; the next run resets it."""
+    assert sim.rig is not None
+    short = RigPlan(sample_rate_hz=50.0, rest_s=2.0, poses=("+z",), pose_hold_s=1.0, rate_steps=())
+    first, _ = run(sim, plan=short)
+    deadline = time.monotonic() + 5.0
+    while sim.rig.model.fault_code != FaultCode.WATCHDOG and time.monotonic() < deadline:
+        sim.rig.readback()  # the model applies the watchdog when it is looked at
+        time.sleep(0.05)
+    assert sim.rig.model.fault_code == FaultCode.WATCHDOG
+    second, _ = run(sim, plan=short)
+    for result in (first, second):
+        assert [s.ok for s in result.records if isinstance(s, StepFinished)] == [True, True]
+        assert result.rig_at_rest and result.message == ""
