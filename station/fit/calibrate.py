@@ -47,7 +47,7 @@ class FitOptions:
         moving_average_length: n of Algorithm 1's moving average (eq. 6); the paper uses 40.
     """
 
-    max_blocks: int = 100
+    max_blocks: int = 70
     g_sensitivity: bool = False
     min_pose_samples: int = 50
     outlier_sigma: float = 6.0
