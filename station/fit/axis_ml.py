@@ -155,11 +155,15 @@ def _optimize(problem: _Problem, log_tc_max: float) -> np.ndarray:
             return np.inf
         return problem.nll(theta)
 
+    x0 = np.array([best[1], best[2]])
+    # start from a simplex the size of the grid cell around the best grid point
+    step_tc = 0.5 * (grid_tc[1] - grid_tc[0])
+    simplex = np.array([x0, x0 + [step_tc, 0.0], x0 + [0.0, 2.0]])
     res = optimize.minimize(
         bounded,
-        np.array([best[1], best[2]]),
+        x0,
         method="Nelder-Mead",
-        options={"xatol": 0.02, "fatol": 0.01, "maxiter": 120},
+        options={"xatol": 0.02, "fatol": 0.01, "maxiter": 120, "initial_simplex": simplex},
     )
     return np.asarray(res.x)
 
