@@ -20,6 +20,15 @@ import_app = typer.Typer(no_args_is_help=True, help="Convert recordings made els
 app.add_typer(import_app, name="import")
 
 
+def _add_subapps() -> None:
+    from station.eeprom.commands import eeprom_app
+
+    app.add_typer(eeprom_app, name="eeprom")
+
+
+_add_subapps()
+
+
 def _fail(exc: StationError, code: int = 2) -> typer.Exit:
     typer.echo(f"error: {exc}", err=True)
     return typer.Exit(code)

@@ -42,3 +42,15 @@ class FitError(StationError):
 
 class HardwareError(StationError):
     """A station fault (rig, serial link, EEPROM): the run's outcome is ERROR, not FAIL."""
+
+
+class UnitRejected(StationError):
+    """A unit failed a check after its calibration (e.g. verification of corrected output).
+
+    The outcome is FAIL, not ERROR: the station worked, the unit did not. ``checks`` holds
+    ``(name, value, limit, unit, passed)`` tuples of what was measured.
+    """
+
+    def __init__(self, message: str, checks: tuple[tuple[str, float, float, str, bool], ...] = ()) -> None:
+        super().__init__(message)
+        self.checks = checks

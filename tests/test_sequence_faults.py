@@ -292,3 +292,37 @@ def test_next_run_clears_the_watchdog_fault_the_last_one_left(sim: SimStation) -
     for result in (first, second):
         assert [s.ok for s in result.records if isinstance(s, StepFinished)] == [True, True]
         assert result.rig_at_rest and result.message == ""
+
+
+def test_failed_verification_is_fail_with_the_residuals_recorded(sim: SimStation) -> None:
+    """The EEPROM is written and the firmware corrects, but the corrected output misses a limit: FAIL, not ERROR."""
+    from station.eeprom.provision import EepromProvisioner
+    from station.eeprom.verify import RigVerifier
+    from station.sequence.limits_file import VerificationLimits
+    from station.sequence.records import Measurement
+    from station.sim.firmware import install_firmware
+
+    for u in sim.units:
+        install_firmware(u.sensor, sim.clock)
+    records: list[Record] = []
+    rig = open_rig(sim.rig_url + RIG_QUERY, sim.clock, **sim.rig_client_options())
+    sensors = [open_sensor(url, sim.clock, **SENSOR_OPTIONS) for url in sim.sensor_urls]  # type: ignore[arg-type]
+    try:
+        impossible = VerificationLimits(accel_mps2=1e-9)  # no real residual is that small
+        verifier = RigVerifier(rig, sim.clock, impossible, gravity_mps2=PLAN.gravity_mps2,
+                               sample_rate_hz=int(PLAN.sample_rate_hz), options=OPTIONS)
+        runner = SequenceRunner(
+            rig, sensors, sim.clock, plan=PLAN, options=OPTIONS, limits=table1_limits(),
+            provisioner=EepromProvisioner("test", verifier=verifier), subscribers=[records.append],
+        )
+        result = runner.run()
+    finally:
+        for s in sensors:
+            s.close()
+        rig.close()
+    assert [u.outcome for u in result.units] == [Outcome.FAIL, Outcome.FAIL]
+    assert result.outcome == Outcome.FAIL and result.rig_at_rest
+    verify = [r for r in records if isinstance(r, Measurement) and r.step == "verify"]
+    assert {r.slot for r in verify} == {0, 1}
+    assert any(not r.passed and "accel" in r.name for r in verify)
+    assert all(u.sensor.eeprom.page_writes > 0 for u in sim.units)  # written, then verified

@@ -158,7 +158,7 @@ def _optimize(problem: _Problem, log_tc_max: float) -> np.ndarray:
     x0 = np.array([best[1], best[2]])
     # start from a simplex the size of the grid cell around the best grid point
     step_tc = 0.5 * (grid_tc[1] - grid_tc[0])
-    simplex = np.array([x0, x0 + [step_tc, 0.0], x0 + [0.0, 2.0]])
+    simplex = np.array([x0, x0 + np.array([step_tc, 0.0]), x0 + np.array([0.0, 2.0])])
     res = optimize.minimize(
         bounded,
         x0,

@@ -4,8 +4,13 @@
 simulated sensors (real ptys) on one simulated clock, opens them with the same
 client code a real station uses, runs the default sequence (300 s power-on rest,
 six 30 s poses, 18 rate steps of 12 s: about 15 minutes of rig time) for all units
-concurrently, fits each unit, checks the Table 1 limits, saves every session CSV
-and parameter JSON, and prints a live progress display and a summary table.
+concurrently, fits each unit, checks the limits of the limits file (default
+``fixtures/limits/default.toml``: Table 1 ranges and fit quality), saves every session
+CSV and parameter JSON, writes each PASS unit's calibration image into its simulated
+EEPROM (:class:`~station.eeprom.provision.EepromProvisioner`), lets the unit's firmware
+(:mod:`station.sim.firmware`, Algorithm 1) load it, verifies the corrected output on the
+rig (:class:`~station.eeprom.verify.RigVerifier`), and prints a live progress display,
+a summary table and the verification residuals.
 
 At the default clock scale (30 simulated seconds per wall second) the sequence
 takes about 30 s of wall time; fits and set-up add a few seconds per unit.
@@ -23,7 +28,10 @@ from rich.live import Live
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
+from station.eeprom.provision import EepromProvisioner
+from station.eeprom.verify import RigVerifier
 from station.sensor import open_sensor
+from station.sequence.limits_file import load_limits
 from station.sequence.options import SequenceOptions
 from station.sequence.records import (
     Measurement,
@@ -37,6 +45,7 @@ from station.sequence.records import (
 )
 from station.sequence.runner import RunResult, SequenceRunner
 from station.sim.effects import Effects
+from station.sim.firmware import install_firmware
 from station.sim.plan import RigPlan, default_plan
 from station.sim.station_sim import SimStation
 
@@ -171,6 +180,25 @@ def summary_table(result: RunResult) -> Table:
     return table
 
 
+def provisioning_table(provisioner: EepromProvisioner) -> Table:
+    """One row per provisioned unit: EEPROM slot and update count, write attempts, verification residuals."""
+    table = Table(title="EEPROM write and verification of the corrected output")
+    for name, justify in (("serial", "left"), ("slot #", "left"), ("tries", "right"), ("accel err\n(m/s²)", "right"),
+                          ("gyro err\n(deg/s)", "right"), ("rate err\n(deg/s)", "right"), ("verified", "left")):
+        table.add_column(name, justify=justify)  # type: ignore[arg-type]
+    for serial, rec in provisioner.records.items():
+        v = rec.verification
+        cells = ["", "", "", "not run"]
+        if v is not None:
+            c = {k.name: k.value for k in v.checks}
+            acc = max(c.get("verify.pose.accel_error", math.nan), c.get("verify.rate.accel_error", math.nan))
+            cells = [f"{acc:.4f}", f"{math.degrees(c.get('verify.pose.gyro_error', math.nan)):.4f}",
+                     f"{math.degrees(c.get('verify.rate.rate_error', math.nan)):+.4f}",
+                     "[green]yes[/green]" if v.passed else f"[red]no[/red] {v.describe()}"]
+        table.add_row(serial, f"{rec.write.slot} #{rec.write.update_count}", str(rec.write.attempts), *cells)
+    return table
+
+
 def run_demo(
     units: int = DEMO_UNITS,
     scale: float = DEMO_SCALE,
@@ -181,6 +209,8 @@ def run_demo(
     effects: Effects | None = None,
     options: SequenceOptions | None = None,
     console: Console | None = None,
+    limits_path: Path | None = None,
+    provision: bool = True,
 ) -> RunResult:
     """Start the simulated station, run the sequence for ``units`` units at clock ``scale``, print, return.
 
@@ -193,12 +223,18 @@ def run_demo(
         effects: optional physics of the simulated units.
         options: sequence options (polling is adapted to ``scale``).
         console: where to print (default: stdout).
+        limits_path: limits file (default ``fixtures/limits/default.toml``).
+        provision: write each PASS unit's image into its EEPROM and verify its corrected output.
     """
     console = console if console is not None else Console()
     plan = plan if plan is not None else default_plan()
     options = (options if options is not None else SequenceOptions()).for_scale(scale)
+    limits = load_limits(limits_path)
     wall0 = time.monotonic()
+    provisioner: EepromProvisioner | None = None
     with SimStation(units, scale, seed, plan=plan, effects=effects) as sim:
+        for u in sim.units:
+            install_firmware(u.sensor, sim.clock)
         console.print(f"simulated rig at {sim.rig_url}; {units} sensor(s) on "
                       f"{', '.join(u.sensor.device for u in sim.units)}; clock x{scale:g}")
         from station.rig import open_rig
@@ -210,10 +246,14 @@ def run_demo(
                 sensors.append(open_sensor(url, sim.clock))
             ident = rig.identify()
             display = ProgressDisplay(console, [u.truth.serial for u in sim.units], scale)
+            if provision:
+                verifier = RigVerifier(rig, sim.clock, limits.verification, gravity_mps2=plan.gravity_mps2,
+                                       sample_rate_hz=int(plan.sample_rate_hz), options=options)
+                provisioner = EepromProvisioner("demo", verifier=verifier)
             runner = SequenceRunner(
-                rig, sensors, sim.clock, plan=plan, options=options, out_dir=out_dir, station="demo",
-                rig_name=f"{ident.firmware_id} {ident.firmware_version}", sensor_urls=sim.sensor_urls,
-                subscribers=[display],
+                rig, sensors, sim.clock, plan=plan, options=options, limits=limits.product, out_dir=out_dir,
+                station="demo", rig_name=f"{ident.firmware_id} {ident.firmware_version}",
+                sensor_urls=sim.sensor_urls, subscribers=[display], provisioner=provisioner,
             )
             with display:
                 result = runner.run()
@@ -222,6 +262,9 @@ def run_demo(
                 s.close()
             rig.close()
     console.print(summary_table(result))
+    if provisioner is not None and provisioner.records:
+        console.print(provisioning_table(provisioner))
+    console.print(f"limits: {limits.name} {limits.version} ({limits.path})")
     if out_dir is not None:
         console.print(f"recordings in {out_dir}/")
     console.print(f"demo finished in {time.monotonic() - wall0:.1f} s wall time")

@@ -11,7 +11,10 @@ The correlation time T_c is not checked by default: a 300 s power-on rest cannot
 resolve the gyro's 1000-3800 s T_c, and the fit then may return T_c at its search
 bound with a local (Wald) uncertainty far too small, which failed 5 of 40 simulated
 Table 1 units (``table1_limits(check_correlation_time=True)`` checks it anyway).
-Proper versioned limits files come with the unit records (issue 4).
+Versioned limits files (``fixtures/limits/*.toml``) are loaded by
+:mod:`station.sequence.limits_file`; a :class:`ProductLimits` from a file also carries
+:class:`FitQualityLimits` (largest residual RMS and standard uncertainties), which
+:func:`check_limits` then checks too (``table1_limits()`` has none: unchanged verdicts).
 """
 
 from __future__ import annotations
@@ -47,13 +50,32 @@ class TriadLimits:
 
 
 @dataclass(frozen=True)
+class FitQualityLimits:
+    """Largest allowed fit-quality figures (SI); None: not checked.
+
+    Attributes:
+        accel_residual_rms_mps2, gyro_residual_rms_radps: residual RMS per axis (m/s^2, rad/s).
+        accel_misalignment_std, gyro_misalignment_std: standard uncertainty of each M element (1).
+        accel_bias_static_std_mps2 (m/s^2), gyro_bias_static_std_radps (rad/s): b_stat uncertainty.
+    """
+
+    accel_residual_rms_mps2: float | None = None
+    gyro_residual_rms_radps: float | None = None
+    accel_misalignment_std: float | None = None
+    gyro_misalignment_std: float | None = None
+    accel_bias_static_std_mps2: float | None = None
+    gyro_bias_static_std_radps: float | None = None
+
+
+@dataclass(frozen=True)
 class ProductLimits:
-    """Limits for a product: both triads, and the widening in standard uncertainties."""
+    """Limits for a product: both triads, the widening in standard uncertainties, optional fit quality."""
 
     name: str
     accel: TriadLimits
     gyro: TriadLimits
     k_sigma: float = 3.0
+    fit_quality: FitQualityLimits | None = None
 
 
 def table1_limits(
@@ -130,8 +152,37 @@ def _triad_checks(prefix: str, tri: TriadParams, lim: TriadLimits, unit: str, k:
     return [c for c in out if c is not None]
 
 
+def check_fit_quality(params: ParameterSet, limits: FitQualityLimits) -> list[LimitCheck]:
+    """Fit-quality figures of ``params`` against ``limits`` (each passes when ``0 <= value <= max``).
+
+    Names start with ``fit.``; unresolved figures (NaN) are not checked.
+    """
+    out: list[LimitCheck] = []
+
+    def add(name: str, values: np.ndarray, limit: float | None, unit: str) -> None:
+        if limit is None:
+            return
+        for idx, v in np.ndenumerate(np.asarray(values, dtype=np.float64)):
+            if not math.isfinite(float(v)):
+                continue
+            suffix = "".join(AXES[i] for i in idx)
+            out.append(LimitCheck(f"fit.{name}.{suffix}", float(v), math.nan, 0.0, limit, unit, bool(0 <= v <= limit)))
+
+    a, g = params.accel, params.gyro
+    add("accel.residual_rms", a.residual_rms, limits.accel_residual_rms_mps2, "m/s^2")
+    add("gyro.residual_rms", g.residual_rms, limits.gyro_residual_rms_radps, "rad/s")
+    add("accel.M_std", a.misalignment_std, limits.accel_misalignment_std, "1")
+    add("gyro.M_std", g.misalignment_std, limits.gyro_misalignment_std, "1")
+    add("accel.bias_static_std", a.bias_static_std, limits.accel_bias_static_std_mps2, "m/s^2")
+    add("gyro.bias_static_std", g.bias_static_std, limits.gyro_bias_static_std_radps, "rad/s")
+    return out
+
+
 def check_limits(params: ParameterSet, limits: ProductLimits) -> list[LimitCheck]:
-    """Every checked parameter of ``params`` against ``limits``, accelerometer first."""
-    return _triad_checks("accel", params.accel, limits.accel, "m/s^2", limits.k_sigma) + _triad_checks(
+    """Every checked parameter of ``params`` against ``limits``, accelerometer first, then fit quality."""
+    out = _triad_checks("accel", params.accel, limits.accel, "m/s^2", limits.k_sigma) + _triad_checks(
         "gyro", params.gyro, limits.gyro, "rad/s", limits.k_sigma
     )
+    if limits.fit_quality is not None:
+        out += check_fit_quality(params, limits.fit_quality)
+    return out

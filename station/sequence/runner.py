@@ -34,7 +34,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Protocol
 
-from station.errors import FitError, HardwareError, StationError
+from station.errors import FitError, HardwareError, StationError, UnitRejected
 from station.fit.calibrate import FitOptions, fit_session
 from station.fit.params import ParameterSet
 from station.rig.protocol import Rig
@@ -516,6 +516,11 @@ class SequenceRunner:
             try:
                 self.provisioner.provision(r, self.sensors[r.slot])
                 out.append(r)
+            except UnitRejected as exc:
+                for name, value, limit, unit, passed in exc.checks:
+                    self._emit(Measurement(self.run_id, r.slot, r.serial, "verify", name, value, -limit, limit, unit,
+                                           passed, float("nan")))
+                out.append(_replace_outcome(r, Outcome.FAIL, f"verification failed: {exc}"))
             except HardwareError as exc:
                 out.append(_replace_outcome(r, Outcome.ERROR, f"provisioning failed: {exc}"))
             except KeyboardInterrupt:

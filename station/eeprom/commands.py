@@ -1,0 +1,245 @@
+"""``station eeprom ...``: make, inspect and write calibration images; export noise parameters for Kalibr.
+
+A Typer sub-app; ``station/cli.py`` mounts it with ``app.add_typer(eeprom_app, name="eeprom")``.
+Parameter sets come from a parameter JSON (``--params``, the format ``station fit --json``
+writes) until the unit store provides them. Expected failures print one line on stderr
+and exit with code 2.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Annotated, Any
+
+import numpy as np
+import typer
+
+from station.errors import StationError
+from station.fit.params import ParameterSet, TriadParams
+
+eeprom_app = typer.Typer(no_args_is_help=True, help="Calibration images in the unit's EEPROM.")
+
+
+def _fail(exc: StationError | str, code: int = 2) -> typer.Exit:
+    typer.echo(f"error: {exc}", err=True)
+    return typer.Exit(code)
+
+
+def _load_params(path: Path, serial: str | None) -> ParameterSet:
+    try:
+        params = ParameterSet.from_json(path.read_text())
+    except OSError as exc:
+        raise StationError(f"cannot read {path}: {exc.strerror or exc}") from exc
+    if serial is not None and params.serial != serial:
+        raise StationError(f"{path} holds the parameters of serial {params.serial!r}, not {serial!r}")
+    return params
+
+
+def image_summary(img: Any) -> dict[str, Any]:
+    """A JSON-friendly view of a :class:`~station.eeprom.image.CalibrationImage` (SI units, NaN as None)."""
+
+    def arr(a: np.ndarray) -> Any:
+        return [None if not math.isfinite(v) else v for v in np.asarray(a).ravel().tolist()]
+
+    def triad(t: Any) -> dict[str, Any]:
+        return {
+            "misalignment": arr(t.misalignment),
+            "bias_static": arr(t.bias_static),
+            "bias_drift": arr(t.bias_drift),
+            "correlation_time_s": arr(t.correlation_time_s),
+            "noise_std": arr(t.noise_std),
+        }
+
+    return {
+        "serial": img.serial,
+        "params_id": img.params_id.hex(),
+        "station_id": img.station_id,
+        "calibration_time": img.calibration_time.isoformat(),
+        "update_count": img.update_count,
+        "sample_period_s": img.sample_period_s,
+        "moving_average_length": img.ma_length,
+        "accel_mps2": triad(img.accel),
+        "gyro_radps": triad(img.gyro),
+        "g_sensitivity_radps_per_mps2": arr(img.g_sensitivity),
+    }
+
+
+@eeprom_app.command("image")
+def image_cmd(
+    serial: Annotated[str, typer.Argument(help="the unit's serial number")],
+    params_path: Annotated[Path, typer.Option("--params", help="parameter JSON of the unit")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="image file to write")],
+    station_id: Annotated[str, typer.Option("--station", help="station id written into the image")] = "station",
+) -> None:
+    """Make the EEPROM image of a unit's parameter set (update count 1; the writer renumbers it)."""
+    from station.eeprom.image import CalibrationImage, encode_image, image_sha256
+
+    try:
+        params = _load_params(params_path, serial)
+        data = encode_image(CalibrationImage.from_params(params, station_id, datetime.now(UTC)))
+        output.write_bytes(data)
+    except StationError as exc:
+        raise _fail(exc) from None
+    except OSError as exc:
+        raise _fail(f"cannot write {output}: {exc.strerror or exc}") from None
+    typer.echo(f"wrote {output}: {len(data)} bytes, serial {serial}, sha256 {image_sha256(data)}")
+
+
+@eeprom_app.command("decode")
+def decode_cmd(
+    path: Annotated[Path, typer.Argument(metavar="IMAGE.bin", help="an image file (or an EEPROM dump with --dump)")],
+    dump: Annotated[bool, typer.Option("--dump", help="the file is a whole EEPROM: decode both slots")] = False,
+) -> None:
+    """Decode and check an image (magic, version, length, CRC-32); print its content as JSON."""
+    from station.eeprom.image import decode_image, read_slots, select_image
+
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise _fail(f"cannot read {path}: {exc.strerror or exc}") from None
+    try:
+        if dump:
+            slots = read_slots(raw)
+            current = select_image(slots)
+            out: dict[str, Any] = {
+                "current": current.name if current is not None else None,
+                "slots": {s.name: image_summary(s.image) if s.image else {"error": s.error} for s in slots},
+            }
+        else:
+            out = image_summary(decode_image(raw))
+    except StationError as exc:
+        raise _fail(f"{path}: {exc}") from None
+    typer.echo(json.dumps(out, indent=2))
+
+
+@eeprom_app.command("write")
+def write_cmd(
+    serial: Annotated[str, typer.Argument(help="the unit's serial number (must match what the sensor reports)")],
+    sensor_url: Annotated[str, typer.Option("--sensor", help="sensor URL, e.g. serial:///dev/ttyUSB0")],
+    params_path: Annotated[Path, typer.Option("--params", help="parameter JSON of the unit")],
+    station_id: Annotated[str, typer.Option("--station", help="station id written into the image")] = "station",
+    attempts: Annotated[int, typer.Option(help="write + read-back attempts")] = 3,
+    power_cycle: Annotated[bool, typer.Option(help="reset the sensor afterwards so it loads the image")] = True,
+) -> None:
+    """Write a unit's image into its EEPROM (free A/B slot, page by page, read back and compared)."""
+    from station.eeprom.image import CalibrationImage
+    from station.eeprom.provision import write_image
+    from station.sensor import open_sensor
+
+    try:
+        params = _load_params(params_path, serial)
+        image = CalibrationImage.from_params(params, station_id, datetime.now(UTC))
+        with open_sensor(sensor_url) as sensor:
+            report = write_image(sensor, image, max_attempts=attempts)
+            if power_cycle:
+                sensor.power_cycle(2.0)
+    except StationError as exc:
+        raise _fail(exc) from None
+    typer.echo(f"wrote image #{report.update_count} to slot {report.slot} of {report.serial} "
+               f"({report.length} bytes, {report.attempts} attempt(s), sha256 {report.sha256})")
+
+
+@eeprom_app.command("read")
+def read_cmd(
+    sensor_url: Annotated[str, typer.Option("--sensor", help="sensor URL")],
+) -> None:
+    """Read both image slots of a connected unit and print which one is current."""
+    from station.eeprom.image import select_image
+    from station.eeprom.provision import read_unit_slots
+    from station.sensor import open_sensor
+
+    try:
+        with open_sensor(sensor_url) as sensor:
+            serial = sensor.identify().serial
+            slots = read_unit_slots(sensor)
+    except StationError as exc:
+        raise _fail(exc) from None
+    current = select_image(slots, serial)
+    out = {
+        "serial": serial,
+        "current": current.name if current is not None else None,
+        "slots": {s.name: image_summary(s.image) if s.image else {"error": s.error} for s in slots},
+    }
+    typer.echo(json.dumps(out, indent=2))
+
+
+# --- Kalibr ---------------------------------------------------------------------------------------
+
+
+def _noise_density(t: TriadParams, sample_period_s: float) -> float:
+    """Continuous-time white-noise density (U/sqrt(Hz)): Allan N if fitted, else sigma * sqrt(T_sampl)."""
+    n = np.asarray(t.allan.random_walk, dtype=np.float64)
+    if np.isfinite(n).all() and (n > 0).all():
+        return float(n.max())
+    sigma = np.asarray(t.noise_std, dtype=np.float64)
+    if not np.isfinite(sigma).all():
+        raise StationError("noise std is not resolved; cannot give a noise density")
+    return float(sigma.max() * math.sqrt(sample_period_s))
+
+
+def _random_walk(t: TriadParams) -> float:
+    """Bias random walk (U/s/sqrt(Hz)): Allan K if fitted, else the Gauss-Markov drive of eq. (3).
+
+    The drift's stochastic part with stationary std sigma_gm and correlation time T_c is
+    driven by white noise of density sigma_gm * sqrt(2 / T_c); over times << T_c it is a
+    random walk of that density.
+    """
+    k = np.asarray(t.allan.rate_random_walk, dtype=np.float64)
+    if np.isfinite(k).all() and (k > 0).all():  # an Allan fit that found no random walk gives 0
+        return float(k.max())
+    sg = np.asarray(t.drift_noise, dtype=np.float64)
+    tc = np.asarray(t.correlation_time_s, dtype=np.float64)
+    ok = np.isfinite(sg) & np.isfinite(tc) & (tc > 0) & (sg > 0)
+    if not ok.any():
+        raise StationError("neither an Allan rate random walk nor a resolved drift; cannot give a random walk")
+    return float(np.max(sg[ok] * np.sqrt(2.0 / tc[ok])))
+
+
+def kalibr_imu_yaml(params: ParameterSet, rostopic: str = "/imu0", update_rate_hz: float | None = None) -> str:
+    """The unit's noise parameters in Kalibr's ``imu.yaml`` form (SI; the largest axis of each triad).
+
+    ``accelerometer_noise_density`` (m/s^2/sqrt(Hz)), ``accelerometer_random_walk``
+    (m/s^3/sqrt(Hz)), ``gyroscope_noise_density`` (rad/s/sqrt(Hz)),
+    ``gyroscope_random_walk`` (rad/s^2/sqrt(Hz)), ``update_rate`` (Hz, default 1/T_sampl).
+    """
+    ts = float(params.sample_period_s)
+    rate = update_rate_hz if update_rate_hz is not None else 1.0 / ts
+    values = {
+        "accelerometer_noise_density": _noise_density(params.accel, ts),
+        "accelerometer_random_walk": _random_walk(params.accel),
+        "gyroscope_noise_density": _noise_density(params.gyro, ts),
+        "gyroscope_random_walk": _random_walk(params.gyro),
+    }
+    lines = [
+        f"# Kalibr IMU noise model of unit {params.serial} (station calibration; SI units)",
+        "#Accelerometers",
+        f"accelerometer_noise_density: {values['accelerometer_noise_density']:.6e}   #Noise density (continuous-time)",
+        f"accelerometer_random_walk:   {values['accelerometer_random_walk']:.6e}   #Bias random walk",
+        "#Gyroscopes",
+        f"gyroscope_noise_density:     {values['gyroscope_noise_density']:.6e}   #Noise density (continuous-time)",
+        f"gyroscope_random_walk:       {values['gyroscope_random_walk']:.6e}   #Bias random walk",
+        f"rostopic:                    {rostopic}   #the IMU ROS topic",
+        f"update_rate:                 {rate:.1f}   #Hz (for discretization of the values above)",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+@eeprom_app.command("kalibr")
+def kalibr_cmd(
+    params_path: Annotated[Path, typer.Option("--params", help="parameter JSON of the unit")],
+    output: Annotated[Path | None, typer.Option("-o", "--output", help="imu.yaml to write (default: stdout)")] = None,
+    rostopic: Annotated[str, typer.Option(help="IMU topic written into the file")] = "/imu0",
+) -> None:
+    """Export the unit's noise parameters as a Kalibr imu.yaml."""
+    try:
+        text = kalibr_imu_yaml(_load_params(params_path, None), rostopic)
+    except StationError as exc:
+        raise _fail(exc) from None
+    if output is None:
+        typer.echo(text, nl=False)
+    else:
+        output.write_text(text)
+        typer.echo(f"wrote {output}")

@@ -1,0 +1,451 @@
+"""The calibration image stored in the unit's EEPROM: a versioned binary layout with CRC-32.
+
+The byte table is in ``station/eeprom/layout.md``. Everything is little-endian; every
+physical quantity is an IEEE-754 float64 in SI units (m/s^2 for the accelerometer,
+rad/s for the gyroscope, s for times), so a parameter set survives the round trip
+bit for bit. The image holds what Algorithm 1 of Kolhoff & Kemper needs per triad:
+the misalignment M (eq. 1), b_stat and b_drift (eq. 2), the correlation time T_c of
+the Gauss-Markov drift (eq. 3; NaN when the fit could not resolve it), plus the
+moving-average length n (eq. 6), the sample period T_sampl, the white-noise std and
+the gyro's g-sensitivity.
+
+:func:`decode_image` refuses, with a :class:`ImageError` subclass, anything that is
+not exactly one image of a known layout version: wrong magic, unknown version, a
+length field that does not match the version or the bytes given, a bad CRC-32, or
+fields outside their domain.
+
+Two-slot (A/B) scheme (:class:`SlotLayout`): the EEPROM holds two slots; each write
+goes to the slot that does *not* hold the newest valid image, with an update count
+one above the newest. A power loss during the write leaves that slot with a bad CRC
+(or an older image with a lower count), so :func:`select_image` still returns the old
+image; after a complete write it returns the new one.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import struct
+import zlib
+from dataclasses import dataclass, replace
+from datetime import UTC, datetime
+
+import numpy as np
+
+from station.errors import FormatError, UnsupportedVersionError
+from station.fit.params import AllanCoefficients, ParameterSet, TriadParams
+
+MAGIC = b"SCAL"
+LAYOUT_VERSION = 1
+TEXT_FIELD = 16  # bytes of serial / station id, ASCII, NUL padded
+ID_FIELD = 16  # bytes of the parameter-set id
+
+_HEADER = struct.Struct("<4sHHI16s16s16sqdHH")  # magic .. reserved: 80 bytes
+_TRIAD = struct.Struct("<21d")  # M (9, row-major), b_stat, b_drift, T_c, noise_std (3 each): 168 bytes
+_GSENS = struct.Struct("<9d")  # gyro g-sensitivity (3, 3) row-major: 72 bytes
+_CRC = struct.Struct("<I")
+BODY_SIZE = _HEADER.size + 2 * _TRIAD.size + _GSENS.size
+IMAGE_SIZE = BODY_SIZE + _CRC.size  # 492 bytes for layout version 1
+MIN_HEADER = 8  # magic, version, length: enough to know what the rest must be
+
+
+class ImageError(FormatError):
+    """Bytes that are not a valid calibration image."""
+
+
+class ImageMagicError(ImageError):
+    """The bytes do not start with the image magic (erased, foreign or shifted data)."""
+
+
+class ImageVersionError(ImageError, UnsupportedVersionError):
+    """The image has a layout version this software does not read."""
+
+
+class ImageLengthError(ImageError):
+    """The length field does not match the layout version or the number of bytes given."""
+
+
+class ImageCrcError(ImageError):
+    """The CRC-32 does not match the content (partly written or corrupted image)."""
+
+
+class ImageContentError(ImageError):
+    """A field is outside its domain (bad text, non-positive sample period, reserved bits set, ...)."""
+
+
+@dataclass(frozen=True, eq=False)
+class TriadImage:
+    """One triad's Algorithm 1 parameters as stored (unit U = m/s^2 or rad/s).
+
+    Attributes:
+        misalignment: M, (3, 3), 1.
+        bias_static: b_stat (U), (3,).
+        bias_drift: b_drift at power-on (U), (3,).
+        correlation_time_s: T_c (s), (3,); NaN = not resolved (Algorithm 1 drops the drift term).
+        noise_std: white-noise std per sample (U), (3,).
+    """
+
+    misalignment: np.ndarray
+    bias_static: np.ndarray
+    bias_drift: np.ndarray
+    correlation_time_s: np.ndarray
+    noise_std: np.ndarray
+
+    def __post_init__(self) -> None:
+        for name in ("misalignment", "bias_static", "bias_drift", "correlation_time_s", "noise_std"):
+            shape = (3, 3) if name == "misalignment" else (3,)
+            a = np.array(getattr(self, name), dtype=np.float64)
+            if a.shape != shape:
+                raise ImageContentError(f"triad field {name} must have shape {shape}, got {a.shape}")
+            a.flags.writeable = False
+            object.__setattr__(self, name, a)
+
+    @classmethod
+    def from_triad(cls, t: TriadParams) -> TriadImage:
+        return cls(t.misalignment, t.bias_static, t.bias_drift, t.correlation_time_s, t.noise_std)
+
+    def values(self) -> list[float]:
+        return [
+            *self.misalignment.ravel().tolist(),
+            *self.bias_static.tolist(),
+            *self.bias_drift.tolist(),
+            *self.correlation_time_s.tolist(),
+            *self.noise_std.tolist(),
+        ]
+
+    @classmethod
+    def from_values(cls, v: tuple[float, ...]) -> TriadImage:
+        return cls(np.reshape(v[0:9], (3, 3)), v[9:12], v[12:15], v[15:18], v[18:21])
+
+    def same_as(self, other: TriadImage) -> bool:
+        """Bitwise equal (NaN equals NaN)."""
+        return all(
+            np.array_equal(getattr(self, n), getattr(other, n), equal_nan=True)
+            for n in ("misalignment", "bias_static", "bias_drift", "correlation_time_s", "noise_std")
+        )
+
+
+def _text(value: str, what: str) -> bytes:
+    try:
+        raw = value.encode("ascii")
+    except UnicodeEncodeError as exc:
+        raise ImageContentError(f"{what} {value!r} is not ASCII") from exc
+    if len(raw) > TEXT_FIELD or b"\x00" in raw or not raw:
+        raise ImageContentError(f"{what} {value!r} must be 1..{TEXT_FIELD} ASCII characters without NUL")
+    return raw.ljust(TEXT_FIELD, b"\x00")
+
+
+def _untext(raw: bytes, what: str) -> str:
+    body = raw.rstrip(b"\x00")
+    if not body or b"\x00" in body:
+        raise ImageContentError(f"{what} field is empty or has embedded NUL bytes")
+    try:
+        text = body.decode("ascii")
+    except UnicodeDecodeError as exc:
+        raise ImageContentError(f"{what} field is not ASCII") from exc
+    if not text.isprintable():
+        raise ImageContentError(f"{what} field has non-printable characters")
+    return text
+
+
+def params_id(params: ParameterSet) -> bytes:
+    """A 16-byte content id of a parameter set: the first 16 bytes of SHA-256 of its compact JSON."""
+    return hashlib.sha256(params.to_json(indent=None).encode("utf-8")).digest()[:ID_FIELD]
+
+
+@dataclass(frozen=True, eq=False)
+class CalibrationImage:
+    """The decoded content of one EEPROM image (layout version 1).
+
+    Attributes:
+        serial: the unit's serial number (ASCII, 1..16 characters).
+        params_id: 16-byte id of the parameter set (see :func:`params_id`; the store may use its own).
+        station_id: the calibrating station (ASCII, 1..16 characters).
+        calibration_time_us: calibration time, µs since the Unix epoch, UTC.
+        update_count: the A/B sequence counter: 1 for the first image written to a unit,
+            one more for each later write; the valid slot with the highest count is current.
+        sample_period_s: T_sampl of Algorithm 1 (s).
+        ma_length: n of the one-sided moving average, eq. (6).
+        accel: accelerometer triad (m/s^2).
+        gyro: gyroscope triad (rad/s).
+        g_sensitivity: gyro output per unit specific force (rad/s per m/s^2), (3, 3).
+    """
+
+    serial: str
+    params_id: bytes
+    station_id: str
+    calibration_time_us: int
+    update_count: int
+    sample_period_s: float
+    ma_length: int
+    accel: TriadImage
+    gyro: TriadImage
+    g_sensitivity: np.ndarray
+
+    def __post_init__(self) -> None:
+        g = np.array(self.g_sensitivity, dtype=np.float64)
+        if g.shape != (3, 3):
+            raise ImageContentError(f"g_sensitivity must have shape (3, 3), got {g.shape}")
+        g.flags.writeable = False
+        object.__setattr__(self, "g_sensitivity", g)
+
+    @classmethod
+    def from_params(
+        cls,
+        params: ParameterSet,
+        station_id: str,
+        calibration_time: datetime | None = None,
+        *,
+        update_count: int = 1,
+        params_id_bytes: bytes | None = None,
+    ) -> CalibrationImage:
+        """The image of ``params``; ``calibration_time`` defaults to now (UTC)."""
+        when = calibration_time if calibration_time is not None else datetime.now(UTC)
+        if when.tzinfo is None:
+            raise ImageContentError("calibration time must be timezone-aware")
+        epoch = datetime(1970, 1, 1, tzinfo=UTC)
+        us = (when - epoch) // _ONE_US
+        return cls(
+            serial=params.serial,
+            params_id=params_id_bytes if params_id_bytes is not None else params_id(params),
+            station_id=station_id,
+            calibration_time_us=int(us),
+            update_count=update_count,
+            sample_period_s=float(params.sample_period_s),
+            ma_length=int(params.moving_average_length),
+            accel=TriadImage.from_triad(params.accel),
+            gyro=TriadImage.from_triad(params.gyro),
+            g_sensitivity=params.gyro.g_sensitivity,
+        )
+
+    @property
+    def calibration_time(self) -> datetime:
+        """Calibration time (UTC)."""
+        return datetime(1970, 1, 1, tzinfo=UTC) + self.calibration_time_us * _ONE_US
+
+    def with_update_count(self, count: int) -> CalibrationImage:
+        return replace(self, update_count=count)
+
+    def to_params(self) -> ParameterSet:
+        """A :class:`ParameterSet` with what the image holds (uncertainties and Allan figures NaN)."""
+        nan3, nan33 = np.full(3, np.nan), np.full((3, 3), np.nan)
+
+        def triad(t: TriadImage, g: np.ndarray | None) -> TriadParams:
+            return TriadParams(
+                misalignment=t.misalignment, misalignment_std=nan33,
+                bias_static=t.bias_static, bias_static_std=nan3,
+                bias_drift=t.bias_drift, bias_drift_std=nan3,
+                correlation_time_s=t.correlation_time_s, correlation_time_s_std=nan3,
+                drift_noise=nan3, drift_noise_std=nan3,
+                noise_std=t.noise_std, noise_std_std=nan3,
+                allan=AllanCoefficients(nan3, nan3, nan3, nan3, nan3, nan3),
+                residual_rms=nan3,
+                g_sensitivity=np.zeros((3, 3)) if g is None else g,
+                g_sensitivity_std=nan33,
+            )
+
+        return ParameterSet(
+            serial=self.serial,
+            sample_period_s=self.sample_period_s,
+            moving_average_length=self.ma_length,
+            accel=triad(self.accel, None),
+            gyro=triad(self.gyro, self.g_sensitivity),
+            source={"kind": "eeprom image", "params_id": self.params_id.hex(), "station": self.station_id,
+                    "update_count": self.update_count},
+        )
+
+    def same_as(self, other: CalibrationImage) -> bool:
+        """Field by field equal (floats bitwise, NaN equals NaN)."""
+        return (
+            self.serial == other.serial
+            and self.params_id == other.params_id
+            and self.station_id == other.station_id
+            and self.calibration_time_us == other.calibration_time_us
+            and self.update_count == other.update_count
+            and _same_float(self.sample_period_s, other.sample_period_s)
+            and self.ma_length == other.ma_length
+            and self.accel.same_as(other.accel)
+            and self.gyro.same_as(other.gyro)
+            and np.array_equal(self.g_sensitivity, other.g_sensitivity, equal_nan=True)
+        )
+
+
+_ONE_US = datetime(1970, 1, 1, 0, 0, 0, 1, tzinfo=UTC) - datetime(1970, 1, 1, tzinfo=UTC)
+
+
+def _same_float(a: float, b: float) -> bool:
+    return a == b or (math.isnan(a) and math.isnan(b))
+
+
+def _check_content(img: CalibrationImage) -> None:
+    """Domain checks shared by encode and decode."""
+    if not (math.isfinite(img.sample_period_s) and img.sample_period_s > 0):
+        raise ImageContentError(f"sample period must be a positive number of seconds, got {img.sample_period_s}")
+    if not 1 <= img.ma_length <= 0xFFFF:
+        raise ImageContentError(f"moving-average length must be 1..65535, got {img.ma_length}")
+    if not 1 <= img.update_count <= 0xFFFFFFFF:
+        raise ImageContentError(f"update count must be 1..2^32-1, got {img.update_count}")
+    if len(img.params_id) != ID_FIELD:
+        raise ImageContentError(f"parameter-set id must be {ID_FIELD} bytes, got {len(img.params_id)}")
+    for name, tri in (("accel", img.accel), ("gyro", img.gyro)):
+        for field in ("misalignment", "bias_static", "bias_drift"):
+            if not np.isfinite(getattr(tri, field)).all():
+                raise ImageContentError(f"{name} {field} has non-finite entries")
+        tc = tri.correlation_time_s
+        if np.any(np.isinf(tc)) or np.any(tc[~np.isnan(tc)] <= 0):
+            raise ImageContentError(f"{name} correlation time must be positive or NaN, got {tc.tolist()}")
+    if not np.isfinite(img.g_sensitivity).all():
+        raise ImageContentError("g_sensitivity has non-finite entries")
+
+
+def encode_image(img: CalibrationImage) -> bytes:
+    """The image's bytes (layout version 1, :data:`IMAGE_SIZE` bytes, CRC-32 last)."""
+    _check_content(img)
+    header = _HEADER.pack(
+        MAGIC,
+        LAYOUT_VERSION,
+        IMAGE_SIZE,
+        img.update_count,
+        _text(img.serial, "serial"),
+        img.params_id,
+        _text(img.station_id, "station id"),
+        img.calibration_time_us,
+        img.sample_period_s,
+        img.ma_length,
+        0,
+    )
+    body = header + _TRIAD.pack(*img.accel.values()) + _TRIAD.pack(*img.gyro.values())
+    body += _GSENS.pack(*img.g_sensitivity.ravel().tolist())
+    return body + _CRC.pack(zlib.crc32(body))
+
+
+def image_length(data: bytes) -> int:
+    """The total length an image starting at ``data`` claims (checks magic and version first)."""
+    if len(data) < MIN_HEADER:
+        raise ImageLengthError(f"{len(data)} bytes are too few for an image header ({MIN_HEADER})")
+    magic, version, length = struct.unpack_from("<4sHH", data)
+    if magic != MAGIC:
+        raise ImageMagicError(f"no calibration image: magic {magic!r}, expected {MAGIC!r}")
+    if version != LAYOUT_VERSION:
+        raise ImageVersionError(f"image layout version {version}; this station reads version {LAYOUT_VERSION} only")
+    if length != IMAGE_SIZE:
+        raise ImageLengthError(f"image length field says {length} bytes; layout {version} has {IMAGE_SIZE}")
+    return length
+
+
+def decode_image(data: bytes) -> CalibrationImage:
+    """Decode exactly one image; raises an :class:`ImageError` subclass for anything else."""
+    data = bytes(data)
+    length = image_length(data)
+    if len(data) != length:
+        raise ImageLengthError(f"image has {len(data)} bytes; its length field says {length}")
+    (crc,) = _CRC.unpack_from(data, BODY_SIZE)
+    if zlib.crc32(data[:BODY_SIZE]) != crc:
+        raise ImageCrcError("image CRC-32 mismatch: the image is corrupted or was not completely written")
+    (_, _, _, count, serial, pid, station, t_us, period, n, reserved) = _HEADER.unpack_from(data)
+    if reserved != 0:
+        raise ImageContentError(f"reserved header field is {reserved}, must be 0")
+    off = _HEADER.size
+    accel = TriadImage.from_values(_TRIAD.unpack_from(data, off))
+    gyro = TriadImage.from_values(_TRIAD.unpack_from(data, off + _TRIAD.size))
+    g = np.reshape(_GSENS.unpack_from(data, off + 2 * _TRIAD.size), (3, 3))
+    img = CalibrationImage(
+        serial=_untext(serial, "serial"),
+        params_id=pid,
+        station_id=_untext(station, "station id"),
+        calibration_time_us=t_us,
+        update_count=count,
+        sample_period_s=period,
+        ma_length=n,
+        accel=accel,
+        gyro=gyro,
+        g_sensitivity=g,
+    )
+    _check_content(img)
+    return img
+
+
+def image_sha256(data: bytes) -> str:
+    """Hex SHA-256 of image bytes (what the unit records store)."""
+    return hashlib.sha256(bytes(data)).hexdigest()
+
+
+# --- the two slots --------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class SlotLayout:
+    """Where the two image slots lie in the EEPROM (bytes).
+
+    Attributes:
+        base: address of slot A; slot B follows at ``base + slot_size``.
+        slot_size: bytes reserved per slot (>= :data:`IMAGE_SIZE`, a multiple of the page size).
+    """
+
+    base: int = 0
+    slot_size: int = 512
+
+    def __post_init__(self) -> None:
+        if self.slot_size < IMAGE_SIZE or self.base < 0:
+            raise ValueError(f"slot size must be >= {IMAGE_SIZE} bytes and base >= 0")
+
+    def address(self, slot: int) -> int:
+        if slot not in (0, 1):
+            raise ValueError("slot must be 0 (A) or 1 (B)")
+        return self.base + slot * self.slot_size
+
+    @property
+    def end(self) -> int:
+        return self.base + 2 * self.slot_size
+
+
+DEFAULT_SLOTS = SlotLayout()
+SLOT_NAMES = ("A", "B")
+
+
+@dataclass(frozen=True, eq=False)
+class SlotState:
+    """What one slot holds: the decoded image, or why it does not decode."""
+
+    slot: int
+    image: CalibrationImage | None
+    error: str = ""
+
+    @property
+    def name(self) -> str:
+        return SLOT_NAMES[self.slot]
+
+
+def decode_slot(slot: int, raw: bytes) -> SlotState:
+    """Decode the image at the start of a slot's bytes (the rest of the slot is ignored)."""
+    try:
+        length = image_length(raw)
+        if len(raw) < length:
+            raise ImageLengthError(f"slot has {len(raw)} bytes, the image claims {length}")
+        return SlotState(slot, decode_image(raw[:length]))
+    except ImageError as exc:
+        return SlotState(slot, None, str(exc))
+
+
+def select_image(slots: list[SlotState], serial: str | None = None) -> SlotState | None:
+    """The current slot: the valid one (for ``serial`` if given) with the highest update count."""
+    valid = [s for s in slots if s.image is not None and (serial is None or s.image.serial == serial)]
+    if not valid:
+        return None
+    return max(valid, key=lambda s: (s.image.update_count, -s.slot))  # type: ignore[union-attr]
+
+
+def next_write(slots: list[SlotState]) -> tuple[int, int]:
+    """(slot to write, update count to give the new image): the slot not holding the current image."""
+    current = select_image(slots)
+    if current is None:
+        return 0, 1
+    assert current.image is not None
+    return 1 - current.slot, current.image.update_count + 1
+
+
+def read_slots(raw: bytes, layout: SlotLayout = DEFAULT_SLOTS) -> list[SlotState]:
+    """Decode both slots from a whole EEPROM dump (or at least ``layout.end`` bytes of it)."""
+    if len(raw) < layout.end:
+        raise ImageLengthError(f"EEPROM dump of {len(raw)} bytes does not cover both slots ({layout.end})")
+    return [decode_slot(k, raw[layout.address(k) : layout.address(k) + layout.slot_size]) for k in (0, 1)]

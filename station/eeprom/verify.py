@@ -1,0 +1,162 @@
+"""Post-calibration verification: the unit's own corrected output, checked on the rig.
+
+After the image is written and the sensor power-cycled (its firmware loads the image
+and runs Algorithm 1 of Kolhoff & Kemper), :class:`RigVerifier` switches the sensor to
+CORRECTED output and repeats a short check on the rig:
+
+* a static pose (default ``+z`` up): the mean corrected specific force must equal
+  ``g * up`` of the pose (m/s^2) and the mean corrected rate must be ~0 (rad/s; the
+  Earth rate, <= 7.3e-5 rad/s, is inside the limit's margin);
+* a constant table rate about the vertical sensor axis: the mean corrected rate about
+  that axis must equal the commanded rate (rad/s).
+
+Each residual (the largest per-axis error of the window mean) is checked against
+:class:`~station.sequence.limits_file.VerificationLimits` (the ``[verification]`` table
+of the limits file); every sample must carry the CORRECTED flag. This is the
+paper's online (on-sensor, Algorithm 1) versus post-processed comparison, run on
+every unit. The rig is brought back to rest and the sensor back to RAW output afterwards.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from station.eeprom.image import CalibrationImage
+from station.rig.protocol import Rig
+from station.sensor.client import SerialSensor
+from station.sequence.limits_file import VerificationLimits
+from station.sequence.options import SequenceOptions
+from station.sequence.steps import Step, bring_to_rest, check_rig_holding
+from station.session.model import Kind
+from station.sim.clock import Clock
+from station.sim.geometry import AXIS_INDEX, up_vector
+
+_DEG = math.pi / 180.0
+
+
+@dataclass(frozen=True)
+class VerificationCheck:
+    """One residual against its limit: passed when ``|value| <= limit``."""
+
+    name: str
+    value: float
+    limit: float
+    unit: str
+    passed: bool
+
+
+@dataclass(frozen=True)
+class VerificationResult:
+    """All checks of one unit, plus how many samples were (not) corrected."""
+
+    serial: str
+    checks: tuple[VerificationCheck, ...]
+    samples: int
+    uncorrected_samples: int
+    notes: tuple[str, ...] = field(default=())
+
+    @property
+    def passed(self) -> bool:
+        return self.uncorrected_samples == 0 and self.samples > 0 and all(c.passed for c in self.checks)
+
+    def describe(self) -> str:
+        bad = [f"{c.name}={c.value:.3g} {c.unit} (limit {c.limit:.3g})" for c in self.checks if not c.passed]
+        if self.uncorrected_samples:
+            bad.append(f"{self.uncorrected_samples} of {self.samples} samples not corrected")
+        if self.samples == 0:
+            bad.append("no samples")
+        return "; ".join(bad) if bad else "all residuals within limits"
+
+
+def _check(name: str, value: float, limit: float, unit: str) -> VerificationCheck:
+    return VerificationCheck(name, float(value), float(limit), unit, bool(abs(value) <= limit))
+
+
+class RigVerifier:
+    """Runs the verification of one unit on the rig (implements ``provision.Verifier``).
+
+    Args:
+        rig: the open rig; clock: the station clock.
+        limits: residual limits and the short plan.
+        gravity_mps2: local gravity (m/s^2).
+        sample_rate_hz: sensor rate during the check (Hz).
+        options: rig timeouts and tolerances (the sequence's).
+    """
+
+    def __init__(
+        self,
+        rig: Rig,
+        clock: Clock,
+        limits: VerificationLimits | None = None,
+        *,
+        gravity_mps2: float = 9.80665,
+        sample_rate_hz: int = 100,
+        options: SequenceOptions | None = None,
+    ) -> None:
+        self.rig = rig
+        self.clock = clock
+        self.limits = limits if limits is not None else VerificationLimits()
+        self.gravity_mps2 = float(gravity_mps2)
+        self.sample_rate_hz = int(sample_rate_hz)
+        self.options = options if options is not None else SequenceOptions()
+
+    def _position(self, step: Step) -> None:
+        rig, o = self.rig, self.options
+        st = rig.state()
+        if abs(st.rate_dps) > o.rate_tol_dps:
+            rig.spin(0.0)
+            rig.wait_rate_settled(o.spin_timeout_s)
+        rig.move_to(step.pose)
+        rig.wait_in_position(o.move_timeout_s)
+        if step.table_rate_dps:
+            rig.spin(step.table_rate_dps)
+            rig.wait_rate_settled(o.spin_timeout_s)
+
+    def _capture(self, sensor: SerialSensor, step: Step) -> tuple[np.ndarray, np.ndarray, int, int]:
+        """(mean accel m/s^2, mean gyro rad/s, samples, uncorrected samples) of a settled window."""
+        lim = self.limits
+        sensor.drain()
+        sensor.read_samples(duration_s=lim.settle_s)  # moving-average window and settle guard
+        block = sensor.read_samples(duration_s=lim.hold_s)
+        check_rig_holding(self.rig.state(), step, self.options)
+        n = len(block)
+        if n == 0:
+            return np.full(3, np.nan), np.full(3, np.nan), 0, 0
+        return block.accel_mps2.mean(axis=0), block.gyro_radps.mean(axis=0), n, int(n - block.corrected.sum())
+
+    def verify(self, sensor: SerialSensor, image: CalibrationImage) -> VerificationResult:
+        """Switch to corrected output, run the pose and rate checks, restore RAW and rest."""
+        lim, g = self.limits, self.gravity_mps2
+        axis = lim.rate_pose[1]
+        sign = 1.0 if lim.rate_pose[0] == "+" else -1.0
+        pose_step = Step(0, f"verify pose {lim.pose}", Kind.POSE, lim.pose, 0.0, lim.hold_s)
+        rate_step = Step(1, f"verify rate {axis}", Kind.RATE, lim.rate_pose, sign * lim.rate_dps, lim.hold_s, axis,
+                         lim.rate_dps)
+        checks: list[VerificationCheck] = []
+        samples = uncorrected = 0
+        sensor.set_output("corrected")
+        try:
+            sensor.start_stream(self.sample_rate_hz)
+            self._position(pose_step)
+            a, w, n, u = self._capture(sensor, pose_step)
+            samples, uncorrected = samples + n, uncorrected + u
+            da = a - g * up_vector(lim.pose)
+            checks.append(_check("verify.pose.accel_error", float(np.max(np.abs(da))), lim.accel_mps2, "m/s^2"))
+            checks.append(_check("verify.pose.gyro_error", float(np.max(np.abs(w))), lim.gyro_static_radps, "rad/s"))
+            self._position(rate_step)
+            a, w, n, u = self._capture(sensor, rate_step)
+            samples, uncorrected = samples + n, uncorrected + u
+            k = AXIS_INDEX[axis]
+            checks.append(_check("verify.rate.rate_error", float(w[k] - lim.rate_dps * _DEG), lim.rate_radps, "rad/s"))
+            da = a - g * up_vector(lim.rate_pose)
+            checks.append(_check("verify.rate.accel_error", float(np.max(np.abs(da))), lim.accel_mps2, "m/s^2"))
+        finally:
+            try:
+                sensor.stop_stream()
+                sensor.set_output("raw")
+            finally:
+                bring_to_rest(self.rig, self.options.rest_timeout_s)
+        return VerificationResult(image.serial, tuple(checks), samples, uncorrected)

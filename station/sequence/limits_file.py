@@ -1,0 +1,307 @@
+"""Versioned limits files (TOML, format ``station-limits/1``): load, validate, check.
+
+A limits file (``fixtures/limits/default.toml`` is the default) holds:
+
+* ``[product]``: ranges per parameter family of eq. (1) and (3) for both triads (the
+  paper's Table 1 by default) and ``k_sigma`` (see :mod:`station.sequence.limits`);
+* ``[marginal]``: ``fraction`` of the range width at each edge that makes a PASS MARGINAL;
+* ``[fit_quality]``: largest residual RMS per axis and largest standard uncertainties;
+* ``[verification]``: residual limits and the short plan of the post-calibration check;
+* ``[retest]``: ``max_attempts`` runs per unit before a disposition is required.
+
+Units are in the key names (``_mps2`` m/s^2, ``_dps`` deg/s, ``_s`` s); everything is
+converted to SI on load. Validation is strict: a missing key, an unknown key (a typo),
+a wrong type, a range with low > high, or a non-positive limit raises
+:class:`LimitsFileError` naming the file and the key, so the station refuses to start
+with a limits file it does not fully understand.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import tomllib
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+from station.errors import FormatError, UnsupportedVersionError
+from station.sequence.limits import (
+    FitQualityLimits,
+    LimitCheck,
+    ProductLimits,
+    TriadLimits,
+    check_fit_quality,
+)
+
+LIMITS_FORMAT = "station-limits/1"
+DEFAULT_LIMITS_PATH = Path(__file__).resolve().parents[2] / "fixtures" / "limits" / "default.toml"
+_DEG = math.pi / 180.0
+
+
+class LimitsFileError(FormatError):
+    """A limits file is malformed; the message names the file and the key."""
+
+
+@dataclass(frozen=True)
+class VerificationLimits:
+    """Limits and plan of the post-calibration verification (see :mod:`station.eeprom.verify`).
+
+    Attributes:
+        accel_mps2: largest allowed |mean corrected specific force - g up| per axis (m/s^2).
+        gyro_static_radps: largest allowed |mean corrected rate| per axis at rest (rad/s).
+        rate_radps: largest allowed |mean corrected rate - commanded| about the rate axis (rad/s).
+        pose: static pose ('+z', ...); rate_pose: pose of the rate check (its up axis is turned about).
+        rate_dps: table rate of the rate check (deg/s).
+        settle_s: corrected samples discarded after the rig confirmed (s; >= the moving-average span).
+        hold_s: captured window per check (s).
+    """
+
+    accel_mps2: float = 0.05
+    gyro_static_radps: float = 0.05 * _DEG
+    rate_radps: float = 0.2 * _DEG
+    pose: str = "+z"
+    rate_pose: str = "+z"
+    rate_dps: float = 50.0
+    settle_s: float = 1.0
+    hold_s: float = 5.0
+
+    def __post_init__(self) -> None:
+        for name in ("accel_mps2", "gyro_static_radps", "rate_radps", "settle_s", "hold_s"):
+            v = getattr(self, name)
+            if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
+                raise ValueError(f"verification limit {name} must be a positive number, got {v!r}")
+        for p in (self.pose, self.rate_pose):
+            if not (isinstance(p, str) and len(p) == 2 and p[0] in "+-" and p[1] in "xyz"):
+                raise ValueError(f"verification pose must be like '+z', got {p!r}")
+
+
+@dataclass(frozen=True)
+class RetestPolicy:
+    """At most ``max_attempts`` runs per unit; then the station refuses it until a disposition is recorded."""
+
+    max_attempts: int = 3
+
+
+@dataclass(frozen=True)
+class LimitsFile:
+    """A loaded, validated limits file.
+
+    Attributes:
+        name, version: from the file (recorded with every run); sha256: hex hash of the file bytes.
+        path: where it was read from (None for text).
+        product: product limits (SI) for :func:`station.sequence.limits.check_limits`, with ``fit_quality``.
+        marginal_fraction: edge band of each range, as a fraction of its width (1).
+        fit_quality, verification, retest: see their classes.
+    """
+
+    name: str
+    version: str
+    sha256: str
+    path: Path | None
+    product: ProductLimits
+    marginal_fraction: float
+    fit_quality: FitQualityLimits
+    verification: VerificationLimits
+    retest: RetestPolicy
+
+
+class _Table:
+    """A TOML table being validated: every key must be read, values are checked as read."""
+
+    def __init__(self, data: Any, where: str, source: str) -> None:
+        if not isinstance(data, dict):
+            raise LimitsFileError(f"{source}: [{where}] must be a table")
+        self.data, self.where, self.source = data, where, source
+        self.used: set[str] = set()
+
+    def _key(self, key: str) -> str:
+        return f"{self.where}.{key}" if self.where else key
+
+    def fail(self, key: str, why: str) -> LimitsFileError:
+        return LimitsFileError(f"{self.source}: {self._key(key)}: {why}")
+
+    def has(self, key: str) -> bool:
+        return key in self.data
+
+    def raw(self, key: str, required: bool = True) -> Any:
+        if key not in self.data:
+            if required:
+                raise LimitsFileError(f"{self.source}: missing key {self._key(key)}")
+            return None
+        self.used.add(key)
+        return self.data[key]
+
+    def table(self, key: str) -> _Table:
+        return _Table(self.raw(key), self._key(key), self.source)
+
+    def number(self, key: str, *, positive: bool = False, required: bool = True) -> float | None:
+        v = self.raw(key, required)
+        if v is None:
+            return None
+        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+            raise self.fail(key, f"expected a finite number, got {v!r}")
+        if positive and v <= 0:
+            raise self.fail(key, f"must be > 0, got {v!r}")
+        return float(v)
+
+    def text(self, key: str) -> str:
+        v = self.raw(key)
+        if not isinstance(v, str) or not v.strip():
+            raise self.fail(key, f"expected a non-empty string, got {v!r}")
+        return v
+
+    def boolean(self, key: str) -> bool:
+        v = self.raw(key)
+        if not isinstance(v, bool):
+            raise self.fail(key, f"expected true or false, got {v!r}")
+        return v
+
+    def range(self, key: str, scale: float = 1.0) -> tuple[float, float]:
+        v = self.raw(key)
+        ok = isinstance(v, list) and len(v) == 2
+        ok = ok and all(not isinstance(x, bool) and isinstance(x, int | float) and math.isfinite(x) for x in v)
+        if not ok:
+            raise self.fail(key, f"expected [low, high] with two finite numbers, got {v!r}")
+        if v[0] > v[1]:
+            raise self.fail(key, f"low {v[0]} is above high {v[1]}")
+        return (float(v[0]) * scale, float(v[1]) * scale)
+
+    def done(self) -> None:
+        extra = sorted(set(self.data) - self.used)
+        if extra:
+            raise LimitsFileError(f"{self.source}: unknown key(s) {', '.join(self._key(k) for k in extra)}")
+
+
+def _triad(t: _Table, gyro: bool, check_tc: bool) -> TriadLimits:
+    unit, scale = ("dps", _DEG) if gyro else ("mps2", 1.0)
+    out = TriadLimits(
+        scale=t.range("scale"),
+        cross_axis=t.range("cross_axis"),
+        bias_static=t.range(f"bias_static_{unit}", scale),
+        bias_drift=t.range(f"bias_drift_{unit}", scale),
+        noise_std=t.range(f"noise_std_{unit}", scale),
+        correlation_time_s=t.range("correlation_time_s") if t.has("correlation_time_s") else None,
+    )
+    if out.correlation_time_s is not None and out.correlation_time_s[0] <= 0:
+        raise t.fail("correlation_time_s", "must be a positive range")
+    if not check_tc:
+        out = replace(out, correlation_time_s=None)
+    t.done()
+    return out
+
+
+def parse_limits(text: str | bytes, source: str = "<limits>", path: Path | None = None) -> LimitsFile:
+    """Parse and validate limits-file text; raises :class:`LimitsFileError` naming ``source`` and the key."""
+    raw = text.encode("utf-8") if isinstance(text, str) else bytes(text)
+    try:
+        data = tomllib.loads(raw.decode("utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise LimitsFileError(f"{source}: not valid TOML: {exc}") from exc
+    top = _Table(data, "", source)
+    fmt = top.raw("format")
+    if fmt != LIMITS_FORMAT:
+        raise UnsupportedVersionError(f"{source}: limits format {fmt!r}; this station reads {LIMITS_FORMAT!r} only")
+    name, version = top.text("name"), top.text("version")
+    top.raw("description", required=False)
+
+    prod = top.table("product")
+    k_sigma = prod.number("k_sigma")
+    assert k_sigma is not None
+    if k_sigma < 0:
+        raise prod.fail("k_sigma", f"must be >= 0, got {k_sigma}")
+    check_tc = prod.boolean("check_correlation_time")
+    accel = _triad(prod.table("accel"), False, check_tc)
+    gyro = _triad(prod.table("gyro"), True, check_tc)
+    prod.done()
+
+    marg = top.table("marginal")
+    fraction = marg.number("fraction")
+    assert fraction is not None
+    if not 0 <= fraction < 0.5:
+        raise marg.fail("fraction", f"must be in [0, 0.5), got {fraction}")
+    marg.done()
+
+    fq = top.table("fit_quality")
+
+    def opt(key: str, scale: float = 1.0) -> float | None:
+        v = fq.number(key, positive=True, required=False)
+        return None if v is None else v * scale
+
+    fit_quality = FitQualityLimits(
+        accel_residual_rms_mps2=opt("accel_residual_rms_mps2"),
+        gyro_residual_rms_radps=opt("gyro_residual_rms_dps", _DEG),
+        accel_misalignment_std=opt("accel_misalignment_std"),
+        gyro_misalignment_std=opt("gyro_misalignment_std"),
+        accel_bias_static_std_mps2=opt("accel_bias_static_std_mps2"),
+        gyro_bias_static_std_radps=opt("gyro_bias_static_std_dps", _DEG),
+    )
+    fq.done()
+    product = ProductLimits(name=f"{name}@{version}", accel=accel, gyro=gyro, k_sigma=k_sigma, fit_quality=fit_quality)
+
+    ver = top.table("verification")
+    try:
+        verification = VerificationLimits(
+            accel_mps2=ver.number("accel_error_mps2", positive=True),  # type: ignore[arg-type]
+            gyro_static_radps=ver.number("gyro_static_error_dps", positive=True) * _DEG,  # type: ignore[operator]
+            rate_radps=ver.number("rate_error_dps", positive=True) * _DEG,  # type: ignore[operator]
+            pose=ver.text("pose"),
+            rate_pose=ver.text("rate_pose"),
+            rate_dps=ver.number("rate_dps"),  # type: ignore[arg-type]
+            settle_s=ver.number("settle_s", positive=True),  # type: ignore[arg-type]
+            hold_s=ver.number("hold_s", positive=True),  # type: ignore[arg-type]
+        )
+    except ValueError as exc:
+        raise LimitsFileError(f"{source}: verification: {exc}") from exc
+    ver.done()
+
+    rt = top.table("retest")
+    n = rt.raw("max_attempts")
+    if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+        raise rt.fail("max_attempts", f"expected an integer >= 1, got {n!r}")
+    rt.done()
+    top.done()
+    return LimitsFile(
+        name=name,
+        version=version,
+        sha256=hashlib.sha256(raw).hexdigest(),
+        path=path,
+        product=product,
+        marginal_fraction=fraction,
+        fit_quality=fit_quality,
+        verification=verification,
+        retest=RetestPolicy(n),
+    )
+
+
+def load_limits(path: str | Path | None = None) -> LimitsFile:
+    """Load and validate a limits file (default: ``fixtures/limits/default.toml``)."""
+    p = Path(path) if path is not None else DEFAULT_LIMITS_PATH
+    try:
+        raw = p.read_bytes()
+    except OSError as exc:
+        raise LimitsFileError(f"cannot read limits file {p}: {exc.strerror or exc}") from exc
+    return parse_limits(raw, str(p), p)
+
+
+def is_marginal(check: LimitCheck, fraction: float) -> bool:
+    """A passed check whose value lies within ``fraction`` of the range width of an edge."""
+    if not check.passed or fraction <= 0:
+        return False
+    band = fraction * (check.high - check.low)
+    return check.value < check.low + band or check.value > check.high - band
+
+
+__all__ = [
+    "DEFAULT_LIMITS_PATH",
+    "LIMITS_FORMAT",
+    "FitQualityLimits",
+    "LimitsFile",
+    "LimitsFileError",
+    "RetestPolicy",
+    "VerificationLimits",
+    "check_fit_quality",
+    "is_marginal",
+    "load_limits",
+    "parse_limits",
+]

@@ -1,0 +1,377 @@
+"""EEPROM provisioning through the real protocol on a pty, the simulated firmware, and verification on the rig."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterator
+from datetime import UTC, datetime
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from station.correct import correct_batch
+from station.eeprom.commands import eeprom_app
+from station.eeprom.image import (
+    IMAGE_SIZE,
+    CalibrationImage,
+    decode_image,
+    encode_image,
+    read_slots,
+    select_image,
+)
+from station.eeprom.provision import (
+    EepromProvisioner,
+    EepromUnusableError,
+    ReadbackMismatchError,
+    SerialMismatchError,
+    read_current_image,
+    write_image,
+)
+from station.eeprom.verify import RigVerifier, VerificationLimits
+from station.errors import HardwareError, UnitRejected
+from station.fit.params import ParameterSet
+from station.rig import open_rig
+from station.sensor.client import SerialSensor, open_sensor
+from station.sequence.records import Outcome
+from station.sequence.runner import UnitResult
+from station.sim.clock import SimClock
+from station.sim.eeprom import Eeprom
+from station.sim.firmware import CalibrationFirmware, install_firmware
+from station.sim.sensor_class import TABLE1, draw_unit
+from station.sim.sensor_peer import SimulatedSensor
+from station.sim.station_sim import SimStation
+
+SCALE = 20.0
+GRAVITY = 9.80665
+SERIAL = "UNIT-0001"
+F_TRUE = np.array([0.0, 0.0, GRAVITY])  # m/s^2, +z up
+W_TRUE = np.array([0.01, -0.02, 0.5])  # rad/s
+T0 = datetime(2026, 1, 2, 3, 4, 5, tzinfo=UTC)
+
+
+def _params(seed: int = 1, serial: str = SERIAL, period: float = 0.01) -> ParameterSet:
+    truth = draw_unit(TABLE1, np.random.default_rng(seed), serial=serial)
+    return truth.as_parameter_set(period)
+
+
+class ModelSource:
+    """Noiseless eq. (1) raw output of constant true (f, w): ``M x + b_stat + b_drift exp(-t/T_c)``."""
+
+    def __init__(self, params: ParameterSet) -> None:
+        self.p = params
+
+    def power_on(self) -> None:
+        pass
+
+    def render(self, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        t = np.asarray(t_s, dtype=float)[:, None]
+        out = []
+        for tri, x in ((self.p.accel, F_TRUE), (self.p.gyro, W_TRUE)):
+            drift = tri.bias_drift * np.exp(-t / tri.correlation_time_s)
+            out.append(np.asarray(tri.misalignment) @ x + tri.bias_static + drift)
+        return out[0], out[1], np.zeros(t.shape[0])
+
+
+@pytest.fixture()
+def unit() -> Iterator[tuple[SimulatedSensor, SerialSensor, CalibrationFirmware, ParameterSet]]:
+    params = _params()
+    clock = SimClock(SCALE)
+    sensor = SimulatedSensor(ModelSource(params), clock, serial=SERIAL, eeprom=Eeprom(clock=clock))
+    fw = install_firmware(sensor, clock)
+    client = open_sensor(sensor.url, clock, command_timeout_s=0.25, attempts=1)
+    try:
+        yield sensor, client, fw, params
+    finally:
+        client.close()
+        sensor.close()
+
+
+def _image(params: ParameterSet, station: str = "ST-01") -> CalibrationImage:
+    return CalibrationImage.from_params(params, station, T0)
+
+
+def test_write_read_back_and_firmware_loads(unit: tuple) -> None:
+    sensor, client, fw, params = unit
+    assert not fw.loaded and read_current_image(client) is None
+    r1 = write_image(client, _image(params))
+    assert (r1.slot, r1.update_count, r1.previous_count, r1.attempts, r1.length) == ("A", 1, 0, 1, IMAGE_SIZE)
+    r2 = write_image(client, _image(params))
+    assert (r2.slot, r2.update_count, r2.previous_count) == ("B", 2, 1)
+    r3 = write_image(client, _image(params))
+    assert (r3.slot, r3.update_count) == ("A", 3)
+    raw = sensor.eeprom.image()
+    assert raw[: IMAGE_SIZE] == encode_image(r3.image)
+    cur = read_current_image(client)
+    assert cur is not None and cur.same_as(r3.image)
+    assert not fw.loaded  # the firmware reads its image at power-on only
+    client.power_cycle(2.0)
+    assert fw.loaded and fw.image is not None and fw.image.update_count == 3
+
+
+def test_firmware_corrected_output_is_algorithm1(unit: tuple) -> None:
+    _sensor, client, fw, params = unit
+    client.start_stream(100)
+    raw = client.read_samples(200)
+    client.stop_stream()
+    client.drain()  # samples sent before the STOP answer
+    assert not raw.corrected.any()
+    client.set_output("corrected")
+    client.start_stream(100)
+    before = client.read_samples(50)  # no image: corrected mode passes raw values through
+    client.stop_stream()
+    client.drain()
+    assert before.corrected.all()
+    assert np.abs(before.accel_mps2.mean(axis=0) - F_TRUE).max() > 0.01
+    write_image(client, _image(params))
+    client.power_cycle(2.0)
+    assert fw.loaded
+    client.set_output("corrected")
+    client.start_stream(100)
+    block = client.read_samples(400)
+    client.stop_stream()
+    assert block.corrected.all()
+    settled = slice(params.moving_average_length, None)  # the moving average has filled
+    # float32 on the wire (~1e-6 relative), forward-Euler drift vs exp (<1e-6 m/s^2 here)
+    np.testing.assert_allclose(block.accel_mps2[settled], np.broadcast_to(F_TRUE, (360, 3)), atol=2e-5)
+    np.testing.assert_allclose(block.gyro_radps[settled], np.broadcast_to(W_TRUE, (360, 3)), atol=2e-6)
+    # raw output of the same unit is off by its bias and scale
+    assert np.abs(raw.gyro_radps.mean(axis=0) - W_TRUE).max() > 1e-3
+
+
+class FakeClock:
+    scale = 1.0
+
+    def __init__(self) -> None:
+        self.t = 0.0
+
+    def now(self) -> float:
+        return self.t
+
+    def sleep(self, s: float) -> None:
+        self.t += s
+
+
+def test_firmware_engines_agree_chunk_by_chunk() -> None:
+    params = _params(seed=3)
+    clock = FakeClock()
+    ee = Eeprom(clock=clock)
+    ee_img = encode_image(_image(params))
+    for a in range(0, IMAGE_SIZE, 32):
+        ee.write_page(a, ee_img[a : a + 32])
+        ee.power_reset()
+    rng = np.random.default_rng(0)
+    n = 1000
+    acc = rng.normal(0, 0.02, (n, 3)) + F_TRUE
+    gyr = rng.normal(0, 2e-4, (n, 3)) + W_TRUE
+    ref_a, ref_w = correct_batch(acc, gyr, params)
+    for engine in ("streaming", "batch"):
+        fw = CalibrationFirmware(ee, clock, serial=SERIAL, engine=engine)  # type: ignore[arg-type]
+        assert fw.loaded
+        outs_a, outs_w = [], []
+        pos = 0
+        for size in [1, 7, 50, 3, 200, 39, 40, 41, 619]:
+            clock.t = (pos + size - 1) * params.sample_period_s  # the newest sample of the chunk is due now
+            a, w = fw(acc[pos : pos + size], gyr[pos : pos + size])
+            outs_a.append(a)
+            outs_w.append(w)
+            pos += size
+        assert pos == n
+        np.testing.assert_allclose(np.concatenate(outs_a), ref_a, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(np.concatenate(outs_w), ref_w, rtol=0, atol=1e-12)
+        clock.t = 0.0
+
+
+def test_firmware_ignores_image_of_another_serial() -> None:
+    clock = FakeClock()
+    ee = Eeprom(clock=clock)
+    data = encode_image(_image(_params(serial="OTHER")))
+    for a in range(0, IMAGE_SIZE, 32):
+        ee.write_page(a, data[a : a + 32])
+        ee.power_reset()
+    fw = CalibrationFirmware(ee, clock, serial=SERIAL)
+    assert not fw.loaded and "other serial" in fw.load_error
+    a = np.ones((3, 3))
+    out_a, _ = fw(a, a)
+    assert out_a is a
+
+
+def _power_loss_round(sensor: SimulatedSensor, client: SerialSensor, fw: CalibrationFirmware,
+                      new: CalibrationImage) -> tuple[int, int]:
+    """Arm a power loss at every page of one write; returns (cases, new image seen complete)."""
+    before = read_slots(sensor.eeprom.image())
+    old = select_image(before)
+    assert old is not None and old.image is not None
+    old_bytes = encode_image(old.image)
+    new_count = old.image.update_count + 1
+    new_bytes = encode_image(new.with_update_count(new_count))
+    pages = -(-IMAGE_SIZE // 32)
+    cases = 0
+    for k in range(pages):
+        sensor.eeprom.power_loss_after(n_bytes=(5 * k) % 32, pages_before=k)
+        with pytest.raises(HardwareError):
+            write_image(client, new)
+        assert not sensor.powered
+        sensor.power_on()
+        slots = read_slots(sensor.eeprom.image())
+        for s in slots:  # whatever decodes is exactly a real image, never a mix
+            if s.image is not None:
+                assert encode_image(s.image) in (old_bytes, new_bytes, *[encode_image(b.image) for b in before if
+                                                                          b.image is not None])
+        cur = select_image(slots)
+        assert cur is not None and cur.image is not None
+        assert encode_image(cur.image) == old_bytes  # the header page goes last: the new image never completes
+        assert fw.loaded and fw.image is not None and fw.image.update_count == old.image.update_count
+        cases += 1
+    sensor.eeprom.disarm()
+    report = write_image(client, new)  # power stays on: the new image becomes current
+    assert report.update_count == new_count
+    cur = select_image(read_slots(sensor.eeprom.image()))
+    assert cur is not None and cur.image is not None and encode_image(cur.image) == new_bytes
+    return cases, 1
+
+
+def test_power_loss_at_every_page_keeps_old_image(unit: tuple) -> None:
+    sensor, client, fw, params = unit
+    write_image(client, _image(params, "OLD"))
+    sensor.power_cycle()
+    assert fw.loaded
+    other = _params(seed=7, serial=SERIAL)
+    cases1, _ = _power_loss_round(sensor, client, fw, _image(other, "NEW"))  # target: slot B, A holds #1
+    cases2, _ = _power_loss_round(sensor, client, fw, _image(params, "NEWER"))  # target: slot A, B holds #2
+    assert cases1 == cases2 == 16
+
+
+def test_readback_mismatch_retries_then_fails(unit: tuple, monkeypatch: pytest.MonkeyPatch) -> None:
+    sensor, client, _fw, params = unit
+    ee = sensor.eeprom
+    original = ee.read
+    bad_reads = {"left": 1}
+
+    def flaky(addr: int, n: int) -> bytes:
+        data = original(addr, n)
+        if addr in (256, 768) and n == IMAGE_SIZE - 256 and bad_reads["left"] > 0:  # 2nd read-back chunk of a slot
+            bad_reads["left"] -= 1
+            data = bytes([data[0] ^ 0x01]) + data[1:]
+        return data
+
+    monkeypatch.setattr(ee, "read", flaky)
+    report = write_image(client, _image(params), max_attempts=3)
+    assert report.attempts == 2 and report.update_count == 1
+    bad_reads["left"] = 10**6
+    writes0 = ee.page_writes
+    with pytest.raises(ReadbackMismatchError, match="after 3 write attempts"):
+        write_image(client, _image(params), max_attempts=3)
+    assert ee.page_writes - writes0 == 3 * 16
+    assert isinstance(ReadbackMismatchError("x"), HardwareError)
+    monkeypatch.setattr(ee, "read", original)
+    cur = select_image(read_slots(ee.image()))
+    assert cur is not None and cur.image is not None and cur.image.update_count in (1, 2)
+
+
+def test_other_serial_is_refused(unit: tuple) -> None:
+    sensor, client, _fw, params = unit
+    writes0 = sensor.eeprom.page_writes
+    with pytest.raises(SerialMismatchError, match="UNIT-0002"):
+        write_image(client, _image(_params(serial="UNIT-0002")))
+    assert sensor.eeprom.page_writes == writes0
+    sensor.eeprom.write_protect = True
+    with pytest.raises(EepromUnusableError, match="write protected"):
+        write_image(client, _image(params))
+    sensor.eeprom.write_protect = False
+
+
+def test_provisioner_writes_pass_unit_and_power_cycles(unit: tuple) -> None:
+    sensor, client, fw, params = unit
+    seen = []
+    prov = EepromProvisioner("ST-01", now=lambda: T0, on_record=seen.append)
+    result = UnitResult(0, sensor.url, SERIAL, Outcome.PASS, "", params=params)
+    prov.provision(result, client)
+    assert fw.loaded and fw.image is not None and fw.image.station_id == "ST-01"
+    assert fw.image.calibration_time == T0
+    rec = prov.records[SERIAL]
+    assert seen == [rec] and rec.write.update_count == 1 and rec.verification is None
+    assert decode_image(sensor.eeprom.image()[:IMAGE_SIZE]).same_as(rec.write.image)
+    wrong = UnitResult(0, sensor.url, "UNIT-0009", Outcome.PASS, "", params=params)
+    with pytest.raises(SerialMismatchError):
+        prov.provision(wrong, client)
+
+
+@pytest.mark.parametrize("good", [True, False])
+def test_verification_on_the_rig(good: bool) -> None:
+    with SimStation(1, 30.0, seed=4) as sim:
+        su = sim.units[0]
+        install_firmware(su.sensor, sim.clock)
+        params = su.truth.as_parameter_set(0.01)
+        if not good:  # a wrong calibration: the gyro bias not removed
+            d = params.to_dict()
+            d["gyro"]["bias_static"] = [0.0, 0.0, 0.0]
+            params = ParameterSet.from_dict(d)
+        rig = open_rig(sim.rig_url, sim.clock, **sim.rig_client_options())
+        client = open_sensor(sim.sensor_urls[0], sim.clock)
+        try:
+            verifier = RigVerifier(rig, sim.clock, VerificationLimits(hold_s=4.0), gravity_mps2=sim.plan.gravity_mps2,
+                                    sample_rate_hz=100)
+            prov = EepromProvisioner("ST-01", verifier=verifier, now=lambda: T0)
+            unit_result = UnitResult(0, su.sensor.url, su.truth.serial, Outcome.PASS, "", params=params)
+            if good:
+                prov.provision(unit_result, client)
+            else:
+                with pytest.raises(UnitRejected, match="verification"):
+                    prov.provision(unit_result, client)
+            res = prov.records[su.truth.serial].verification
+            assert res is not None and res.samples >= 790 and res.uncorrected_samples == 0
+            values = {c.name: c.value for c in res.checks}
+            print(values)
+            assert res.passed is good
+            if good:
+                assert values["verify.pose.accel_error"] < 0.003
+                assert values["verify.pose.gyro_error"] < 2e-4
+                assert abs(values["verify.rate.rate_error"]) < 1e-3
+            else:
+                assert values["verify.pose.gyro_error"] > 1e-3
+            assert not client.status().streaming and client.status().output == 0
+        finally:
+            client.close()
+            rig.close()
+
+
+def test_cli_write_and_read(unit: tuple, tmp_path: Path) -> None:
+    sensor, client, fw, params = unit
+    client.close()  # the command opens the port itself
+    pj = tmp_path / "p.json"
+    pj.write_text(params.to_json())
+    runner = CliRunner()
+    res = runner.invoke(eeprom_app, ["write", SERIAL, "--sensor", sensor.url, "--params", str(pj), "--station", "CLI"])
+    assert res.exit_code == 0, res.output
+    assert "image #1 to slot A" in res.output
+    assert fw.loaded and fw.image is not None and fw.image.station_id == "CLI"  # power-cycled: firmware loaded it
+    res = runner.invoke(eeprom_app, ["read", "--sensor", sensor.url])
+    assert res.exit_code == 0, res.output
+    out = json.loads(res.output)
+    assert out["serial"] == SERIAL and out["current"] == "A" and "magic" in out["slots"]["B"]["error"]
+    res = runner.invoke(eeprom_app, ["write", "UNIT-0002", "--sensor", sensor.url, "--params", str(pj)])
+    assert res.exit_code == 2 and "not 'UNIT-0002'" in res.output
+
+
+def test_firmware_removes_g_sensitivity() -> None:
+    g = np.array([[1e-4, 0, 0], [0, -2e-4, 0], [0, 3e-5, 5e-5]])  # rad/s per m/s^2
+    truth = draw_unit(TABLE1, np.random.default_rng(11), serial=SERIAL)
+    params = truth.as_parameter_set(0.01, g_sensitivity=g)
+    clock = FakeClock()
+    ee = Eeprom(clock=clock)
+    data = encode_image(_image(params))
+    for a in range(0, IMAGE_SIZE, 32):
+        ee.write_page(a, data[a : a + 32])
+        ee.power_reset()
+    fw = CalibrationFirmware(ee, clock, serial=SERIAL)
+    n = 100
+    m_a, m_w = params.accel.misalignment, params.gyro.misalignment
+    acc = np.tile(m_a @ F_TRUE + params.accel.bias_static + params.accel.bias_drift, (n, 1))
+    gyr = np.tile(m_w @ W_TRUE + g @ F_TRUE + params.gyro.bias_static + params.gyro.bias_drift, (n, 1))
+    clock.t = (n - 1) * 0.01
+    out_a, out_w = fw(acc, gyr)
+    # the drift decays by (1 - T_s/T_c)^i: a few 1e-6 over 1 s; the g-sensitivity term (~1e-3 rad/s) is gone
+    np.testing.assert_allclose(out_a, np.tile(F_TRUE, (n, 1)), atol=2e-4)
+    np.testing.assert_allclose(out_w, np.tile(W_TRUE, (n, 1)), atol=2e-5)
