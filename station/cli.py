@@ -22,8 +22,15 @@ app.add_typer(import_app, name="import")
 
 def _add_subapps() -> None:
     from station.eeprom.commands import eeprom_app
+    from station.store.commands import units_app
 
     app.add_typer(eeprom_app, name="eeprom")
+    app.add_typer(units_app, name="units")
+
+
+DbOption = Annotated[
+    str | None, typer.Option("--db", help="database URL (default $STATION_DB or sqlite:///station.sqlite)")
+]
 
 
 _add_subapps()
@@ -172,15 +179,24 @@ def demo(
     scale: Annotated[float, typer.Option(min=0.1, help="simulated seconds per wall second")] = 30.0,
     seed: Annotated[int, typer.Option(help="seed: the same seed gives the same units")] = 0,
     out: Annotated[Path, typer.Option(help="directory for session CSVs and parameter JSONs")] = Path("demo-out"),
+    db: DbOption = None,
 ) -> None:
     """Simulated rig + N sensors, the whole sequence, fit, limits, summary: the station end to end.
 
     Exit code: 0 all PASS, 1 a unit FAILed, 2 ERROR (station fault), 130 ABORTED.
     """
     from station.sequence.demo import run_demo
+    from station.sequence.limits_file import load_limits
+    from station.sim.plan import default_plan
+    from station.store.commands import attach_recorder
+    from station.store.queries import retest_gate
 
     try:
-        result = run_demo(units, scale, seed, out)
+        subscribers: list = []
+        limits = load_limits()
+        recorder = attach_recorder(subscribers.append, db, station_name="demo", plan=default_plan(), limits=limits)
+        result = run_demo(units, scale, seed, out, subscribers=subscribers, on_provision=recorder.provisioned,
+                          admit=retest_gate(recorder.db, limits.retest.max_attempts))
     except StationError as exc:
         raise _fail(exc) from None
     raise typer.Exit(_OUTCOME_EXIT[result.outcome.value])
@@ -195,6 +211,8 @@ def run_station(
     gravity: Annotated[float | None, typer.Option(help="local gravity (m/s^2); default from the plan")] = None,
     latitude: Annotated[float | None, typer.Option(help="site latitude (deg); default from the plan")] = None,
     name: Annotated[str, typer.Option("--station", help="station name for the records")] = "station",
+    db: DbOption = None,
+    operator: Annotated[str, typer.Option(help="operator name for the records")] = "",
 ) -> None:
     """Run the calibration sequence against any rig and sensors (real ones, or `station sim`).
 
@@ -219,10 +237,19 @@ def run_station(
     console = Console()
     display = ProgressDisplay(console, list(sensor), scale)
     try:
+        from station.sequence.limits_file import load_limits
+        from station.store.commands import attach_recorder
+        from station.store.queries import retest_gate
+
+        limits = load_limits()
+        subscribers: list = [display]
+        recorder = attach_recorder(subscribers.append, db, station_name=name, operator=operator, plan=plan,
+                                   limits=limits)
         with display:
             result = run_sequence(
                 rig, sensor, clock, rig_options=rig_client_options(scale), plan=plan,
-                options=SequenceOptions().for_scale(scale), out_dir=out, station=name, subscribers=[display],
+                options=SequenceOptions().for_scale(scale), out_dir=out, station=name, subscribers=subscribers,
+                limits=limits.product, admit=retest_gate(recorder.db, limits.retest.max_attempts),
             )
     except StationError as exc:
         raise _fail(exc) from None

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -28,7 +29,7 @@ from rich.live import Live
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from station.eeprom.provision import EepromProvisioner
+from station.eeprom.provision import EepromProvisioner, ProvisionRecord
 from station.eeprom.verify import RigVerifier
 from station.sensor import open_sensor
 from station.sequence.limits_file import load_limits
@@ -211,6 +212,9 @@ def run_demo(
     console: Console | None = None,
     limits_path: Path | None = None,
     provision: bool = True,
+    subscribers: Sequence[Callable[[Record], None]] = (),
+    on_provision: Callable[[ProvisionRecord], None] | None = None,
+    admit: Callable[[str, str], str | None] | None = None,
 ) -> RunResult:
     """Start the simulated station, run the sequence for ``units`` units at clock ``scale``, print, return.
 
@@ -225,6 +229,9 @@ def run_demo(
         console: where to print (default: stdout).
         limits_path: limits file (default ``fixtures/limits/default.toml``).
         provision: write each PASS unit's image into its EEPROM and verify its corrected output.
+        subscribers: more record subscribers (e.g. the store's recorder).
+        on_provision: called with each unit's EEPROM write and verification record.
+        admit: the retest policy (see :class:`~station.sequence.runner.SequenceRunner`).
     """
     console = console if console is not None else Console()
     plan = plan if plan is not None else default_plan()
@@ -249,11 +256,11 @@ def run_demo(
             if provision:
                 verifier = RigVerifier(rig, sim.clock, limits.verification, gravity_mps2=plan.gravity_mps2,
                                        sample_rate_hz=int(plan.sample_rate_hz), options=options)
-                provisioner = EepromProvisioner("demo", verifier=verifier)
+                provisioner = EepromProvisioner("demo", verifier=verifier, on_record=on_provision)
             runner = SequenceRunner(
                 rig, sensors, sim.clock, plan=plan, options=options, limits=limits.product, out_dir=out_dir,
                 station="demo", rig_name=f"{ident.firmware_id} {ident.firmware_version}",
-                sensor_urls=sim.sensor_urls, subscribers=[display], provisioner=provisioner,
+                sensor_urls=sim.sensor_urls, subscribers=[display, *subscribers], provisioner=provisioner, admit=admit,
             )
             with display:
                 result = runner.run()

@@ -158,6 +158,8 @@ class SequenceRunner:
         out_dir: where session CSVs and parameter JSONs go (None: not saved).
         fit_options: passed to :func:`fit_session`.
         provisioner: called for each PASS unit after a complete, fault-free run.
+        admit: the retest policy, ``admit(serial, run_id) -> reason or None``, asked for each unit
+            once the power-on step has identified it; a refused unit is not tested (ABORTED).
         station, rig_name: names for records and session metadata.
         sensor_urls: for records and results (default ``slotN``).
         subscribers: called with every record, in order, from the thread calling :meth:`run`.
@@ -175,6 +177,7 @@ class SequenceRunner:
         out_dir: Path | None = None,
         fit_options: FitOptions | None = None,
         provisioner: Provisioner | None = None,
+        admit: Callable[[str, str], str | None] | None = None,
         station: str = "station",
         rig_name: str = "rig",
         sensor_urls: Sequence[str] | None = None,
@@ -191,6 +194,7 @@ class SequenceRunner:
         self.out_dir = out_dir
         self.fit_options = fit_options
         self.provisioner = provisioner
+        self.admit = admit
         self.station = station
         self.rig_name = rig_name
         self.sensor_urls = list(sensor_urls) if sensor_urls is not None else [f"slot{k}" for k in range(len(sensors))]
@@ -318,6 +322,8 @@ class SequenceRunner:
                                         self.clock.now() - t0, False, len(fx.active), why))
                 raise
             problems = self._apply_report(fx, step, report, verdicts)
+            if step.index == 0:
+                problems += self._admit_units(fx, verdicts)
             self._emit(StepFinished(self.run_id, step.index, step.name, self.clock.now(), self.clock.now() - t0,
                                     not problems, len(fx.active), "; ".join(problems)))
 
@@ -346,6 +352,20 @@ class SequenceRunner:
                 text = "; ".join(g.describe() for g in (link or failed))
                 self._end_unit(fx, unit, v, outcome, f"step '{step.name}': {text}")
                 problems.append(f"slot {unit.slot}: {text}")
+        return problems
+
+    def _admit_units(self, fx: Fixture, verdicts: list[_Verdict]) -> list[str]:
+        """The retest policy, once the power-on step has identified every unit: a refused unit is
+        not tested (ABORTED for that unit, with the reason), and nothing is written to it."""
+        problems: list[str] = []
+        if self.admit is None:
+            return problems
+        for unit in list(fx.active):
+            reason = self.admit(unit.serial, self.run_id)
+            if reason:
+                message = f"refused by the retest policy: {reason}"
+                self._end_unit(fx, unit, verdicts[unit.slot], Outcome.ABORTED, message)
+                problems.append(f"slot {unit.slot}: {reason}")
         return problems
 
     def _end_unit(self, fx: Fixture, unit: UnitChannel, v: _Verdict, outcome: Outcome, message: str) -> None:

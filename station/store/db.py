@@ -1,0 +1,152 @@
+"""Open the station database by URL and bring its schema up to date (Alembic migrations).
+
+The default is a SQLite file ``station.sqlite`` in the working directory; a
+``postgresql+psycopg://user@host:port/dbname`` URL works the same and lets several
+stations write to one database. :func:`open_database` runs ``alembic upgrade head``
+on open, so a new file or an empty database gets the schema and an old one is
+migrated. The migrations live in ``migrations/`` at the top of the source tree.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from alembic import command
+from alembic.config import Config
+from alembic.runtime.migration import MigrationContext
+from alembic.script import ScriptDirectory
+from sqlalchemy import Engine, create_engine, event, text
+from sqlalchemy.exc import SQLAlchemyError
+from sqlalchemy.orm import Session, sessionmaker
+
+from station.errors import StationError
+
+DEFAULT_URL = "sqlite:///station.sqlite"
+"""The default database: a SQLite file in the working directory."""
+
+ENV_VAR = "STATION_DB"
+"""Environment variable that overrides :data:`DEFAULT_URL`."""
+
+MIGRATIONS_DIR = Path(__file__).resolve().parents[2] / "migrations"
+
+_MIGRATION_LOCK = threading.Lock()  # Alembic's context is process-global: one migration at a time per process
+_PG_LOCK_KEY = 0x5354_4154  # advisory lock id on PostgreSQL: one migrating station at a time
+
+
+class StoreError(StationError):
+    """The station database could not be opened, migrated or written."""
+
+
+def database_url(url: str | None = None) -> str:
+    """``url`` if given, else ``$STATION_DB``, else :data:`DEFAULT_URL`."""
+    return url or os.environ.get(ENV_VAR) or DEFAULT_URL
+
+
+def alembic_config(url: str) -> Config:
+    """An Alembic configuration for ``url`` with the station's migrations (no alembic.ini needed)."""
+    if not (MIGRATIONS_DIR / "env.py").is_file():
+        raise StoreError(f"migrations not found in {MIGRATIONS_DIR}")
+    cfg = Config()
+    cfg.set_main_option("script_location", str(MIGRATIONS_DIR))
+    cfg.set_main_option("sqlalchemy.url", url.replace("%", "%%"))
+    return cfg
+
+
+def make_engine(url: str) -> Engine:
+    """An engine for ``url``; SQLite gets foreign keys on and a 30 s busy timeout (several writers)."""
+    if url.startswith("sqlite"):
+        engine = create_engine(url, connect_args={"timeout": 30.0})
+
+        @event.listens_for(engine, "connect")
+        def _pragmas(dbapi_conn: Any, _record: Any) -> None:
+            cur = dbapi_conn.cursor()
+            cur.execute("PRAGMA foreign_keys=ON")
+            cur.execute("PRAGMA journal_mode=WAL")
+            cur.close()
+
+        return engine
+    return create_engine(url, pool_pre_ping=True)
+
+
+def _migrate(engine: Engine, revision: str, up: bool) -> None:
+    with _MIGRATION_LOCK, engine.begin() as conn:
+        if conn.dialect.name == "postgresql":  # several stations starting at once: one migrates, the others wait
+            conn.execute(text("SELECT pg_advisory_xact_lock(:k)"), {"k": _PG_LOCK_KEY})
+        cfg = alembic_config(engine.url.render_as_string(hide_password=False))
+        cfg.attributes["connection"] = conn
+        (command.upgrade if up else command.downgrade)(cfg, revision)
+
+
+def upgrade(engine: Engine, revision: str = "head") -> None:
+    """Run ``alembic upgrade <revision>`` on ``engine``'s database (serialized between stations)."""
+    _migrate(engine, revision, True)
+
+
+def downgrade(engine: Engine, revision: str = "base") -> None:
+    """Run ``alembic downgrade <revision>`` on ``engine``'s database."""
+    _migrate(engine, revision, False)
+
+
+def current_revision(engine: Engine) -> str | None:
+    """The database's Alembic revision (None: no schema yet)."""
+    with engine.connect() as conn:
+        return MigrationContext.configure(conn).get_current_revision()
+
+
+def head_revision() -> str | None:
+    """The newest migration's revision id."""
+    return ScriptDirectory.from_config(alembic_config(DEFAULT_URL)).get_current_head()
+
+
+@dataclass
+class Database:
+    """An open station database: the engine and a session factory."""
+
+    url: str
+    engine: Engine
+    sessions: sessionmaker[Session]
+
+    @contextmanager
+    def transaction(self) -> Iterator[Session]:
+        """A session in one transaction: committed on success, rolled back on any exception."""
+        with self.sessions.begin() as session:
+            yield session
+
+    def close(self) -> None:
+        self.engine.dispose()
+
+    def __enter__(self) -> Database:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def open_database(url: str | None = None, *, migrate: bool = True) -> Database:
+    """Open the database at ``url`` (see :func:`database_url`) and run the migrations up to head.
+
+    Raises :class:`StoreError` if the database cannot be reached or migrated.
+    """
+    url = database_url(url)
+    try:
+        engine = make_engine(url)
+        if migrate:
+            upgrade(engine)
+    except (SQLAlchemyError, OSError) as exc:
+        raise StoreError(f"cannot open the station database {_redact(url)}: {exc}") from exc
+    return Database(url, engine, sessionmaker(engine, expire_on_commit=False))
+
+
+def _redact(url: str) -> str:
+    from sqlalchemy.engine import make_url
+
+    try:
+        return make_url(url).render_as_string(hide_password=True)
+    except Exception:
+        return "<bad URL>"

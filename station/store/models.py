@@ -1,0 +1,256 @@
+"""The station's durable records: SQLAlchemy 2 typed ORM tables.
+
+One row per station, fixture slot, unit (serial number) and run; per run the
+steps' timing and per unit in the run (:class:`RunUnit`) its outcome, every limit
+check, the fitted parameter set, the session recording and any EEPROM writes.
+Dispositions record a person's decision about a unit that the retest policy
+refused.
+
+Units: times of steps in station clock seconds (s); measured values and limits in
+the SI unit named in ``LimitCheck.unit`` (m/s^2, rad/s, s or 1). Wall-clock times
+are UTC. A float the runner reports as NaN (no uncertainty, unresolved) is stored
+as NULL.
+
+A run is written UNFINISHED when it starts and gets its outcome only in the
+transaction that records its end, so a killed process can never leave a PASS
+behind; :func:`station.store.recorder.recover_unfinished` closes such runs.
+The schema is created by the Alembic migrations in ``migrations/``, never by
+``create_all`` in production code; ``migrations/versions/0001_initial.py`` must
+match these classes (a test compares them).
+"""
+
+from __future__ import annotations
+
+from datetime import datetime
+
+from sqlalchemy import (
+    Boolean,
+    DateTime,
+    Float,
+    ForeignKey,
+    Integer,
+    MetaData,
+    String,
+    Text,
+    UniqueConstraint,
+)
+from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
+
+UNFINISHED = "UNFINISHED"
+"""Outcome of a run (and of its units) until its end is recorded."""
+
+NAMING = {
+    "ix": "ix_%(column_0_label)s",
+    "uq": "uq_%(table_name)s_%(column_0_name)s",
+    "fk": "fk_%(table_name)s_%(column_0_name)s_%(referred_table_name)s",
+    "pk": "pk_%(table_name)s",
+}
+
+
+class Base(DeclarativeBase):
+    """Declarative base with deterministic constraint names (needed for migrations)."""
+
+    metadata = MetaData(naming_convention=NAMING)
+
+
+class Station(Base):
+    """A calibration station (one rig and its fixture), identified by name."""
+
+    __tablename__ = "stations"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    name: Mapped[str] = mapped_column(String(100), unique=True)
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
+
+    slots: Mapped[list[FixtureSlot]] = relationship(back_populates="station", order_by="FixtureSlot.slot")
+
+
+class FixtureSlot(Base):
+    """One slot of a station's fixture and the sensor URL it was last used with."""
+
+    __tablename__ = "fixture_slots"
+    __table_args__ = (UniqueConstraint("station_id", "slot"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    station_id: Mapped[int] = mapped_column(ForeignKey("stations.id"), index=True)
+    slot: Mapped[int] = mapped_column(Integer)
+    sensor_url: Mapped[str] = mapped_column(String(500), default="")
+
+    station: Mapped[Station] = relationship(back_populates="slots")
+
+
+class Unit(Base):
+    """A device under calibration, identified by its serial number."""
+
+    __tablename__ = "units"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    serial: Mapped[str] = mapped_column(String(100), unique=True)
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
+
+    results: Mapped[list[RunUnit]] = relationship(back_populates="unit")
+    dispositions: Mapped[list[Disposition]] = relationship(back_populates="unit", order_by="Disposition.id")
+
+
+class Run(Base):
+    """One run of the sequence on one station (all units of the fixture).
+
+    ``outcome`` is PASS, FAIL, ERROR, ABORTED or UNFINISHED (not ended yet, or the
+    process died). Versions and SHA-256 hashes identify the software, the sequence
+    (plan) and the product limits the run used.
+    """
+
+    __tablename__ = "runs"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    run_uid: Mapped[str] = mapped_column(String(100), unique=True)
+    station_id: Mapped[int] = mapped_column(ForeignKey("stations.id"), index=True)
+    outcome: Mapped[str] = mapped_column(String(16), index=True)
+    started_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
+    finished_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
+    duration_s: Mapped[float | None] = mapped_column(Float)
+    wall_s: Mapped[float | None] = mapped_column(Float)
+    software_version: Mapped[str] = mapped_column(String(100), default="")
+    sequence_version: Mapped[str] = mapped_column(String(100), default="")
+    sequence_hash: Mapped[str] = mapped_column(String(64), default="")
+    limits_version: Mapped[str] = mapped_column(String(100), default="")
+    limits_hash: Mapped[str] = mapped_column(String(64), default="")
+    operator: Mapped[str] = mapped_column(String(100), default="")
+    rig: Mapped[str] = mapped_column(String(200), default="")
+    host: Mapped[str] = mapped_column(String(200), default="")
+    pid: Mapped[int] = mapped_column(Integer, default=0)
+    rig_at_rest: Mapped[bool | None] = mapped_column(Boolean)
+    message: Mapped[str] = mapped_column(Text, default="")
+
+    station: Mapped[Station] = relationship()
+    units: Mapped[list[RunUnit]] = relationship(back_populates="run", order_by="RunUnit.slot")
+    steps: Mapped[list[StepTiming]] = relationship(back_populates="run", order_by="StepTiming.step_index")
+
+
+class RunUnit(Base):
+    """One fixture slot in one run: the unit (once its serial is known) and its outcome."""
+
+    __tablename__ = "run_units"
+    __table_args__ = (UniqueConstraint("run_id", "slot"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    run_id: Mapped[int] = mapped_column(ForeignKey("runs.id"), index=True)
+    slot: Mapped[int] = mapped_column(Integer)
+    sensor_url: Mapped[str] = mapped_column(String(500), default="")
+    unit_id: Mapped[int | None] = mapped_column(ForeignKey("units.id"), index=True)
+    outcome: Mapped[str] = mapped_column(String(16))
+    message: Mapped[str] = mapped_column(Text, default="")
+
+    run: Mapped[Run] = relationship(back_populates="units")
+    unit: Mapped[Unit | None] = relationship(back_populates="results")
+    checks: Mapped[list[LimitCheck]] = relationship(back_populates="run_unit", order_by="LimitCheck.id")
+    parameter_sets: Mapped[list[ParameterSetRecord]] = relationship(back_populates="run_unit")
+    recordings: Mapped[list[SessionRecording]] = relationship(back_populates="run_unit")
+    eeprom_writes: Mapped[list[EepromWrite]] = relationship(back_populates="run_unit")
+
+
+class StepTiming(Base):
+    """One step of a run: planned hold, start and duration on the station clock (s)."""
+
+    __tablename__ = "step_timings"
+    __table_args__ = (UniqueConstraint("run_id", "step_index"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    run_id: Mapped[int] = mapped_column(ForeignKey("runs.id"), index=True)
+    step_index: Mapped[int] = mapped_column(Integer)
+    name: Mapped[str] = mapped_column(String(100))
+    kind: Mapped[str] = mapped_column(String(20))
+    hold_s: Mapped[float] = mapped_column(Float)
+    started_t_s: Mapped[float] = mapped_column(Float)
+    duration_s: Mapped[float | None] = mapped_column(Float)
+    ok: Mapped[bool | None] = mapped_column(Boolean)
+    units_active: Mapped[int | None] = mapped_column(Integer)
+    message: Mapped[str] = mapped_column(Text, default="")
+
+    run: Mapped[Run] = relationship(back_populates="steps")
+
+
+class LimitCheck(Base):
+    """One measured value against its limits: a capture gate (``step`` = the step) or a product limit
+    (``step`` = 'limits'). ``value``, ``low``, ``high`` and ``std`` are in ``unit``."""
+
+    __tablename__ = "limit_checks"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    run_unit_id: Mapped[int] = mapped_column(ForeignKey("run_units.id"), index=True)
+    step: Mapped[str] = mapped_column(String(100))
+    name: Mapped[str] = mapped_column(String(100))
+    value: Mapped[float | None] = mapped_column(Float)
+    low: Mapped[float | None] = mapped_column(Float)
+    high: Mapped[float | None] = mapped_column(Float)
+    std: Mapped[float | None] = mapped_column(Float)
+    unit: Mapped[str] = mapped_column(String(20), default="")
+    passed: Mapped[bool] = mapped_column(Boolean)
+
+    run_unit: Mapped[RunUnit] = relationship(back_populates="checks")
+
+
+class ParameterSetRecord(Base):
+    """A fitted parameter set: the JSON as saved (``format`` e.g. 'station-params/1'), its SHA-256,
+    and the standard uncertainties (the ``*_std`` fields per triad) as a JSON object for queries."""
+
+    __tablename__ = "parameter_sets"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    run_unit_id: Mapped[int] = mapped_column(ForeignKey("run_units.id"), index=True)
+    unit_id: Mapped[int] = mapped_column(ForeignKey("units.id"), index=True)
+    format: Mapped[str] = mapped_column(String(50))
+    sha256: Mapped[str] = mapped_column(String(64))
+    params_json: Mapped[str] = mapped_column(Text)
+    uncertainties_json: Mapped[str] = mapped_column(Text)
+    path: Mapped[str] = mapped_column(String(1000), default="")
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
+
+    run_unit: Mapped[RunUnit] = relationship(back_populates="parameter_sets")
+
+
+class SessionRecording(Base):
+    """The session CSV of a unit in a run: where it was saved, its SHA-256 and size (bytes)."""
+
+    __tablename__ = "session_recordings"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    run_unit_id: Mapped[int] = mapped_column(ForeignKey("run_units.id"), index=True)
+    path: Mapped[str] = mapped_column(String(1000))
+    sha256: Mapped[str] = mapped_column(String(64))
+    size_bytes: Mapped[int] = mapped_column(Integer)
+
+    run_unit: Mapped[RunUnit] = relationship(back_populates="recordings")
+
+
+class EepromWrite(Base):
+    """A calibration image written into a unit's EEPROM: image SHA-256, attempts, read-back verdict."""
+
+    __tablename__ = "eeprom_writes"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    run_unit_id: Mapped[int | None] = mapped_column(ForeignKey("run_units.id"), index=True)
+    unit_id: Mapped[int] = mapped_column(ForeignKey("units.id"), index=True)
+    image_sha256: Mapped[str] = mapped_column(String(64))
+    layout_version: Mapped[int] = mapped_column(Integer, default=0)
+    attempts: Mapped[int] = mapped_column(Integer)
+    verified: Mapped[bool] = mapped_column(Boolean)
+    message: Mapped[str] = mapped_column(Text, default="")
+    written_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
+
+    run_unit: Mapped[RunUnit | None] = relationship(back_populates="eeprom_writes")
+
+
+class Disposition(Base):
+    """A person's decision about a unit (e.g. 'retest', 'scrap', 'rework'); it resets the attempt count."""
+
+    __tablename__ = "dispositions"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    unit_id: Mapped[int] = mapped_column(ForeignKey("units.id"), index=True)
+    decision: Mapped[str] = mapped_column(String(50))
+    operator: Mapped[str] = mapped_column(String(100), default="")
+    note: Mapped[str] = mapped_column(Text, default="")
+    decided_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
+
+    unit: Mapped[Unit] = relationship(back_populates="dispositions")

@@ -1,0 +1,202 @@
+"""Read the station database: units, a unit's runs and latest parameter set, attempts for the retest policy.
+
+Every function opens its own read transaction on a :class:`~station.store.db.Database`
+and returns plain frozen dataclasses (no ORM objects escape), with ``to_dict()`` for JSON.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from datetime import datetime
+from typing import Any
+
+from sqlalchemy import func, select
+
+from station.fit.params import ParameterSet
+from station.store.db import Database
+from station.store.models import (
+    UNFINISHED,
+    Disposition,
+    EepromWrite,
+    LimitCheck,
+    ParameterSetRecord,
+    Run,
+    RunUnit,
+    SessionRecording,
+    Unit,
+)
+from station.store.models import Station as StationRow
+
+
+def _iso(t: datetime | None) -> str | None:
+    return t.isoformat() if t is not None else None
+
+
+@dataclass(frozen=True)
+class UnitSummary:
+    """One line of ``station units list``: runs of the unit and its latest result."""
+
+    serial: str
+    runs: int
+    last_outcome: str
+    last_started_at: str | None
+    attempts: int
+
+
+@dataclass(frozen=True)
+class UnitRun:
+    """A unit's result in one run (limit checks counted; failed ones named)."""
+
+    run_id: str
+    station: str
+    slot: int
+    outcome: str
+    message: str
+    run_outcome: str
+    started_at: str | None
+    finished_at: str | None
+    operator: str
+    software_version: str
+    limits_version: str
+    limits_hash: str
+    sequence_version: str
+    sequence_hash: str
+    checks: int
+    failed_checks: tuple[str, ...]
+    session_path: str | None
+    session_sha256: str | None
+
+
+@dataclass(frozen=True)
+class UnitDetail:
+    """Everything ``station units show`` prints about one unit."""
+
+    serial: str
+    runs: tuple[UnitRun, ...]
+    attempts: int
+    latest_params_json: str | None
+    latest_params_run_id: str | None
+    eeprom_writes: tuple[dict[str, Any], ...]
+    dispositions: tuple[dict[str, Any], ...]
+
+    def latest_params(self) -> ParameterSet | None:
+        """The latest fitted parameter set, parsed (None if the unit was never fitted)."""
+        return ParameterSet.from_json(self.latest_params_json) if self.latest_params_json else None
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["latest_params"] = json.loads(self.latest_params_json) if self.latest_params_json else None
+        del d["latest_params_json"]
+        return d
+
+
+def attempt_count(
+    db: Database, serial: str, *, since_disposition: bool = True, exclude_run: str | None = None
+) -> int:
+    """Runs of ``serial`` (any outcome, unfinished ones too) since its latest disposition (or ever).
+
+    ``exclude_run``: a run id not to count (the run asking whether the unit may be tested).
+    """
+    with db.transaction() as s:
+        unit = s.scalar(select(Unit).where(Unit.serial == serial))
+        if unit is None:
+            return 0
+        return _attempts(s, unit.id, since_disposition, exclude_run)
+
+
+def retest_gate(db: Database, max_attempts: int) -> Callable[[str, str], str | None]:
+    """The retest policy for :class:`~station.sequence.runner.SequenceRunner` ``admit``.
+
+    A unit with ``max_attempts`` runs since its latest disposition is refused (the reason is
+    returned) until a disposition is recorded (``record_disposition``).
+    """
+
+    def admit(serial: str, run_id: str) -> str | None:
+        n = attempt_count(db, serial, exclude_run=run_id)
+        if n >= max_attempts:
+            return (f"{serial} has had {n} attempt(s), the limit is {max_attempts}: "
+                    "record a disposition before testing it again")
+        return None
+
+    return admit
+
+
+def _attempts(s: Any, unit_id: int, since_disposition: bool, exclude_run: str | None = None) -> int:
+    q = select(func.count(RunUnit.id)).join(Run).where(RunUnit.unit_id == unit_id)
+    if exclude_run is not None:
+        q = q.where(Run.run_uid != exclude_run)
+    if since_disposition:
+        last = s.scalar(select(func.max(Disposition.decided_at)).where(Disposition.unit_id == unit_id))
+        if last is not None:
+            q = q.where(Run.started_at > last)
+    return int(s.scalar(q) or 0)
+
+
+def latest_parameter_set(db: Database, serial: str, *, passed_only: bool = True) -> ParameterSet | None:
+    """The newest parameter set of ``serial`` from a finished run (only from a PASS result by default)."""
+    with db.transaction() as s:
+        q = (select(ParameterSetRecord.params_json).join(RunUnit, ParameterSetRecord.run_unit_id == RunUnit.id)
+             .join(Run, RunUnit.run_id == Run.id).join(Unit, ParameterSetRecord.unit_id == Unit.id)
+             .where(Unit.serial == serial, Run.outcome != UNFINISHED))
+        if passed_only:
+            q = q.where(RunUnit.outcome == "PASS")
+        text = s.scalar(q.order_by(Run.started_at.desc(), ParameterSetRecord.id.desc()).limit(1))
+    return ParameterSet.from_json(text) if text is not None else None
+
+
+def list_units(db: Database) -> list[UnitSummary]:
+    """Every unit, by serial, with its run count, latest outcome and attempts since its last disposition."""
+    out: list[UnitSummary] = []
+    with db.transaction() as s:
+        for unit in s.scalars(select(Unit).order_by(Unit.serial)):
+            rows = s.execute(
+                select(RunUnit.outcome, Run.started_at).join(Run).where(RunUnit.unit_id == unit.id)
+                .order_by(Run.started_at.desc(), Run.id.desc())
+            ).all()
+            last = rows[0] if rows else None
+            out.append(UnitSummary(unit.serial, len(rows), last[0] if last else "", _iso(last[1]) if last else None,
+                                   _attempts(s, unit.id, True)))
+    return out
+
+
+def show_unit(db: Database, serial: str) -> UnitDetail | None:
+    """The unit ``serial`` with its runs (newest first), latest parameter set, EEPROM writes, dispositions."""
+    with db.transaction() as s:
+        unit = s.scalar(select(Unit).where(Unit.serial == serial))
+        if unit is None:
+            return None
+        runs: list[UnitRun] = []
+        q = (select(RunUnit, Run, StationRow.name).join(Run, RunUnit.run_id == Run.id)
+             .join(StationRow, Run.station_id == StationRow.id).where(RunUnit.unit_id == unit.id)
+             .order_by(Run.started_at.desc(), Run.id.desc()))
+        for ru, run, station_name in s.execute(q).all():
+            checks = s.scalars(select(LimitCheck).where(LimitCheck.run_unit_id == ru.id).order_by(LimitCheck.id)).all()
+            rec = s.scalar(select(SessionRecording).where(SessionRecording.run_unit_id == ru.id))
+            runs.append(UnitRun(
+                run.run_uid, station_name, ru.slot, ru.outcome, ru.message, run.outcome, _iso(run.started_at),
+                _iso(run.finished_at), run.operator, run.software_version, run.limits_version, run.limits_hash,
+                run.sequence_version, run.sequence_hash, len(checks),
+                tuple(f"{c.step}:{c.name}" for c in checks if not c.passed),
+                rec.path if rec else None, rec.sha256 if rec else None,
+            ))
+        latest = s.execute(
+            select(ParameterSetRecord, Run.run_uid).join(RunUnit, ParameterSetRecord.run_unit_id == RunUnit.id)
+            .join(Run, RunUnit.run_id == Run.id)
+            .where(ParameterSetRecord.unit_id == unit.id, Run.outcome != UNFINISHED)
+            .order_by(Run.started_at.desc(), ParameterSetRecord.id.desc()).limit(1)
+        ).first()
+        writes = tuple(
+            {"image_sha256": w.image_sha256, "layout_version": w.layout_version, "attempts": w.attempts,
+             "verified": w.verified, "message": w.message, "written_at": _iso(w.written_at)}
+            for w in s.scalars(select(EepromWrite).where(EepromWrite.unit_id == unit.id).order_by(EepromWrite.id))
+        )
+        dispositions = tuple(
+            {"decision": d.decision, "operator": d.operator, "note": d.note, "decided_at": _iso(d.decided_at)}
+            for d in unit.dispositions
+        )
+        return UnitDetail(
+            unit.serial, tuple(runs), _attempts(s, unit.id, True),
+            latest[0].params_json if latest else None, latest[1] if latest else None, writes, dispositions,
+        )

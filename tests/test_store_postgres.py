@@ -1,0 +1,216 @@
+"""The station database on a real PostgreSQL server: migrations, and two stations writing at once.
+
+The server is a throwaway cluster started here: ``initdb`` (from PATH or Debian's
+``/usr/lib/postgresql/*/bin``; run as the ``postgres`` user when the tests run as root)
+in a temporary directory, listening on 127.0.0.1 on a free port, stopped and deleted
+afterwards. ``STATION_TEST_PG_URL`` (a ``postgresql+psycopg://`` URL of a server whose
+user may create databases) uses an existing server instead. Without either the tests
+are skipped with the reason. Debian packages: ``postgresql`` (server and initdb).
+"""
+
+from __future__ import annotations
+
+import glob
+import os
+import pwd
+import shutil
+import socket
+import subprocess
+import tempfile
+import threading
+import uuid
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from alembic.autogenerate import compare_metadata
+from alembic.runtime.migration import MigrationContext
+from sqlalchemy import create_engine, func, inspect, select, text
+from sqlalchemy.engine import make_url
+
+from station.sequence.records import (
+    Measurement,
+    Outcome,
+    Record,
+    RunFinished,
+    RunStarted,
+    StepFinished,
+    StepStarted,
+    UnitFinished,
+)
+from station.store import Recorder, RunContext, attempt_count, list_units, open_database, recover_unfinished
+from station.store.db import current_revision, downgrade, make_engine, upgrade
+from station.store.models import UNFINISHED, Base, LimitCheck, Run, RunUnit, Station, StepTiming, Unit
+
+pytestmark = pytest.mark.integration
+
+TABLES = {
+    "stations", "fixture_slots", "units", "runs", "run_units", "step_timings", "limit_checks",
+    "parameter_sets", "session_recordings", "eeprom_writes", "dispositions",
+}
+RUNS_PER_STATION = 100
+
+
+def _initdb() -> Path | None:
+    found = shutil.which("initdb")
+    if found:
+        return Path(found)
+    candidates = sorted(glob.glob("/usr/lib/postgresql/*/bin/initdb"), key=lambda p: int(p.split("/")[4]))
+    return Path(candidates[-1]) if candidates else None
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.fixture(scope="module")
+def pg_server() -> Iterator[str]:
+    """A server URL (database 'postgres'); a throwaway cluster unless STATION_TEST_PG_URL is set."""
+    url = os.environ.get("STATION_TEST_PG_URL")
+    if url:
+        yield url
+        return
+    initdb = _initdb()
+    if initdb is None:
+        pytest.skip("no PostgreSQL server: initdb not found (install Debian's 'postgresql' package "
+                    "or set STATION_TEST_PG_URL)")
+    bindir = initdb.resolve().parent
+    run_as: dict[str, object] = {}
+    tmp = Path(tempfile.mkdtemp(prefix="station-pg-"))
+    if os.geteuid() == 0:
+        try:
+            pw = pwd.getpwnam("postgres")
+        except KeyError:
+            shutil.rmtree(tmp)
+            pytest.skip("running as root and there is no 'postgres' user to run the PostgreSQL server as")
+        os.chown(tmp, pw.pw_uid, pw.pw_gid)
+        run_as = {"user": pw.pw_uid, "group": pw.pw_gid, "extra_groups": []}
+    data, port = tmp / "data", _free_port()
+    try:
+        subprocess.run([str(bindir / "initdb"), "-D", str(data), "-A", "trust", "-U", "postgres", "-E", "UTF8",
+                        "--no-sync"], check=True, capture_output=True, cwd=tmp, **run_as)  # type: ignore[arg-type]
+        opts = f"-h 127.0.0.1 -p {port} -k {tmp} -c fsync=off -c max_connections=50"
+        subprocess.run([str(bindir / "pg_ctl"), "-D", str(data), "-l", str(tmp / "log"), "-o", opts, "-w",
+                        "-t", "60", "start"], check=True, capture_output=True, cwd=tmp, **run_as)  # type: ignore[arg-type]
+    except subprocess.CalledProcessError as exc:
+        log = (tmp / "log").read_text() if (tmp / "log").exists() else ""
+        shutil.rmtree(tmp, ignore_errors=True)
+        pytest.fail(f"could not start a throwaway PostgreSQL cluster: {exc.stderr!r} {log}")
+    try:
+        yield f"postgresql+psycopg://postgres@127.0.0.1:{port}/postgres"
+    finally:
+        subprocess.run([str(bindir / "pg_ctl"), "-D", str(data), "-m", "immediate", "-w", "stop"],
+                       capture_output=True, cwd=tmp, **run_as)  # type: ignore[arg-type]
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+@pytest.fixture
+def pg_url(pg_server: str) -> Iterator[str]:
+    """A fresh, empty database on the server; dropped afterwards."""
+    name = f"station_test_{uuid.uuid4().hex[:10]}"
+    admin = create_engine(pg_server, isolation_level="AUTOCOMMIT")
+    with admin.connect() as conn:
+        conn.execute(text(f'CREATE DATABASE "{name}"'))
+    try:
+        yield make_url(pg_server).set(database=name).render_as_string(hide_password=False)
+    finally:
+        with admin.connect() as conn:
+            conn.execute(text(f'DROP DATABASE IF EXISTS "{name}" WITH (FORCE)'))
+        admin.dispose()
+
+
+def test_upgrade_from_empty_and_round_trip(pg_url: str) -> None:
+    engine = make_engine(pg_url)
+    assert engine.dialect.name == "postgresql"
+    assert current_revision(engine) is None and inspect(engine).get_table_names() == []
+    upgrade(engine)
+    assert current_revision(engine) == "0001"
+    assert set(inspect(engine).get_table_names()) == TABLES | {"alembic_version"}
+    with engine.connect() as conn:
+        assert compare_metadata(MigrationContext.configure(conn), Base.metadata) == []
+    downgrade(engine, "base")
+    assert current_revision(engine) is None
+    assert set(inspect(engine).get_table_names()) <= {"alembic_version"}
+    upgrade(engine)
+    assert current_revision(engine) == "0001"
+    assert set(inspect(engine).get_table_names()) == TABLES | {"alembic_version"}
+    engine.dispose()
+
+
+def _run_records(run_id: str, station: str, serial: str, outcome: Outcome) -> list[Record]:
+    """A two-step, one-unit run with two gates and one limit check."""
+    return [
+        RunStarted(run_id, "2026-11-21T10:00:00+00:00", 0.0, station, "rig", ("pty0",), ("rest", "pose +z")),
+        StepStarted(run_id, 0, "rest", "rest", 0.0, 60.0),
+        Measurement(run_id, 0, serial, "rest", "stillness", 0.001, 0.0, 0.01, "rad/s", True),
+        StepFinished(run_id, 0, "rest", 60.0, 60.0, True, 1),
+        StepStarted(run_id, 1, "pose +z", "pose", 60.0, 30.0),
+        Measurement(run_id, 0, serial, "pose +z", "gravity_ratio", 1.001, 0.95, 1.05, "1", True),
+        StepFinished(run_id, 1, "pose +z", 95.0, 35.0, True, 1),
+        Measurement(run_id, 0, serial, "limits", "gyro.bias_static.z", 1e-4, -1e-3, 1e-3, "rad/s",
+                    outcome == Outcome.PASS, float("nan")),
+        UnitFinished(run_id, 0, serial, outcome, "" if outcome == Outcome.PASS else "out of limits"),
+        RunFinished(run_id, outcome, 95.0, 95.0, 0.01,
+                    (UnitFinished(run_id, 0, serial, outcome, "" if outcome == Outcome.PASS else "out of limits"),)),
+    ]
+
+
+def test_two_stations_write_concurrently(pg_url: str) -> None:
+    open_database(pg_url).close()  # migrate once, as the first station to start would
+    serials = [f"SN{k:03d}" for k in range(20)]  # both stations see the same units: concurrent unit creation
+    errors: list[BaseException] = []
+    barrier = threading.Barrier(2)
+
+    def station(name: str) -> None:
+        try:
+            with open_database(pg_url) as db:
+                rec = Recorder(db, RunContext(operator=name))
+                barrier.wait(timeout=60)
+                for k in range(RUNS_PER_STATION):
+                    outcome = Outcome.FAIL if k % 7 == 0 else Outcome.PASS
+                    for r in _run_records(f"{name}-{k:03d}", name, serials[k % len(serials)], outcome):
+                        rec(r)
+        except BaseException as exc:
+            errors.append(exc)
+            barrier.abort()
+
+    threads = [threading.Thread(target=station, args=(n,)) for n in ("station-a", "station-b")]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert errors == []
+    with open_database(pg_url) as db, db.transaction() as s:
+        uids = s.scalars(select(Run.run_uid)).all()
+        assert len(uids) == len(set(uids)) == 2 * RUNS_PER_STATION
+        expected = {f"station-{x}-{k:03d}" for x in "ab" for k in range(RUNS_PER_STATION)}
+        assert set(uids) == expected
+        per_station = dict(s.execute(select(Station.name, func.count(Run.id)).join(Run).group_by(Station.name)).all())
+        assert per_station == {"station-a": RUNS_PER_STATION, "station-b": RUNS_PER_STATION}
+        assert s.scalar(select(func.count(Run.id)).where(Run.outcome == UNFINISHED)) == 0
+        n_fail = sum(1 for k in range(RUNS_PER_STATION) if k % 7 == 0)
+        assert s.scalar(select(func.count(Run.id)).where(Run.outcome == "FAIL")) == 2 * n_fail
+        assert s.scalar(select(func.count(RunUnit.id))) == 2 * RUNS_PER_STATION
+        assert s.scalar(select(func.count(StepTiming.id))) == 2 * 2 * RUNS_PER_STATION
+        assert s.scalar(select(func.count(LimitCheck.id))) == 3 * 2 * RUNS_PER_STATION
+        assert s.scalar(select(func.count(LimitCheck.id)).where(LimitCheck.std.is_(None))) == 2 * 3 * RUNS_PER_STATION
+        assert sorted(s.scalars(select(Unit.serial)).all()) == serials
+        assert s.scalar(select(func.count(RunUnit.id)).where(RunUnit.unit_id.is_(None))) == 0
+    with open_database(pg_url) as db:
+        assert sum(u.runs for u in list_units(db)) == 2 * RUNS_PER_STATION
+        assert attempt_count(db, "SN000") == 2 * RUNS_PER_STATION // len(serials)
+
+
+def test_recovery_on_postgres(pg_url: str) -> None:
+    with open_database(pg_url) as db:
+        rec = Recorder(db)
+        for r in _run_records("dead", "st", "SN1", Outcome.PASS)[:-1]:
+            rec(r)
+        with db.transaction() as s:
+            assert s.scalars(select(Run.outcome)).one() == UNFINISHED
+        assert recover_unfinished(db, "st") == ["dead"]
+        with db.transaction() as s:
+            assert s.scalars(select(Run.outcome)).one() == "ERROR"
+            assert s.scalars(select(RunUnit.outcome)).one() == "ERROR"
