@@ -326,3 +326,33 @@ def test_failed_verification_is_fail_with_the_residuals_recorded(sim: SimStation
     assert {r.slot for r in verify} == {0, 1}
     assert any(not r.passed and "accel" in r.name for r in verify)
     assert all(u.sensor.eeprom.page_writes > 0 for u in sim.units)  # written, then verified
+
+
+def test_passed_verification_records_its_residuals(sim: SimStation) -> None:
+    """A unit that passes verification gets its residuals recorded as 'verify' measurements, all passed."""
+    from station.eeprom.provision import EepromProvisioner
+    from station.eeprom.verify import RigVerifier
+    from station.sequence.records import Measurement
+    from station.sim.firmware import install_firmware
+
+    for u in sim.units:
+        install_firmware(u.sensor, sim.clock)
+    records: list[Record] = []
+    rig = open_rig(sim.rig_url + RIG_QUERY, sim.clock, **sim.rig_client_options())
+    sensors = [open_sensor(url, sim.clock, **SENSOR_OPTIONS) for url in sim.sensor_urls]  # type: ignore[arg-type]
+    try:
+        verifier = RigVerifier(rig, sim.clock, gravity_mps2=PLAN.gravity_mps2,
+                               sample_rate_hz=int(PLAN.sample_rate_hz), options=OPTIONS)
+        runner = SequenceRunner(
+            rig, sensors, sim.clock, plan=PLAN, options=OPTIONS, limits=table1_limits(),
+            provisioner=EepromProvisioner("test", verifier=verifier), subscribers=[records.append],
+        )
+        result = runner.run()
+    finally:
+        for s in sensors:
+            s.close()
+        rig.close()
+    assert [u.outcome for u in result.units] == [Outcome.PASS, Outcome.PASS]
+    verify = [r for r in records if isinstance(r, Measurement) and r.step == "verify"]
+    assert {r.slot for r in verify} == {0, 1} and all(r.passed for r in verify)
+    assert {r.name for r in verify} >= {"verify.rate.rate_error"}

@@ -1,9 +1,10 @@
 """``station eeprom ...``: make, inspect and write calibration images; export noise parameters for Kalibr.
 
 A Typer sub-app; ``station/cli.py`` mounts it with ``app.add_typer(eeprom_app, name="eeprom")``.
-Parameter sets come from a parameter JSON (``--params``, the format ``station fit --json``
-writes) until the unit store provides them. Expected failures print one line on stderr
-and exit with code 2.
+Parameter sets come from the unit store (the newest PASS parameter set of the serial, in
+``--db``, default ``$STATION_DB`` or ``sqlite:///station.sqlite``) or from a parameter JSON
+(``--params``, the format ``station fit --json`` writes). Expected failures print one line on
+stderr and exit with code 2.
 """
 
 from __future__ import annotations
@@ -26,6 +27,31 @@ eeprom_app = typer.Typer(no_args_is_help=True, help="Calibration images in the u
 def _fail(exc: StationError | str, code: int = 2) -> typer.Exit:
     typer.echo(f"error: {exc}", err=True)
     return typer.Exit(code)
+
+
+ParamsOption = Annotated[
+    Path | None, typer.Option("--params", help="parameter JSON of the unit (default: the newest PASS set in the store)")
+]
+DbOption = Annotated[str | None, typer.Option("--db", help="database URL (default $STATION_DB or sqlite:///station.sqlite)")]
+
+
+def _unit_params(serial: str | None, path: Path | None, db_url: str | None) -> ParameterSet:
+    """The unit's parameter set from ``path`` if given, else its newest PASS set in the store."""
+    if path is not None:
+        return _load_params(path, serial)
+    if serial is None:
+        raise StationError("give the unit's SERIAL or --params")
+    from station.store.db import open_database
+    from station.store.queries import latest_parameter_set
+
+    db = open_database(db_url)
+    try:
+        params = latest_parameter_set(db, serial)
+    finally:
+        db.close()
+    if params is None:
+        raise StationError(f"no PASS parameter set of serial {serial!r} in the store {db.url}")
+    return params
 
 
 def _load_params(path: Path, serial: str | None) -> ParameterSet:
@@ -70,15 +96,16 @@ def image_summary(img: Any) -> dict[str, Any]:
 @eeprom_app.command("image")
 def image_cmd(
     serial: Annotated[str, typer.Argument(help="the unit's serial number")],
-    params_path: Annotated[Path, typer.Option("--params", help="parameter JSON of the unit")],
     output: Annotated[Path, typer.Option("-o", "--output", help="image file to write")],
+    params_path: ParamsOption = None,
+    db: DbOption = None,
     station_id: Annotated[str, typer.Option("--station", help="station id written into the image")] = "station",
 ) -> None:
     """Make the EEPROM image of a unit's parameter set (update count 1; the writer renumbers it)."""
     from station.eeprom.image import CalibrationImage, encode_image, image_sha256
 
     try:
-        params = _load_params(params_path, serial)
+        params = _unit_params(serial, params_path, db)
         data = encode_image(CalibrationImage.from_params(params, station_id, datetime.now(UTC)))
         output.write_bytes(data)
     except StationError as exc:
@@ -119,7 +146,8 @@ def decode_cmd(
 def write_cmd(
     serial: Annotated[str, typer.Argument(help="the unit's serial number (must match what the sensor reports)")],
     sensor_url: Annotated[str, typer.Option("--sensor", help="sensor URL, e.g. serial:///dev/ttyUSB0")],
-    params_path: Annotated[Path, typer.Option("--params", help="parameter JSON of the unit")],
+    params_path: ParamsOption = None,
+    db: DbOption = None,
     station_id: Annotated[str, typer.Option("--station", help="station id written into the image")] = "station",
     attempts: Annotated[int, typer.Option(help="write + read-back attempts")] = 3,
     power_cycle: Annotated[bool, typer.Option(help="reset the sensor afterwards so it loads the image")] = True,
@@ -130,16 +158,30 @@ def write_cmd(
     from station.sensor import open_sensor
 
     try:
-        params = _load_params(params_path, serial)
+        params = _unit_params(serial, params_path, db)
         image = CalibrationImage.from_params(params, station_id, datetime.now(UTC))
         with open_sensor(sensor_url) as sensor:
             report = write_image(sensor, image, max_attempts=attempts)
             if power_cycle:
                 sensor.power_cycle(2.0)
+        _record_write(db, report)
     except StationError as exc:
         raise _fail(exc) from None
     typer.echo(f"wrote image #{report.update_count} to slot {report.slot} of {report.serial} "
                f"({report.length} bytes, {report.attempts} attempt(s), sha256 {report.sha256})")
+
+
+def _record_write(db_url: str | None, report: Any) -> None:
+    """Record a write made outside a calibration run in the unit store (read back and compared)."""
+    from station.store.db import open_database
+    from station.store.recorder import record_eeprom_write
+
+    db = open_database(db_url)
+    try:
+        record_eeprom_write(db, report.serial, report.sha256, attempts=report.attempts, verified=True,
+                            layout_version=1, message=f"written by `station eeprom write` to slot {report.slot}")
+    finally:
+        db.close()
 
 
 @eeprom_app.command("read")
@@ -229,13 +271,15 @@ def kalibr_imu_yaml(params: ParameterSet, rostopic: str = "/imu0", update_rate_h
 
 @eeprom_app.command("kalibr")
 def kalibr_cmd(
-    params_path: Annotated[Path, typer.Option("--params", help="parameter JSON of the unit")],
+    serial: Annotated[str | None, typer.Argument(help="the unit's serial (parameters from the store)")] = None,
+    params_path: ParamsOption = None,
+    db: DbOption = None,
     output: Annotated[Path | None, typer.Option("-o", "--output", help="imu.yaml to write (default: stdout)")] = None,
     rostopic: Annotated[str, typer.Option(help="IMU topic written into the file")] = "/imu0",
 ) -> None:
     """Export the unit's noise parameters as a Kalibr imu.yaml."""
     try:
-        text = kalibr_imu_yaml(_load_params(params_path, None), rostopic)
+        text = kalibr_imu_yaml(_unit_params(serial, params_path, db), rostopic)
     except StationError as exc:
         raise _fail(exc) from None
     if output is None:

@@ -246,8 +246,10 @@ class EepromProvisioner:
             )
         return CalibrationImage.from_params(unit.params, self.station_id, self._now())
 
-    def provision(self, unit: UnitResult, sensor: SerialSensor) -> None:
-        """Write, power-cycle, verify one PASS unit.
+    def provision(
+        self, unit: UnitResult, sensor: SerialSensor
+    ) -> tuple[tuple[str, float, float, str, bool], ...] | None:
+        """Write, power-cycle, verify one PASS unit; returns the verification checks (None without verifier).
 
         Raises a HardwareError subclass when the writing fails (station ERROR) and
         VerificationFailed (a UnitRejected) when the corrected output misses its limits (unit FAIL).
@@ -263,6 +265,9 @@ class EepromProvisioner:
             self._on_record(record)
         if result is not None and not result.passed:
             raise VerificationFailed(f"verification of corrected output failed: {result.describe()}", result)
+        if result is None:
+            return None
+        return tuple((c.name, c.value, c.limit, c.unit, c.passed) for c in result.checks)
 
 
 __all__ = [

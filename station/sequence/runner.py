@@ -128,10 +128,18 @@ class RunResult:
         return self.units[slot]
 
 
-class Provisioner(Protocol):
-    """Writes a passed unit's calibration into the sensor (EEPROM); issue 4 provides the real one."""
+VerifyCheck = tuple[str, float, float, str, bool]  # name, value, limit (|value| <= limit), unit, passed
 
-    def provision(self, unit: UnitResult, sensor: SerialSensor) -> None: ...
+
+class Provisioner(Protocol):
+    """Writes a passed unit's calibration into the sensor (EEPROM) and verifies it.
+
+    Returns the verification checks (recorded as measurements of step 'verify'); raises
+    :class:`~station.errors.UnitRejected` when the unit misses them (FAIL) and a
+    :class:`~station.errors.HardwareError` when the writing fails (ERROR).
+    """
+
+    def provision(self, unit: UnitResult, sensor: SerialSensor) -> Sequence[VerifyCheck] | None: ...
 
 
 @dataclass
@@ -525,6 +533,11 @@ class SequenceRunner:
             return None, None
         return session_path, params_path
 
+    def _emit_verify(self, r: UnitResult, checks: Sequence[VerifyCheck]) -> None:
+        for name, value, limit, unit, passed in checks:
+            self._emit(Measurement(self.run_id, r.slot, r.serial, "verify", name, value, -limit, limit, unit,
+                                   passed, float("nan")))
+
     def _provision(self, results: list[UnitResult]) -> list[UnitResult]:
         assert self.provisioner is not None
         out: list[UnitResult] = []
@@ -534,12 +547,11 @@ class SequenceRunner:
                 out.append(r)
                 continue
             try:
-                self.provisioner.provision(r, self.sensors[r.slot])
+                checks = self.provisioner.provision(r, self.sensors[r.slot])
+                self._emit_verify(r, checks or ())
                 out.append(r)
             except UnitRejected as exc:
-                for name, value, limit, unit, passed in exc.checks:
-                    self._emit(Measurement(self.run_id, r.slot, r.serial, "verify", name, value, -limit, limit, unit,
-                                           passed, float("nan")))
+                self._emit_verify(r, exc.checks)
                 out.append(_replace_outcome(r, Outcome.FAIL, f"verification failed: {exc}"))
             except HardwareError as exc:
                 out.append(_replace_outcome(r, Outcome.ERROR, f"provisioning failed: {exc}"))

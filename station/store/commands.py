@@ -20,8 +20,8 @@ import typer
 from station.errors import StationError
 from station.sequence.records import Record
 from station.store.db import ENV_VAR, open_database
-from station.store.queries import list_units, show_unit
-from station.store.recorder import Recorder, RunContext, digest_of
+from station.store.queries import latest_parameter_set, list_units, show_unit
+from station.store.recorder import Recorder, RunContext, digest_of, record_disposition
 
 units_app = typer.Typer(no_args_is_help=True, help="Per-unit records in the station database.")
 
@@ -152,3 +152,39 @@ def units_show(
         typer.echo(f"  disposition {d['decided_at']}: {d['decision']} by {d['operator'] or '-'} {d['note']}")
     if detail.latest_params_json:
         typer.echo(f"  latest parameter set: run {detail.latest_params_run_id}")
+
+
+@units_app.command("params")
+def units_params(
+    serial: Annotated[str, typer.Argument(help="the unit's serial number")],
+    db: DbOption = None,
+) -> None:
+    """Print the unit's newest PASS parameter set as JSON (station-params/1, SI units)."""
+    try:
+        with open_database(db) as database:
+            params = latest_parameter_set(database, serial)
+    except StationError as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(2) from None
+    if params is None:
+        typer.echo(f"error: no PASS parameter set of serial {serial!r}", err=True)
+        raise typer.Exit(2)
+    typer.echo(params.to_json())
+
+
+@units_app.command("disposition")
+def units_disposition(
+    serial: Annotated[str, typer.Argument(help="the unit's serial number")],
+    decision: Annotated[str, typer.Argument(help="e.g. retest, scrap, rework")],
+    operator: Annotated[str, typer.Option(help="who decided")] = "",
+    note: Annotated[str, typer.Option(help="why")] = "",
+    db: DbOption = None,
+) -> None:
+    """Record a disposition: the retest policy counts attempts again from here."""
+    try:
+        with open_database(db) as database:
+            record_disposition(database, serial, decision, operator=operator, note=note)
+    except StationError as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(2) from None
+    typer.echo(f"recorded disposition {decision!r} for {serial}")
