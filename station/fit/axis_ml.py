@@ -205,14 +205,15 @@ def fit_axis(
     # The stochastic drift q is often poorly determined (a Gauss-Markov process slower than
     # the record looks like a random offset and trend). ML underestimates it, and with it
     # every other uncertainty, so uncertainties are evaluated at the upper end of q's
-    # 95 % profile interval. The std of sqrt(q) is the mean half-width of its 1-sigma interval.
+    # 95 % profile interval. The std of sqrt(q) is that interval's half-width / 1.96 (the same as
+    # the 1-sigma half-width for a Gaussian likelihood, wider when it is skewed by the q = 0 bound).
     def profile_q(u: float) -> float:
         return problem.nll(np.array([theta_q[0], u]))
 
-    q_lo_edge, q_hi_edge = _profile_interval(profile_q, theta_q[1], _LOG_Q_MIN, _LOG_Q_MAX)
-    sq = np.sqrt(problem.q0 * np.exp(np.array([q_lo_edge, theta_q[1], q_hi_edge])))
-    sq_std = float(0.5 * (sq[2] - sq[0]))
-    q_unc = problem.q0 * float(np.exp(_profile_interval(profile_q, theta_q[1], _LOG_Q_MIN, _LOG_Q_MAX, 1.92)[1]))
+    q_lo95, q_hi95 = _profile_interval(profile_q, theta_q[1], _LOG_Q_MIN, _LOG_Q_MAX, 1.92)
+    sq = np.sqrt(problem.q0 * np.exp(np.array([q_lo95, q_hi95])))
+    sq_std = float((sq[1] - sq[0]) / (2 * 1.96))
+    q_unc = problem.q0 * float(np.exp(q_hi95))
     if resolved:
         nll, beta, _, _ = full.solve(tc, q)
         step = 1e-4 * tc
