@@ -21,11 +21,13 @@ app.add_typer(import_app, name="import")
 
 
 def _add_subapps() -> None:
+    from station.diagnose.command import diagnose as diagnose_command
     from station.eeprom.commands import eeprom_app
     from station.store.commands import units_app
 
     app.add_typer(eeprom_app, name="eeprom")
     app.add_typer(units_app, name="units")
+    app.command(name="diagnose")(diagnose_command)
 
 
 DbOption = Annotated[
@@ -255,6 +257,20 @@ def run_station(
         raise _fail(exc) from None
     console.print(summary_table(result))
     raise typer.Exit(_OUTCOME_EXIT[result.outcome.value])
+
+
+@app.command()
+def serve(
+    host: Annotated[str, typer.Option(help="address to bind (0.0.0.0: the line's network)")] = "127.0.0.1",
+    port: Annotated[int, typer.Option(min=1, max=65535, help="TCP port")] = 8000,
+    db: DbOption = None,
+) -> None:
+    """Operator status page and JSON API; write actions need $STATION_TOKEN (read-only without it)."""
+    import os
+
+    from station.web.serve import serve as run_server
+
+    run_server(host, port, db, os.environ.get("STATION_TOKEN") or None)
 
 
 @app.command()

@@ -8,39 +8,33 @@
 - :mod:`station.store.commands`: ``station units ...`` and :func:`attach_recorder`.
 """
 
-from station.store.db import DEFAULT_URL, Database, StoreError, open_database
-from station.store.queries import (
-    UnitDetail,
-    UnitRun,
-    UnitSummary,
-    attempt_count,
-    latest_parameter_set,
-    list_units,
-    show_unit,
-)
-from station.store.recorder import (
-    Recorder,
-    RunContext,
-    record_disposition,
-    record_eeprom_write,
-    recover_unfinished,
-)
 
-__all__ = [
-    "DEFAULT_URL",
-    "Database",
-    "Recorder",
-    "RunContext",
-    "StoreError",
-    "UnitDetail",
-    "UnitRun",
-    "UnitSummary",
-    "attempt_count",
-    "latest_parameter_set",
-    "list_units",
-    "open_database",
-    "record_disposition",
-    "record_eeprom_write",
-    "recover_unfinished",
-    "show_unit",
-]
+# Lazy (PEP 562): importing the package, e.g. for its CLI commands, loads no heavy dependency.
+_EXPORTS = {
+    "DEFAULT_URL": "station.store.url",
+    "Database": "station.store.db",
+    "StoreError": "station.store.db",
+    "open_database": "station.store.db",
+    "UnitDetail": "station.store.queries",
+    "UnitRun": "station.store.queries",
+    "UnitSummary": "station.store.queries",
+    "attempt_count": "station.store.queries",
+    "latest_parameter_set": "station.store.queries",
+    "list_units": "station.store.queries",
+    "show_unit": "station.store.queries",
+    "Recorder": "station.store.recorder",
+    "RunContext": "station.store.recorder",
+    "record_disposition": "station.store.recorder",
+    "record_eeprom_write": "station.store.recorder",
+    "recover_unfinished": "station.store.recorder",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str) -> object:
+    if name in _EXPORTS:
+        import importlib
+
+        return getattr(importlib.import_module(_EXPORTS[name]), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

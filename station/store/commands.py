@@ -13,15 +13,16 @@ from __future__ import annotations
 import json
 import sys
 from collections.abc import Callable
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
 from station.errors import StationError
-from station.sequence.records import Record
-from station.store.db import ENV_VAR, open_database
-from station.store.queries import latest_parameter_set, list_units, show_unit
-from station.store.recorder import Recorder, RunContext, digest_of, record_disposition
+from station.store.url import ENV_VAR
+
+if TYPE_CHECKING:  # the database code loads only when a command runs
+    from station.sequence.records import Record
+    from station.store.recorder import Recorder, RunContext
 
 units_app = typer.Typer(no_args_is_help=True, help="Per-unit records in the station database.")
 
@@ -38,6 +39,8 @@ def run_context(plan: Any = None, limits: Any = None, operator: str = "") -> Run
     the limits version is their ``name`` (for a limits file: its name, version and the file's SHA-256).
     None leaves the corresponding fields empty.
     """
+    from station.store.recorder import RunContext, digest_of
+
     kw: dict[str, str] = {"operator": operator}
     if limits is not None and hasattr(limits, "sha256") and hasattr(limits, "version"):
         # a limits file (station.sequence.limits_file.LimitsFile): its own version and file hash
@@ -81,6 +84,9 @@ def attach_recorder(
     Returns the recorder; its ``db`` stays open for the process (``recorder.db.close()`` to release it).
     Raises :class:`~station.store.db.StoreError` if the database cannot be opened.
     """
+    from station.store.db import open_database
+    from station.store.recorder import Recorder
+
     db = open_database(db_url)
     subscribe: Callable[[Callable[[Record], None]], Any]
     if hasattr(runner_or_subscribe, "subscribe"):
@@ -103,6 +109,9 @@ def attach_recorder(
 @units_app.command("list")
 def units_list(db: DbOption = None) -> None:
     """List every unit: runs, latest outcome, attempts since its last disposition."""
+    from station.store.db import open_database
+    from station.store.queries import list_units
+
     try:
         with open_database(db) as database:
             rows = list_units(database)
@@ -124,6 +133,9 @@ def units_show(
     db: DbOption = None,
 ) -> None:
     """Show one unit: its runs (newest first), limit verdicts, latest parameter set, EEPROM writes."""
+    from station.store.db import open_database
+    from station.store.queries import show_unit
+
     try:
         with open_database(db) as database:
             detail = show_unit(database, serial)
@@ -160,6 +172,9 @@ def units_params(
     db: DbOption = None,
 ) -> None:
     """Print the unit's newest PASS parameter set as JSON (station-params/1, SI units)."""
+    from station.store.db import open_database
+    from station.store.queries import latest_parameter_set
+
     try:
         with open_database(db) as database:
             params = latest_parameter_set(database, serial)
@@ -181,6 +196,9 @@ def units_disposition(
     db: DbOption = None,
 ) -> None:
     """Record a disposition: the retest policy counts attempts again from here."""
+    from station.store.db import open_database
+    from station.store.recorder import record_disposition
+
     try:
         with open_database(db) as database:
             record_disposition(database, serial, decision, operator=operator, note=note)

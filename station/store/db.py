@@ -26,11 +26,10 @@ from sqlalchemy.exc import SQLAlchemyError
 from sqlalchemy.orm import Session, sessionmaker
 
 from station.errors import StationError
+from station.store.url import DEFAULT_URL, ENV_VAR
 
-DEFAULT_URL = "sqlite:///station.sqlite"
 """The default database: a SQLite file in the working directory."""
 
-ENV_VAR = "STATION_DB"
 """Environment variable that overrides :data:`DEFAULT_URL`."""
 
 MIGRATIONS_DIR = Path(__file__).resolve().parents[2] / "migrations"

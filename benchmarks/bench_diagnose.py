@@ -1,0 +1,123 @@
+"""Concealed-data study of ``station.diagnose``: is the missing physics found, and only then?
+
+For every candidate effect, simulated recordings (random rig plans, sample rates and units,
+``station.sim.plan.random_plan``) with that effect at a magnitude below the white noise of a
+single sample; recordings without missing physics; and pairs of effects hidden together.
+Prints the confusion matrix (true effect x named effects), the detection and false-finding
+rates, the median fit improvement (block chi^2 before/after on the affected axes), and the
+time to diagnose a 15-minute 100 Hz recording.
+
+Run: ``/work/venv/bin/python benchmarks/bench_diagnose.py [--seeds 10] [--clean 50] [--pairs 10]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from station.diagnose import NAMES, diagnose
+from station.sim.effects import Effects
+from station.sim.plan import RigPlan, random_plan
+from station.sim.session_sim import simulate_session
+
+#: Magnitudes (units of station.sim.effects.Effects) below the white noise of a single sample
+#: (accel 0.017-0.028 m/s^2, gyro 0.010-0.013 deg/s) at typical inputs.
+CONCEALED: dict[str, float] = {
+    "temperature_bias": 0.0005,  # accel 0.5 mm/s^2/K, gyro 2.5 mdeg/s/K: ~2.5 mm/s^2, 12 mdeg/s over the warm-up
+    "temperature_scale": 50.0,  # ppm/K: 2.5e-4 relative after 5 K
+    "g_sensitivity": 0.005,  # deg/s per g
+    "scale_nonlinearity": 2e-4,  # relative at 1 g / 200 deg/s
+    "scale_asymmetry": 2e-4,
+    "lever_arm": 2.0,  # mm
+    "earth_rotation": 1.0,  # 15 deg/h = 4 mdeg/s
+    "time_offset": 0.2,  # ms
+    "bias_random_walk": 1e-4,  # m/s^2/sqrt(s)
+    "outliers": 3e-4,  # extra probability per sample
+}
+
+
+def run(effects: dict[str, float], seed: int) -> tuple[set[str], list[float], float]:
+    rng = np.random.default_rng(10_000 + seed)
+    plan = random_plan(rng)
+    res = simulate_session(seed, plan=plan, effects=Effects(**effects))
+    t0 = time.perf_counter()
+    d = diagnose(res.session)
+    dt = time.perf_counter() - t0
+    named = {f["effect"] for f in d.report["findings"]}
+    gains = []
+    for f in d.report["findings"]:
+        fit = f.get("fit") or {}
+        if "before" in fit:
+            b, a = np.array(fit["before"]["block_chi2"]), np.array(fit["after"]["block_chi2"])
+            gains.append(float(np.max(b / a)))
+    return named, gains, dt
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--seeds", type=int, default=10)
+    ap.add_argument("--clean", type=int, default=50)
+    ap.add_argument("--pairs", type=int, default=10)
+    args = ap.parse_args()
+
+    confusion = {name: dict.fromkeys(NAMES, 0) for name in (*NAMES, "none")}
+    found = dict.fromkeys(NAMES, 0)
+    improvements: list[float] = []
+    times: list[float] = []
+    for name in NAMES:
+        for s in range(args.seeds):
+            named, gains, dt = run({name: CONCEALED[name]}, 100 * (NAMES.index(name) + 1) + s)
+            times.append(dt)
+            for n in named:
+                confusion[name][n] += 1
+            found[name] += name in named
+            improvements.extend(gains)
+            print(f"  {name:20s} seed {s}: named {sorted(named)} ({dt:.1f} s)", flush=True)
+    false = 0
+    for s in range(args.clean):
+        named, _, dt = run({}, 5000 + s)
+        times.append(dt)
+        for n in named:
+            confusion["none"][n] += 1
+        false += bool(named)
+        print(f"  none                 seed {s}: named {sorted(named)} ({dt:.1f} s)", flush=True)
+    pair_ok = 0
+    rng = np.random.default_rng(7)
+    pairs = []
+    for s in range(args.pairs):
+        a, b = rng.choice(len(NAMES), size=2, replace=False)
+        pair = (NAMES[a], NAMES[b])
+        named, _, dt = run({pair[0]: CONCEALED[pair[0]], pair[1]: CONCEALED[pair[1]]}, 9000 + s)
+        ok = set(pair) <= named
+        pair_ok += ok
+        pairs.append((pair, sorted(named), ok))
+        print(f"  pair {pair}: named {sorted(named)} {'OK' if ok else 'MISSED'}", flush=True)
+
+    short = {n: n[:9] for n in NAMES}
+    print("\nconfusion matrix (rows: true effect, columns: named effect; counts of recordings)")
+    print(f"{'true':20s} " + " ".join(f"{short[n]:>9s}" for n in NAMES))
+    for row in (*NAMES, "none"):
+        print(f"{row:20s} " + " ".join(f"{confusion[row][n]:9d}" for n in NAMES))
+    print("\ndetection rate per effect (target >= 90 %)")
+    for name in NAMES:
+        print(f"  {name:20s} {found[name]}/{args.seeds} = {100.0 * found[name] / max(args.seeds, 1):.0f} %")
+    print(f"false-finding rate: {false}/{args.clean} = {100.0 * false / max(args.clean, 1):.1f} % (target <= 2 %)")
+    print(f"pairs both found: {pair_ok}/{args.pairs}")
+    if improvements:
+        print(f"median fit improvement (block chi^2 before/after, worst axis): {np.median(improvements):.3f}")
+    print(f"diagnosis time per recording: median {np.median(times):.2f} s, max {np.max(times):.2f} s")
+
+    plan = RigPlan(sample_rate_hz=100.0)  # default plan: ~14 min; stretch the rest to 15 min total
+    plan = RigPlan(sample_rate_hz=100.0, rest_s=plan.rest_s + 60.0)
+    res = simulate_session(1, plan=plan)
+    t0 = time.perf_counter()
+    diagnose(res.session)
+    dt = time.perf_counter() - t0
+    print(f"speed: {res.session.duration_s / 60:.1f}-minute {plan.sample_rate_hz:.0f} Hz recording "
+          f"({len(res.session)} samples) diagnosed in {dt:.2f} s (target < 10 s)")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,243 @@
+"""The library of candidate effects the base model (eq. 1 + eq. 3) leaves out.
+
+Each *mean* candidate is a set of regressors built from the session's references and
+metadata: per sample an array ``Z`` of shape (n, 3, p) such that the effect adds
+``Z[i, k] @ theta`` to output axis k of sample i (theta: p parameters in SI). They are
+block-averaged by :mod:`station.diagnose.residuals` and fitted jointly with the base
+model's linear terms by :mod:`station.diagnose.select`. Two candidates are not mean
+terms: ``bias_random_walk`` changes the block covariance and ``outliers`` is a count.
+
+Units: ``u = M ref`` in m/s^2 (accelerometer) or rad/s (gyroscope), temperature rise in K,
+time in s. :func:`engineering` converts fitted SI parameters to the units the report uses.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from station.diagnose.residuals import Baseline, SensorData
+from station.sim.effects import EARTH_RATE_RADPS, GYRO_NONLINEARITY_REF_RADPS, STANDARD_GRAVITY
+from station.sim.geometry import POSE_ANGLES_DEG, rotation_matrices, up_vector
+
+NAMES = (
+    "temperature_bias", "temperature_scale", "g_sensitivity", "scale_nonlinearity", "scale_asymmetry",
+    "lever_arm", "earth_rotation", "time_offset", "bias_random_walk", "outliers",
+)
+#: Candidates that are mean terms (regressors); the others are tested by select.py directly.
+MEAN_CANDIDATES = NAMES[:8]
+
+_DEG = math.pi / 180.0
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """A mean candidate: which sensors it applies to, its parameters and its regressors."""
+
+    name: str
+    sensors: tuple[str, ...]
+    build: Callable[[Baseline, SensorData], np.ndarray | None]
+    description: str
+
+
+def _diag(values: np.ndarray) -> np.ndarray:
+    """(n, 3) per-axis regressors -> (n, 3, 3) with axis k's regressor in parameter k."""
+    z = np.zeros((values.shape[0], 3, 3))
+    for k in range(3):
+        z[:, k, k] = values[:, k]
+    return z
+
+
+def _temperature_bias(b: Baseline, s: SensorData) -> np.ndarray | None:
+    if not np.any(b.d_temp):
+        return None
+    return _diag(np.repeat(b.d_temp[:, None], 3, axis=1))
+
+
+def _temperature_scale(b: Baseline, s: SensorData) -> np.ndarray | None:
+    if not np.any(b.d_temp):
+        return None
+    return _diag(s.u * b.d_temp[:, None])
+
+
+def _g_sensitivity(b: Baseline, s: SensorData) -> np.ndarray:
+    f = np.nan_to_num(b.session.ref_accel_mps2)
+    z = np.zeros((len(f), 3, 9))
+    for k in range(3):
+        z[:, k, 3 * k:3 * k + 3] = f
+    return z
+
+
+def _nonlinearity(b: Baseline, s: SensorData) -> np.ndarray:
+    return _diag(s.u * np.abs(s.u))
+
+
+def _asymmetry(b: Baseline, s: SensorData) -> np.ndarray:
+    return _diag(0.5 * np.abs(s.u))
+
+
+def _angular(b: Baseline) -> tuple[np.ndarray, np.ndarray]:
+    """Rig body rate (rad/s) and angular acceleration (rad/s^2) from the rate reference."""
+    w = np.nan_to_num(b.session.ref_gyro_radps)
+    alpha = np.gradient(w, b.session.t_s, axis=0)
+    return w, alpha
+
+
+def _lever_arm(b: Baseline, s: SensorData) -> np.ndarray | None:
+    w, alpha = _angular(b)
+    if not np.any(w):
+        return None
+    m = np.nan_to_num(s.params.misalignment)
+    z = np.zeros((len(w), 3, 3))
+    for j in range(3):
+        e = np.zeros(3)
+        e[j] = 1.0
+        extra = np.cross(w, np.cross(w, e)) + np.cross(alpha, e)  # w x (w x r) + alpha x r per unit r_j
+        z[:, :, j] = extra @ m.T
+    return z
+
+
+def earth_rate_world(latitude_deg: float, heading_deg: float) -> np.ndarray:
+    """Earth rate (rad/s) in the rig's world frame (x, y horizontal, y at ``heading_deg`` from north, z up)."""
+    lat, head = math.radians(latitude_deg), math.radians(heading_deg)
+    north = np.array([-math.sin(head), math.cos(head), 0.0])
+    return EARTH_RATE_RADPS * (math.cos(lat) * north + np.array([0.0, 0.0, math.sin(lat)]))
+
+
+def attitude(b: Baseline) -> np.ndarray | None:
+    """Sensor-to-world rotations (n, 3, 3) of the station's rig, from the rest pose (yaw 0) and the
+    integrated rate reference; None when the first segment's pose is not one of the rig's six poses.
+
+    The product of the per-sample body-frame increments ``exp([w dt]x)`` is formed by a
+    parallel prefix scan (log2 n vectorized steps).
+    """
+    from scipy.spatial.transform import Rotation
+
+    session = b.session
+    f0 = np.nan_to_num(session.ref_accel_mps2[0])
+    if not np.any(f0):
+        return None
+    up0 = f0 / np.linalg.norm(f0)
+    start = [p for p in POSE_ANGLES_DEG if up0 @ up_vector(p) > 0.999]
+    if not start:
+        return None
+    roll, pitch = POSE_ANGLES_DEG[start[0]]
+    r0 = Rotation.from_matrix(rotation_matrices(np.array(roll * _DEG), np.array(pitch * _DEG), np.array(0.0)))
+    w = np.nan_to_num(session.ref_gyro_radps)
+    dt = np.diff(session.t_s, prepend=session.t_s[0])
+    wm = w.copy()
+    wm[1:] = 0.5 * (w[1:] + w[:-1])  # trapezoid rate over each interval
+    cum = Rotation.from_rotvec(wm * dt[:, None])
+    d = 1
+    n = len(dt)
+    quat = cum.as_quat()
+    while d < n:
+        left = Rotation.from_quat(quat[:-d])
+        right = Rotation.from_quat(quat[d:])
+        quat = np.concatenate([quat[:d], (left * right).as_quat()])
+        d *= 2
+    return (r0 * Rotation.from_quat(quat)).as_matrix()
+
+
+def _earth_rotation(b: Baseline, s: SensorData) -> np.ndarray | None:
+    session = b.session
+    lat = session.meta_float("latitude_deg")
+    if lat is None:
+        return None
+    head = session.meta_float("heading_deg") or 0.0
+    e = earth_rate_world(lat, head)
+    rot = attitude(b)
+    if rot is not None:
+        seen = np.einsum("nij,i->nj", rot, e)  # R^T e
+    else:  # only the vertical part: along 'up' whatever the yaw
+        f = np.nan_to_num(session.ref_accel_mps2)
+        norm = np.linalg.norm(f, axis=1)
+        seen = np.where(norm[:, None] > 0, f / np.where(norm > 0, norm, 1.0)[:, None], 0.0) * e[2]
+    return (seen @ np.nan_to_num(s.params.misalignment).T)[:, :, None]
+
+
+def _time_offset(b: Baseline, s: SensorData) -> np.ndarray | None:
+    du = np.gradient(s.u, b.session.t_s, axis=0)
+    if not np.any(du):
+        return None
+    return -du[:, :, None]  # y(t) = u(t - delta) ~ u(t) - delta du/dt
+
+
+LIBRARY: dict[str, Candidate] = {
+    c.name: c
+    for c in (
+        Candidate("temperature_bias", ("accel", "gyro"), _temperature_bias,
+                  "bias proportional to the temperature rise"),
+        Candidate("temperature_scale", ("accel", "gyro"), _temperature_scale,
+                  "scale factor proportional to the temperature rise"),
+        Candidate("g_sensitivity", ("gyro",), _g_sensitivity, "gyro output proportional to specific force"),
+        Candidate("scale_nonlinearity", ("accel", "gyro"), _nonlinearity, "quadratic scale term u|u|"),
+        Candidate("scale_asymmetry", ("accel", "gyro"), _asymmetry, "different scale for positive and negative input"),
+        Candidate("lever_arm", ("accel",), _lever_arm, "accelerometer off the rotation centre: w x (w x r) + a x r"),
+        Candidate("earth_rotation", ("gyro",), _earth_rotation, "Earth rate at the site's latitude and heading"),
+        Candidate("time_offset", ("accel", "gyro"), _time_offset, "sensor samples late against the rig reference"),
+    )
+}
+
+
+def engineering(name: str, sensor: str, theta: np.ndarray, cov: np.ndarray) -> dict[str, object]:
+    """Fitted SI parameters (and covariance) of candidate ``name`` in engineering units.
+
+    temperature_bias: mg/K (accel) or deg/s/K (gyro); temperature_scale: ppm/K;
+    g_sensitivity: deg/s per g (3x3); scale_nonlinearity: relative scale error at 1 g or
+    200 deg/s; scale_asymmetry: relative scale difference positive minus negative;
+    lever_arm: mm; earth_rotation: multiple of the Earth rate and deg/h; time_offset: ms.
+    """
+    std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    gyro = sensor == "gyro"
+
+    def pack(factor: float, unit: str, shape: tuple[int, ...] | None = None) -> dict[str, object]:
+        v, s = theta * factor, std * factor
+        if shape:
+            v, s = v.reshape(shape), s.reshape(shape)
+        return {"value": np.round(v, 9).tolist(), "std": np.round(s, 9).tolist(), "unit": unit}
+
+    if name == "temperature_bias":
+        return pack(1.0 / _DEG, "deg/s/K") if gyro else pack(1e3 / STANDARD_GRAVITY, "mg/K")
+    if name == "temperature_scale":
+        return pack(1e6, "ppm/K")
+    if name == "g_sensitivity":
+        return pack(STANDARD_GRAVITY / _DEG, "deg/s per g", (3, 3))
+    if name == "scale_nonlinearity":
+        ref = GYRO_NONLINEARITY_REF_RADPS if gyro else STANDARD_GRAVITY
+        return pack(ref, "relative scale error at " + ("200 deg/s" if gyro else "1 g"))
+    if name == "scale_asymmetry":
+        return pack(1.0, "relative (positive - negative scale)")
+    if name == "lever_arm":
+        out = pack(1e3, "mm")
+        out["length_mm"] = round(float(np.linalg.norm(theta) * 1e3), 3)
+        return out
+    if name == "earth_rotation":
+        out = pack(1.0, "multiple of the Earth rate")
+        out["deg_per_h"] = round(float(theta[0] * EARTH_RATE_RADPS / _DEG * 3600.0), 4)
+        return out
+    if name == "time_offset":
+        return pack(1e3, "ms")
+    raise KeyError(name)
+
+
+#: The rig step that separates a candidate from the base model or from another candidate.
+RIG_STEPS: dict[str, str] = {
+    "temperature_bias": "a longer still rest (or a warm-up in a climate chamber) so temperature and drift differ",
+    "temperature_scale": "repeat poses or rate steps late in the session, when the unit is warm",
+    "g_sensitivity": "rate steps with the spin axis horizontal, or poses at two headings",
+    "scale_nonlinearity": "steps at a second input magnitude (more rates, or tilted poses for the accelerometer)",
+    "scale_asymmetry": "both signs of every rate step and both poses of every axis",
+    "lever_arm": "rate steps at two or more rates about each axis",
+    "earth_rotation": "each pose held at two headings (table turned 180 deg about the vertical)",
+    "time_offset": "rate-table ramps with higher angular acceleration",
+    "bias_random_walk": "a still rest several correlation times long",
+    "outliers": "a longer still rest",
+}
+
+__all__ = [
+    "LIBRARY", "MEAN_CANDIDATES", "NAMES", "RIG_STEPS", "Candidate", "attitude", "earth_rate_world", "engineering",
+]

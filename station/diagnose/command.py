@@ -1,0 +1,64 @@
+"""``station diagnose SESSION.csv [--json] [--plot OUT.png]``: the CLI front of :mod:`station.diagnose`.
+
+Wire it into ``station/cli.py`` with ``app.command()(diagnose)`` (see the report of issue 6).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+from station.errors import StationError
+
+
+def _print_text(report: dict[str, Any]) -> None:
+    findings = report["findings"]
+    typer.echo(f"diagnosis of {report['serial']}: {len(findings)} finding(s)")
+    for f in findings:
+        params = {k: v for k, v in f["parameters"].items()} if f["effect"] == "outliers" else f["parameters"]
+        typer.echo(f"  {f['effect']} ({f['sensor']}, axes {''.join(f['axes'])}): {json.dumps(params)}")
+        ev = f["evidence"]
+        if "likelihood_gain_chi2" in ev:
+            typer.echo(f"    evidence: chi2 gain {ev['likelihood_gain_chi2']:.1f} for {ev['params']} parameter(s), "
+                       f"BIC gain {ev['bic_gain']:.1f}, held-out error {ev['heldout_before']:.3f} -> "
+                       f"{ev['heldout_after']:.3f}")
+            b, a = f["fit"]["before"], f["fit"]["after"]
+            typer.echo(f"    block chi2 per axis {b['block_chi2']} -> {a['block_chi2']}")
+        else:
+            typer.echo(f"    evidence: {json.dumps(ev)}")
+    for item in report["inseparable"]:
+        typer.echo(f"  inseparable ({item['sensor']}): {' / '.join(item['effects'])}; rig step: {item['rig_step']}")
+    if not findings and not report["inseparable"]:
+        typer.echo("  the base model (eq. 1 + eq. 3) explains this recording")
+
+
+def diagnose(
+    session_path: Annotated[Path, typer.Argument(metavar="SESSION.csv", help="session CSV v1 recording")],
+    as_json: Annotated[bool, typer.Option("--json", help="print the diagnosis as one JSON object")] = False,
+    plot: Annotated[Path | None, typer.Option("--plot", help="write a PNG of the residual before/after")] = None,
+) -> None:
+    """Find the physics the base model misses in a recording, fit it and show the improvement."""
+    from station.diagnose.report import diagnose as run_diagnosis
+    from station.diagnose.report import save_figure
+    from station.session import read_session
+
+    try:
+        result = run_diagnosis(read_session(session_path))
+    except StationError as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(2) from None
+    if plot is not None:
+        save_figure(result, plot)
+    if as_json:
+        sys.stdout.write(json.dumps(result.report) + "\n")
+    else:
+        _print_text(result.report)
+        if plot is not None:
+            typer.echo(f"wrote {plot}")
+
+
+__all__ = ["diagnose"]

@@ -1,0 +1,257 @@
+"""Compare a recording with the fitted base model and locate where they disagree.
+
+The base model is the paper's eq. (1) with the Gauss-Markov drift of eq. (3), fitted by
+:func:`station.fit.calibrate.fit_session`. Its mean (``M x + b_stat + b_drift exp(-t/T_c)``)
+is subtracted from every sample; what is left is cut into *blocks*: contiguous runs of
+samples inside one segment (settled rest, pose and rate steps, and the rig's moves where
+its reference is known). Block means are the data of the diagnosis: averaging shrinks the
+white noise by ``sqrt(n)``, so an effect far below the noise of any single sample shows
+up, while the drift and the correlated noise are handled by the block covariance in
+:mod:`station.diagnose.select`.
+
+Units: SI (accelerometer m/s^2, gyroscope rad/s, time s, temperature K).
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy.ndimage import uniform_filter1d
+
+from station.fit.calibrate import fit_session, mean_model
+from station.fit.params import ParameterSet, TriadParams
+from station.session.model import Kind, Session
+
+SENSORS = ("accel", "gyro")
+#: Block length in the rig's moves (s): short enough to keep the shape of a ramp or tumble.
+MOVE_BLOCK_S = 0.5
+#: Samples further than this many noise sigmas from their local mean are outliers.
+OUTLIER_SIGMA = 6.0
+
+
+@dataclass(frozen=True, eq=False)
+class SensorData:
+    """One triad's residual against the base model, per sample and per block.
+
+    Attributes:
+        sensor: ``accel`` or ``gyro``.
+        params: the base fit of this triad.
+        ref: rig reference used by the base model (m/s^2 or rad/s), NaN -> 0, (n, 3).
+        u: ``M ref``, the modelled true input through the misalignment (n, 3).
+        residual: measurement minus base mean model, (n, 3).
+        sigma: white-noise std per sample, (3,).
+        keep: samples that are not outliers (n,).
+        outlier_count: outliers per axis among the settled samples, (3,); settled_samples: their number.
+        label: block index per sample, -1 outside any block, (n,).
+        t_s, width_s, count: block centre time (s), span (s) and sample count, (m,).
+        y: block-mean residual, (m, 3).
+        segment, kind: segment index and :class:`Kind` code per block, (m,).
+    """
+
+    sensor: str
+    params: TriadParams
+    ref: np.ndarray
+    u: np.ndarray
+    residual: np.ndarray
+    sigma: np.ndarray
+    keep: np.ndarray
+    outlier_count: np.ndarray
+    settled_samples: int
+    label: np.ndarray
+    t_s: np.ndarray
+    width_s: np.ndarray
+    count: np.ndarray
+    y: np.ndarray
+    segment: np.ndarray
+    kind: np.ndarray
+
+    def block_mean(self, values: np.ndarray) -> np.ndarray:
+        """Mean of per-sample ``values`` (n, ...) over each block's kept samples, (m, ...)."""
+        sel = self.label >= 0
+        lab = self.label[sel]
+        v = values[sel].reshape(int(sel.sum()), -1)
+        m = len(self.t_s)
+        out = np.stack([np.bincount(lab, weights=v[:, j], minlength=m) for j in range(v.shape[1])], axis=1)
+        return (out / self.count[:, None]).reshape((m, *values.shape[1:]))
+
+
+@dataclass(frozen=True, eq=False)
+class Baseline:
+    """The base fit of a session and both triads' residuals.
+
+    Attributes:
+        session: the recording.
+        params: the base parameter set (eq. 1 + eq. 3).
+        d_temp: sensor temperature minus its power-on value (K), smoothed, NaN-free (zeros without
+            a temperature channel), (n,).
+        accel, gyro: :class:`SensorData`.
+    """
+
+    session: Session
+    params: ParameterSet
+    d_temp: np.ndarray
+    accel: SensorData
+    gyro: SensorData
+
+    def sensor(self, name: str) -> SensorData:
+        return self.accel if name == "accel" else self.gyro
+
+
+def _triad_dict(p: TriadParams) -> dict[str, np.ndarray]:
+    return {
+        "misalignment": np.nan_to_num(p.misalignment), "bias_static": p.bias_static, "bias_drift": p.bias_drift,
+        "correlation_time_s": p.correlation_time_s, "g_sensitivity": p.g_sensitivity,
+    }
+
+
+def _temperature(session: Session) -> np.ndarray:
+    """Smoothed temperature rise since power-on (K); zeros without a temperature channel."""
+    temp = np.asarray(session.temp_degc, dtype=float)
+    if not np.isfinite(temp).any():
+        return np.zeros(len(session))
+    idx = np.arange(len(temp))
+    ok = np.isfinite(temp)
+    temp = np.interp(idx, idx[ok], temp[ok])
+    window = max(3, round(5.0 * session.sample_rate_hz))  # 5 s: the temperature sensor's noise
+    smooth = uniform_filter1d(temp, size=window, mode="nearest")
+    return smooth - smooth[0]
+
+
+def _blocks(session: Session, ref: np.ndarray, keep: np.ndarray, max_settled_blocks: int) -> np.ndarray:
+    """Block label per sample (-1 outside): settled segments cut evenly, moves into ~0.5 s pieces."""
+    fs = session.sample_rate_hz
+    segs = [s for s in session.segments() if len(s) >= 10 and np.all(np.isfinite(ref[s.start:s.stop]))]
+    settled = sum(len(s) for s in segs if s.kind != Kind.MOVE)
+    settled_block = max(settled / max_settled_blocks, 20.0)
+    move_block = max(MOVE_BLOCK_S * fs, 10.0)
+    label = np.full(len(session), -1, dtype=np.int64)
+    nxt = 0
+    for s in segs:
+        size = move_block if s.kind == Kind.MOVE else settled_block
+        k = max(1, round(len(s) / size))
+        edges = np.linspace(s.start, s.stop, k + 1).round().astype(int)
+        for lo, hi in itertools.pairwise(edges):
+            if np.count_nonzero(keep[lo:hi]) >= 5:
+                label[lo:hi] = nxt
+                nxt += 1
+    label[~keep] = -1
+    return label
+
+
+def _sensor_data(
+    session: Session, name: str, p: TriadParams, data: np.ndarray, ref: np.ndarray, max_settled_blocks: int
+) -> SensorData:
+    ref0 = np.nan_to_num(ref)
+    residual = data - mean_model(_triad_dict(p), session.t_s, ref0, session.ref_accel_mps2)
+    sigma = np.maximum(np.asarray(p.noise_std, dtype=float), 1e-12)
+    keep = np.ones(len(session), dtype=bool)
+    outliers = np.zeros(3, dtype=int)
+    settled_n = 0
+    for s in session.segments():
+        if len(s) < 10:
+            continue
+        x = residual[s.start:s.stop]
+        local = uniform_filter1d(x, size=max(3, min(len(s), 101)), axis=0, mode="nearest")
+        bad = np.abs(x - local) > OUTLIER_SIGMA * sigma
+        keep[s.start:s.stop] &= ~bad.any(axis=1)
+        if s.kind != Kind.MOVE and np.all(np.isfinite(ref[s.start:s.stop])):
+            outliers += bad.sum(axis=0)
+            settled_n += len(s)
+    label = _blocks(session, ref, keep, max_settled_blocks)
+    m = int(label.max()) + 1
+    sel = label >= 0
+    lab = label[sel]
+    count = np.bincount(lab, minlength=m).astype(float)
+    t = session.t_s
+    first = np.full(m, np.inf)
+    last = np.full(m, -np.inf)
+    np.minimum.at(first, lab, t[sel])
+    np.maximum.at(last, lab, t[sel])
+    ts = 1.0 / session.sample_rate_hz
+    seg_of = np.zeros(m, dtype=np.int64)
+    kind_of = np.zeros(m, dtype=np.int64)
+    seg_of[lab] = session.segment[sel]
+    kind_of[lab] = session.kind[sel]
+    u = ref0 @ np.nan_to_num(p.misalignment).T
+    y = np.stack([np.bincount(lab, weights=residual[sel, j], minlength=m) for j in range(3)], axis=1) / count[:, None]
+    return SensorData(
+        sensor=name, params=p, ref=ref0, u=u, residual=residual, sigma=sigma, keep=keep, outlier_count=outliers,
+        settled_samples=settled_n, label=label, t_s=0.5 * (first + last), width_s=last - first + ts, count=count,
+        y=y, segment=seg_of, kind=kind_of,
+    )
+
+
+def fit_baseline(session: Session, *, max_settled_blocks: int = 150) -> Baseline:
+    """Fit the base model to ``session`` and compute both triads' residuals and blocks.
+
+    Raises :class:`station.errors.FitError` when the base fit refuses the recording.
+    """
+    params = fit_session(session)
+    g_ref = session.ref_gyro_radps
+    if params.quality.get("gyro_scale_method") != "rate":
+        g_ref = np.where(np.isnan(g_ref), 0.0, g_ref)
+        static = np.isin(session.kind, [int(Kind.REST), int(Kind.POSE)])
+        g_ref = np.where(static[:, None], g_ref, np.nan)
+    accel = _sensor_data(session, "accel", params.accel, session.accel_mps2, session.ref_accel_mps2,
+                         max_settled_blocks)
+    gyro = _sensor_data(session, "gyro", params.gyro, session.gyro_radps, g_ref, max_settled_blocks)
+    return Baseline(session=session, params=params, d_temp=_temperature(session), accel=accel, gyro=gyro)
+
+
+def _corr(a: np.ndarray, b: np.ndarray, w: np.ndarray) -> float:
+    """Weighted correlation of two block series (0 when either is constant)."""
+    wa = a - np.average(a, weights=w)
+    wb = b - np.average(b, weights=w)
+    den = np.sqrt(np.average(wa**2, weights=w) * np.average(wb**2, weights=w))
+    return float(np.average(wa * wb, weights=w) / den) if den > 0 else 0.0
+
+
+def locate(baseline: Baseline) -> dict[str, Any]:
+    """Where the base model disagrees: per sensor and axis, the normalized block residual
+    (chi^2 per block, 1 = as expected from white noise) per kind of segment, the worst
+    segments, and correlations of the block residual with temperature, rate, |rate|,
+    rate sign, specific force and time.
+    """
+    out: dict[str, Any] = {}
+    force = np.nan_to_num(baseline.session.ref_accel_mps2)
+    rate = np.nan_to_num(baseline.session.ref_gyro_radps)
+    for name in SENSORS:
+        sd = baseline.sensor(name)
+        z = sd.y * np.sqrt(sd.count)[:, None] / sd.sigma  # block residual in block-noise sigmas
+        per_kind: dict[str, list[float]] = {}
+        for kind in Kind:
+            sel = sd.kind == int(kind)
+            if np.any(sel):
+                per_kind[kind.label] = np.mean(z[sel] ** 2, axis=0).round(3).tolist()
+        seg_chi = {}
+        for seg in np.unique(sd.segment):
+            sel = sd.segment == seg
+            seg_chi[int(seg)] = float(np.mean(z[sel] ** 2))
+        worst = sorted(seg_chi, key=lambda s: -seg_chi[s])[:5]
+        variables = {
+            "temperature": sd.block_mean(baseline.d_temp),
+            "time": sd.t_s,
+        }
+        r_b = sd.block_mean(rate)
+        f_b = sd.block_mean(force)
+        corr: dict[str, list[float]] = {}
+        w = sd.count
+        for k in range(3):
+            cols = dict(variables)
+            cols.update({"rate": r_b[:, k], "abs_rate": np.abs(r_b[:, k]), "rate_sign": np.sign(r_b[:, k]),
+                         "specific_force": f_b[:, k]})
+            for vname, v in cols.items():
+                corr.setdefault(vname, []).append(round(_corr(sd.y[:, k], v, w), 3))
+        out[name] = {
+            "chi2_per_block": per_kind,
+            "worst_segments": [{"segment": s, "chi2_per_block": round(seg_chi[s], 3)} for s in worst],
+            "correlation": corr,
+            "blocks": len(sd.t_s),
+        }
+    return out
+
+
+__all__ = ["SENSORS", "Baseline", "SensorData", "fit_baseline", "locate"]

@@ -1,0 +1,72 @@
+"""``station serve``: run the status page and API with uvicorn (binds to 127.0.0.1 unless told otherwise).
+
+:func:`serve` blocks until interrupted; :class:`ServerThread` runs the app in a background
+thread of a process that also runs the sequence (so the page shows that run live).
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import uvicorn
+from fastapi import FastAPI
+
+from station.errors import StationError
+from station.web.app import create_app
+from station.web.state import LiveStatus
+
+
+def serve(host: str = "127.0.0.1", port: int = 8000, db_url: str | None = None, token: str | None = None,
+          live: LiveStatus | None = None) -> None:
+    """Serve the web application on ``host``:``port`` until interrupted.
+
+    Args:
+        host: address to bind (127.0.0.1: this machine only; 0.0.0.0 for the line's network).
+        port: TCP port.
+        db_url: station database URL (None: ``$STATION_DB`` or ``sqlite:///station.sqlite``).
+        token: bearer token for the write actions (None: read-only, they answer 401).
+        live: the live status of a sequence running in this process (None: an idle station).
+    """
+    app = create_app(db_url, token=token, live=live)
+    uvicorn.run(app, host=host, port=port, log_level="info")
+
+
+class ServerThread:
+    """uvicorn serving ``app`` in a daemon thread from construction until :meth:`stop`.
+
+    Args:
+        app: the application (see :func:`create_app`).
+        host, port: where to listen (port 0: a free port, see :attr:`port`).
+        start_timeout_s: how long to wait for the server to listen (s).
+    """
+
+    def __init__(self, app: FastAPI, host: str = "127.0.0.1", port: int = 0, *, start_timeout_s: float = 20.0,
+                 log_level: str = "warning") -> None:
+        self.host = host
+        self.server = uvicorn.Server(uvicorn.Config(app, host=host, port=port, log_level=log_level,
+                                                    timeout_graceful_shutdown=1))
+        self.thread = threading.Thread(target=self.server.run, name="station-web", daemon=True)
+        self.thread.start()
+        deadline = time.monotonic() + start_timeout_s
+        while not self.server.started:
+            if time.monotonic() > deadline or not self.thread.is_alive():
+                raise StationError(f"the web server did not start on {host}:{port}")
+            time.sleep(0.02)
+        self.port = int(self.server.servers[0].sockets[0].getsockname()[1])
+
+    @property
+    def url(self) -> str:
+        """Base URL, e.g. ``http://127.0.0.1:8000``."""
+        return f"http://{self.host}:{self.port}"
+
+    def stop(self, timeout_s: float = 10.0) -> None:
+        """Ask the server to exit and wait up to ``timeout_s`` (s); open event streams are cut after 1 s."""
+        self.server.should_exit = True
+        self.thread.join(timeout_s)
+
+    def __enter__(self) -> ServerThread:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()

@@ -1,0 +1,316 @@
+"""The station's live status for the operator page: a record subscriber with change notification.
+
+:class:`LiveStatus` is passed to the sequence runner as one more subscriber (see
+:mod:`station.sequence.records`); it keeps the station state (``idle``, ``running``,
+``fault``), the current step with progress and the estimated time remaining, and one
+tile per fixture slot (serial, state, verdict). It is fed from the runner's thread and
+read from the web server's event loop: every change bumps :attr:`LiveStatus.version`
+under a lock and wakes the asyncio waiters of :meth:`LiveStatus.wait_change`
+thread-safely, which is what the server-sent events stream waits on.
+
+Times: ``t_s`` and step durations are station clock seconds (rig seconds, s). The time
+remaining is the unfinished part of the planned capture (``hold_s``) of the current
+step plus, for each step still to come, the hold time of the last step of its kind
+(rest, pose, rate; the current step's hold for a kind not seen yet) and the mean rig
+overhead (step duration minus hold: motion and settling) of the steps finished so far.
+
+First-pass yield and units per hour for the shift come from the store
+(:func:`shift_stats`), so they include earlier runs and other stations' results in the
+same database.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from datetime import UTC, datetime, timedelta
+from typing import Any
+
+from sqlalchemy import select
+
+from station.sequence.records import (
+    Measurement,
+    Outcome,
+    Record,
+    RunFinished,
+    RunStarted,
+    StepFinished,
+    StepStarted,
+    UnitFinished,
+)
+from station.store.db import Database
+from station.store.models import UNFINISHED, Run, RunUnit, Unit
+from station.store.models import Station as StationRow
+
+SHIFT_HOURS = 8.0
+"""Length of a shift (h); shifts start at 06:00, 14:00 and 22:00 UTC."""
+SHIFT_ANCHOR_HOUR = 6
+
+
+def shift_start(now: datetime) -> datetime:
+    """The start of the shift containing ``now`` (UTC, timezone-aware)."""
+    anchor = now.astimezone(UTC).replace(hour=SHIFT_ANCHOR_HOUR, minute=0, second=0, microsecond=0)
+    if anchor > now:
+        anchor -= timedelta(days=1)
+    shift = timedelta(hours=SHIFT_HOURS)
+    return anchor + shift * int((now - anchor) / shift)
+
+
+@dataclass(frozen=True)
+class ShiftStats:
+    """Production figures since ``since``.
+
+    Attributes:
+        since: shift start (UTC, ISO 8601).
+        units_tested: unit results of finished runs in the shift.
+        first_pass_units: units whose first ever test was in this shift.
+        first_pass_yield: fraction of those that passed that first test (1), None if none.
+        units_per_hour: unit results per hour since the shift started (1/h).
+    """
+
+    since: str
+    units_tested: int
+    first_pass_units: int
+    first_pass_yield: float | None
+    units_per_hour: float
+
+
+def shift_stats(db: Database, now: datetime | None = None, station: str | None = None) -> ShiftStats:
+    """First-pass yield and units per hour of the shift containing ``now`` (default: now, UTC)."""
+    now = now if now is not None else datetime.now(UTC)
+    since = shift_start(now)
+    with db.transaction() as s:
+        q = (select(RunUnit.unit_id, RunUnit.outcome, Run.started_at, Run.id)
+             .join(Run, RunUnit.run_id == Run.id).join(StationRow, Run.station_id == StationRow.id)
+             .where(Run.outcome != UNFINISHED, RunUnit.unit_id.is_not(None)))
+        if station is not None:
+            q = q.where(StationRow.name == station)
+        rows = s.execute(q.order_by(Run.started_at, Run.id)).all()
+        first_ever: dict[int, Any] = {}
+        for uid, _outcome, started, run_pk in s.execute(
+            select(RunUnit.unit_id, RunUnit.outcome, Run.started_at, Run.id).join(Run, RunUnit.run_id == Run.id)
+            .join(Unit, RunUnit.unit_id == Unit.id).order_by(Run.started_at, Run.id)
+        ).all():
+            first_ever.setdefault(uid, (started, run_pk))
+    in_shift = [r for r in rows if _aware(r[2]) >= since and _aware(r[2]) <= now]
+    first = [r for r in in_shift if first_ever.get(r[0]) == (r[2], r[3])]
+    passed = sum(1 for r in first if r[1] == Outcome.PASS.value)
+    hours = max((now - since).total_seconds() / 3600.0, 1.0 / 60.0)
+    return ShiftStats(
+        since.isoformat(), len(in_shift), len(first), passed / len(first) if first else None, len(in_shift) / hours
+    )
+
+
+def _aware(t: datetime) -> datetime:
+    return t if t.tzinfo is not None else t.replace(tzinfo=UTC)
+
+
+@dataclass
+class SlotStatus:
+    """One fixture slot's tile: serial ('' until known), what it is doing, its verdict (None until finished)."""
+
+    slot: int
+    sensor: str = ""
+    serial: str = ""
+    state: str = "waiting"
+    verdict: str | None = None
+    message: str = ""
+
+
+@dataclass
+class _Live:
+    state: str = "idle"
+    run_id: str = ""
+    station: str = ""
+    rig: str = ""
+    message: str = ""
+    steps: tuple[str, ...] = ()
+    step_index: int = -1
+    step_name: str = ""
+    step_kind: str = ""
+    step_hold_s: float = 0.0
+    step_started_t_s: float = 0.0
+    t_s: float = 0.0
+    steps_done: int = 0
+    done_overheads: list[float] = field(default_factory=list)
+    hold_by_kind: dict[str, float] = field(default_factory=dict)
+    slots: list[SlotStatus] = field(default_factory=list)
+    outcome: str | None = None
+
+
+def _kind_of(step_name: str) -> str:
+    """'rest', 'pose' or 'rate' from a step name such as ``'pose -z'`` or ``'rate x +50'``."""
+    return step_name.split(" ", 1)[0]
+
+
+class LiveStatus:
+    """Thread-safe live model of the station, fed by sequence records (call it with each record).
+
+    Args:
+        db: the station database for the shift figures and recent runs (None: none shown).
+        now: wall clock (UTC) for the shift (default :func:`datetime.now`).
+    """
+
+    def __init__(self, db: Database | None = None, now: Callable[[], datetime] | None = None) -> None:
+        self.db = db
+        self._now = now if now is not None else (lambda: datetime.now(UTC))
+        self._lock = threading.Lock()
+        self._live = _Live()
+        self._version = 0
+        self._store_epoch = 0
+        self._store_cache: tuple[int, float, dict[str, Any]] | None = None
+        self._waiters: list[tuple[asyncio.AbstractEventLoop, asyncio.Future[None]]] = []
+        self.on_start: Callable[[dict[str, Any]], str] | None = None
+        """Starts a run when the API is asked to (returns its run id); None: the station cannot start runs."""
+        self.on_abort: Callable[[str], bool] | None = None
+        """Aborts the run with this id (False: no such run); None: the station cannot abort runs."""
+
+    @property
+    def version(self) -> int:
+        """Increases with every change."""
+        with self._lock:
+            return self._version
+
+    def __call__(self, record: Record) -> None:
+        """Update from one record (the runner's subscriber interface)."""
+        with self._lock:
+            self._apply(record)
+            self._version += 1
+            if isinstance(record, (RunStarted, UnitFinished, RunFinished)):
+                self._store_epoch += 1
+            waiters, self._waiters = self._waiters, []
+        self._wake(waiters)
+
+    def set_fault(self, message: str) -> None:
+        """Put the station in the fault state (e.g. the rig or the runner failed outside a run)."""
+        with self._lock:
+            self._live.state, self._live.message = "fault", message
+            self._version += 1
+            waiters, self._waiters = self._waiters, []
+        self._wake(waiters)
+
+    @staticmethod
+    def _wake(waiters: list[tuple[asyncio.AbstractEventLoop, asyncio.Future[None]]]) -> None:
+        for loop, fut in waiters:
+            def done(f: asyncio.Future[None] = fut) -> None:
+                if not f.done():
+                    f.set_result(None)
+            with contextlib.suppress(RuntimeError):  # a closed loop: the client is gone
+                loop.call_soon_threadsafe(done)
+
+    async def wait_change(self, version: int, timeout_s: float) -> int:
+        """Wait until :attr:`version` differs from ``version`` or ``timeout_s`` (s) passed; return the version."""
+        loop = asyncio.get_running_loop()
+        fut: asyncio.Future[None] = loop.create_future()
+        with self._lock:
+            if self._version != version:
+                return self._version
+            self._waiters.append((loop, fut))
+        try:
+            await asyncio.wait_for(fut, timeout_s)
+        except TimeoutError:
+            with self._lock:
+                self._waiters = [w for w in self._waiters if w[1] is not fut]
+        return self.version
+
+    def _apply(self, r: Record) -> None:
+        lv = self._live
+        if isinstance(r, RunStarted):
+            self._live = lv = _Live(state="running", run_id=r.run_id, station=r.station, rig=r.rig, steps=r.steps,
+                                    t_s=r.t_s, step_started_t_s=r.t_s,
+                                    slots=[SlotStatus(k, sensor=s) for k, s in enumerate(r.sensors)])
+            for sl in lv.slots:
+                sl.state = "measuring"
+        elif isinstance(r, StepStarted):
+            lv.step_index, lv.step_name, lv.step_kind = r.index, r.name, r.kind
+            lv.step_hold_s, lv.step_started_t_s, lv.t_s = r.hold_s, r.t_s, r.t_s
+            lv.hold_by_kind[r.kind] = r.hold_s
+        elif isinstance(r, StepFinished):
+            lv.t_s = r.t_s
+            lv.steps_done = r.index + 1
+            lv.done_overheads.append(max(r.duration_s - lv.step_hold_s, 0.0))
+            if lv.steps_done == len(lv.steps):
+                lv.step_name, lv.step_kind = "fit and limits", "fit"
+                for sl in lv.slots:
+                    if sl.verdict is None and sl.state == "measuring":
+                        sl.state = "fitting"
+        elif isinstance(r, Measurement):
+            sl = self._slot(r.slot)
+            if r.serial:
+                sl.serial = r.serial
+            if not r.passed and r.step != "limits":
+                sl.state = f"{r.step}: {r.name} = {r.value:.4g} out of limits"
+        elif isinstance(r, UnitFinished):
+            sl = self._slot(r.slot)
+            sl.serial = r.serial or sl.serial
+            sl.verdict, sl.message, sl.state = r.outcome.value, r.message, "done"
+        elif isinstance(r, RunFinished):
+            lv.t_s = r.t_s
+            lv.outcome = r.outcome.value
+            for u in r.units:
+                sl = self._slot(u.slot)
+                if sl.verdict is None:
+                    sl.serial = u.serial or sl.serial
+                    sl.verdict, sl.message, sl.state = u.outcome.value, u.message, "done"
+            lv.state = "fault" if r.outcome == Outcome.ERROR and not r.rig_at_rest else "idle"
+            lv.message = r.message
+            lv.step_name, lv.step_kind = "", ""
+
+    def _slot(self, k: int) -> SlotStatus:
+        while len(self._live.slots) <= k:
+            self._live.slots.append(SlotStatus(len(self._live.slots)))
+        return self._live.slots[k]
+
+    def snapshot(self, *, with_store: bool = True) -> dict[str, Any]:
+        """The status as plain JSON-able data (see ``GET /api/status``).
+
+        Keys: version, state, run_id, station, rig, message, outcome, step {index, name, kind, hold_s},
+        steps_done, steps_total, progress (0..1), remaining_s (station clock s, None when idle),
+        slots [{slot, sensor, serial, state, verdict, message}], shift (see :class:`ShiftStats`) or None,
+        recent_runs (see :func:`station.web.listing.list_runs`).
+        """
+        with self._lock:
+            lv = self._live
+            total = len(lv.steps)
+            remaining: float | None = None
+            if lv.state == "running" and total:
+                overhead = sum(lv.done_overheads) / len(lv.done_overheads) if lv.done_overheads else 0.0
+                current = 0.0
+                if lv.step_index >= lv.steps_done:  # a step is under way
+                    current = max(lv.step_hold_s - (lv.t_s - lv.step_started_t_s), 0.0)
+                future = lv.steps[max(lv.step_index + 1, lv.steps_done):]
+                remaining = current + sum(
+                    lv.hold_by_kind.get(_kind_of(name), lv.step_hold_s) + overhead for name in future)
+            out: dict[str, Any] = {
+                "version": self._version, "state": lv.state, "run_id": lv.run_id, "station": lv.station,
+                "rig": lv.rig, "message": lv.message, "outcome": lv.outcome,
+                "step": {"index": lv.step_index, "name": lv.step_name, "kind": lv.step_kind,
+                         "hold_s": lv.step_hold_s},
+                "steps_done": lv.steps_done, "steps_total": total,
+                "progress": lv.steps_done / total if total else (1.0 if lv.outcome else 0.0),
+                "remaining_s": remaining,
+                "slots": [asdict(s) for s in lv.slots],
+            }
+        out.update(self._store_figures() if with_store else {"shift": None, "recent_runs": []})
+        return out
+
+    def _store_figures(self) -> dict[str, Any]:
+        """Shift figures and recent runs, re-read when a unit or run finished or after 10 s (s of wall time)."""
+        if self.db is None:
+            return {"shift": None, "recent_runs": []}
+        with self._lock:
+            epoch = self._store_epoch
+            cached = self._store_cache
+        now = time.monotonic()
+        if cached is not None and cached[0] == epoch and now - cached[1] < 10.0:
+            return cached[2]
+        from station.web.listing import list_runs
+
+        figures = {"shift": asdict(shift_stats(self.db, self._now())), "recent_runs": list_runs(self.db, limit=10)}
+        with self._lock:
+            self._store_cache = (epoch, now, figures)
+        return figures
