@@ -264,13 +264,51 @@ def serve(
     host: Annotated[str, typer.Option(help="address to bind (0.0.0.0: the line's network)")] = "127.0.0.1",
     port: Annotated[int, typer.Option(min=1, max=65535, help="TCP port")] = 8000,
     db: DbOption = None,
+    rig: Annotated[str | None, typer.Option("--rig", help="rig URL: lets the API start and abort runs")] = None,
+    sensor: Annotated[list[str] | None, typer.Option("--sensor", help="sensor URL (repeat per unit)")] = None,
+    scale: Annotated[float, typer.Option(min=0.1, help="clock scale of the hardware (as `station sim`)")] = 1.0,
+    out: Annotated[Path, typer.Option(help="directory for session CSVs and parameter JSONs")] = Path("runs"),
+    name: Annotated[str, typer.Option("--station", help="station name for the records")] = "station",
 ) -> None:
-    """Operator status page and JSON API; write actions need $STATION_TOKEN (read-only without it)."""
+    """Operator status page and JSON API.
+
+    Write actions (start/abort a run) need the bearer token in $STATION_TOKEN and a station
+    given with --rig/--sensor; otherwise the server is read-only and they answer 401 (or 503).
+    """
     import os
 
     from station.web.serve import serve as run_server
 
-    run_server(host, port, db, os.environ.get("STATION_TOKEN") or None)
+    token = os.environ.get("STATION_TOKEN") or None
+    live = None
+    if rig is not None and sensor:
+        from station.sequence.limits_file import load_limits
+        from station.sequence.options import SequenceOptions, rig_client_options
+        from station.sim.clock import SimClock, WallClock
+        from station.sim.plan import default_plan
+        from station.store.commands import attach_recorder
+        from station.store.queries import retest_gate
+        from station.web.control import StationControl
+        from station.web.state import LiveStatus
+
+        try:
+            limits = load_limits()
+            plan = default_plan()
+            subscribers: list = []
+            recorder = attach_recorder(subscribers.append, db, station_name=name, plan=plan, limits=limits)
+            live = LiveStatus(recorder.db)
+            subscribers.append(live)  # after the recorder: the page reads what it stored
+            control = StationControl(
+                rig, sensor, WallClock() if scale == 1.0 else SimClock(scale), subscribers, on_error=live.set_fault,
+                rig_options=rig_client_options(scale), plan=plan, options=SequenceOptions().for_scale(scale),
+                limits=limits.product, admit=retest_gate(recorder.db, limits.retest.max_attempts), out_dir=out,
+                station=name,
+            )
+        except StationError as exc:
+            raise _fail(exc) from None
+        live.on_start = control.start
+        live.on_abort = control.abort
+    run_server(host, port, db, token, live)
 
 
 @app.command()

@@ -54,3 +54,7 @@ class UnitRejected(StationError):
     def __init__(self, message: str, checks: tuple[tuple[str, float, float, str, bool], ...] = ()) -> None:
         super().__init__(message)
         self.checks = checks
+
+
+class StationBusy(StationError):
+    """The station is already running a calibration; one run at a time."""

@@ -573,12 +573,14 @@ def run_sequence(
     *,
     rig_options: dict[str, object] | None = None,
     sensor_options: dict[str, object] | None = None,
+    on_runner: Callable[[SequenceRunner], None] | None = None,
     **runner_options: object,
 ) -> RunResult:
     """Open the rig and the sensors by URL, run the sequence, close them again.
 
     ``rig_options`` go to :func:`station.rig.open_rig` (e.g. :func:`~station.sequence.options.rig_client_options`),
     ``sensor_options`` to :func:`station.sensor.open_sensor`, the rest to :class:`SequenceRunner`.
+    ``on_runner`` gets the runner before it runs (its ``run_id``, and :meth:`SequenceRunner.abort`).
     Raises :class:`~station.errors.HardwareError` if the rig or a sensor cannot be opened.
     """
     from station.rig import open_rig
@@ -594,6 +596,8 @@ def run_sequence(
             rig, sensors, clock, rig_name=f"{ident.firmware_id} {ident.firmware_version}",
             sensor_urls=list(sensor_urls), **runner_options,  # type: ignore[arg-type]
         )
+        if on_runner is not None:
+            on_runner(runner)
         return runner.run()
     finally:
         for s in sensors:

@@ -35,7 +35,7 @@ from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from fastapi.templating import Jinja2Templates
 
 from station.eeprom.image import CalibrationImage, ImageError, encode_image
-from station.errors import StationError
+from station.errors import StationBusy, StationError
 from station.fit.params import ParameterSet
 from station.sequence.limits_file import load_limits
 from station.session.csv_v1 import read_session
@@ -272,14 +272,20 @@ def create_app(db_url: str | None = None, *, token: str | None = None, live: Liv
         return list_runs(db, limit=limit, station=station, outcome=outcome)
 
     @app.post("/api/runs", tags=["runs"], status_code=202, dependencies=[Depends(require_token)],
-              responses={**_UNAUTHORIZED, 503: {"description": "this station cannot start runs"}})
+              responses={**_UNAUTHORIZED, 409: {"description": "a run is in progress"},
+                         503: {"description": "this station cannot start runs"}})
     def api_start_run(options: Annotated[dict[str, Any] | None, Body()] = None) -> dict[str, str]:
         """Start a run on the station (write action: bearer token)."""
         if live.on_start is None:
             raise HTTPException(503, "this station cannot start runs from the API")
         if live.snapshot(with_store=False)["state"] == "running":
             raise HTTPException(409, "a run is in progress")
-        return {"run_id": live.on_start(options or {})}
+        try:
+            return {"run_id": live.on_start(options or {})}
+        except StationBusy as exc:
+            raise HTTPException(409, str(exc)) from None
+        except StationError as exc:
+            raise HTTPException(503, str(exc)) from None
 
     @app.post("/api/runs/{run_id}/abort", tags=["runs"], status_code=202, dependencies=[Depends(require_token)],
               responses={**_UNAUTHORIZED, **_NOT_FOUND, 503: {"description": "this station cannot abort runs"}})

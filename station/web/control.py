@@ -1,0 +1,101 @@
+"""Starting and aborting runs from the web API: the hooks behind ``POST /api/runs`` and its abort.
+
+One run at a time, in a background thread, on the rig and sensors the station was started
+with. The runner's records go to the store's recorder first and then to the live status.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from station.errors import StationBusy, StationError
+from station.sequence.records import Record
+from station.sequence.runner import RunResult, SequenceRunner, run_sequence
+from station.sim.clock import Clock
+
+
+class StationControl:
+    """Runs the calibration sequence on request.
+
+    Args:
+        rig_url, sensor_urls: the station's hardware (real, or ``station sim``'s).
+        clock: the clock the hardware lives by.
+        subscribers: record subscribers, in order (the store's recorder, then the live status).
+        runner_options: passed to :func:`~station.sequence.runner.run_sequence` (plan, options,
+            limits, admit, out_dir, station, rig_options, sensor_options, ...).
+        on_error: called with a station fault that ended a run before it started (e.g. the rig
+            cannot be opened).
+    """
+
+    def __init__(
+        self,
+        rig_url: str,
+        sensor_urls: Sequence[str],
+        clock: Clock,
+        subscribers: Sequence[Callable[[Record], None]],
+        *,
+        on_error: Callable[[str], None] | None = None,
+        **runner_options: Any,
+    ) -> None:
+        self.rig_url = rig_url
+        self.sensor_urls = list(sensor_urls)
+        self.clock = clock
+        self.subscribers = list(subscribers)
+        self.on_error = on_error
+        self.runner_options = runner_options
+        self._lock = threading.Lock()
+        self._runner: SequenceRunner | None = None
+        self._thread: threading.Thread | None = None
+        self.last_result: RunResult | None = None
+
+    @property
+    def busy(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    def start(self, options: dict[str, Any] | None = None, timeout_s: float = 30.0) -> str:
+        """Start a run; returns its id once the runner exists. Raises :class:`StationBusy`."""
+        with self._lock:
+            if self.busy:
+                raise StationBusy("a run is in progress")
+            ready = threading.Event()
+            failure: list[str] = []
+
+            def handed(runner: SequenceRunner) -> None:
+                self._runner = runner
+                ready.set()
+
+            def work() -> None:
+                try:
+                    self.last_result = run_sequence(
+                        self.rig_url, self.sensor_urls, self.clock, on_runner=handed,
+                        subscribers=self.subscribers, **self.runner_options,
+                    )
+                except StationError as exc:
+                    failure.append(str(exc))
+                    if self.on_error is not None:
+                        self.on_error(str(exc))
+                finally:
+                    ready.set()
+
+            self._thread = threading.Thread(target=work, name="station-run", daemon=True)
+            self._thread.start()
+        ready.wait(timeout_s)
+        if self._runner is None or failure:
+            raise StationError(f"the run did not start: {failure[0] if failure else 'timeout'}")
+        return self._runner.run_id
+
+    def abort(self, run_id: str) -> bool:
+        """Abort the run ``run_id`` if it is the one in progress; False otherwise."""
+        runner = self._runner
+        if runner is None or runner.run_id != run_id or not self.busy:
+            return False
+        runner.abort()
+        return True
+
+    def wait(self, timeout_s: float | None = None) -> RunResult | None:
+        """Wait for the run in progress to end; its result (None if none ran or it is still going)."""
+        if self._thread is not None:
+            self._thread.join(timeout_s)
+        return None if self.busy else self.last_result

@@ -1,0 +1,57 @@
+"""Starting and aborting runs through the API on a simulated station (real Modbus rig, sensor on a pty)."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+from fastapi.testclient import TestClient
+
+from station.sequence import Outcome, SequenceOptions
+from station.sequence.limits import table1_limits
+from station.sim.plan import RigPlan
+from station.sim.station_sim import SimStation
+from station.store.commands import attach_recorder
+from station.web.app import create_app
+from station.web.control import StationControl
+from station.web.state import LiveStatus
+
+SCALE = 200.0
+PLAN = RigPlan(sample_rate_hz=50.0, rest_s=60.0, pose_hold_s=4.0,
+               rate_steps=(("x", 100.0), ("y", 100.0), ("z", 100.0)), rate_hold_s=3.0)
+AUTH = {"Authorization": "Bearer s3cret"}
+
+
+def test_start_conflict_abort_through_the_api(tmp_path: Path) -> None:
+    with SimStation(1, SCALE, 8, plan=PLAN) as sim:
+        subscribers: list = []
+        recorder = attach_recorder(subscribers.append, f"sqlite:///{tmp_path / 'st.sqlite'}", station_name="web")
+        live = LiveStatus(recorder.db)
+        subscribers.append(live)
+        control = StationControl(
+            sim.rig_url, sim.sensor_urls, sim.clock, subscribers, on_error=live.set_fault,
+            rig_options=sim.rig_client_options(), plan=PLAN, options=SequenceOptions().for_scale(SCALE),
+            limits=table1_limits(), station="web",
+        )
+        live.on_start, live.on_abort = control.start, control.abort
+        client = TestClient(create_app(database=recorder.db, token="s3cret", live=live))
+
+        assert client.post("/api/runs").status_code == 401
+        r = client.post("/api/runs", headers=AUTH)
+        assert r.status_code == 202, r.text
+        first = r.json()["run_id"]
+        assert client.post("/api/runs", headers=AUTH).status_code == 409  # one run at a time
+        assert client.post(f"/api/runs/{first}/abort").status_code == 401
+        result = control.wait(120)
+        assert result is not None and result.run_id == first and result.outcome == Outcome.PASS
+        assert client.post(f"/api/runs/{first}/abort", headers=AUTH).status_code == 404  # not running any more
+
+        second = client.post("/api/runs", headers=AUTH).json()["run_id"]
+        time.sleep(0.5)
+        assert client.post(f"/api/runs/{second}/abort", headers=AUTH).status_code == 202
+        result = control.wait(120)
+        assert result is not None and result.run_id == second and result.outcome == Outcome.ABORTED
+        assert result.rig_at_rest
+
+        runs = {r["run_id"]: r for r in client.get("/api/runs").json()}
+        assert runs[first]["outcome"] == "PASS" and runs[second]["outcome"] == "ABORTED"
