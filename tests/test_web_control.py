@@ -7,7 +7,7 @@ from pathlib import Path
 
 from fastapi.testclient import TestClient
 
-from station.sequence import Outcome, SequenceOptions
+from station.sequence import Outcome, RigReading, SequenceOptions
 from station.sequence.limits import table1_limits
 from station.sim.plan import RigPlan
 from station.sim.station_sim import SimStation
@@ -45,6 +45,11 @@ def test_start_conflict_abort_through_the_api(tmp_path: Path) -> None:
         result = control.wait(120)
         assert result is not None and result.run_id == first and result.outcome == Outcome.PASS
         assert client.post(f"/api/runs/{first}/abort", headers=AUTH).status_code == 404  # not running any more
+        # the rig's readings reached the live status (and the page's JSON), the store ignores them
+        readings = [r for r in result.records if isinstance(r, RigReading)]
+        assert readings and all(abs(r.roll_deg) <= 360 and "REMOTE" in r.status for r in readings)
+        rig_state = client.get("/api/status").json()["rig_state"]
+        assert rig_state is not None and set(rig_state) >= {"roll_deg", "pitch_deg", "yaw_deg", "rate_dps", "status"}
 
         second = client.post("/api/runs", headers=AUTH).json()["run_id"]
         time.sleep(0.5)

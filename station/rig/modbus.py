@@ -82,6 +82,8 @@ class ModbusRig:
         retry_backoff_s: float = 0.05,
     ) -> None:
         self.url = url if isinstance(url, RigUrl) else parse_rig_url(url)
+        #: called with every valid :class:`RigState` read (in the reading thread)
+        self.listeners: list[Callable[[RigState], None]] = []
         self.clock: Clock = clock if clock is not None else WallClock()
         self.poll_s = poll_s
         self.heartbeat_period_s = heartbeat_period_s
@@ -226,6 +228,8 @@ class ModbusRig:
             self._alive_seen = (st.alive, now)
         elif now - self._alive_seen[1] > self.alive_timeout_s:
             raise RigTimeout(f"rig alive counter stuck at {st.alive} for {now - self._alive_seen[1]:.1f} s")
+        for listener in tuple(self.listeners):
+            listener(st)
         return st
 
     # ------------------------------------------------------------------ commands

@@ -173,4 +173,24 @@ class RunFinished:
     rig_at_rest: bool = True
 
 
-Record = RunStarted | StepStarted | StepFinished | Measurement | UnitFinished | RunFinished
+@dataclass(frozen=True)
+class RigReading:
+    """What the rig reported while the run waited on it (throttled; for live displays, not stored).
+
+    Attributes:
+        t_s: station clock time (s); roll_deg, pitch_deg, yaw_deg: measured angles (deg);
+        rate_dps: measured table rate (deg/s); status: the status flags, e.g. 'MOVING|REMOTE';
+        fault_code: latched fault code (0 = none).
+    """
+
+    run_id: str
+    t_s: float
+    roll_deg: float
+    pitch_deg: float
+    yaw_deg: float
+    rate_dps: float
+    status: str
+    fault_code: int
+
+
+Record = RunStarted | StepStarted | StepFinished | Measurement | UnitFinished | RunFinished | RigReading

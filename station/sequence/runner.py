@@ -25,6 +25,7 @@ nor hit by a station fault.
 from __future__ import annotations
 
 import logging
+import threading
 import time
 import uuid
 from collections.abc import Callable, Sequence
@@ -37,7 +38,7 @@ from typing import Protocol
 from station.errors import FitError, HardwareError, StationError, UnitRejected
 from station.fit.calibrate import FitOptions, fit_session
 from station.fit.params import ParameterSet
-from station.rig.protocol import Rig
+from station.rig.protocol import Rig, RigState
 from station.sensor.client import SerialSensor
 from station.sequence.capture import UnitChannel, build_session
 from station.sequence.limits import ProductLimits, check_limits, table1_limits
@@ -46,6 +47,7 @@ from station.sequence.records import (
     Measurement,
     Outcome,
     Record,
+    RigReading,
     RunFinished,
     RunStarted,
     StepFinished,
@@ -239,6 +241,7 @@ class SequenceRunner:
         """Run every step, tear down, fit, check limits, save; see the module docstring."""
         clock = self.clock
         t_start, wall0 = clock.now(), time.monotonic()
+        self._run_thread, self._last_reading = threading.current_thread(), 0.0
         channels = [
             UnitChannel(k, url, s, clock) for k, (url, s) in enumerate(zip(self.sensor_urls, self.sensors, strict=True))
         ]
@@ -261,6 +264,9 @@ class SequenceRunner:
         if aborted:
             fx.abort.set()
         reconnects0 = int(getattr(self.rig, "reconnects", 0))
+        listeners = getattr(self.rig, "listeners", None)  # rigs that publish their readings (ModbusRig)
+        if listeners is not None:
+            listeners.append(self._rig_reading)
         try:
             try:
                 if not aborted:
@@ -282,6 +288,8 @@ class SequenceRunner:
             post_wall0 = time.monotonic()
             units = self._finish_units(channels, verdicts, aborted, run_message, completed)
         finally:
+            if listeners is not None:
+                listeners.remove(self._rig_reading)
             pool.shutdown(wait=True, cancel_futures=True)
             self._fixture = None
         outcome = worst(u.outcome for u in units)
@@ -305,6 +313,17 @@ class SequenceRunner:
             self.run_id, outcome, tuple(units), tuple(self._records), sequence_s, duration, wall, post_wall,
             run_message, rig_at_rest,
         )
+
+    def _rig_reading(self, state: RigState) -> None:
+        """Publish what the rig reports while the run waits on it: at most ~4 per wall second, and only
+        from the thread running the sequence (subscribers are called from that thread)."""
+        now = time.monotonic()
+        if threading.current_thread() is not self._run_thread or now - self._last_reading < 0.25:
+            return
+        self._last_reading = now
+        flags = "|".join(f.name or "" for f in type(state.status) if state.status & f)
+        self._emit(RigReading(self.run_id, state.t_s, state.roll_deg, state.pitch_deg, state.yaw_deg, state.rate_dps,
+                              flags, state.fault_code))
 
     def _run_steps(self, fx: Fixture, verdicts: list[_Verdict], reconnects0: int) -> None:
         for step in self.steps:

@@ -41,6 +41,7 @@ from station.sequence.records import (
     Measurement,
     Outcome,
     Record,
+    RigReading,
     RunFinished,
     RunStarted,
     StepFinished,
@@ -217,6 +218,8 @@ class Recorder:
         """Write one record (in its own transaction; measurements are buffered to the next one)."""
         if isinstance(record, RunStarted):
             self._run_started(record)
+            return
+        if isinstance(record, RigReading):  # live telemetry for displays, not a state change
             return
         state = self._runs.get(record.run_id)
         if state is None:

@@ -36,6 +36,7 @@ from station.sequence.records import (
     Measurement,
     Outcome,
     Record,
+    RigReading,
     RunFinished,
     RunStarted,
     StepFinished,
@@ -138,6 +139,7 @@ class _Live:
     steps_done: int = 0
     done_overheads: list[float] = field(default_factory=list)
     hold_by_kind: dict[str, float] = field(default_factory=dict)
+    rig_state: dict[str, Any] | None = None  # the rig's last reading (RigReading) in this run
     slots: list[SlotStatus] = field(default_factory=list)
     outcome: str | None = None
 
@@ -225,6 +227,11 @@ class LiveStatus:
                                     slots=[SlotStatus(k, sensor=s) for k, s in enumerate(r.sensors)])
             for sl in lv.slots:
                 sl.state = "measuring"
+        elif isinstance(r, RigReading):
+            if r.run_id == lv.run_id:
+                lv.rig_state = {"roll_deg": round(r.roll_deg, 3), "pitch_deg": round(r.pitch_deg, 3),
+                                "yaw_deg": round(r.yaw_deg, 3), "rate_dps": round(r.rate_dps, 3),
+                                "status": r.status, "fault_code": r.fault_code, "t_s": r.t_s}
         elif isinstance(r, StepStarted):
             lv.step_index, lv.step_name, lv.step_kind = r.index, r.name, r.kind
             lv.step_hold_s, lv.step_started_t_s, lv.t_s = r.hold_s, r.t_s, r.t_s
@@ -294,6 +301,7 @@ class LiveStatus:
                 "progress": lv.steps_done / total if total else (1.0 if lv.outcome else 0.0),
                 "remaining_s": remaining,
                 "slots": [asdict(s) for s in lv.slots],
+                "rig_state": lv.rig_state,
             }
         out.update(self._store_figures() if with_store else {"shift": None, "recent_runs": []})
         return out
