@@ -24,6 +24,7 @@ from station.rig.registers import FaultCode, Status
 from station.sensor import open_sensor
 from station.sensor.client import SerialSensor
 from station.sequence import (
+    Measurement,
     Outcome,
     Record,
     RunFinished,
@@ -298,12 +299,11 @@ def test_next_run_clears_the_watchdog_fault_the_last_one_left(sim: SimStation) -
         assert result.rig_at_rest and result.message == ""
 
 
-def test_failed_verification_is_fail_with_the_residuals_recorded(sim: SimStation) -> None:
-    """The EEPROM is written and the firmware corrects, but the corrected output misses a limit: FAIL, not ERROR."""
+def run_with_verification(sim: SimStation, limits: object = None) -> tuple[RunResult, list[Record]]:
+    """A run whose PASS units are written to EEPROM by the real provisioner and verified on the rig,
+    with the simulated sensors running the calibration firmware (Algorithm 1 from their EEPROM)."""
     from station.eeprom.provision import EepromProvisioner
     from station.eeprom.verify import RigVerifier
-    from station.sequence.limits_file import VerificationLimits
-    from station.sequence.records import Measurement
     from station.sim.firmware import install_firmware
 
     for u in sim.units:
@@ -312,8 +312,7 @@ def test_failed_verification_is_fail_with_the_residuals_recorded(sim: SimStation
     rig = open_rig(sim.rig_url + RIG_QUERY, sim.clock, **sim.rig_client_options())
     sensors = [open_sensor(url, sim.clock, **SENSOR_OPTIONS) for url in sim.sensor_urls]  # type: ignore[arg-type]
     try:
-        impossible = VerificationLimits(accel_mps2=1e-9)  # no real residual is that small
-        verifier = RigVerifier(rig, sim.clock, impossible, gravity_mps2=PLAN.gravity_mps2,
+        verifier = RigVerifier(rig, sim.clock, limits, gravity_mps2=PLAN.gravity_mps2,  # type: ignore[arg-type]
                                sample_rate_hz=int(PLAN.sample_rate_hz), options=OPTIONS)
         runner = SequenceRunner(
             rig, sensors, sim.clock, plan=PLAN, options=OPTIONS, limits=table1_limits(),
@@ -324,9 +323,21 @@ def test_failed_verification_is_fail_with_the_residuals_recorded(sim: SimStation
         for s in sensors:
             s.close()
         rig.close()
+    return result, records
+
+
+def verify_measurements(records: list[Record]) -> list[Measurement]:
+    return [r for r in records if isinstance(r, Measurement) and r.step == "verify"]
+
+
+def test_failed_verification_is_fail_with_the_residuals_recorded(sim: SimStation) -> None:
+    """The EEPROM is written and the firmware corrects, but the corrected output misses a limit: FAIL, not ERROR."""
+    from station.sequence.limits_file import VerificationLimits
+
+    result, records = run_with_verification(sim, VerificationLimits(accel_mps2=1e-9))  # no residual is that small
     assert [u.outcome for u in result.units] == [Outcome.FAIL, Outcome.FAIL]
     assert result.outcome == Outcome.FAIL and result.rig_at_rest
-    verify = [r for r in records if isinstance(r, Measurement) and r.step == "verify"]
+    verify = verify_measurements(records)
     assert {r.slot for r in verify} == {0, 1}
     assert any(not r.passed and "accel" in r.name for r in verify)
     assert all(u.sensor.eeprom.page_writes > 0 for u in sim.units)  # written, then verified
@@ -334,29 +345,8 @@ def test_failed_verification_is_fail_with_the_residuals_recorded(sim: SimStation
 
 def test_passed_verification_records_its_residuals(sim: SimStation) -> None:
     """A unit that passes verification gets its residuals recorded as 'verify' measurements, all passed."""
-    from station.eeprom.provision import EepromProvisioner
-    from station.eeprom.verify import RigVerifier
-    from station.sequence.records import Measurement
-    from station.sim.firmware import install_firmware
-
-    for u in sim.units:
-        install_firmware(u.sensor, sim.clock)
-    records: list[Record] = []
-    rig = open_rig(sim.rig_url + RIG_QUERY, sim.clock, **sim.rig_client_options())
-    sensors = [open_sensor(url, sim.clock, **SENSOR_OPTIONS) for url in sim.sensor_urls]  # type: ignore[arg-type]
-    try:
-        verifier = RigVerifier(rig, sim.clock, gravity_mps2=PLAN.gravity_mps2,
-                               sample_rate_hz=int(PLAN.sample_rate_hz), options=OPTIONS)
-        runner = SequenceRunner(
-            rig, sensors, sim.clock, plan=PLAN, options=OPTIONS, limits=table1_limits(),
-            provisioner=EepromProvisioner("test", verifier=verifier), subscribers=[records.append],
-        )
-        result = runner.run()
-    finally:
-        for s in sensors:
-            s.close()
-        rig.close()
+    result, records = run_with_verification(sim)
     assert [u.outcome for u in result.units] == [Outcome.PASS, Outcome.PASS]
-    verify = [r for r in records if isinstance(r, Measurement) and r.step == "verify"]
+    verify = verify_measurements(records)
     assert {r.slot for r in verify} == {0, 1} and all(r.passed for r in verify)
     assert {r.name for r in verify} >= {"verify.rate.rate_error"}
