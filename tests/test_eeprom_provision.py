@@ -343,15 +343,23 @@ def test_cli_write_and_read(unit: tuple, tmp_path: Path) -> None:
     pj = tmp_path / "p.json"
     pj.write_text(params.to_json())
     runner = CliRunner()
-    res = runner.invoke(eeprom_app, ["write", SERIAL, "--sensor", sensor.url, "--params", str(pj), "--station", "CLI"])
+    db_url = f"sqlite:///{tmp_path / 'station.sqlite'}"
+    res = runner.invoke(eeprom_app, ["write", SERIAL, "--sensor", sensor.url, "--params", str(pj), "--station", "CLI",
+                                     "--db", db_url])
     assert res.exit_code == 0, res.output
     assert "image #1 to slot A" in res.output
+    from station.store.db import open_database
+    from station.store.queries import show_unit
+
+    with open_database(db_url) as db:  # the write is recorded in the unit store
+        writes = show_unit(db, SERIAL).to_dict()["eeprom_writes"]
+    assert len(writes) == 1 and writes[0]["attempts"] == 1 and len(writes[0]["image_sha256"]) == 64
     assert fw.loaded and fw.image is not None and fw.image.station_id == "CLI"  # power-cycled: firmware loaded it
     res = runner.invoke(eeprom_app, ["read", "--sensor", sensor.url])
     assert res.exit_code == 0, res.output
     out = json.loads(res.output)
     assert out["serial"] == SERIAL and out["current"] == "A" and "magic" in out["slots"]["B"]["error"]
-    res = runner.invoke(eeprom_app, ["write", "UNIT-0002", "--sensor", sensor.url, "--params", str(pj)])
+    res = runner.invoke(eeprom_app, ["write", "UNIT-0002", "--sensor", sensor.url, "--params", str(pj), "--db", db_url])
     assert res.exit_code == 2 and "not 'UNIT-0002'" in res.output
 
 
