@@ -106,18 +106,24 @@ def attach_recorder(
     return recorder
 
 
-@units_app.command("list")
-def units_list(db: DbOption = None) -> None:
-    """List every unit: runs, latest outcome, attempts since its last disposition."""
+def _query(db_url: str | None, query: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
+    """Open the store, run ``query(database, *args, **kwargs)``, close it; a StationError is one line, exit 2."""
     from station.store.db import open_database
-    from station.store.queries import list_units
 
     try:
-        with open_database(db) as database:
-            rows = list_units(database)
+        with open_database(db_url) as database:
+            return query(database, *args, **kwargs)
     except StationError as exc:
         typer.echo(f"error: {exc}", err=True)
         raise typer.Exit(2) from None
+
+
+@units_app.command("list")
+def units_list(db: DbOption = None) -> None:
+    """List every unit: runs, latest outcome, attempts since its last disposition."""
+    from station.store.queries import list_units
+
+    rows = _query(db, list_units)
     if not rows:
         typer.echo("no units recorded")
         return
@@ -133,15 +139,9 @@ def units_show(
     db: DbOption = None,
 ) -> None:
     """Show one unit: its runs (newest first), limit verdicts, latest parameter set, EEPROM writes."""
-    from station.store.db import open_database
     from station.store.queries import show_unit
 
-    try:
-        with open_database(db) as database:
-            detail = show_unit(database, serial)
-    except StationError as exc:
-        typer.echo(f"error: {exc}", err=True)
-        raise typer.Exit(2) from None
+    detail = _query(db, show_unit, serial)
     if detail is None:
         typer.echo(f"error: no unit with serial {serial!r}", err=True)
         raise typer.Exit(1)
@@ -172,15 +172,9 @@ def units_params(
     db: DbOption = None,
 ) -> None:
     """Print the unit's newest PASS parameter set as JSON (station-params/1, SI units)."""
-    from station.store.db import open_database
     from station.store.queries import latest_parameter_set
 
-    try:
-        with open_database(db) as database:
-            params = latest_parameter_set(database, serial)
-    except StationError as exc:
-        typer.echo(f"error: {exc}", err=True)
-        raise typer.Exit(2) from None
+    params = _query(db, latest_parameter_set, serial)
     if params is None:
         typer.echo(f"error: no PASS parameter set of serial {serial!r}", err=True)
         raise typer.Exit(2)
@@ -196,13 +190,7 @@ def units_disposition(
     db: DbOption = None,
 ) -> None:
     """Record a disposition: the retest policy counts attempts again from here."""
-    from station.store.db import open_database
     from station.store.recorder import record_disposition
 
-    try:
-        with open_database(db) as database:
-            record_disposition(database, serial, decision, operator=operator, note=note)
-    except StationError as exc:
-        typer.echo(f"error: {exc}", err=True)
-        raise typer.Exit(2) from None
+    _query(db, record_disposition, serial, decision, operator=operator, note=note)
     typer.echo(f"recorded disposition {decision!r} for {serial}")

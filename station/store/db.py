@@ -138,7 +138,7 @@ def open_database(url: str | None = None, *, migrate: bool = True) -> Database:
         if migrate:
             upgrade(engine)
     except (SQLAlchemyError, OSError) as exc:
-        raise StoreError(f"cannot open the station database {_redact(url)}: {exc}") from exc
+        raise StoreError(f"cannot open the station database {_redact(url)}: {_first_line(exc)}") from exc
     return Database(url, engine, sessionmaker(engine, expire_on_commit=False))
 
 
@@ -149,3 +149,8 @@ def _redact(url: str) -> str:
         return make_url(url).render_as_string(hide_password=True)
     except Exception:
         return "<bad URL>"
+
+
+def _first_line(exc: BaseException) -> str:
+    """An exception's message without SQLAlchemy's multi-line 'Background on this error' appendix."""
+    return str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
