@@ -25,6 +25,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+from station.datafiles import data_path
 from station.errors import FormatError, UnsupportedVersionError
 from station.sequence.limits import (
     FitQualityLimits,
@@ -35,7 +36,7 @@ from station.sequence.limits import (
 )
 
 LIMITS_FORMAT = "station-limits/1"
-DEFAULT_LIMITS_PATH = Path(__file__).resolve().parents[2] / "fixtures" / "limits" / "default.toml"
+DEFAULT_LIMITS_PATH = data_path("fixtures", "limits", "default.toml")
 _DEG = math.pi / 180.0
 
 

@@ -14,7 +14,6 @@ import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 from alembic import command
@@ -25,6 +24,7 @@ from sqlalchemy import Engine, create_engine, event, text
 from sqlalchemy.exc import SQLAlchemyError
 from sqlalchemy.orm import Session, sessionmaker
 
+from station.datafiles import data_path
 from station.errors import StationError
 from station.store.url import DEFAULT_URL, ENV_VAR
 
@@ -32,7 +32,7 @@ from station.store.url import DEFAULT_URL, ENV_VAR
 
 """Environment variable that overrides :data:`DEFAULT_URL`."""
 
-MIGRATIONS_DIR = Path(__file__).resolve().parents[2] / "migrations"
+MIGRATIONS_DIR = data_path("migrations")
 
 _MIGRATION_LOCK = threading.Lock()  # Alembic's context is process-global: one migration at a time per process
 _PG_LOCK_KEY = 0x5354_4154  # advisory lock id on PostgreSQL: one migrating station at a time
