@@ -139,6 +139,30 @@ def test_sync_measures_the_sensor_clock_offset() -> None:
     assert ch.sync(3) == pytest.approx(100.0, abs=1e-3)
 
 
+class LateReplySensor(FakeSensor):
+    """Reads its clock at once, but the reply arrives ``delay_s`` later (queued behind streamed frames)."""
+
+    def __init__(self, clock: SimClock, delay_s: float) -> None:
+        super().__init__([], clock)
+        self.delay_s = delay_s
+
+    def status(self) -> SimpleNamespace:
+        reply = super().status()
+        self.clock.sleep(self.delay_s)
+        return reply
+
+
+def test_window_start_bound_holds_for_a_one_sided_round_trip() -> None:
+    clock = SimClock(1000.0, start=500.0)
+    ch = UnitChannel(0, "fake", LateReplySensor(clock, 2.0), clock)  # type: ignore[arg-type]
+    ch.sync(3)
+    # the midpoint estimate is off by half the trip; the bound is not early
+    assert ch.offset_s is not None and abs(ch.offset_s - 100.0) > 0.9
+    t_station = clock.now()
+    truth = t_station - 100.0
+    assert truth <= ch.latest_sensor_time(t_station) <= truth + 2.0 * ch.sync_halfwidth_s + 1e-6
+
+
 def test_collect_until_and_silence() -> None:
     clock = SimClock(1.0)
     b = still(1000)

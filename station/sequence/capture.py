@@ -139,6 +139,17 @@ class UnitChannel:
         self.offset_s, self.sync_halfwidth_s = best
         return best[0]
 
+    def latest_sensor_time(self, t_station_s: float) -> float:
+        """The latest sensor time (s) that station time ``t_station_s`` can be, given the last :meth:`sync`.
+
+        The sensor read its clock somewhere inside the best round trip, so the midpoint offset is
+        uncertain by the half-width. A reply queued behind streamed frames makes the trip long and
+        one-sided (late); a window placed with this bound never starts before the station's instant.
+        """
+        if self.offset_s is None:
+            raise HardwareError(f"sensor {self.serial or self.url}: clock offset not measured (sync first)")
+        return t_station_s - self.offset_s + self.sync_halfwidth_s
+
     def stop_stream(self) -> None:
         """Stop streaming; link errors are ignored (teardown)."""
         with contextlib.suppress(HardwareError):

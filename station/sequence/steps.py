@@ -213,13 +213,13 @@ def _capture_unit(
 ) -> list[GateResult]:
     """One unit's capture of ``step`` (runs in a worker thread)."""
     o = fx.options
-    offset = unit.sync(o.sync_tries)
+    unit.sync(o.sync_tries)
     if start == "stream":
         t0 = unit.wait_first(stop, fx.silence_wall_s)
     elif start == "continue" and unit.windows:
         t0 = unit.windows[-1].t1_s
     else:
-        t0 = t_confirm + o.settle_guard_s - offset
+        t0 = unit.latest_sensor_time(t_confirm + o.settle_guard_s)
     if unit.windows:
         t0 = max(t0, unit.windows[-1].t1_s)
     t1 = t0 + step.hold_s
