@@ -4,7 +4,7 @@ uvicorn serves the app in a thread on 127.0.0.1 (free port); a short simulated r
 units, real Modbus/TCP rig server and pty sensors on a fast clock) feeds the store's
 recorder and the live status while the browser watches the status page: it must see
 the steps go by through server-sent events, without reloading, and end with the
-runner's verdicts. Then the unit page must show its plots. Screenshots of both pages
+runner's verdicts. Then the unit page must show its plots and its diagnosis. Screenshots of both pages
 are saved under pytest's tmp dir (their paths are printed).
 
 Never downloads a browser: skipped when ``/usr/bin/chromium`` or Playwright is missing.
@@ -114,6 +114,12 @@ def test_status_page_follows_a_run_and_unit_page_shows_plots(tmp_path: Path, bro
                 f"(() => {{ const i = document.getElementById('plot-{name}'); "
                 f"return i && i.complete && i.naturalWidth > 300; }})()", timeout=60_000)
         assert page.locator("#checks tr").count() > 10
+        # the diagnosis section: computed in the background, the page polls until it renders
+        page.wait_for_function("document.getElementById('diagnosis-status').dataset.state === 'ready'",
+                               timeout=120_000)
+        page.wait_for_function("(() => { const i = document.getElementById('diagnosis-figure'); "
+                               "return !i.hidden && i.complete && i.naturalWidth > 300; })()", timeout=60_000)
+        assert page.locator("#diagnosis-findings tr").count() > 1 or page.locator("#diagnosis .diag-none").count() == 1
         unit_png = tmp_path / "unit.png"
         page.screenshot(path=str(unit_png), full_page=True)
         assert unit_png.stat().st_size > 10_000

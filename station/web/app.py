@@ -5,11 +5,14 @@ Pages (server-rendered Jinja2 templates in ``templates/``, no front-end build st
 * ``/``: the station's live status; updated by server-sent events from ``/events``
   (the browser's EventSource reconnects by itself after a dropped connection);
 * ``/units/{serial}``: parameter set against limits (marginal values highlighted), run
-  history and plots (``/units/{serial}/plots/{name}.svg``, see :mod:`station.web.plots`);
+  history and plots (``/units/{serial}/plots/{name}.svg``, see :mod:`station.web.plots`), and the
+  diagnosis of each run's recording (loaded by the page from the API, figure at
+  ``/units/{serial}/diagnosis.svg``; computed in the background, see :mod:`station.web.diagnosis`);
 * ``/population``: a histogram per limit-checked parameter over all units, with limits.
 
 JSON API (documented in ``/openapi.json``): ``GET /api/units``, ``GET /api/units/{serial}``,
-``GET /api/units/{serial}/eeprom.bin``, ``GET /api/runs``, ``GET /api/status``. The write
+``GET /api/units/{serial}/eeprom.bin``, ``GET /api/units/{serial}/diagnosis``, ``GET /api/runs``,
+``GET /api/status``. The write
 actions ``POST /api/runs`` and ``POST /api/runs/{run_id}/abort`` need ``Authorization:
 Bearer <token>`` with the token configured on the station; without a configured token
 they always answer 401 (read-only by default).
@@ -30,7 +33,7 @@ from pathlib import Path
 from typing import Annotated, Any
 
 from fastapi import Body, Depends, FastAPI, HTTPException, Query, Request
-from fastapi.responses import HTMLResponse, Response, StreamingResponse
+from fastapi.responses import HTMLResponse, JSONResponse, Response, StreamingResponse
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from fastapi.templating import Jinja2Templates
 
@@ -43,6 +46,7 @@ from station.session.model import Session
 from station.store.db import Database, open_database
 from station.store.queries import latest_parameter_set, show_unit
 from station.web import plots
+from station.web.diagnosis import ERROR, PENDING, DiagnosisBusy, DiagnosisService, Recording
 from station.web.listing import is_marginal, latest_checks, list_runs, list_unit_results, population
 from station.web.state import LiveStatus
 
@@ -54,6 +58,8 @@ SSE_COALESCE_S = 0.05
 _bearer = HTTPBearer(auto_error=False)
 _UNAUTHORIZED = {401: {"description": "missing or wrong bearer token (or no token configured)"}}
 _NOT_FOUND = {404: {"description": "unknown serial or run"}}
+#: Seconds a client should wait before asking again for a diagnosis in progress.
+DIAGNOSIS_RETRY_S = 2
 
 
 def _fmt(value: float | None, unit: str = "") -> str:
@@ -83,8 +89,15 @@ class _PlotCache:
         return svg
 
 
+def _recordings(detail: Any) -> list[Recording]:
+    """The unit's runs with a session recording that is still on disk, newest first."""
+    return [Recording(r.run_id, Path(r.session_path), r.session_sha256) for r in detail.runs
+            if r.session_path and r.session_sha256 and Path(r.session_path).is_file()]
+
+
 def create_app(db_url: str | None = None, *, token: str | None = None, live: LiveStatus | None = None,
-               limits_path: Path | None = None, database: Database | None = None) -> FastAPI:
+               limits_path: Path | None = None, database: Database | None = None,
+               diagnosis: DiagnosisService | None = None) -> FastAPI:
     """The web application on the station database at ``db_url`` (see :func:`station.store.open_database`).
 
     Args:
@@ -94,6 +107,8 @@ def create_app(db_url: str | None = None, *, token: str | None = None, live: Liv
             Its ``on_start``/``on_abort`` hooks start and abort runs; unset hooks answer 503.
         limits_path: limits file for the marginal band (default: the station's default limits file).
         database: an already open database (instead of ``db_url``).
+        diagnosis: the background diagnosis of recordings (default: one worker thread, results kept next to
+            the recordings); started and stopped with the application.
     """
     db = database if database is not None else open_database(db_url)
     live = live if live is not None else LiveStatus(db)
@@ -103,15 +118,21 @@ def create_app(db_url: str | None = None, *, token: str | None = None, live: Liv
     templates = Jinja2Templates(directory=str(TEMPLATES_DIR))
     templates.env.filters["fmt"] = _fmt
     cache = _PlotCache()
+    diagnoses = diagnosis if diagnosis is not None else DiagnosisService()
+
     @asynccontextmanager
     async def lifespan(_app: FastAPI) -> AsyncIterator[None]:
-        yield
-        if database is None:  # opened here: closed here
-            db.close()
+        diagnoses.start()
+        try:
+            yield
+        finally:
+            await asyncio.to_thread(diagnoses.stop)
+            if database is None:  # opened here: closed here
+                db.close()
 
     app = FastAPI(title="station", version="1", lifespan=lifespan,
                   description="End-of-line MEMS IMU calibration station: live status, units, runs, EEPROM images.")
-    app.state.db, app.state.live = db, live
+    app.state.db, app.state.live, app.state.diagnosis = db, live, diagnoses
 
     def require_token(creds: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)]) -> None:
         ok = (token is not None and creds is not None and creds.scheme.lower() == "bearer"
@@ -156,10 +177,45 @@ def create_app(db_url: str | None = None, *, token: str | None = None, live: Liv
         for c in checks:
             c["marginal"] = c["passed"] and is_marginal(c["value"], c["low"], c["high"], marginal_fraction)
         has_plots = _plot_source(detail) is not None
+        recorded = {rec.run_id for rec in _recordings(detail)}
         return templates.TemplateResponse(request, "unit.html", {
             "d": detail, "checks": checks, "plots": PLOT_NAMES if has_plots else (),
             "params": detail.latest_params(), "marginal_fraction": marginal_fraction,
+            "diag_runs": [r for r in detail.runs if r.run_id in recorded],
         })
+
+    def _recording(serial: str, run_id: str | None) -> Recording:
+        """The unit's recording of run ``run_id`` (None: its newest recording); 404 when there is none."""
+        detail = show_unit(db, serial)
+        if detail is None:
+            raise HTTPException(404, f"unknown unit {serial}")
+        for rec in _recordings(detail):
+            if run_id is None or rec.run_id == run_id:
+                return rec
+        if run_id is None:
+            raise HTTPException(404, f"no session recording of unit {serial}")
+        raise HTTPException(404, f"no session recording of unit {serial} in run {run_id}")
+
+    @app.get("/units/{serial}/diagnosis.svg", include_in_schema=False)
+    def unit_diagnosis_svg(serial: str, run_id: str | None = None) -> Response:
+        rec = _recording(serial, run_id)
+        try:
+            result = diagnoses.get(rec)
+        except DiagnosisBusy as exc:
+            return Response(plots.message_svg(f"diagnosis busy: {exc}"), status_code=503,
+                            media_type="image/svg+xml", headers={"Retry-After": str(DIAGNOSIS_RETRY_S)})
+        if result.status == PENDING:
+            return Response(plots.message_svg("diagnosis in progress"), status_code=202, media_type="image/svg+xml",
+                            headers={"Cache-Control": "no-store", "Retry-After": str(DIAGNOSIS_RETRY_S)})
+        if result.status == ERROR:
+            return Response(plots.message_svg(f"no diagnosis: {result.error}"), status_code=422,
+                            media_type="image/svg+xml", headers={"Cache-Control": "no-store"})
+        title = f"{serial}, run {rec.run_id}: " + ("block residual before and after each finding"
+                                                  if any(c.after is not None for c in result.curves)
+                                                  else "block residual of the base model (no findings)")
+        svg = cache.get((serial, f"{rec.run_id}:{rec.sha256}", "diagnosis"),
+                        lambda: plots.diagnosis_svg(result.curves, title))
+        return Response(svg, media_type="image/svg+xml", headers={"Cache-Control": "max-age=60"})
 
     def _plot_source(detail: Any) -> tuple[str, str] | None:
         if detail.latest_params_json is None:
@@ -254,6 +310,36 @@ def create_app(db_url: str | None = None, *, token: str | None = None, live: Liv
             raise HTTPException(409, f"cannot encode the image: {exc}") from exc
         return Response(data, media_type="application/octet-stream",
                         headers={"Content-Disposition": f'attachment; filename="{_safe(serial)}.eeprom.bin"'})
+
+    @app.get("/api/units/{serial}/diagnosis", tags=["units"], response_model=None, responses={
+        200: {"description": "the diagnosis is ready: {status: 'ready', serial, run_id, session_sha256, elapsed_s, "
+                             "report} with the station-diagnosis/1 report"},
+        202: {"description": "the diagnosis is being computed: {status: 'pending', ...}; ask again (Retry-After)"},
+        404: {"description": "unknown serial, or no session recording of the unit (in that run)"},
+        422: {"description": "the recording cannot be diagnosed: {status: 'error', detail: the reason, ...}"},
+        503: {"description": "too many recordings are waiting for a diagnosis; ask again (Retry-After)"},
+    })
+    def api_unit_diagnosis(
+        serial: str,
+        run_id: Annotated[str | None, Query(description="the run whose recording to diagnose (default: the newest "
+                                                        "run with a recording)")] = None,
+    ) -> dict[str, Any] | JSONResponse:
+        """Where the unit's session recording and the base model (eq. 1 + eq. 3) disagree and which physics is
+        missing (``station diagnose``): findings with parameters and uncertainties, rejected and inseparable
+        effects. Computed once per recording in the background: answers 202 until it is ready."""
+        rec = _recording(serial, run_id)
+        head: dict[str, Any] = {"serial": serial, "run_id": rec.run_id, "session_sha256": rec.sha256}
+        try:
+            result = diagnoses.get(rec)
+        except DiagnosisBusy as exc:
+            return JSONResponse({"status": "busy", "detail": str(exc), **head}, status_code=503,
+                                headers={"Retry-After": str(DIAGNOSIS_RETRY_S)})
+        if result.status == PENDING:
+            return JSONResponse({"status": PENDING, **head}, status_code=202,
+                                headers={"Retry-After": str(DIAGNOSIS_RETRY_S), "Cache-Control": "no-store"})
+        if result.status == ERROR:
+            return JSONResponse({"status": ERROR, "detail": result.error, **head}, status_code=422)
+        return {"status": result.status, **head, "elapsed_s": result.elapsed_s, "report": result.report}
 
     def _image_origin(serial: str, params: ParameterSet) -> tuple[str, datetime]:
         detail = show_unit(db, serial)

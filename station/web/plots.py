@@ -9,7 +9,9 @@
 * ``residuals``: RMS of the fit residual per segment and axis;
 * ``allan``: overlapping Allan deviation of the gyro (deg/s) and accelerometer (m/s^2)
   during the rest against the cluster time tau (s);
-* ``histogram``: a population histogram of one parameter with its limits.
+* ``histogram``: a population histogram of one parameter with its limits;
+* ``diagnosis``: block-mean residual before and after each finding of a diagnosis
+  (accel m/s^2, gyro deg/s), or the base model's residual when nothing is missing.
 
 Each function returns the SVG text. Figures are built with :class:`matplotlib.figure.Figure`
 directly (no global pyplot state), so they can be rendered from several threads.
@@ -29,6 +31,7 @@ from station.fit.acf import finite_record_acf, lowpass_record
 from station.fit.allan import overlapping_allan_deviation
 from station.fit.params import ParameterSet
 from station.session.model import Kind, Session
+from station.web.diagnosis import Curve
 
 AXES = "xyz"
 _DEG = 180.0 / math.pi
@@ -213,3 +216,44 @@ def message_svg(text: str) -> str:
     safe = text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
     return (f'<svg xmlns="http://www.w3.org/2000/svg" width="480" height="60"><text x="10" y="35" '
             f'font-family="sans-serif" font-size="14">{safe}</text></svg>')
+
+
+def _rms(a: np.ndarray) -> np.ndarray:
+    with np.errstate(invalid="ignore"):
+        return np.sqrt(np.nanmean(a * a, axis=0)) if a.size else np.full(a.shape[-1], np.nan)
+
+
+def diagnosis_svg(curves: tuple[Curve, ...], title: str) -> str:
+    """Block-mean residual (accel m/s^2, gyro deg/s) against time since power-on (s): per finding a row with the
+    base model's residual and the residual with the finding modelled, on one y scale; RMS per axis in the titles."""
+    if not curves:
+        return message_svg("no residuals to show")
+    two = any(c.after is not None for c in curves)
+    fig = Figure(figsize=(10, 2.9 * len(curves) + 0.4))
+    axs = fig.subplots(len(curves), 2 if two else 1, squeeze=False, sharex=True)
+    for row, c in enumerate(curves):
+        scale, unit = (_DEG, "deg/s") if c.unit == "rad/s" else (1.0, "m/s²")
+        panels = [(c.before, c.labels[0] if c.after is not None else "block residual")]
+        if c.after is not None:
+            panels.append((c.after, c.labels[1]))
+        for col, (data, label) in enumerate(panels):
+            ax = axs[row, col]
+            y = data * scale
+            for i, a in enumerate(AXES):
+                ax.plot(c.t_s, y[:, i], ".", ms=2.5, label=a)
+            rms = ", ".join(f"{v:.3g}" for v in _rms(y))
+            ax.set_title(f"{c.title}: {label}\nRMS x, y, z: {rms} {unit}", fontsize=9)
+            ax.set_ylabel(unit)
+            ax.grid(alpha=0.3)
+        if len(panels) == 2:  # one y scale per row: the improvement is what the eye sees
+            lo = min(axs[row, k].get_ylim()[0] for k in range(2))
+            hi = max(axs[row, k].get_ylim()[1] for k in range(2))
+            for k in range(2):
+                axs[row, k].set_ylim(lo, hi)
+        elif two:
+            axs[row, 1].set_visible(False)
+        axs[row, 0].legend(fontsize=7, markerscale=3, loc="upper right")
+    for ax in axs[-1]:
+        ax.set_xlabel("time since power-on (s)")
+    fig.suptitle(title)
+    return _svg(fig)
