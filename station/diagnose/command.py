@@ -30,10 +30,36 @@ def _print_text(report: dict[str, Any]) -> None:
             typer.echo(f"    block chi2 per axis {b['block_chi2']} -> {a['block_chi2']}")
         else:
             typer.echo(f"    evidence: {json.dumps(ev)}")
+        if "rerun" in f:
+            r = f["rerun"]
+            typer.echo(f"    simulator re-run, block RMS per axis: {r['rms_base']} -> {r['rms_with_this_effect']} "
+                       f"{r['unit']} with this effect")
     for item in report["inseparable"]:
         typer.echo(f"  inseparable ({item['sensor']}): {' / '.join(item['effects'])}; rig step: {item['rig_step']}")
     if not findings and not report["inseparable"]:
         typer.echo("  the base model (eq. 1 + eq. 3) explains this recording")
+    _print_rerun(report.get("rerun"))
+
+
+def _print_rerun(rerun: dict[str, Any] | None) -> None:
+    """The simulator re-run: recording minus simulation per block, base vs base + effects."""
+    if not rerun:
+        return
+    if "error" in rerun:
+        typer.echo(f"  simulator re-run not possible: {rerun['error']}")
+        return
+    n = len(rerun["effects"])
+    head = "simulator re-run on the recording's motion, recording minus simulation per block"
+    typer.echo(f"  {head} (RMS x/y/z, chi2 x/y/z, 1 = noise):")
+    for sensor in ("accel", "gyro"):
+        b = rerun["base"][sensor]
+        line = f"    {sensor:5s} base {b['rms']} {b['unit']}, chi2 {b['chi2']}"
+        if n:
+            e = rerun["extended"][sensor]
+            line += f" -> with {n} effect(s) {e['rms']} {e['unit']}, chi2 {e['chi2']}"
+        typer.echo(line + f" (noise {b['noise_rms']})")
+    for item in rerun["not_simulated"]:
+        typer.echo(f"    not simulated: {item['effect']} ({item['sensor']}): {item['reason']}")
 
 
 def diagnose(

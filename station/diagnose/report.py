@@ -5,12 +5,20 @@ returns a :class:`Diagnosis`; ``Diagnosis.report`` is the object ``station diagn
 prints::
 
     {"format": "station-diagnosis/1", "findings": [...], "rejected": [...], "inseparable": [...],
-     "location": {...}, "base_fit": {...}}
+     "location": {...}, "base_fit": {...}, "rerun": {...}}
 
 Each finding has ``effect``, ``sensor`` (accel|gyro), ``axes``, ``parameters`` (value, std,
 unit in engineering units), ``evidence`` (likelihood gain, BIC gain, held-out error) and
-``fit`` (before/after: BIC, block chi^2 per axis, block residual RMS). Pure numerics:
-only :func:`save_figure` writes a file.
+``fit`` (before/after: BIC, block chi^2 per axis, block residual RMS); a simulated finding also
+has ``rerun`` (block RMS of its sensor per axis: base, base + this effect, all effects).
+
+``rerun`` (:mod:`station.diagnose.rerun`): the simulator re-run on the recording's own motion
+with the base model and with the accepted effects, compared with the recording per block:
+``{"method", "effects", "not_simulated", "base": {SENSOR: STATS}, "extended": {SENSOR: STATS},
+"improvement": {SENSOR: {"rms_ratio", "chi2_ratio"}}}`` where STATS holds ``unit``, ``blocks``,
+``rms``, ``noise_rms``, ``chi2`` per axis and the same ``per_kind`` (rest/pose/rate/move);
+``{"error": ...}`` when the recording cannot drive the simulator. Pure numerics: only
+:func:`save_figure` writes a file.
 """
 
 from __future__ import annotations
@@ -22,8 +30,10 @@ from typing import Any
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from station.diagnose.rerun import FittedEffect, Rerun, rerun
 from station.diagnose.residuals import Baseline, fit_baseline, locate
 from station.diagnose.select import select
+from station.errors import FitError
 from station.session.model import Session
 
 FORMAT = "station-diagnosis/1"
@@ -37,11 +47,13 @@ class Diagnosis:
         report: the JSON-ready object (see the module docstring).
         baseline: the base fit and residuals.
         curves: per finding, (block times s, block residual before, after), sensor units (SI).
+        rerun: the simulator re-runs (base and extended), None when the recording cannot drive it.
     """
 
     report: dict[str, Any]
     baseline: Baseline
     curves: list[tuple[str, np.ndarray, np.ndarray, np.ndarray]] = field(default_factory=list)
+    rerun: Rerun | None = None
 
     @property
     def effects(self) -> list[tuple[str, str]]:
@@ -58,14 +70,29 @@ def diagnose(session: Session) -> Diagnosis:
     with threadpool_limits(limits=1, user_api="blas"):
         baseline = fit_baseline(session)
         decision = select(baseline)
-    curves = []
-    findings = []
-    for f in decision.findings:
-        res = f.pop("_block_residual", None)
-        if res is not None:
-            sd = baseline.sensor(f["sensor"])
-            curves.append((f"{f['sensor']} {f['effect']}", sd.t_s, res[0], res[1]))
-        findings.append(f)
+        curves = []
+        findings = []
+        fitted = []
+        for f in decision.findings:
+            res = f.pop("_block_residual", None)
+            if res is not None:
+                sd = baseline.sensor(f["sensor"])
+                curves.append((f"{f['sensor']} {f['effect']}", sd.t_s, res[0], res[1]))
+            theta = f.pop("_theta", None)
+            if theta is not None or f["effect"] == "outliers":
+                fitted.append(FittedEffect(f["effect"], f["sensor"], np.zeros(0) if theta is None else theta))
+            findings.append(f)
+        try:
+            runs: Rerun | None = rerun(baseline, fitted)
+        except FitError as exc:
+            runs = None
+            rerun_section: dict[str, Any] = {"error": str(exc)}
+        else:
+            rerun_section = runs.summary()
+            for f in findings:
+                part = runs.finding_part(f["effect"], f["sensor"])
+                if part is not None:
+                    f["rerun"] = part
     p = baseline.params
     report = {
         "format": FORMAT,
@@ -80,36 +107,54 @@ def diagnose(session: Session) -> Diagnosis:
             "accel_noise_std_mps2": np.round(p.accel.noise_std, 9).tolist(),
             "gyro_noise_std_dps": np.round(np.degrees(p.gyro.noise_std), 9).tolist(),
         },
+        "rerun": rerun_section,
     }
-    return Diagnosis(report=report, baseline=baseline, curves=curves)
+    return Diagnosis(report=report, baseline=baseline, curves=curves, rerun=runs)
 
 
 def save_figure(diagnosis: Diagnosis, path: str | os.PathLike[str]) -> None:
     """Write a PNG of the block residual before and after each finding (needs matplotlib).
 
-    Without findings, the base model's block residuals of both sensors are shown.
+    Without findings, the base model's block residuals of both sensors are shown. With a simulator
+    re-run, one more row per sensor shows the recording minus the base simulation and minus the
+    extended simulation (base + the accepted effects), per block.
     """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    rows: list[tuple[str, str, str, np.ndarray, np.ndarray, np.ndarray]] = []
     curves = diagnosis.curves
     if not curves:
         b = diagnosis.baseline
         curves = [(f"{sd.sensor} base model", sd.t_s, sd.y, sd.y) for sd in (b.accel, b.gyro)]
-    fig, axes = plt.subplots(len(curves), 2, figsize=(11, 2.8 * len(curves)), squeeze=False, sharex=True)
-    for row, (title, t, before, after) in enumerate(curves):
-        gyro = title.startswith("gyro")
-        scale, unit = (np.degrees(1.0), "deg/s") if gyro else (1.0, "m/s^2")
-        for col, (data, label) in enumerate(((before, "before"), (after, "after"))):
+    for title, t, before, after in curves:
+        rows.append((title.split(" ")[0], f"{title}: block residual before", f"{title}: block residual after",
+                     t, before, after))
+    runs = diagnosis.rerun
+    if runs is not None:
+        for sensor in ("accel", "gyro"):
+            sd = diagnosis.baseline.sensor(sensor)
+            rows.append((sensor, f"{sensor}: recording - base simulation", f"{sensor}: recording - simulation "
+                         f"with {len(runs.extended.effects)} effect(s)", sd.t_s, runs.base.block_residual[sensor],
+                         runs.extended.block_residual[sensor]))
+    fig, axes = plt.subplots(len(rows), 2, figsize=(11, 2.8 * len(rows)), squeeze=False, sharex=True)
+    for row, (sensor, left, right, t, before, after) in enumerate(rows):
+        scale, unit = (np.degrees(1.0), "deg/s") if sensor == "gyro" else (1.0, "m/s^2")
+        for col, (data, label) in enumerate(((before, left), (after, right))):
             ax = axes[row][col]
             for k, name in enumerate("xyz"):
                 ax.plot(t, data[:, k] * scale, ".", ms=2, label=name)
-            ax.set_title(f"{title}: block residual {label}", fontsize=9)
+            ax.set_title(label, fontsize=9)
             ax.set_ylabel(unit)
             ax.grid(alpha=0.3)
         axes[row][0].legend(fontsize=7, markerscale=4)
+        if row >= len(curves):  # the re-run rows: one scale for both, so the improvement shows
+            lo = min(axes[row][0].get_ylim()[0], axes[row][1].get_ylim()[0])
+            hi = max(axes[row][0].get_ylim()[1], axes[row][1].get_ylim()[1])
+            for ax in axes[row]:
+                ax.set_ylim(lo, hi)
     for ax in axes[-1]:
         ax.set_xlabel("time since power-on (s)")
     fig.tight_layout()

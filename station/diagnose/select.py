@@ -588,6 +588,7 @@ def _finding(sd: SensorData, t: Test, before: dict[str, Any], after: dict[str, A
                       "block_rms": np.round(after["block_rms"] * unit_factor, 9).tolist(), "unit": unit},
         },
         "_block_residual": (before["block_residual"], after["block_residual"]),
+        "_theta": np.array(t.theta, dtype=float),  # fitted SI parameters, for the simulator re-run (rerun.py)
     }
 
 

@@ -29,6 +29,7 @@ Units: t in s since power-on, specific force m/s^2, angular rate rad/s, temperat
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -203,6 +204,15 @@ class ImuModel:
         seed: seeds every random stream (see :data:`STREAMS`).
         latitude_deg, heading_deg: the site, for ``earth_rotation``.
         environment: the room; drawn from the ``environment`` stream when None.
+        effect_truth: explicit SI effect coefficients, used instead of realizing ``effects``
+            with the unit's random shapes (e.g. coefficients fitted to a recording); the
+            site arguments are then unused.
+        temperature_degc: true sensor temperature (degC) as a function of sensor time (s),
+            replacing the ambient drift and self-heating model (e.g. a recording's own
+            temperature course); temperature effects act on it minus ``environment.ambient_degc``.
+
+    Both keyword arguments default to None, which keeps the output bit-identical to a model
+    built without them.
 
     The model does not shift time itself: with a ``time_offset`` effect, pass kinematics
     evaluated at rig time ``t_s - time_offset_s`` but stamped with the sensor times ``t_s``
@@ -219,12 +229,15 @@ class ImuModel:
         latitude_deg: float = 0.0,
         heading_deg: float = 0.0,
         environment: Environment | None = None,
+        effect_truth: EffectTruth | None = None,
+        temperature_degc: Callable[[np.ndarray], np.ndarray] | None = None,
     ) -> None:
         self.truth = truth
         self.effects = effects if effects is not None else Effects()
-        self.effect_truth: EffectTruth = self.effects.realize(
+        self.effect_truth: EffectTruth = effect_truth if effect_truth is not None else self.effects.realize(
             truth.shapes, latitude_deg=latitude_deg, heading_deg=heading_deg
         )
+        self._temperature = temperature_degc
         ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
         # explicit child keys (not ss.spawn) so a SeedSequence passed twice gives the same streams
         rng = {
@@ -255,17 +268,23 @@ class ImuModel:
         return self._t_last
 
     def true_temperature(self, t_s: np.ndarray) -> np.ndarray:
-        """True sensor temperature (degC): ambient drift plus self-heating since power-on."""
+        """True sensor temperature (degC): ambient drift plus self-heating since power-on, or the given course."""
         t = np.asarray(t_s, dtype=float)
+        if self._temperature is not None:
+            return np.asarray(self._temperature(t), dtype=float)
         env, u = self.environment, self.truth
         return env.ambient_degc + env.ambient_rate_k_per_s * t + u.self_heating_k * -np.expm1(-t / u.self_heating_tau_s)
 
-    def render(self, kin: Kinematics, gravity_mps2: float) -> RawSamples:
+    def render(
+        self, kin: Kinematics, gravity_mps2: float, *, specific_force_mps2: np.ndarray | None = None
+    ) -> RawSamples:
         """Raw samples at ``kin.t_s`` (sensor time since power-on, s), continuing the last call.
 
         ``kin`` is what the sensor frame does (rotation, body rate, angular acceleration);
         ``gravity_mps2`` the local gravity. Times must be strictly increasing, >= 0, and
-        later than the previous call's.
+        later than the previous call's. ``specific_force_mps2`` (n, 3), when given, is the
+        specific force at the rotation centre (m/s^2, sensor frame) instead of gravity along
+        ``kin``'s up axis, e.g. a recording's reference; the lever arm is still added to it.
         """
         t = np.array(kin.t_s, dtype=float)
         n = t.shape[0]
@@ -280,7 +299,12 @@ class ImuModel:
         dt_gm = np.round(dt / DT_RESOLUTION_S) * DT_RESOLUTION_S
 
         # --- what the sensor is exposed to ------------------------------------------------
-        f = kin.specific_force(gravity_mps2)
+        if specific_force_mps2 is None:
+            f = kin.specific_force(gravity_mps2)
+        else:
+            f = np.array(specific_force_mps2, dtype=float)
+            if f.shape != (n, 3):
+                raise ValueError(f"render: specific_force_mps2 has shape {f.shape}, expected {(n, 3)}")
         omega = np.asarray(kin.omega_radps, dtype=float)
         if self._lever_arm is not None:
             r = self._lever_arm
