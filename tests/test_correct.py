@@ -142,6 +142,28 @@ def test_batch_preallocated_output() -> None:
         correct_batch(raw_a, raw_g, params, out=(raw_a, np.empty((500, 3))))
 
 
+def test_batch_fresh_outputs_are_separate_arrays() -> None:
+    rng = np.random.default_rng(9)
+    raw_a, raw_g = noisy_record(rng, 300)
+    a, g = correct_batch(raw_a, raw_g, make_params())
+    assert a.shape == g.shape == (300, 3)
+    assert a.flags.c_contiguous and g.flags.c_contiguous and a.flags.writeable and g.flags.writeable
+    assert not np.may_share_memory(a, g)
+    a[:] = 0.0  # writing one leaves the other alone
+    assert np.all(g != 0.0)
+
+
+def test_batch_large_chunk_request_is_clamped() -> None:
+    """chunk_rows above the internal maximum (16384) gives the same output over several chunks."""
+    rng = np.random.default_rng(10)
+    params = make_params()
+    raw_a, raw_g = noisy_record(rng, 20_000)
+    s_a, s_g = stream(params, raw_a, raw_g, start_index=7)
+    b_a, b_g = correct_batch(raw_a, raw_g, params, start_index=7, chunk_rows=10**9)
+    np.testing.assert_allclose(b_a, s_a, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(b_g, s_g, rtol=0, atol=1e-12)
+
+
 def test_empty_record() -> None:
     a, g = correct_batch(np.empty((0, 3)), np.empty((0, 3)), make_params())
     assert a.shape == (0, 3) and g.shape == (0, 3)
