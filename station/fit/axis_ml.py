@@ -13,11 +13,13 @@ Model for axis k over block means (see :mod:`station.fit.blocks`):
 * ``e_b``: white noise, variance sigma_w^2 / n_b (sigma_w known from sample differences).
 
 The linear parameters are profiled out by generalized least squares; (T_c, q) are found
-by maximizing the Gaussian likelihood. Uncertainties of (beta, d, T_c) come from the
-Fisher information of the mean with the fitted covariance; q from the curvature of the
-profile likelihood in log q. This is the "better estimator" that replaces the paper's
-ACF reading of eq. (4) (see :mod:`station.fit.acf`), and it uses all settled data of
-the session, not only the power-on rest.
+by maximizing the (restricted) Gaussian likelihood. Uncertainties of (beta, d) come from
+the Fisher information of the mean with the covariance at the upper end of q's 95 %
+profile interval; when the drift is resolved, the estimate and uncertainty of the drift
+noise sqrt(q) come from the restricted likelihood profiled over T_c (:class:`_ProfileGrid`).
+The std of T_c comes from its own profile likelihood. This is the "better estimator" that
+replaces the paper's ACF reading of eq. (4) (see :mod:`station.fit.acf`), and it uses all
+settled data of the session, not only the power-on rest.
 """
 
 from __future__ import annotations
@@ -27,12 +29,17 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy import linalg, optimize
+from scipy.interpolate import PchipInterpolator
 from scipy.linalg import lapack
 
 from station.fit.blocks import Blocks, block_exp_mean
 
 _LOG_TC_MIN = np.log(2.0)
 _LOG_Q_MIN, _LOG_Q_MAX = -25.0, 12.0  # q relative to the white variance of a block
+#: log q grid of the profile likelihoods (relative to the white variance of a block); e^-12 is q = 0 in effect
+_GRID_LOG_Q = np.arange(-12.0, _LOG_Q_MAX + 1e-9, 0.5)
+#: rise of the negative log-likelihood that bounds a 95 % profile interval (chi^2_1 / 2)
+_RISE_95 = 1.92
 
 
 @dataclass(frozen=True, eq=False)
@@ -142,6 +149,101 @@ class _Problem:
         return value
 
 
+class _ProfileGrid:
+    """Restricted likelihood of one axis over a grid of (log T_c, log q), with the GLS fit at every node.
+
+    For each T_c the white-scaled GM kernel is diagonalized once, so the whole q axis costs
+    a few small matrix products: with K = U diag(lam) U^T, the covariance (eq. 3's drift plus
+    white noise) is W^1/2 U diag(1 + q lam) U^T W^1/2.
+
+    The REML term counts every mean column, the drift column ``exp(-t/T_c)`` included, at the
+    fitted ``tc_ref_s``: the drift amplitude uses up one of the few degrees of freedom that
+    carry information on q, and leaving it out biases q (and every uncertainty) low. Fixing
+    its T_c keeps the term from rewarding the collinearity of drift and static bias at long T_c.
+
+    Between the T_c nodes the likelihood is interpolated (monotone cubic) on a fine grid.
+    """
+
+    def __init__(
+        self, problem: _Problem, log_tc_nodes: np.ndarray, tc_ref_s: float, n_fine: int = 120
+    ) -> None:
+        sw = np.sqrt(problem.white)
+        q = problem.q0 * np.exp(_GRID_LOG_Q)
+        x_ref = np.column_stack([problem.design, block_exp_mean(problem.t, problem.h, tc_ref_s)]) / sw[:, None]
+        p = x_ref.shape[1]
+        n_tc = len(log_tc_nodes)
+        nll = np.empty((n_tc, len(q)))
+        usable = np.empty((n_tc, len(q)), dtype=bool)
+        scale = np.outer(sw, sw)
+        for i, lt in enumerate(log_tc_nodes):
+            tc = float(np.exp(lt))
+            lam, u = linalg.eigh(problem.kernel(tc) / scale, check_finite=False, driver="evr")
+            lam = np.clip(lam, 0.0, None)
+            rotated = u.T @ np.column_stack([problem.columns(tc) / sw[:, None], x_ref, problem.y / sw])
+            xr, xf, yr = rotated[:, :p], rotated[:, p:2 * p], rotated[:, -1]
+            ql = q[:, None] * lam[None, :]
+            wt = 1.0 / (1.0 + ql)  # (n_q, m): the inverse covariance in the eigenbasis
+            # normal equations for all q at once: sum over m of wt[q, m] (outer products of rows)
+            normal = (wt @ _outer_rows(xr)).reshape(-1, p, p)
+            rhs = wt @ (xr * yr[:, None])
+            cov = np.linalg.inv(normal)
+            b = (cov @ rhs[:, :, None])[:, :, 0]
+            quad = wt @ yr**2 - np.sum(rhs * b, axis=1)
+            logdet = np.log1p(ql).sum(axis=1)
+            reml = np.linalg.slogdet((wt @ _outer_rows(xf)).reshape(-1, p, p))[1]
+            nll[i] = 0.5 * (quad + logdet + reml)
+            usable[i] = np.all(np.isfinite(b), axis=1) & np.all(np.diagonal(cov, axis1=1, axis2=2) > 0, axis=1)
+        # nodes where the normal equations are singular (drift and static bias collinear) drop out
+        bad = ~(np.isfinite(nll) & usable)
+        if bad.all():
+            raise linalg.LinAlgError("no usable node in the profile grid")
+        nll[bad] = nll[~bad].max() + 1e3
+        fine = np.linspace(log_tc_nodes[0], log_tc_nodes[-1], n_fine)
+        self.nll = PchipInterpolator(log_tc_nodes, nll, axis=0)(fine)  # monotone: no spurious minima
+        self.nll_min = float(self.nll.min())
+        self.s = np.sqrt(q)
+
+    def drift_noise(self, rise: float = _RISE_95, z: float = 1.96) -> tuple[float, float]:
+        """Restricted-ML estimate of sqrt(q) (T_c profiled out) and its std: 95 % interval half-width / 1.96.
+
+        At the bound q = 0 the interval is one-sided; its full width then enters the half-width.
+        """
+        prof = self.nll.min(axis=0) - self.nll_min
+        i = int(np.argmin(prof))
+        est = float(self.s[i])
+        if 0 < i < len(prof) - 1:
+            # parabola through the minimum and its neighbours, in log q
+            a, b, c = prof[i - 1], prof[i], prof[i + 1]
+            den = a - 2 * b + c
+            if den > 0:
+                est = float(self.s[i] * np.exp(0.5 * 0.5 * (_GRID_LOG_Q[1] - _GRID_LOG_Q[0]) * (a - c) / den))
+        lo, hi = _edges(self.s, prof, i, rise)
+        return est, (hi - lo) / (2.0 * z)
+
+
+def _outer_rows(x: np.ndarray) -> np.ndarray:
+    """Outer product of each row of ``x`` (m, p) with itself, flattened to (m, p * p)."""
+    return (x[:, :, None] * x[:, None, :]).reshape(x.shape[0], -1)
+
+
+def _edges(x: np.ndarray, f: np.ndarray, i0: int, rise: float) -> tuple[float, float]:
+    """Where ``f`` (excess of a negative log-likelihood over its minimum at ``x[i0]``) first exceeds ``rise``.
+
+    Linear interpolation between grid points; a side that never rises that much ends at the grid's end.
+    """
+    out = []
+    for step in (-1, 1):
+        i = i0
+        while 0 <= i + step < len(x) and f[i + step] <= rise:
+            i += step
+        j = i + step
+        if 0 <= j < len(x):
+            out.append(float(x[i] + (x[j] - x[i]) * (rise - f[i]) / (f[j] - f[i])))
+        else:
+            out.append(float(x[i]))
+    return out[0], out[1]
+
+
 def _optimize(problem: _Problem, log_tc_max: float) -> np.ndarray:
     """Coarse grid over (log T_c, log q), then Nelder-Mead within bounds."""
     grid_tc = np.linspace(np.log(5.0), log_tc_max, 10)
@@ -203,10 +305,12 @@ def fit_axis(
     theta_q = theta if resolved else np.array([theta[0], _optimize_q(problem, theta)])
     q = problem.q0 * float(np.exp(theta_q[1]))
     # The stochastic drift q is often poorly determined (a Gauss-Markov process slower than
-    # the record looks like a random offset and trend). ML underestimates it, and with it
-    # every other uncertainty, so uncertainties are evaluated at the upper end of q's
-    # 95 % profile interval. The std of sqrt(q) is that interval's half-width / 1.96 (the same as
-    # the 1-sigma half-width for a Gaussian likelihood, wider when it is skewed by the q = 0 bound).
+    # the record looks like a random offset and trend) and ML underestimates it. With a resolved
+    # drift, the stds of the linear parameters and sqrt(q) come from profile likelihoods over
+    # (T_c, q) (:class:`_ProfileGrid`), the std of T_c from its profile at the upper end of q's
+    # 95 % interval (at the fitted T_c). Without, everything is evaluated at that upper end, and the
+    # std of sqrt(q) is the interval's half-width / 1.96 (the 1-sigma half-width for a Gaussian
+    # likelihood, wider when it is skewed by the q = 0 bound).
     def profile_q(u: float) -> float:
         return problem.nll(np.array([theta_q[0], u]))
 
@@ -214,6 +318,7 @@ def fit_axis(
     sq = np.sqrt(problem.q0 * np.exp(np.array([q_lo95, q_hi95])))
     sq_std = float((sq[1] - sq[0]) / (2 * 1.96))
     q_unc = problem.q0 * float(np.exp(q_hi95))
+    drift_noise = float(np.sqrt(q))
     if resolved:
         nll, beta, _, _ = full.solve(tc, q)
         step = 1e-4 * tc
@@ -228,6 +333,21 @@ def fit_axis(
                                    _LOG_TC_MIN, log_tc_max + 1.0)
         tc_std = 0.5 * float(np.exp(hi) - np.exp(lo))
         residual = y - full.columns(tc) @ beta
+        # sqrt(q) and its std from the restricted likelihood profiled over T_c (nodes over 2.5 times
+        # T_c's asymmetric 1-sigma profile interval). The stds of (beta, d) stay at q's upper edge:
+        # profiling them over T_c too made them 100x the actual error where the drift is tiny and a
+        # long T_c trades b_stat against b_drift (see tests/test_fit_recovery.py).
+        lt0 = float(np.log(tc))
+        below, above = max(lt0 - lo, 0.03), max(hi - lt0, 0.03)
+        steps = np.linspace(0.0, 2.5, 4)
+        nodes = np.concatenate([lt0 - below * steps[:0:-1], lt0 + above * steps])
+        try:
+            grid = _ProfileGrid(full, np.unique(np.clip(nodes, _LOG_TC_MIN, log_tc_max + 1.0)), tc)
+            profile_sq = grid.drift_noise()
+        except (linalg.LinAlgError, ValueError):  # keep the fixed-T_c values
+            profile_sq = (drift_noise, sq_std)
+        if np.all(np.isfinite(profile_sq)) and profile_sq[1] > 0:
+            drift_noise, sq_std = profile_sq
     else:
         # No significant drift: report d = 0 and the level from the model without drift,
         # widening the uncertainties by what an unresolved drift could hide. T_c is not
@@ -258,7 +378,7 @@ def fit_axis(
         beta_cov=beta_cov,
         tc_s=tc,
         tc_std_s=tc_std,
-        drift_noise=float(np.sqrt(q)),
+        drift_noise=drift_noise,
         drift_noise_std=sq_std,
         drift_resolved=resolved,
         nll=nll,
