@@ -98,3 +98,44 @@ def test_attitude_reproduces_the_rig() -> None:
     err = np.einsum("nij,nik->njk", rot, truth)
     angle = np.degrees(np.arccos(np.clip((np.trace(err, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)))
     assert angle.max() < 1.0
+
+
+def test_eigen_likelihood_matches_cholesky() -> None:
+    """The q profile's diagonalized likelihood equals the direct Cholesky one (same constant)."""
+    from station.diagnose.select import SensorProblem
+
+    res = simulate_session(11, plan=PLAN)
+    baseline = fit_baseline(res.session)
+    prob = SensorProblem(baseline, baseline.gyro)
+    for k in range(3):
+        q0 = float(np.median(prob.white[:, k]))
+        q, nll = prob._profile_q(k, 0.0, None)
+        assert nll == pytest.approx(prob._axis_nll(k, q, 0.0, None), abs=1e-6)
+        # the profile is a minimum over q
+        for f in (0.0, 0.3, 3.0):
+            assert nll <= prob._axis_nll(k, q * f if q > 0 else q0 * f, 0.0, None) + 1e-6
+
+
+def test_random_walk_below_the_noise_is_found() -> None:
+    """A bias random walk of 1e-4 m/s^2/sqrt(s) (gyro 5e-4 deg/s/sqrt(s)): ~3 mm/s^2 and 0.013 deg/s over
+    the record, below one sample's noise; found on the gyro with its density, and nothing else named."""
+    res = simulate_session(12, plan=PLAN, effects=Effects(bias_random_walk=1e-4))
+    report = diagnose(res.session).report
+    walks = [f for f in report["findings"] if f["effect"] == "bias_random_walk"]
+    assert {f["sensor"] for f in walks} >= {"gyro"}
+    assert {f["effect"] for f in report["findings"]} == {"bias_random_walk"}
+    gyro = next(f for f in walks if f["sensor"] == "gyro")
+    density = gyro["parameters"]["density"]["value"]  # deg/s/sqrt(s)
+    assert 0.3 * 5e-4 < density < 3.0 * 5e-4
+
+
+def test_temperature_course_shaped_like_the_warmup_is_called_inseparable() -> None:
+    """Self-heating is an exponential like eq. 3's warm-up: without a temperature bias, nothing is found,
+    and the report says that this recording cannot tell the two apart, and which rig step would."""
+    report = _run("", 13)
+    assert report["findings"] == []
+    pairs = [e for e in report["inseparable"] if "temperature_bias" in e["effects"]]
+    assert pairs
+    for e in pairs:
+        assert e["evidence"]["r2_temperature_vs_warmup"] > 0.98
+        assert e["rig_step"]

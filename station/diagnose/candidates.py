@@ -107,15 +107,32 @@ def earth_rate_world(latitude_deg: float, heading_deg: float) -> np.ndarray:
     return EARTH_RATE_RADPS * (math.cos(lat) * north + np.array([0.0, 0.0, math.sin(lat)]))
 
 
+def _quat_mul(p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Hamilton products ``p q`` of quaternions (n, 4), scalar last (the rotation q, then p)."""
+    pv, pw = p[:, :3], p[:, 3:]
+    qv, qw = q[:, :3], q[:, 3:]
+    return np.concatenate([pw * qv + qw * pv + np.cross(pv, qv), pw * qw - np.sum(pv * qv, axis=1, keepdims=True)],
+                          axis=1)
+
+
+def _quat_matrix(q: np.ndarray) -> np.ndarray:
+    """Rotation matrices (n, 3, 3) of quaternions (n, 4), scalar last (normalized here)."""
+    q = q / np.linalg.norm(q, axis=1, keepdims=True)
+    x, y, z, w = q.T
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], axis=1),
+        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], axis=1),
+        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], axis=1),
+    ], axis=1)
+
+
 def attitude(b: Baseline) -> np.ndarray | None:
     """Sensor-to-world rotations (n, 3, 3) of the station's rig, from the rest pose (yaw 0) and the
     integrated rate reference; None when the first segment's pose is not one of the rig's six poses.
 
-    The product of the per-sample body-frame increments ``exp([w dt]x)`` is formed by a
-    parallel prefix scan (log2 n vectorized steps).
+    The product of the per-sample body-frame increments ``exp([w dt]x)`` (quaternions) is formed
+    by a parallel prefix scan (log2 n vectorized steps).
     """
-    from scipy.spatial.transform import Rotation
-
     session = b.session
     f0 = np.nan_to_num(session.ref_accel_mps2[0])
     if not np.any(f0):
@@ -125,21 +142,22 @@ def attitude(b: Baseline) -> np.ndarray | None:
     if not start:
         return None
     roll, pitch = POSE_ANGLES_DEG[start[0]]
-    r0 = Rotation.from_matrix(rotation_matrices(np.array(roll * _DEG), np.array(pitch * _DEG), np.array(0.0)))
+    r0 = rotation_matrices(np.array(roll * _DEG), np.array(pitch * _DEG), np.array(0.0)).reshape(3, 3)
     w = np.nan_to_num(session.ref_gyro_radps)
     dt = np.diff(session.t_s, prepend=session.t_s[0])
     wm = w.copy()
     wm[1:] = 0.5 * (w[1:] + w[:-1])  # trapezoid rate over each interval
-    cum = Rotation.from_rotvec(wm * dt[:, None])
+    rotvec = wm * dt[:, None]
+    angle = np.linalg.norm(rotvec, axis=1, keepdims=True)
+    # sin(a/2)/a, with its limit 1/2 - a^2/48 for small a
+    half = np.where(angle > 1e-6, np.sin(0.5 * angle) / np.where(angle > 1e-6, angle, 1.0), 0.5 - angle**2 / 48.0)
+    quat = np.concatenate([rotvec * half, np.cos(0.5 * angle)], axis=1)
     d = 1
     n = len(dt)
-    quat = cum.as_quat()
     while d < n:
-        left = Rotation.from_quat(quat[:-d])
-        right = Rotation.from_quat(quat[d:])
-        quat = np.concatenate([quat[:d], (left * right).as_quat()])
+        quat = np.concatenate([quat[:d], _quat_mul(quat[:-d], quat[d:])])
         d *= 2
-    return (r0 * Rotation.from_quat(quat)).as_matrix()
+    return np.einsum("ij,njk->nik", r0, _quat_matrix(quat))
 
 
 def _earth_rotation(b: Baseline, s: SensorData) -> np.ndarray | None:
@@ -226,7 +244,8 @@ def engineering(name: str, sensor: str, theta: np.ndarray, cov: np.ndarray) -> d
 
 #: The rig step that separates a candidate from the base model or from another candidate.
 RIG_STEPS: dict[str, str] = {
-    "temperature_bias": "a longer still rest (or a warm-up in a climate chamber) so temperature and drift differ",
+    "temperature_bias": "a temperature course that is not one exponential like the warm-up: a climate-chamber "
+                        "temperature step or ramp during a long still rest",
     "temperature_scale": "repeat poses or rate steps late in the session, when the unit is warm",
     "g_sensitivity": "rate steps with the spin axis horizontal, or poses at two headings",
     "scale_nonlinearity": "steps at a second input magnitude (more rates, or tilted poses for the accelerometer)",
