@@ -13,19 +13,25 @@ concealed magnitude, with the effect's size relative to the white noise of a sin
 recordings; the effect signal is the exact difference of the simulation with and without it).
 
 Run: ``/work/venv/bin/python benchmarks/bench_diagnose.py [--seeds 10] [--clean 50] [--pairs 10]
-[--sweep [--sweep-seeds 5] [--sweep-effects a,b]]``
+[--sweep [--sweep-seeds 5] [--sweep-effects a,b]] [--chamber 10]``
+
+``--chamber N`` repeats the temperature_bias study with the rig step the diagnosis names when it
+reports temperature and warm-up as inseparable (a climate-chamber temperature cycle), and checks
+N clean recordings made with that step for false findings.
 """
 
 from __future__ import annotations
 
 import argparse
 import time
+from dataclasses import replace
 
 import numpy as np
 
 from station.diagnose import NAMES, diagnose
 from station.sim.effects import Effects
 from station.sim.plan import RigPlan, random_plan
+from station.sim.sensor_class import TABLE1, SensorClass
 from station.sim.session_sim import simulate_session
 
 #: Magnitudes (units of station.sim.effects.Effects) below the white noise of a single sample
@@ -44,10 +50,12 @@ CONCEALED: dict[str, float] = {
 }
 
 
-def run(effects: dict[str, float], seed: int) -> tuple[set[str], list[float], float]:
+def run(
+    effects: dict[str, float], seed: int, sensor_class: SensorClass = TABLE1
+) -> tuple[set[str], list[float], float]:
     rng = np.random.default_rng(10_000 + seed)
     plan = random_plan(rng)
-    res = simulate_session(seed, plan=plan, effects=Effects(**effects))
+    res = simulate_session(seed, plan=plan, effects=Effects(**effects), sensor_class=sensor_class)
     t0 = time.perf_counter()
     d = diagnose(res.session)
     dt = time.perf_counter() - t0
@@ -103,11 +111,33 @@ def sweep(names: list[str], seeds: int) -> None:
         print(f"{name:20s} " + " ".join(cells), flush=True)
 
 
+#: The rig step the diagnosis names for temperature_bias: a climate-chamber cycle, +-2 K with a 5 min period.
+CHAMBER = replace(TABLE1, ambient_cycle_k=2.0, ambient_cycle_period_s=300.0)
+
+
+def chamber(seeds: int) -> None:
+    """temperature_bias (concealed magnitude) with and without the separating rig step, and clean
+    recordings with the step (false findings)."""
+    print(f"\ntemperature_bias with the rig step the diagnosis names (climate chamber +-2 K, 300 s period), "
+          f"{seeds} recordings each")
+    for label, cls, mag in (("without the step", TABLE1, CONCEALED["temperature_bias"]),
+                            ("with the step", CHAMBER, CONCEALED["temperature_bias"]),
+                            ("with the step, no effect", CHAMBER, 0.0)):
+        hits, other = 0, 0
+        for s in range(seeds):
+            named, _, _ = run({"temperature_bias": mag} if mag else {}, 100 + s, cls)
+            hits += "temperature_bias" in named
+            other += bool(named - {"temperature_bias"})
+            print(f"  {label} seed {s}: named {sorted(named)}", flush=True)
+        print(f"{label:26s} temperature_bias named {hits}/{seeds}, other findings in {other}/{seeds}", flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--seeds", type=int, default=10)
     ap.add_argument("--clean", type=int, default=50)
     ap.add_argument("--pairs", type=int, default=10)
+    ap.add_argument("--chamber", type=int, default=0, help="recordings for the temperature rig-step study")
     ap.add_argument("--sweep", action="store_true", help="also the detection rate against magnitude")
     ap.add_argument("--sweep-seeds", type=int, default=5)
     ap.add_argument("--sweep-effects", default=",".join(NAMES), help="comma-separated effect names")
@@ -158,16 +188,19 @@ def main() -> None:
     print(f"pairs both found: {pair_ok}/{args.pairs}")
     if improvements:
         print(f"median fit improvement (block chi^2 before/after, worst axis): {np.median(improvements):.3f}")
-    print(f"diagnosis time per recording: median {np.median(times):.2f} s, max {np.max(times):.2f} s")
+    if times:
+        print(f"diagnosis time per recording: median {np.median(times):.2f} s, max {np.max(times):.2f} s")
 
     plan = RigPlan(sample_rate_hz=100.0)  # default plan: ~14 min; stretch the rest to 15 min total
-    plan = RigPlan(sample_rate_hz=100.0, rest_s=plan.rest_s + 60.0)
+    plan = RigPlan(sample_rate_hz=100.0, rest_s=plan.rest_s + 85.0)
     res = simulate_session(1, plan=plan)
     t0 = time.perf_counter()
     diagnose(res.session)
     dt = time.perf_counter() - t0
     print(f"speed: {res.session.duration_s / 60:.1f}-minute {plan.sample_rate_hz:.0f} Hz recording "
           f"({len(res.session)} samples) diagnosed in {dt:.2f} s (target < 10 s)")
+    if args.chamber:
+        chamber(args.chamber)
     if args.sweep:
         sweep([n for n in args.sweep_effects.split(",") if n], args.sweep_seeds)
 

@@ -244,8 +244,8 @@ def engineering(name: str, sensor: str, theta: np.ndarray, cov: np.ndarray) -> d
 
 #: The rig step that separates a candidate from the base model or from another candidate.
 RIG_STEPS: dict[str, str] = {
-    "temperature_bias": "a temperature course that is not one exponential like the warm-up: a climate-chamber "
-                        "temperature step or ramp during a long still rest",
+    "temperature_bias": "a temperature course no warm-up exponential can follow: a climate-chamber cycle (e.g. "
+                        "+-2 K with a 5 min period) during the session; a ramp is not enough (a slow warm-up is a ramp too)",
     "temperature_scale": "repeat poses or rate steps late in the session, when the unit is warm",
     "g_sensitivity": "rate steps with the spin axis horizontal, or poses at two headings",
     "scale_nonlinearity": "steps at a second input magnitude (more rates, or tilted poses for the accelerometer)",

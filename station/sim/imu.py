@@ -65,16 +65,26 @@ class Environment:
         ambient_degc: ambient temperature at power-on (degC); the unit starts at it, and it
             is the reference ``T_ref`` of the temperature effects.
         ambient_rate_k_per_s: slow linear drift of the ambient temperature (K/s).
+        cycle_k, cycle_period_s: climate-chamber cycle ``cycle_k sin(2 pi t / cycle_period_s)`` (K, s).
     """
 
     ambient_degc: float = 23.0
     ambient_rate_k_per_s: float = 0.0
+    cycle_k: float = 0.0
+    cycle_period_s: float = 600.0
 
     @classmethod
     def draw(cls, sensor_class: SensorClass, rng: np.random.Generator) -> Environment:
         amb = float(rng.uniform(*sensor_class.ambient_degc))
         rate = float(rng.uniform(*sensor_class.ambient_rate_k_per_h)) / 3600.0
-        return cls(amb, rate)
+        return cls(amb, rate, sensor_class.ambient_cycle_k, sensor_class.ambient_cycle_period_s)
+
+    def ambient(self, t_s: np.ndarray) -> np.ndarray:
+        """Ambient temperature (degC) at ``t_s`` (s since power-on)."""
+        out = self.ambient_degc + self.ambient_rate_k_per_s * t_s
+        if self.cycle_k:
+            out = out + self.cycle_k * np.sin(2.0 * np.pi * t_s / self.cycle_period_s)
+        return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -273,7 +283,7 @@ class ImuModel:
         if self._temperature is not None:
             return np.asarray(self._temperature(t), dtype=float)
         env, u = self.environment, self.truth
-        return env.ambient_degc + env.ambient_rate_k_per_s * t + u.self_heating_k * -np.expm1(-t / u.self_heating_tau_s)
+        return env.ambient(t) + u.self_heating_k * -np.expm1(-t / u.self_heating_tau_s)
 
     def render(
         self, kin: Kinematics, gravity_mps2: float, *, specific_force_mps2: np.ndarray | None = None

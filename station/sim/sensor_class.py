@@ -55,6 +55,8 @@ class SensorClass:
             slow linear ambient drift; self_heating_k (K) and self_heating_tau_s (s):
             the sensor warms by ``dT (1 - exp(-t/tau))`` after power-on;
             temp_noise_std_k (K) and temp_lsb_k (K): temperature-sensor noise and resolution.
+        ambient_cycle_k (K) and ambient_cycle_period_s (s): a climate-chamber program on top of
+            the room, ``A sin(2 pi t / P)`` from power-on; 0 (default) for an ordinary room.
     """
 
     name: str = "table1"
@@ -84,6 +86,8 @@ class SensorClass:
     self_heating_tau_s: Range = (200.0, 600.0)
     temp_noise_std_k: float = 0.05
     temp_lsb_k: float = 1.0 / 256.0
+    ambient_cycle_k: float = 0.0
+    ambient_cycle_period_s: float = 600.0
 
 
 TABLE1 = SensorClass()
