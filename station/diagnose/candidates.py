@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from station.diagnose import pose_tilt
 from station.diagnose.residuals import Baseline, SensorData
 from station.sim.effects import EARTH_RATE_RADPS, GYRO_NONLINEARITY_REF_RADPS, STANDARD_GRAVITY
 from station.sim.geometry import POSE_ANGLES_DEG, rotation_matrices, up_vector
@@ -26,9 +27,10 @@ from station.sim.geometry import POSE_ANGLES_DEG, rotation_matrices, up_vector
 NAMES = (
     "temperature_bias", "temperature_scale", "g_sensitivity", "scale_nonlinearity", "scale_asymmetry",
     "lever_arm", "earth_rotation", "time_offset", "bias_random_walk", "outliers",
+    "pose_tilt",  # ours: the rig's (or a hand's) poses are not where the reference says
 )
 #: Candidates that are mean terms (regressors); the others are tested by select.py directly.
-MEAN_CANDIDATES = NAMES[:8]
+MEAN_CANDIDATES = (*NAMES[:8], "pose_tilt")
 
 _DEG = math.pi / 180.0
 
@@ -197,6 +199,7 @@ LIBRARY: dict[str, Candidate] = {
         Candidate("lever_arm", ("accel",), _lever_arm, "accelerometer off the rotation centre: w x (w x r) + a x r"),
         Candidate("earth_rotation", ("gyro",), _earth_rotation, "Earth rate at the site's latitude and heading"),
         Candidate("time_offset", ("accel", "gyro"), _time_offset, "sensor samples late against the rig reference"),
+        Candidate(pose_tilt.NAME, pose_tilt.SENSORS, pose_tilt.build, pose_tilt.DESCRIPTION),
     )
 }
 
@@ -237,6 +240,8 @@ def engineering(name: str, sensor: str, theta: np.ndarray, cov: np.ndarray) -> d
         out = pack(1.0, "multiple of the Earth rate")
         out["deg_per_h"] = round(float(theta[0] * EARTH_RATE_RADPS / _DEG * 3600.0), 4)
         return out
+    if name == "pose_tilt":
+        return pose_tilt.engineering(theta, cov)
     if name == "time_offset":
         return pack(1e3, "ms")
     raise KeyError(name)
@@ -245,7 +250,8 @@ def engineering(name: str, sensor: str, theta: np.ndarray, cov: np.ndarray) -> d
 #: The rig step that separates a candidate from the base model or from another candidate.
 RIG_STEPS: dict[str, str] = {
     "temperature_bias": "a temperature course no warm-up exponential can follow: a climate-chamber cycle (e.g. "
-                        "+-2 K with a 5 min period) during the session; a ramp is not enough (a slow warm-up is a ramp too)",
+                        "+-2 K with a 5 min period) during the session; a ramp is not enough (a slow warm-up "
+                        "is a ramp too)",
     "temperature_scale": "repeat poses or rate steps late in the session, when the unit is warm",
     "g_sensitivity": "rate steps with the spin axis horizontal, or poses at two headings",
     "scale_nonlinearity": "steps at a second input magnitude (more rates, or tilted poses for the accelerometer)",
@@ -255,6 +261,7 @@ RIG_STEPS: dict[str, str] = {
     "time_offset": "rate-table ramps with higher angular acceleration",
     "bias_random_walk": "a still rest several correlation times long",
     "outliers": "a longer still rest",
+    "pose_tilt": pose_tilt.RIG_STEP,
 }
 
 __all__ = [

@@ -47,6 +47,7 @@ from typing import Any
 
 import numpy as np
 
+from station.diagnose import pose_tilt
 from station.diagnose.candidates import attitude, earth_rate_world
 from station.diagnose.residuals import SENSORS, Baseline, SensorData
 from station.errors import FitError
@@ -59,7 +60,7 @@ from station.sim.sensor_class import TriadTruth, UnitTruth
 #: Effects with a mean signal: simulated with their fitted parameters.
 SIMULATED = (
     "temperature_bias", "temperature_scale", "g_sensitivity", "scale_nonlinearity", "scale_asymmetry",
-    "lever_arm", "earth_rotation", "time_offset",
+    "lever_arm", "earth_rotation", "time_offset", "pose_tilt",
 )
 #: Effects that change only the noise, not the expected output.
 STOCHASTIC = ("bias_random_walk", "outliers")
@@ -235,8 +236,11 @@ def _triads(baseline: Baseline) -> dict[str, Triad]:
     return out
 
 
-def _effect_truth(drive: Drive, effects: Iterable[FittedEffect]) -> tuple[EffectTruth, dict[str, float]]:
-    """The simulator's coefficients (SI) for the base gyro G plus ``effects``, and the time offset per sensor."""
+def _effect_truth(
+    drive: Drive, effects: Iterable[FittedEffect]
+) -> tuple[EffectTruth, dict[str, float], np.ndarray | None]:
+    """The simulator's coefficients (SI) for the base gyro G plus ``effects``, the time offset per sensor, and
+    the change of the true specific force (m/s^2, (n, 3)) by fitted pose tilts (None without)."""
     c: dict[str, np.ndarray] = {
         name: np.zeros(3) for name in (
             "accel_temp_bias", "gyro_temp_bias", "accel_temp_scale", "gyro_temp_scale", "accel_nonlinearity",
@@ -245,6 +249,7 @@ def _effect_truth(drive: Drive, effects: Iterable[FittedEffect]) -> tuple[Effect
     g_sens = np.nan_to_num(np.asarray(drive.baseline.params.gyro.g_sensitivity, dtype=float)).copy()
     offsets = dict.fromkeys(SENSORS, 0.0)
     session = drive.baseline.session
+    tilt_force: np.ndarray | None = None
     for e in effects:
         th = np.asarray(e.theta, dtype=float)
         s = e.sensor
@@ -268,9 +273,11 @@ def _effect_truth(drive: Drive, effects: Iterable[FittedEffect]) -> tuple[Effect
             c["earth_rate_radps"] += float(th[0]) * world
         elif e.effect == "time_offset":
             offsets[s] += float(th[0])
+        elif e.effect == "pose_tilt":  # the poses' true gravity is f_ref x phi off the reference
+            tilt_force = pose_tilt.specific_force_change(drive.baseline, drive.baseline.accel, th)
         else:
             raise KeyError(e.effect)
-    return EffectTruth(g_sensitivity=g_sens, **c), offsets
+    return EffectTruth(g_sensitivity=g_sens, **c), offsets, tilt_force
 
 
 class Drive:
@@ -386,10 +393,11 @@ class Drive:
 
     def simulate(
         self, triads: dict[str, Triad], effect_truth: EffectTruth, time_offset_s: dict[str, float],
-        sensors: Sequence[str] = SENSORS,
+        sensors: Sequence[str] = SENSORS, tilt_force: np.ndarray | None = None,
     ) -> dict[str, np.ndarray]:
         """Noise-free simulator output (n, 3) of ``sensors`` on the recording's motion, temperature and time
-        stamps; one render per distinct time offset among them."""
+        stamps; one render per distinct time offset among them. ``tilt_force``: added to the specific
+        force (m/s^2, (n, 3)), the fitted pose tilts."""
         session = self.baseline.session
         z3 = np.zeros(3)
         shapes = EffectShapes(*([z3] * 4), np.zeros((3, 3)), *([z3] * 5))
@@ -402,7 +410,8 @@ class Drive:
             model = ImuModel(unit, effect_truth=effect_truth, environment=self.environment,
                              temperature_degc=self.temperature)
             kin, f = self.motion(delta, need_rotation)
-            raw = model.render(kin, session.gravity_mps2, specific_force_mps2=f)
+            raw = model.render(kin, session.gravity_mps2,
+                               specific_force_mps2=f if tilt_force is None else f + tilt_force)
             for s in sensors:
                 if time_offset_s[s] == delta:
                     out[s] = raw.accel_mps2 if s == "accel" else raw.gyro_radps
@@ -469,10 +478,10 @@ def run_model(
     """
     baseline = drive.baseline
     triads = _triads(baseline)
-    et, offsets = _effect_truth(drive, effects)
+    et, offsets, tilt_force = _effect_truth(drive, effects)
     out: dict[str, np.ndarray] | None = None
     if effects or not refit:
-        out = drive.simulate(triads, et, offsets, sensors)
+        out = drive.simulate(triads, et, offsets, sensors, tilt_force)
         res = {s: drive.residual(s, out[s]) for s in sensors}
     else:
         res = {s: baseline.sensor(s).y for s in sensors}
@@ -480,7 +489,7 @@ def run_model(
         fits = {s: _refit(drive, s, triads[s], res[s]) for s in sensors}
         triads = {**triads, **{s: fits[s][0] for s in sensors}}
         if render_refit:
-            out = drive.simulate(triads, et, offsets, sensors)
+            out = drive.simulate(triads, et, offsets, sensors, tilt_force)
             res = {s: drive.residual(s, out[s]) for s in sensors}
         else:
             out = None

@@ -55,6 +55,9 @@ COLLINEAR_R2 = 0.9
 #: the paper reports outliers on the accelerometer; none are expected on the gyroscope.
 OUTLIER_ALLOWANCE = {"accel": 2e-4, "gyro": 1e-5}
 FOLDS = 4
+#: Relative singular-value cutoff of the candidate and held-out least squares: a candidate's columns that
+#: the base terms already span (e.g. half of a pose tilt is a cross-axis term of M) get no wild coefficients.
+RCOND = 1e-10
 #: A temperature course that an exponential warm-up (eq. 3) explains to this R^2 (after the other base terms)
 #: cannot be told from the warm-up in this recording.
 TEMPERATURE_R2 = 0.98
@@ -261,7 +264,7 @@ class SensorProblem:
         """
         chols, yw = self.whitened()
         x0, _ = self.design(chols, self.accepted)
-        b0, *_ = linalg.lstsq(x0, yw, check_finite=False)
+        b0, *_ = linalg.lstsq(x0, yw, cond=RCOND, check_finite=False)
         chi0 = float(np.sum((yw - x0 @ b0) ** 2))
         r0 = self._rank(x0)
         saved = None
@@ -279,7 +282,7 @@ class SensorProblem:
             chols, yw = self.whitened()
         x1, _ = self.design(chols, [*self.accepted, zb])
         gain_rank = self._rank(x1) - r0
-        b1, *_ = linalg.lstsq(x1, yw, check_finite=False)
+        b1, *_ = linalg.lstsq(x1, yw, cond=RCOND, check_finite=False)
         chi1 = float(np.sum((yw - x1 @ b1) ** 2))
         gain = chi0 - chi1
         if saved is not None:
@@ -341,7 +344,7 @@ class SensorProblem:
                     rows = slice(k * ntr, (k + 1) * ntr)
                     x[rows] = linalg.solve_triangular(ch, xk[tr], lower=True, check_finite=False)
                     y[rows] = linalg.solve_triangular(ch, self.sd.y[tr, k], lower=True, check_finite=False)
-                beta, *_ = linalg.lstsq(x, y, check_finite=False)
+                beta, *_ = linalg.lstsq(x, y, cond=RCOND, check_finite=False)
                 for k in range(3):
                     r = self.sd.y[:, k] - xte[k] @ beta
                     ch = chols[k]

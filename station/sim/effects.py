@@ -21,6 +21,7 @@ from dataclasses import asdict, dataclass, fields
 import numpy as np
 
 from station.errors import StationError
+from station.sim.geometry import AXIS_INDEX, POSE_ANGLES_DEG
 
 #: Gyro magnitude per accelerometer magnitude for two-sensor effects, (deg/s) per (m/s^2).
 #: Typical MEMS data sheets pair an accelerometer tempco of ~0.2 mg/K (~0.002 m/s^2/K) with a gyro
@@ -34,6 +35,10 @@ STANDARD_GRAVITY = 9.80665
 GYRO_NONLINEARITY_REF_RADPS = math.radians(200.0)
 
 _DEG = math.pi / 180.0
+#: The six gravity poses in the row order of the ``pose_tilt`` arrays.
+POSES: tuple[str, ...] = tuple(POSE_ANGLES_DEG)
+_SHAPE_SHAPES = {"g_sensitivity": (3, 3), "pose_tilt": (len(POSES), 3)}
+_SHAPE_TRUTH = {"g_sensitivity": (3, 3), "pose_tilt_rad": (len(POSES), 3)}
 
 
 class EffectError(StationError):
@@ -79,6 +84,12 @@ class Effects:
             deg/s/sqrt(s).
         outliers: extra outlier probability per sample and axis, both sensors, on top of the
             sensor class's own; outlier size as set by the sensor class.
+        pose_tilt: rms tilt (deg) of the rig's actual attitude in each still gravity pose against
+            the commanded one: per pose (each of the six, see
+            :data:`station.sim.geometry.POSE_ANGLES_DEG`) a small rotation of the sensor about the
+            two axes perpendicular to that pose's up axis, each component normal with std
+            ``pose_tilt / sqrt(2)`` times the unit's shape (so the tilt's rms size is ``pose_tilt``).
+            It acts in ``pose`` segments only; the reference columns keep the nominal +-g.
     """
 
     temperature_bias: float = 0.0
@@ -91,6 +102,7 @@ class Effects:
     time_offset: float = 0.0
     bias_random_walk: float = 0.0
     outliers: float = 0.0
+    pose_tilt: float = 0.0
 
     _SIGNED = ("time_offset", "earth_rotation")
 
@@ -179,6 +191,7 @@ class Effects:
             accel_random_walk=self.bias_random_walk,
             gyro_random_walk=self.bias_random_walk * g_unit,
             extra_outlier_probability=self.outliers,
+            pose_tilt_rad=self.pose_tilt * _DEG * shapes.pose_tilt,
         )
 
 
@@ -188,6 +201,10 @@ class EffectShapes:
 
     Vectors (3,) have components of magnitude in [0.5, 1] with random signs;
     ``g_sensitivity`` is (3, 3) likewise; ``lever_arm`` is a unit vector (uniform on the sphere).
+    ``pose_tilt`` (6, 3): per pose in the order of :data:`POSES`, a rotation vector (sensor frame)
+    perpendicular to that pose's up axis, its two components normal with std ``1/sqrt(2)``
+    (rms length 1); zeros when not given. It is drawn from its own stream (:meth:`draw`), so
+    adding it changed no other draw.
     """
 
     accel_temp_bias: np.ndarray
@@ -200,15 +217,22 @@ class EffectShapes:
     accel_asymmetry: np.ndarray
     gyro_asymmetry: np.ndarray
     lever_arm: np.ndarray
+    pose_tilt: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         for f in fields(self):
-            shape = (3, 3) if f.name == "g_sensitivity" else (3,)
-            object.__setattr__(self, f.name, _ro(getattr(self, f.name), shape))
+            value = getattr(self, f.name)
+            if f.name == "pose_tilt" and value is None:
+                value = np.zeros((len(POSES), 3))
+            object.__setattr__(self, f.name, _ro(value, _SHAPE_SHAPES.get(f.name, (3,))))
 
     @classmethod
     def draw(cls, rng: np.random.Generator) -> EffectShapes:
-        """Draw a unit's shapes (fixed draw order: the same generator state gives the same shapes)."""
+        """Draw a unit's shapes (fixed draw order: the same generator state gives the same shapes).
+
+        ``pose_tilt`` comes from a child stream spawned from ``rng``'s seed sequence
+        (``rng.spawn``), which leaves ``rng``'s own draws, and so every other shape, unchanged.
+        """
 
         def signed(shape: tuple[int, ...]) -> np.ndarray:
             mag = rng.uniform(0.5, 1.0, size=shape)
@@ -220,9 +244,21 @@ class EffectShapes:
             if f.name == "lever_arm":
                 v = rng.standard_normal(3)
                 kwargs[f.name] = v / np.linalg.norm(v)
+            elif f.name == "pose_tilt":
+                kwargs[f.name] = _pose_tilt_shape(rng.spawn(1)[0])
             else:
                 kwargs[f.name] = signed((3, 3) if f.name == "g_sensitivity" else (3,))
         return cls(**kwargs)
+
+
+def _pose_tilt_shape(rng: np.random.Generator) -> np.ndarray:
+    """(6, 3): per pose of :data:`POSES`, normal components (std 1/sqrt(2)) on the two axes perpendicular to up."""
+    draws = rng.standard_normal((len(POSES), 2)) / math.sqrt(2.0)
+    out = np.zeros((len(POSES), 3))
+    for i, pose in enumerate(POSES):
+        perp = [k for k in range(3) if k != AXIS_INDEX[pose[1]]]
+        out[i, perp] = draws[i]
+    return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -248,6 +284,10 @@ class EffectTruth:
         accel_random_walk: bias random walk density (m/s^2/sqrt(s)), all axes.
         gyro_random_walk: bias random walk density (rad/s/sqrt(s)), all axes.
         extra_outlier_probability: added outlier probability per sample and axis.
+        pose_tilt_rad: per pose of :data:`POSES`, the rotation vector ``phi`` (rad, sensor frame,
+            perpendicular to the pose's up axis) of the sensor's actual attitude against the
+            commanded one, (6, 3): ``R_true = R_nominal exp([phi]x)``, so the specific force the
+            sensor feels is ``exp(-[phi]x) f_ref ~ f_ref + f_ref x phi``. Pose segments only.
 
     Temperature effects act on ``T - T_ref``, the true sensor temperature minus its
     value at power-on (:attr:`station.sim.imu.Environment.ambient_degc`).
@@ -268,12 +308,19 @@ class EffectTruth:
     accel_random_walk: float = 0.0
     gyro_random_walk: float = 0.0
     extra_outlier_probability: float = 0.0
+    pose_tilt_rad: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         for f in fields(self):
             value = getattr(self, f.name)
+            if f.name == "pose_tilt_rad" and value is None:
+                value = np.zeros((len(POSES), 3))
             if isinstance(value, float | int):
                 object.__setattr__(self, f.name, float(value))
             else:
-                shape = (3, 3) if f.name == "g_sensitivity" else (3,)
-                object.__setattr__(self, f.name, _ro(value, shape))
+                object.__setattr__(self, f.name, _ro(value, _SHAPE_TRUTH.get(f.name, (3,))))
+
+    def pose_tilts(self) -> dict[str, np.ndarray]:
+        """The non-zero pose tilts: pose name ('+x', ...) -> rotation vector (rad, sensor frame), (3,)."""
+        tilt = np.asarray(self.pose_tilt_rad)
+        return {pose: tilt[i] for i, pose in enumerate(POSES) if np.any(tilt[i])}

@@ -51,6 +51,16 @@ def rotation_matrices(roll: np.ndarray, pitch: np.ndarray, yaw: np.ndarray) -> n
     return r
 
 
+def rotation_vector_matrix(phi: np.ndarray) -> np.ndarray:
+    """Rotation matrix ``exp([phi]x)`` (3, 3) of the rotation vector ``phi`` (rad), (3,) (Rodrigues)."""
+    phi = np.asarray(phi, dtype=float)
+    angle = float(np.linalg.norm(phi))
+    k = np.array([[0.0, -phi[2], phi[1]], [phi[2], 0.0, -phi[0]], [-phi[1], phi[0], 0.0]])
+    if angle < 1e-12:
+        return np.eye(3) + k
+    return np.eye(3) + (np.sin(angle) / angle) * k + ((1.0 - np.cos(angle)) / angle**2) * (k @ k)
+
+
 @dataclass(frozen=True)
 class Kinematics:
     """What the sensor frame does at each sample time.

@@ -13,13 +13,21 @@ trajectory everything is rad, rad/s, rad/s^2.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from station.errors import StationError
 from station.session.model import Kind
-from station.sim.geometry import AXIS_INDEX, POSE_ANGLES_DEG, Kinematics, kinematics_from_angles, up_vector
+from station.sim.geometry import (
+    AXIS_INDEX,
+    POSE_ANGLES_DEG,
+    Kinematics,
+    kinematics_from_angles,
+    rotation_vector_matrix,
+    up_vector,
+)
 from station.sim.motion import AxisTrajectory
 
 _DEG = math.pi / 180.0
@@ -176,12 +184,33 @@ class RigTrajectory:
         states = [ax.state(t) for ax in (self.roll, self.pitch, self.yaw)]
         return tuple(np.stack([s[i] for s in states], axis=1) for i in range(3))  # type: ignore[return-value]
 
-    def kinematics(self, t_s: np.ndarray, time_offset_s: float = 0.0) -> Kinematics:
-        """Sensor kinematics at rig time ``t_s - time_offset_s``, stamped with ``t_s`` (sensor time)."""
+    def kinematics(
+        self, t_s: np.ndarray, time_offset_s: float = 0.0, pose_tilt_rad: Mapping[str, np.ndarray] | None = None
+    ) -> Kinematics:
+        """Sensor kinematics at rig time ``t_s - time_offset_s``, stamped with ``t_s`` (sensor time).
+
+        ``pose_tilt_rad`` (the ``pose_tilt`` effect, :meth:`station.sim.effects.EffectTruth.pose_tilts`):
+        pose name -> rotation vector ``phi`` (rad, sensor frame); in every ``pose`` segment of that
+        pose the sensor's attitude is ``R exp([phi]x)`` instead of the commanded ``R`` (the rig
+        stands still there, so body rate and angular acceleration stay as commanded: zero). Rest,
+        rate and move segments keep the commanded attitude. Without tilts (None or all zero) the
+        result is the commanded kinematics, bit for bit.
+        """
         t = np.asarray(t_s, dtype=float)
         angle, rate, accel = self.axis_states(t - time_offset_s)
         kin = kinematics_from_angles(t, angle, rate, accel)
-        return kin
+        tilts = {p: np.asarray(v, dtype=float) for p, v in (pose_tilt_rad or {}).items() if np.any(v)}
+        if not tilts:
+            return kin
+        idx = self.segment_of(t - time_offset_s)
+        rotation = kin.rotation.copy()
+        for i, seg in enumerate(self.segments):
+            if seg.kind != Kind.POSE or seg.up not in tilts:
+                continue
+            sel = idx == i
+            if np.any(sel):
+                rotation[sel] = rotation[sel] @ rotation_vector_matrix(tilts[seg.up])
+        return replace(kin, rotation=rotation)
 
     def segment_of(self, t_s: np.ndarray) -> np.ndarray:
         """Index into :attr:`segments` of each time (rig time, s); the last segment extends to the end."""

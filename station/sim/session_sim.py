@@ -71,7 +71,8 @@ def simulate_session(
     )
     traj = build_trajectory(plan)
     t = traj.sample_times()
-    raw = model.render(traj.kinematics(t, time_offset_s=model.time_offset_s), plan.gravity_mps2)
+    kin = traj.kinematics(t, time_offset_s=model.time_offset_s, pose_tilt_rad=model.effect_truth.pose_tilts())
+    raw = model.render(kin, plan.gravity_mps2)
     segment, kind = traj.labels(t)
     ref_f, ref_w = traj.reference(t)
     metadata = {

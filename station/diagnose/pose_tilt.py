@@ -1,0 +1,241 @@
+"""Candidate effect ``pose_tilt``: the rig's actual attitude in a still pose is not the nominal one.
+
+A rig (or a hand) that puts the unit in the six gravity poses states the nominal
+specific force ``f_ref = +-g`` along one sensor axis in its reference columns; the unit's
+actual attitude is off by a small rotation ``phi`` (sensor frame, perpendicular to the
+pose's up axis; a rotation about up does not change what the accelerometer feels). Its
+true input is then ``exp(-[phi]x) f_ref ~ f_ref + f_ref x phi``, so the accelerometer output
+changes by (eq. 1 with the tilted input)
+
+    dy = M (f_ref x phi) = sum_j phi_j M (f_ref x a_j)
+
+with ``a_1, a_2`` the two rotation axes of the pose (for the six standard poses the two
+other sensor axes) and M the base fit's misalignment matrix. Poses are told apart by the
+direction of their reference vector (within ``ALIGN_COS``); only samples in ``pose``
+segments are affected (a power-on rest or a rate step in the same orientation is taken as
+un-tilted, as in the simulator's ``pose_tilt`` effect).
+
+Identifiability, and the parameters. Six pose means give 6 x 3 = 18 numbers; the base model
+re-fits 12 of them (M's 9 entries and b's 3), so at most 6 of the 12 tilts can be told from
+the base model by the poses alone. For a pair of opposite poses +k/-k and a rotation axis j:
+
+* the half-difference ``d = (phi_j(+k) - phi_j(-k)) / 2`` shifts the output the same way in
+  both poses, like a bias seen in those two poses only: identifiable against the bias of the
+  other poses (6 parameters, one per pair and axis);
+* the half-sum ``s = (phi_j(+k) + phi_j(-k)) / 2``, the same body rotation in both poses, turns
+  gravity the opposite way in the two poses, exactly like a cross-axis entry of M (one per
+  off-diagonal entry): the base fit absorbs it, unless segments outside the poses (rest, rate
+  steps) see gravity along axis k without the tilt and so pin M's column k.
+
+:func:`build` therefore fits ``d`` and ``s`` per pair and axis (``phi(+-k) = s +- d``) rather
+than the per-pose tilts, and leaves a half-sum out (zero column) where the recording cannot
+determine it; the rank gain of :mod:`station.diagnose.select` counts the rest. What separates
+the half-sums from the misalignment is :data:`RIG_STEP`.
+
+Units: specific force m/s^2, tilt rad inside and deg in :func:`engineering`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+
+import numpy as np
+
+from station.diagnose.residuals import Baseline, SensorData
+from station.session.model import Kind
+from station.sim.effects import POSES
+from station.sim.geometry import up_vector
+
+NAME = "pose_tilt"
+SENSORS = ("accel",)
+DESCRIPTION = "actual attitude in each still pose tilted from the nominal one (two small angles per pose)"
+#: A reference direction within this cosine of a pose's (about 2.6 deg) belongs to that pose.
+ALIGN_COS = 0.999
+#: The rig step that separates the tilt from the misalignment M (the half-sums, see the module docstring).
+RIG_STEP = ("each pose measured at two headings, the fixture turned 180 deg about the vertical between them "
+            "(a tilt of the fixture changes sign in the sensor frame, a misalignment does not), or the poses "
+            "taken on a levelled precision cube or surface plate (tilt < 0.01 deg)")
+
+_AXES = "xyz"
+_PAIR_AXES = "zxy"  # pairs in the order of POSES: +-z, +-x, +-y
+_DEG = math.pi / 180.0
+
+
+def _rotation_axes(up: np.ndarray) -> np.ndarray:
+    """The two rotation axes (2, 3) perpendicular to ``up``: the two sensor axes least along it, orthogonalized."""
+    axes = []
+    for k in sorted(np.argsort(np.abs(up), kind="stable")[:2]):
+        a = np.zeros(3)
+        a[k] = 1.0
+        a = a - (a @ up) * up
+        axes.append(a / np.linalg.norm(a))
+    return np.array(axes)
+
+
+def pose_groups(baseline: Baseline) -> tuple[np.ndarray, list[tuple[str, np.ndarray]]]:
+    """Pose of each sample and the pose list: (index (n,) into the list, -1 outside pose segments;
+    [(label, up unit vector (3,))]). The six standard poses come first, always, in the order of
+    :data:`station.sim.effects.POSES`; other reference directions follow in order of first appearance.
+    """
+    session = baseline.session
+    ref = np.asarray(session.ref_accel_mps2, dtype=float)
+    norm = np.linalg.norm(np.nan_to_num(ref), axis=1)
+    in_pose = (session.kind == int(Kind.POSE)) & np.all(np.isfinite(ref), axis=1) & (norm > 0)
+    poses: list[tuple[str, np.ndarray]] = [(p, up_vector(p)) for p in POSES]
+    index = np.full(len(session), -1, dtype=np.int64)
+    if not np.any(in_pose):
+        return index, poses
+    rows = np.flatnonzero(in_pose)
+    unit = ref[rows] / norm[rows, None]
+    for i, p in enumerate(POSES):
+        index[rows[unit @ up_vector(p) > ALIGN_COS]] = i
+    rest = rows[index[rows] < 0]
+    while len(rest):
+        u = ref[rest[0]] / norm[rest[0]]
+        match = (ref[rest] / norm[rest, None]) @ u > ALIGN_COS
+        index[rest[match]] = len(poses)
+        poses.append((f"pose ({u[0]:+.3f}, {u[1]:+.3f}, {u[2]:+.3f})", u))
+        rest = rest[~match]
+    return index, poses
+
+
+def _has_free_axis(baseline: Baseline, sd: SensorData, k: int) -> bool:
+    """Whether blocks outside the pose segments see gravity along sensor axis ``k`` (they pin M's column k)."""
+    other = (sd.label >= 0) & (baseline.session.kind != int(Kind.POSE))
+    return bool(np.any(np.abs(sd.ref[other, k]) > 0.1 * np.abs(sd.ref[other]).max(initial=0.0)))
+
+
+def build(baseline: Baseline, sd: SensorData) -> np.ndarray | None:
+    """Per-sample regressors (n, 3, p) of the pose tilts (rad); None without pose segments.
+
+    Accelerometer only (``sd.sensor == "accel"``); M is ``sd.params.misalignment``. A tilt
+    ``phi_j`` of pose ``P`` (rotation axis ``a_j``) adds ``M (f_ref x a_j) phi_j`` in ``P``'s
+    samples. Parameters, in this order (see :data:`PARAMETERS`):
+
+    * for each opposite pair +k/-k of the standard poses (z, x, y) and each of its two rotation
+      axes: the half-difference ``d = (phi(+k) - phi(-k)) / 2`` and the half-sum
+      ``s = (phi(+k) + phi(-k)) / 2`` (so ``phi(+-k) = s +- d``): 12 parameters. The column of
+      ``s`` is zero (not fitted) when no block outside the pose segments sees gravity along
+      axis k (then M's column k absorbs it exactly), or when only one pose of the pair is
+      present (then ``d`` alone is that pose's tilt);
+    * two per-pose tilts for every other reference direction, in order of first appearance.
+    """
+    if sd.sensor != "accel":
+        return None
+    index, poses = pose_groups(baseline)
+    if not np.any(index >= 0):
+        return None
+    m = np.nan_to_num(np.asarray(sd.params.misalignment, dtype=float))
+    f = sd.ref  # accelerometer reference, NaN -> 0 (m/s^2)
+
+    def column(p: int, a: np.ndarray) -> np.ndarray:
+        out = np.zeros((len(f), 3))
+        sel = index == p
+        out[sel] = np.cross(f[sel], a) @ m.T
+        return out
+
+    cols: list[np.ndarray] = []
+    for k in _PAIR_AXES:
+        ip, im = POSES.index("+" + k), POSES.index("-" + k)
+        both = np.any(index == ip) and np.any(index == im)
+        free = both and _has_free_axis(baseline, sd, _AXES.index(k))
+        for a in _rotation_axes(up_vector("+" + k)):
+            plus, minus = column(ip, a), column(im, a)
+            cols.append(plus - minus)  # d
+            cols.append(plus + minus if free else np.zeros_like(plus))  # s
+    for p in range(len(POSES), len(poses)):
+        cols.extend(column(p, a) for a in _rotation_axes(poses[p][1]))
+    return np.stack(cols, axis=2)
+
+
+def specific_force_change(baseline: Baseline, sd: SensorData, theta: np.ndarray) -> np.ndarray:
+    """What fitted tilts ``theta`` (rad, order of :func:`build`) change in the true specific force,
+    sensor frame (m/s^2), (n, 3): ``f_ref x phi`` in each pose's samples, zero elsewhere. Adding it to
+    the reference gives the input a simulator re-run of the recording needs (``M^-1`` of the regressors).
+    """
+    z = build(baseline, sd)
+    if z is None:
+        return np.zeros((len(baseline.session), 3))
+    m = np.nan_to_num(np.asarray(sd.params.misalignment, dtype=float))
+    return np.linalg.solve(m, (z @ np.asarray(theta, dtype=float)).T).T
+
+
+def _parameter_names() -> tuple[str, ...]:
+    names = []
+    for k in _PAIR_AXES:
+        for j in _rotation_axes(up_vector("+" + k)).argmax(axis=1):
+            names += [f"+-{k} about {_AXES[j]}: half-difference", f"+-{k} about {_AXES[j]}: half-sum"]
+    return tuple(names)
+
+
+def theta_of(tilts: Mapping[str, np.ndarray]) -> np.ndarray:
+    """The 12 pair parameters of :func:`build` (rad) of per-pose tilts: pose ('+x', ...) -> rotation
+    vector (rad, sensor frame), e.g. :meth:`station.sim.effects.EffectTruth.pose_tilts`; missing poses are 0."""
+    zero = np.zeros(3)
+    out = []
+    for k in _PAIR_AXES:
+        plus, minus = tilts.get("+" + k, zero), tilts.get("-" + k, zero)
+        for a in _rotation_axes(up_vector("+" + k)):
+            out += [0.5 * (plus @ a - minus @ a), 0.5 * (plus @ a + minus @ a)]
+    return np.array(out)
+
+
+def engineering(theta: np.ndarray, cov: np.ndarray) -> dict[str, object]:
+    """Fitted tilt parameters (rad, order of :func:`build`) and their covariance, in deg.
+
+    Returns per opposite pose pair and rotation axis the ``half_difference`` (identifiable
+    whenever both poses were taken) and the ``half_sum`` (None where this recording does not
+    determine it: the base fit's M absorbs it), each ``{"value", "std"}`` in deg; the per-pose
+    tilts ``s +- d`` where both are determined; ``rms_half_difference_deg``; and the tilts of
+    poses outside the six standard ones (``other_poses``, [about a1, about a2] deg each).
+    """
+    theta = np.asarray(theta, dtype=float)
+    cov = np.asarray(cov, dtype=float)
+    std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+
+    tiny = 1e-6 * float(std.max(initial=0.0))  # a zero column's variance from a pseudo-inverse is round-off
+
+    def deg(i: int) -> dict[str, float] | None:
+        if std[i] <= tiny:
+            return None
+        return {"value": round(float(theta[i]) / _DEG, 6), "std": round(float(std[i]) / _DEG, 6)}
+
+    pairs: dict[str, dict[str, object]] = {}
+    per_pose: dict[str, dict[str, float]] = {}
+    for i, name in enumerate(PARAMETERS[::2]):
+        key = name.split(":")[0]
+        d, s = deg(2 * i), deg(2 * i + 1)
+        if d is None:
+            continue  # neither pose of the pair, or a pair the base fit absorbs entirely
+        pairs[key] = {"half_difference": d, "half_sum": s}
+        if s is not None:
+            axis = key.split()[0][2]
+            about = key.split()[-1]
+            for sign in (1.0, -1.0):
+                a, b = 2 * i + 1, 2 * i
+                var = cov[a, a] + cov[b, b] + 2.0 * sign * cov[a, b]
+                per_pose[f"{'+' if sign > 0 else '-'}{axis} about {about}"] = {
+                    "value": round(float(theta[a] + sign * theta[b]) / _DEG, 6),
+                    "std": round(math.sqrt(max(float(var), 0.0)) / _DEG, 6),
+                }
+    out: dict[str, object] = {"unit": "deg", "pairs": pairs, "per_pose": per_pose}
+    if pairs:
+        vals = np.array([v["half_difference"]["value"] for v in pairs.values()])  # type: ignore[index]
+        out["rms_half_difference_deg"] = round(float(np.sqrt(np.mean(vals**2))), 6)
+    extra = theta[len(PARAMETERS):]
+    if len(extra):
+        out["other_poses"] = {
+            "value": np.round(extra.reshape(-1, 2) / _DEG, 6).tolist(),
+            "std": np.round(std[len(PARAMETERS):].reshape(-1, 2) / _DEG, 6).tolist(),
+        }
+    return out
+
+
+#: Names of the 12 pair parameters of :func:`build` (rad), in order.
+PARAMETERS: tuple[str, ...] = _parameter_names()
+
+__all__ = [
+    "ALIGN_COS", "DESCRIPTION", "NAME", "PARAMETERS", "RIG_STEP", "SENSORS", "build", "engineering", "pose_groups",
+    "specific_force_change", "theta_of",
+]
