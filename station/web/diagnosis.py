@@ -45,6 +45,7 @@ from typing import Any
 import numpy as np
 
 from station.errors import StationError
+from station.store.recorder import sha256_file
 
 log = logging.getLogger(__name__)
 
@@ -150,14 +151,6 @@ def json_safe(obj: Any) -> Any:
     return obj
 
 
-def _file_sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with path.open("rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
-
-
 def _curves_of(diagnosis: Any) -> tuple[Curve, ...]:
     """The figure rows of a :class:`station.diagnose.Diagnosis` (base model residuals without findings)."""
     out = []
@@ -199,7 +192,7 @@ def compute(recording: Recording) -> Result:
     from station.diagnose import diagnose
     from station.session.csv_v1 import read_session
 
-    digest = _file_sha256(recording.path)
+    digest, _ = sha256_file(recording.path)
     if digest != recording.sha256:
         return Result(ERROR, error=f"the recording {recording.path.name} has changed since run {recording.run_id} "
                                    f"(SHA-256 {digest[:12]}..., recorded {recording.sha256[:12]}...)",
