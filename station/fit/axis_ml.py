@@ -13,11 +13,12 @@ Model for axis k over block means (see :mod:`station.fit.blocks`):
 * ``e_b``: white noise, variance sigma_w^2 / n_b (sigma_w known from sample differences).
 
 The linear parameters are profiled out by generalized least squares; (T_c, q) are found
-by maximizing the (restricted) Gaussian likelihood. Uncertainties of (beta, d) come from
-the Fisher information of the mean with the covariance at the upper end of q's 95 %
-profile interval; when the drift is resolved, the estimate and uncertainty of the drift
-noise sqrt(q) come from the restricted likelihood profiled over T_c (:class:`_ProfileGrid`).
-The std of T_c comes from its own profile likelihood. This is the "better estimator" that
+by maximizing the (restricted) Gaussian likelihood. When the drift is resolved, the
+uncertainties of (beta, d) average the GLS covariance over the restricted likelihood of
+(q, T_c), and the estimate and uncertainty of the drift noise sqrt(q) come from that
+likelihood with T_c integrated out (:class:`_ProfileGrid`); without a resolved drift they
+are evaluated at the upper end of q's 95 % profile interval and widened by what an
+unresolved drift could hide. The std of T_c comes from its own profile likelihood. This is the "better estimator" that
 replaces the paper's ACF reading of eq. (4) (see :mod:`station.fit.acf`), and it uses all
 settled data of the session, not only the power-on rest.
 """
@@ -165,7 +166,12 @@ class _ProfileGrid:
     """
 
     def __init__(
-        self, problem: _Problem, log_tc_nodes: np.ndarray, tc_ref_s: float, n_fine: int = 120
+        self,
+        problem: _Problem,
+        log_tc_nodes: np.ndarray,
+        tc_ref_s: float,
+        tc_column: np.ndarray | None = None,
+        n_fine: int = 120,
     ) -> None:
         sw = np.sqrt(problem.white)
         q = problem.q0 * np.exp(_GRID_LOG_Q)
@@ -174,6 +180,10 @@ class _ProfileGrid:
         n_tc = len(log_tc_nodes)
         nll = np.empty((n_tc, len(q)))
         usable = np.empty((n_tc, len(q)), dtype=bool)
+        self.node_beta = np.empty((n_tc, len(q), p))
+        self.node_cov = np.empty((n_tc, len(q), p, p))
+        i_ref = int(np.argmin(np.abs(log_tc_nodes - np.log(tc_ref_s))))
+        self.ref_cov: np.ndarray | None = None
         scale = np.outer(sw, sw)
         for i, lt in enumerate(log_tc_nodes):
             tc = float(np.exp(lt))
@@ -192,23 +202,37 @@ class _ProfileGrid:
             logdet = np.log1p(ql).sum(axis=1)
             reml = np.linalg.slogdet((wt @ _outer_rows(xf)).reshape(-1, p, p))[1]
             nll[i] = 0.5 * (quad + logdet + reml)
+            self.node_beta[i], self.node_cov[i] = b, cov
+            if i == i_ref and tc_column is not None:
+                # Fisher information of (beta, d, T_c) at the reference T_c: the drift's T_c
+                # derivative enters as one more column (linearized, eq. 3's exp(-t/T_c))
+                ext = np.column_stack([xr, u.T @ (tc_column / sw)])
+                info = (wt @ _outer_rows(ext)).reshape(-1, p + 1, p + 1)
+                self.ref_cov = np.array([_inverse(m)[:p, :p] for m in info])
             usable[i] = np.all(np.isfinite(b), axis=1) & np.all(np.diagonal(cov, axis1=1, axis2=2) > 0, axis=1)
         # nodes where the normal equations are singular (drift and static bias collinear) drop out
         bad = ~(np.isfinite(nll) & usable)
         if bad.all():
             raise linalg.LinAlgError("no usable node in the profile grid")
         nll[bad] = nll[~bad].max() + 1e3
+        self.node_nll, self.node_usable, self.i_ref = nll, ~bad, i_ref
+        self.log_tc_nodes = log_tc_nodes
         fine = np.linspace(log_tc_nodes[0], log_tc_nodes[-1], n_fine)
         self.nll = PchipInterpolator(log_tc_nodes, nll, axis=0)(fine)  # monotone: no spurious minima
         self.nll_min = float(self.nll.min())
         self.s = np.sqrt(q)
 
     def drift_noise(self, rise: float = _RISE_95, z: float = 1.96) -> tuple[float, float]:
-        """Restricted-ML estimate of sqrt(q) (T_c profiled out) and its std: 95 % interval half-width / 1.96.
+        """Estimate of sqrt(q) with T_c integrated out, and its std: 95 % interval half-width / 1.96.
 
-        At the bound q = 0 the interval is one-sided; its full width then enters the half-width.
+        The restricted likelihood is averaged over log T_c (flat on the grid's range) rather than
+        maximized: where the Gauss-Markov process is slower than the record, q and T_c trade off
+        and the profile's interval is too short (90.7 % of gyro axes within 3 sigma, against
+        96.7 % marginalized; tests/test_fit_recovery.py). At the bound q = 0 the interval is
+        one-sided; its full width then enters the half-width.
         """
-        prof = self.nll.min(axis=0) - self.nll_min
+        marginal = -np.log(np.exp(-(self.nll - self.nll_min)).mean(axis=0))
+        prof = marginal - marginal.min()
         i = int(np.argmin(prof))
         est = float(self.s[i])
         if 0 < i < len(prof) - 1:
@@ -219,6 +243,34 @@ class _ProfileGrid:
                 est = float(self.s[i] * np.exp(0.5 * 0.5 * (_GRID_LOG_Q[1] - _GRID_LOG_Q[0]) * (a - c) / den))
         lo, hi = _edges(self.s, prof, i, rise)
         return est, (hi - lo) / (2.0 * z)
+
+
+    def beta_covariance(self, beta: np.ndarray, over_tc: bool) -> np.ndarray:
+        """Covariance of the estimate ``beta`` (linear parameters, then ``d``), averaged over the likelihood.
+
+        The covariance of the GLS estimate at each grid node, weighted by the restricted likelihood
+        (flat in log q and log T_c), plus the spread of the node estimates about ``beta``: the
+        uncertainty of the drift variance q (and of T_c) is integrated out instead of taking one
+        q. ``over_tc`` False: over q only, at the reference T_c, with T_c's own uncertainty from
+        the linearized Fisher information (when ``tc_column`` was given); True: over both.
+        """
+        nll, usable = self.node_nll, self.node_usable
+        if over_tc:
+            lt = self.log_tc_nodes
+            edges = np.concatenate([[lt[0]], 0.5 * (lt[1:] + lt[:-1]), [lt[-1]]])
+            width = np.diff(edges) if len(lt) > 1 else np.ones(1)
+            w = np.exp(-(nll - nll[usable].min())) * width[:, None] * usable
+            b, c = self.node_beta[usable], self.node_cov[usable]
+            w = w[usable]
+        else:
+            i = self.i_ref
+            ok = usable[i]
+            w = np.exp(-(nll[i] - nll[i][ok].min()))[ok]
+            b = self.node_beta[i][ok]
+            c = (self.ref_cov if self.ref_cov is not None else self.node_cov[i])[ok]
+        w = w / w.sum()
+        dev = b - beta
+        return np.einsum("n,nij->ij", w, c) + (dev.T * w) @ dev
 
 
 def _outer_rows(x: np.ndarray) -> np.ndarray:
@@ -333,21 +385,38 @@ def fit_axis(
                                    _LOG_TC_MIN, log_tc_max + 1.0)
         tc_std = 0.5 * float(np.exp(hi) - np.exp(lo))
         residual = y - full.columns(tc) @ beta
-        # sqrt(q) and its std from the restricted likelihood profiled over T_c (nodes over 2.5 times
-        # T_c's asymmetric 1-sigma profile interval). The stds of (beta, d) stay at q's upper edge:
-        # profiling them over T_c too made them 100x the actual error where the drift is tiny and a
-        # long T_c trades b_stat against b_drift (see tests/test_fit_recovery.py).
+        # The restricted likelihood on a (T_c, q) grid: nodes over 2.5 times T_c's asymmetric
+        # 1-sigma profile interval, 4 when T_c is longer than half the record (see below).
+        # sqrt(q) and its std come from it with T_c integrated out; the covariance of (beta, d) averages
+        # over it. Where the record spans two correlation times the warm-up is seen to settle:
+        # average over q at the fitted T_c (T_c linearized). Where it does not, b_stat is an
+        # extrapolation along exp(-t/T_c) and the average runs over T_c too. Averaging over T_c
+        # everywhere made stds 100x the actual error where the drift is tiny and a long T_c trades
+        # b_stat against b_drift; one q at its 95 % upper edge everywhere made the accelerometer's
+        # stds twice its errors (see tests/test_fit_recovery.py).
         lt0 = float(np.log(tc))
+        over_tc = span < 2.0 * float(np.exp(hi))
         below, above = max(lt0 - lo, 0.03), max(hi - lt0, 0.03)
-        steps = np.linspace(0.0, 2.5, 4)
+        steps = np.linspace(0.0, 4.0, 6) if over_tc else np.linspace(0.0, 2.5, 4)
         nodes = np.concatenate([lt0 - below * steps[:0:-1], lt0 + above * steps])
         try:
-            grid = _ProfileGrid(full, np.unique(np.clip(nodes, _LOG_TC_MIN, log_tc_max + 1.0)), tc)
+            grid = _ProfileGrid(
+                full, np.unique(np.clip(nodes, _LOG_TC_MIN, log_tc_max + 1.0)), tc, tc_column=beta[-1] * de_dtc
+            )
             profile_sq = grid.drift_noise()
+            averaged = grid.beta_covariance(beta, over_tc)
         except (linalg.LinAlgError, ValueError):  # keep the fixed-T_c values
             profile_sq = (drift_noise, sq_std)
+            averaged = beta_cov
         if np.all(np.isfinite(profile_sq)) and profile_sq[1] > 0:
             drift_noise, sq_std = profile_sq
+        if np.all(np.isfinite(averaged)) and np.all(np.diag(averaged) > 0):
+            beta_cov = averaged
+        if not _LOG_TC_MIN + 0.05 < theta[0] < log_tc_max + 1.0 - 0.05:
+            # T_c at a bound of the search is a bound, not an estimate (the exponential is then
+            # indistinguishable from a trend or from the noise): any T_c of the searched range is
+            # possible, and its std is that of a uniform distribution over the range
+            tc_std = max(tc_std, float(np.exp(log_tc_max + 1.0) - np.exp(_LOG_TC_MIN)) / np.sqrt(12.0))
     else:
         # No significant drift: report d = 0 and the level from the model without drift,
         # widening the uncertainties by what an unresolved drift could hide. T_c is not
