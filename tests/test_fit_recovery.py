@@ -17,8 +17,9 @@ from station.fit.calibrate import fit_session
 from station.sim.session_sim import simulate_session
 
 N_UNITS = 50
-#: first seed of the study; other sets: ``STATION_RECOVERY_SEED0=3000 pytest -s tests/test_fit_recovery.py``
-SEED0 = int(os.environ.get("STATION_RECOVERY_SEED0", "1000"))
+#: first seeds of the 50-unit sets studied; more sets, e.g. 150 units:
+#: ``STATION_RECOVERY_SEEDS=1000,3000,5000 pytest -s tests/test_fit_recovery.py``
+SEED0S = [int(s) for s in os.environ.get("STATION_RECOVERY_SEEDS", "1000").split(",")]
 
 
 def _effective_noise(tri: object) -> np.ndarray:
@@ -30,8 +31,8 @@ def _effective_noise(tri: object) -> np.ndarray:
 def study() -> dict[str, list[np.ndarray]]:
     z: dict[str, list[np.ndarray]] = {}
     resolved = {"accel": 0, "gyro": 0}
-    for i in range(N_UNITS):
-        res = simulate_session(SEED0 + i)
+    for seed in (s0 + i for s0 in SEED0S for i in range(N_UNITS)):
+        res = simulate_session(seed)
         params = fit_session(res.session)
         for name in ("accel", "gyro"):
             est, tru = getattr(params, name), getattr(res.truth, name)
@@ -57,8 +58,10 @@ def study() -> dict[str, list[np.ndarray]]:
 # Targets that were missed until 2026-11-21 (50 units, this file): the stds of accel b_stat and
 # b_drift were conservative (spread of z 0.46 / 0.59) with q at its 95 % upper edge, and gyro
 # drift_noise was 90.7 % within 3 sigma with T_c profiled out. Both now integrate over the
-# restricted likelihood of (q, T_c) (station.fit.axis_ml._ProfileGrid). Checked on seeds 3000+
-# and 5000+ as well (worst: accel b_stat spread 0.67, gyro b_stat spread 1.41 / 96.7 % within).
+# restricted likelihood of (q, T_c) (station.fit.axis_ml._ProfileGrid). On 150 units
+# (STATION_RECOVERY_SEEDS=1000,3000,5000) every parameter meets both targets; the tightest is
+# accel T_c, spread 0.673 (conservative). The 50-unit set from seed 3000 alone misses T_c:
+# accel spread 0.47, gyro 94.6 % within 3 sigma.
 # An entry here marks a parameter as a known miss: xfail(strict) with the numbers.
 KNOWN_MISSES: dict[str, str] = {}
 
@@ -91,5 +94,6 @@ def test_within_three_sigma_and_honest(study: dict[str, np.ndarray], name: str) 
 def test_drift_resolved_for_most_axes(study: dict[str, object]) -> None:
     resolved = study["_resolved"]
     # Table 1's drift ranges include values near zero: those cannot be resolved, the rest must be
-    assert resolved["accel"] >= 0.75 * 3 * N_UNITS
-    assert resolved["gyro"] >= 0.75 * 3 * N_UNITS
+    units = N_UNITS * len(SEED0S)
+    assert resolved["accel"] >= 0.75 * 3 * units
+    assert resolved["gyro"] >= 0.75 * 3 * units
