@@ -388,14 +388,15 @@ def fit_axis(
         # The restricted likelihood on a (T_c, q) grid: nodes over 2.5 times T_c's asymmetric
         # 1-sigma profile interval, 4 when T_c is longer than half the record (see below).
         # sqrt(q) and its std come from it with T_c integrated out; the covariance of (beta, d) averages
-        # over it. Where the record spans two correlation times the warm-up is seen to settle:
-        # average over q at the fitted T_c (T_c linearized). Where it does not, b_stat is an
-        # extrapolation along exp(-t/T_c) and the average runs over T_c too. Averaging over T_c
-        # everywhere made stds 100x the actual error where the drift is tiny and a long T_c trades
-        # b_stat against b_drift; one q at its 95 % upper edge everywhere made the accelerometer's
-        # stds twice its errors (see tests/test_fit_recovery.py).
+        # over it. Where the record spans two fitted correlation times the warm-up is seen to
+        # settle: average over q at the fitted T_c (T_c linearized). Where it does not, b_stat is
+        # an extrapolation along exp(-t/T_c) and the average runs over T_c too. Averaging over T_c
+        # everywhere (or wherever T_c's upper 1-sigma edge exceeds half the record) made stds 100x
+        # the actual error where the drift is tiny and a long T_c trades b_stat against b_drift,
+        # and failed good demo units on the fit-quality limit; one q at its 95 % upper edge
+        # everywhere made the accelerometer's stds twice its errors (tests/test_fit_recovery.py).
         lt0 = float(np.log(tc))
-        over_tc = span < 2.0 * float(np.exp(hi))
+        over_tc = span < 2.0 * tc
         below, above = max(lt0 - lo, 0.03), max(hi - lt0, 0.03)
         steps = np.linspace(0.0, 4.0, 6) if over_tc else np.linspace(0.0, 2.5, 4)
         nodes = np.concatenate([lt0 - below * steps[:0:-1], lt0 + above * steps])
