@@ -13,7 +13,12 @@ concealed magnitude, with the effect's size relative to the white noise of a sin
 recordings; the effect signal is the exact difference of the simulation with and without it).
 
 Run: ``/work/venv/bin/python benchmarks/bench_diagnose.py [--seeds 10] [--clean 50] [--pairs 10]
-[--sweep [--sweep-seeds 5] [--sweep-effects a,b]] [--chamber 10]``
+[--sweep [--sweep-seeds 5] [--sweep-effects a,b]] [--chamber 10] [--information a,b]``
+
+``--information a,b`` prints, for the study's recordings of those effects, how much information each
+recording holds about the effect (noncentrality of the exact effect signal against the decision threshold,
+and the detection probability that implies): a miss where that probability is low is information-limited.
+It runs only that study (``--seeds`` recordings per effect).
 
 ``--chamber N`` repeats the temperature_bias study with the rig step the diagnosis names when it
 reports temperature and warm-up as inseparable (a climate-chamber temperature cycle), and checks
@@ -23,6 +28,7 @@ N clean recordings made with that step for false findings.
 from __future__ import annotations
 
 import argparse
+import math
 import time
 from dataclasses import replace
 
@@ -112,6 +118,64 @@ def sweep(names: list[str], seeds: int) -> None:
         print(f"{name:20s} " + " ".join(cells), flush=True)
 
 
+def information(names: list[str], seeds: int) -> None:
+    """Whether a miss is information-limited: per recording of the study and sensor, the noncentrality
+    ``lambda`` of the exact effect signal (simulation with minus without the effect, same seed; block means
+    whitened by the diagnosis's block covariance, after the base model's terms), the part of it the
+    candidate's regressors capture, the decision threshold (max of the chi^2 critical value and the BIC
+    penalty) and the power ``P(chi^2_p(lambda) > threshold)`` of the test with the captured part.
+    ``lambda`` includes the ADC's rounding jitter (a few units); T_c and q are held at the diagnosis's start."""
+    from scipy import linalg, stats
+
+    from station.diagnose.candidates import LIBRARY
+    from station.diagnose.residuals import fit_baseline
+    from station.diagnose.select import RCOND, SensorProblem
+
+    print("\ninformation per recording (noncentrality lambda in chi^2 units; power = P(the test passes) given "
+          "the captured part)")
+    for name in names:
+        expected = 0.0
+        for s in range(seeds):
+            seed = 100 * (NAMES.index(name) + 1) + s
+            rng = np.random.default_rng(10_000 + seed)
+            plan = random_plan(rng)
+            on = simulate_session(seed, plan=plan, effects=Effects(**{name: CONCEALED[name]}))
+            off = simulate_session(seed, plan=plan)
+            baseline = fit_baseline(on.session)
+            cells, miss = [], 1.0
+            for sensor, data in (("accel", lambda x: x.accel_mps2), ("gyro", lambda x: x.gyro_radps)):
+                cand = LIBRARY.get(name)
+                if cand is None or sensor not in cand.sensors:
+                    continue
+                sd = baseline.sensor(sensor)
+                z = cand.build(baseline, sd)
+                if z is None:
+                    continue
+                prob = SensorProblem(baseline, sd)
+                chols, _ = prob.whitened()
+                exact = sd.block_mean(data(on.session) - data(off.session))
+                sw = np.concatenate([linalg.solve_triangular(chols[k], exact[:, k], lower=True) for k in range(3)])
+
+                def left(x: np.ndarray, sw: np.ndarray = sw) -> float:
+                    beta, *_ = linalg.lstsq(x, sw, cond=RCOND)
+                    return float(np.sum((sw - x @ beta) ** 2))
+
+                x0, _ = prob.design(chols, [])
+                x1, _ = prob.design(chols, [sd.block_mean(z)])
+                lam = left(x0)
+                captured = lam - left(x1)
+                test = prob.test_mean(name, sd.block_mean(z))
+                p = max(test.params, 1)
+                thr = max(test.critical, p * math.log(prob.n_rows))
+                power = float(stats.ncx2.sf(thr, p, max(captured, 1e-12)))
+                miss *= 1.0 - power
+                cells.append(f"{sensor} lambda {lam:7.1f} captured {captured:7.1f} threshold {thr:5.1f} "
+                             f"power {power:4.2f} gain {test.gain:7.1f}")
+            expected += 1.0 - miss
+            print(f"  {name} seed {s}: " + " | ".join(cells) + f" | P(found) {1.0 - miss:.2f}", flush=True)
+        print(f"{name}: expected detections from the powers {expected:.1f}/{seeds}", flush=True)
+
+
 #: The rig step the diagnosis names for temperature_bias: a climate-chamber cycle, +-2 K with a 5 min period.
 CHAMBER = replace(TABLE1, ambient_cycle_k=2.0, ambient_cycle_period_s=300.0)
 
@@ -142,7 +206,12 @@ def main() -> None:
     ap.add_argument("--sweep", action="store_true", help="also the detection rate against magnitude")
     ap.add_argument("--sweep-seeds", type=int, default=5)
     ap.add_argument("--sweep-effects", default=",".join(NAMES), help="comma-separated effect names")
+    ap.add_argument("--information", default="", help="comma-separated effect names: noncentrality and power per "
+                    "recording of the study (is a miss information-limited?)")
     args = ap.parse_args()
+    if args.information:  # only this study
+        information([n for n in args.information.split(",") if n], args.seeds)
+        return
 
     confusion = {name: dict.fromkeys(NAMES, 0) for name in (*NAMES, "none")}
     found = dict.fromkeys(NAMES, 0)

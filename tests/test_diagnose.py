@@ -160,3 +160,49 @@ def test_temperature_bias_found_with_the_rig_step_the_report_names() -> None:
     assert np.all(np.abs(value - truth) < 4 * std + 2e-4)
     clean = simulate_session(14, plan=PLAN, sensor_class=chamber)
     assert diagnose(clean.session).report["findings"] == []
+
+
+def test_nonlinearity_that_distorts_the_base_warmup_names_no_temperature_bias() -> None:
+    """A gyro scale nonlinearity (1e-3 at 200 deg/s) pulls the base fit's warm-up to T_c ~ 44 s on y (truth ~1700 s).
+    The diagnosis re-fits the drift with the whole b_drift, not as a correction on top of the base fit's: the
+    nonlinearity is found with its coefficient and the leftover warm-up is not taken for a temperature bias."""
+    res = simulate_session(23, plan=PLAN, effects=Effects(scale_nonlinearity=1e-3))
+    report = diagnose(res.session).report
+    assert _named(report) == {("scale_nonlinearity", "gyro")}
+    finding = report["findings"][0]
+    value = np.array(finding["parameters"]["value"])  # relative scale error at 200 deg/s
+    std = np.array(finding["parameters"]["std"])
+    truth = res.effect_truth.gyro_nonlinearity * math.radians(200.0)
+    assert np.all(np.abs(value - truth) < 4 * std)
+
+
+def test_block_data_do_not_depend_on_the_base_fit_warmup() -> None:
+    """The diagnosis's block data are the recording minus the base fit's M ref + b_stat only: changing the base
+    fit's b_drift and T_c (eq. 3) leaves them unchanged."""
+    from station.diagnose.residuals import _sensor_data
+    from station.diagnose.select import SensorProblem
+
+    res = simulate_session(11, plan=PLAN)
+    baseline = fit_baseline(res.session)
+    p = baseline.gyro.params
+    other = replace(p, bias_drift=np.array([3e-3, -2e-3, 1e-3]), correlation_time_s=np.array([40.0, 900.0, np.nan]))
+    sd = _sensor_data(res.session, "gyro", other, res.session.gyro_radps, baseline.gyro.ref, 150)
+    assert not np.allclose(sd.y, baseline.gyro.y)  # the base fit's residual does change
+    a = SensorProblem(baseline, baseline.gyro).y
+    b = SensorProblem(replace(baseline, gyro=sd), sd).y
+    assert np.allclose(a, b, rtol=0.0, atol=1e-12)
+
+
+def test_drift_refit_reaches_its_optimum() -> None:
+    """The drift's T_c re-fit runs to convergence: another re-fit moves nothing. (A nested test re-fits the null
+    and then the alternative from the null's T_c; a null left short of its optimum hands the alternative's extra
+    improvement to the candidate.)"""
+    from station.diagnose.select import SensorProblem
+
+    baseline = fit_baseline(simulate_session(5, plan=PLAN).session)
+    for sd in (baseline.accel, baseline.gyro):
+        prob = SensorProblem(baseline, sd)
+        nll, tc = prob.total_nll(), prob.tc.copy()
+        prob.refit_drift()
+        assert prob.total_nll() == pytest.approx(nll, abs=1e-9)
+        assert np.array_equal(prob.tc, tc)

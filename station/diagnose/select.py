@@ -13,7 +13,8 @@ diagonalized once per ``T_c`` (``D^-1/2 GM D^-1/2 = V diag(lambda) V^T``), so pr
 costs one small weighted least-squares fit per trial value.
 
 Mean model per axis: the base model's linear terms are re-fitted together with the
-candidate (corrections to the row of M, b_stat and b_drift), so a candidate only counts
+candidate (corrections to the row of M and b_stat; the warm-up ``b_drift exp(-t/T_c)`` of
+eq. 3 in full, its T_c re-fitted, see :func:`base_drift`), so a candidate only counts
 with what the base model cannot absorb. Decision (forward selection, one effect at a
 time): twice the log-likelihood gain must exceed the BIC penalty ``p ln N`` and the
 chi^2 critical value at ``ALPHA``, and the error on held-out segments (4-fold by segment)
@@ -64,6 +65,10 @@ TEMPERATURE_R2 = 0.98
 #: Drift noise the base model allows, relative to the warm-up's change over the record (see
 #: :meth:`SensorProblem.drift_noise_max`); the simulated sensor class has about 1 % of b_drift.
 DRIFT_NOISE_MAX = 0.1
+#: Most rounds of the drift's T_c re-fit (:meth:`SensorProblem.refit_drift`); each moves T_c by up to a factor 4.
+REFIT_ROUNDS = 8
+#: Drift-noise correlation matrices kept per T_c (each (m, m) for m blocks).
+GM_CACHE = 48
 #: Candidates that look like the warm-up drift: tested with the drift's T_c re-fitted.
 PROFILE_TC = ("temperature_bias", "temperature_scale", "bias_random_walk")
 
@@ -90,21 +95,40 @@ class Test:
         return self.params > 0 and self.bic_gain > 0 and self.gain > self.critical
 
 
+def base_drift(t_s: np.ndarray, sd: SensorData) -> np.ndarray:
+    """The base fit's warm-up ``b_drift exp(-t/T_c)`` (eq. 3) at the sample times ``t_s`` (s), (n, 3), in the
+    sensor's unit (m/s^2 or rad/s); zero on axes where the base fit left it unresolved.
+
+    The block residual is taken against the base mean model *without* it: the base design's drift column
+    then carries the whole ``b_drift`` at whatever T_c the diagnosis settles on. (A correction column
+    ``exp(-t/T_c')`` on top of the base fit's ``b_drift exp(-t/T_c)`` leaves the base fit's drift in the data
+    whenever T_c' moves away from T_c, e.g. when an unmodelled effect distorted the base fit's T_c.)
+    """
+    out = np.zeros((len(t_s), 3))
+    tc = np.asarray(sd.params.correlation_time_s, dtype=float)
+    bd = np.asarray(sd.params.bias_drift, dtype=float)
+    for k in range(3):
+        if np.isfinite(tc[k]) and tc[k] > 0 and np.isfinite(bd[k]) and bd[k] != 0.0:
+            out[:, k] = bd[k] * np.exp(-t_s / tc[k])
+    return out
+
+
 class SensorProblem:
     """The stacked block problem of one sensor; see the module docstring."""
 
     def __init__(self, baseline: Baseline, sd: SensorData) -> None:
         self.sd = sd
         self.m = len(sd.t_s)
+        self.y = sd.y + sd.block_mean(base_drift(baseline.session.t_s, sd))  # (m, 3), see base_drift
         t = sd.t_s
         self.white = (sd.sigma[None, :] ** 2) / sd.count[:, None]  # (m, 3)
         span = float(t.max() + 0.5 * sd.width_s.max())
         self.dist = np.abs(t[:, None] - t[None, :])
-        self.tsum = t[:, None] + t[None, :]
         self.tmin = np.minimum(t[:, None], t[None, :])
         self.d_temp = sd.block_mean(baseline.d_temp)  # temperature rise per block (K)
         self.tc = np.array([tc if np.isfinite(tc) and tc > 0 else span for tc in sd.params.correlation_time_s])
-        self.gm = [np.exp(-self.dist / tc) - np.exp(-self.tsum / tc) for tc in self.tc]
+        self._gm_cache: dict[float, np.ndarray] = {}
+        self.gm = [self._gm(float(tc)) for tc in self.tc]
         ref_b = sd.block_mean(sd.ref)
         self.base: list[np.ndarray] = []
         self._ref_cols = [ref_b[:, j] for j in range(3) if np.ptp(ref_b[:, j]) > 1e-9 * max(1.0, np.abs(ref_b).max())]
@@ -119,31 +143,52 @@ class SensorProblem:
         self.refit_drift()
 
     def _base_design(self, tc: float) -> np.ndarray:
-        """Base linear terms of one axis: corrections to the row of M, b_stat and b_drift exp(-t/T_c) (eq. 3)."""
+        """Base linear terms of one axis: corrections to the row of M and b_stat, and b_drift exp(-t/T_c) (eq. 3)."""
         return np.column_stack([*self._ref_cols, np.ones(self.m), block_exp_mean(self.sd.t_s, self.sd.width_s, tc)])
+
+    def _gm(self, tc: float) -> np.ndarray:
+        """Correlation of eq. 3's drift noise started at power-on between the blocks, for T_c (s), (m, m):
+        ``exp(-|t_i - t_j|/T_c) - exp(-t_i/T_c) exp(-t_j/T_c)``; the last ``GM_CACHE`` T_c are kept (the
+        T_c re-fit of a nested test visits the same values for the null and the alternative)."""
+        hit = self._gm_cache.pop(tc, None)
+        if hit is None:
+            e = np.exp(-self.sd.t_s / tc)
+            hit = np.exp(-self.dist / tc) - e[:, None] * e[None, :]
+            hit.flags.writeable = False
+            if len(self._gm_cache) >= GM_CACHE:
+                self._gm_cache.pop(next(iter(self._gm_cache)))
+        self._gm_cache[tc] = hit
+        return hit
 
     def _set_tc(self, k: int, tc: float) -> None:
         """Set axis k's warm-up time constant T_c (s): its drift column and its GM covariance (eq. 3)."""
         self.tc[k] = tc
         self.base[k] = self._base_design(tc)
-        self.gm[k] = np.exp(-self.dist / tc) - np.exp(-self.tsum / tc)
+        self.gm[k] = self._gm(tc)
 
     def refit_drift(self) -> None:
-        """Re-fit each axis's T_c (and q) with the accepted effects: the base fit's T_c may have absorbed them."""
-        for k in range(3):
-            extra = self._accepted_axis(k)
-            best = (self._axis_nll(k, float(self.q[k]), self.k2, extra), float(self.tc[k]))
-            for f in (0.25, 0.5, 0.7, 1.4, 2.0, 4.0):
-                tc = float(self.tc[k]) * f
-                self.base[k] = self._base_design(tc)
-                self.gm[k] = np.exp(-self.dist / tc) - np.exp(-self.tsum / tc)
-                val = self._axis_nll(k, float(self.q[k]), self.k2, extra)
-                if val < best[0]:
-                    best = (val, tc)
-            self.tc[k] = best[1]
-            self.base[k] = self._base_design(best[1])
-            self.gm[k] = np.exp(-self.dist / best[1]) - np.exp(-self.tsum / best[1])
-        self._fit_q()
+        """Re-fit each axis's T_c (and q) with the accepted effects: the base fit's T_c may have absorbed them.
+
+        Rounds of a grid search around the current T_c (q held), then q, until no T_c moves (at most
+        ``REFIT_ROUNDS``): a nested test re-fits the null and the alternative this way, and both must reach
+        their optimum, or the alternative's extra round counts as the candidate's gain.
+        """
+        for _ in range(REFIT_ROUNDS):
+            moved = False
+            for k in range(3):
+                extra = self._accepted_axis(k)
+                tc0 = float(self.tc[k])
+                best = (self._axis_nll(k, float(self.q[k]), self.k2, extra), tc0)
+                for f in (0.25, 0.5, 0.7, 1.4, 2.0, 4.0):
+                    self._set_tc(k, tc0 * f)
+                    val = self._axis_nll(k, float(self.q[k]), self.k2, extra)
+                    if val < best[0]:
+                        best = (val, tc0 * f)
+                self._set_tc(k, best[1])
+                moved = moved or best[1] != tc0
+            self._fit_q()
+            if not moved:
+                break
 
     # --- covariance ----------------------------------------------------------
     def chol(self, k: int, q: float, k2: float) -> np.ndarray:
@@ -158,7 +203,7 @@ class SensorProblem:
             return np.inf
         x = self.base[k] if extra is None else np.column_stack([self.base[k], extra])
         xw = linalg.solve_triangular(ch, x, lower=True, check_finite=False)
-        yw = linalg.solve_triangular(ch, self.sd.y[:, k], lower=True, check_finite=False)
+        yw = linalg.solve_triangular(ch, self.y[:, k], lower=True, check_finite=False)
         beta, *_ = linalg.lstsq(xw, yw, check_finite=False)
         r = yw - xw @ beta
         return 0.5 * float(r @ r) + float(np.log(np.diag(ch)).sum())
@@ -187,7 +232,7 @@ class SensorProblem:
             s, lam, vec = self._eigen(k)
             x = self.base[k] if extra is None else np.column_stack([self.base[k], extra])
             xt = vec.T @ (s[:, None] * x)
-            yt = vec.T @ (s * self.sd.y[:, k])
+            yt = vec.T @ (s * self.y[:, k])
             const = -float(np.log(s).sum())
 
             def nll(q: float) -> float:
@@ -225,7 +270,7 @@ class SensorProblem:
     # --- mean fit ----------------------------------------------------------------
     def whitened(self) -> tuple[list[np.ndarray], np.ndarray]:
         chols = [self.chol(k, float(self.q[k]), self.k2) for k in range(3)]
-        yw = np.concatenate([linalg.solve_triangular(chols[k], self.sd.y[:, k], lower=True, check_finite=False)
+        yw = np.concatenate([linalg.solve_triangular(chols[k], self.y[:, k], lower=True, check_finite=False)
                              for k in range(3)])
         return chols, yw
 
@@ -343,10 +388,10 @@ class SensorProblem:
                     xte.append(xk)
                     rows = slice(k * ntr, (k + 1) * ntr)
                     x[rows] = linalg.solve_triangular(ch, xk[tr], lower=True, check_finite=False)
-                    y[rows] = linalg.solve_triangular(ch, self.sd.y[tr, k], lower=True, check_finite=False)
+                    y[rows] = linalg.solve_triangular(ch, self.y[tr, k], lower=True, check_finite=False)
                 beta, *_ = linalg.lstsq(x, y, cond=RCOND, check_finite=False)
                 for k in range(3):
-                    r = self.sd.y[:, k] - xte[k] @ beta
+                    r = self.y[:, k] - xte[k] @ beta
                     ch = chols[k]
                     a = linalg.cho_solve((ch, True), covs[k][np.ix_(tr, te)], check_finite=False)
                     mu = a.T @ r[tr]
@@ -375,19 +420,18 @@ class SensorProblem:
         """
         span = float(self.sd.t_s.max())
         tc = float(self.tc[k])
-        # the warm-up's change over the record: the base fit's b_drift exp(-t/T_c) plus the correction
-        # to it re-fitted here with the accepted effects (an effect the base fit missed distorts its drift)
-        b0 = float(np.nan_to_num(self.sd.params.bias_drift[k]))
-        t0 = float(self.sd.params.correlation_time_s[k])
-        change = b0 * -math.expm1(-span / t0) if np.isfinite(t0) and t0 > 0 else 0.0
+        # the warm-up's change over the record: b_drift exp(-t/T_c) re-fitted here with the accepted effects
+        # (the drift column carries the whole b_drift, see base_drift; an effect the base fit missed distorts
+        # the base fit's own drift)
+        change = 0.0
         extra = self._accepted_axis(k)
         x = self.base[k] if extra is None else np.column_stack([self.base[k], extra])
         try:
             ch = self.chol(k, float(self.q[k]), self.k2)
             xw = linalg.solve_triangular(ch, x, lower=True, check_finite=False)
-            yw = linalg.solve_triangular(ch, self.sd.y[:, k], lower=True, check_finite=False)
+            yw = linalg.solve_triangular(ch, self.y[:, k], lower=True, check_finite=False)
             beta, *_ = linalg.lstsq(xw, yw, check_finite=False)
-            change += float(beta[self.base[k].shape[1] - 1]) * -math.expm1(-span / tc)
+            change = float(beta[self.base[k].shape[1] - 1]) * -math.expm1(-span / tc)
         except linalg.LinAlgError:
             pass
         return (DRIFT_NOISE_MAX * change) ** 2 / -math.expm1(-2.0 * span / tc)
@@ -503,7 +547,7 @@ class SensorProblem:
             if self.accepted:
                 fit = fit + np.concatenate([a[:, k, :] for a in self.accepted], axis=1) @ beta[total_base:]
             col += nb[k]
-            raw[:, k] = self.sd.y[:, k] - fit
+            raw[:, k] = self.y[:, k] - fit
         chi = np.mean(raw**2 / self.white, axis=0)
         return {"nll": nll, "bic": 2.0 * nll + npar * math.log(self.n_rows), "block_chi2": chi,
                 "block_rms": np.sqrt(np.average(raw**2, axis=0, weights=self.sd.count)), "block_residual": raw}

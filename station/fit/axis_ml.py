@@ -29,7 +29,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import linalg, optimize
+from scipy import linalg, optimize, special
 from scipy.interpolate import PchipInterpolator
 from scipy.linalg import lapack
 
@@ -231,7 +231,8 @@ class _ProfileGrid:
         96.7 % marginalized; tests/test_fit_recovery.py). At the bound q = 0 the interval is
         one-sided; its full width then enters the half-width.
         """
-        marginal = -np.log(np.exp(-(self.nll - self.nll_min)).mean(axis=0))
+        n_tc = self.nll.shape[0]
+        marginal = -(special.logsumexp(-(self.nll - self.nll_min), axis=0) - np.log(n_tc))
         prof = marginal - marginal.min()
         i = int(np.argmin(prof))
         est = float(self.s[i])
