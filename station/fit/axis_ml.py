@@ -80,10 +80,10 @@ class _Problem:
         self.white = sigma_w**2 / blocks.count
         self.with_drift = with_drift
         self.dist = np.abs(self.t[:, None] - self.t[None, :])
-        self.tsum = self.t[:, None] + self.t[None, :]
         # scale of q: the white variance of a typical block
         self.q0 = float(np.median(self.white))
         self._kernels: dict[float, np.ndarray] = {}
+        self._columns: dict[float, np.ndarray] = {}
         self._nll_memo: dict[tuple[float, float], float] = {}
 
     def kernel(self, tc: float) -> np.ndarray:
@@ -92,7 +92,9 @@ class _Problem:
         if k is None:
             if len(self._kernels) > 64:
                 self._kernels.clear()
-            k = np.exp(-self.dist / tc) - np.exp(-self.tsum / tc)
+            e = np.exp(-self.t / tc)  # exp(-(ti+tj)/T_c) as an outer product: one exp per block, not per pair
+            k = np.exp(-self.dist / tc)
+            k -= e[:, None] * e[None, :]
             self._kernels[tc] = k
         return k
 
@@ -102,9 +104,16 @@ class _Problem:
         return cov
 
     def columns(self, tc: float) -> np.ndarray:
+        """Design with the drift column exp(-t/T_c) averaged over each block (eq. 3), cached per T_c."""
         if not self.with_drift:
             return self.design
-        return np.column_stack([self.design, block_exp_mean(self.t, self.h, tc)])
+        x = self._columns.get(tc)
+        if x is None:
+            if len(self._columns) > 64:
+                self._columns.clear()
+            x = np.column_stack([self.design, block_exp_mean(self.t, self.h, tc)])
+            self._columns[tc] = x
+        return x
 
     def solve(self, tc: float, q: float) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
         """(nll, beta, whitened design, lower cholesky factor) at (tc, q).
