@@ -18,8 +18,8 @@ uncertainties of (beta, d) average the GLS covariance over the restricted likeli
 (q, T_c), and the estimate and uncertainty of the drift noise sqrt(q) come from that
 likelihood with T_c integrated out (:class:`_ProfileGrid`); without a resolved drift they
 are evaluated at the upper end of q's 95 % profile interval and widened by what an
-unresolved drift could hide. The std of T_c comes from its own profile likelihood. This is the "better estimator" that
-replaces the paper's ACF reading of eq. (4) (see :mod:`station.fit.acf`), and it uses all
+unresolved drift could hide. The std of T_c comes from its own profile likelihood. This is
+the "better estimator" that replaces the paper's ACF reading of eq. (4) (see :mod:`station.fit.acf`), and it uses all
 settled data of the session, not only the power-on rest.
 """
 
