@@ -51,6 +51,7 @@ from station.diagnose import pose_tilt
 from station.diagnose.candidates import attitude, earth_rate_world
 from station.diagnose.residuals import SENSORS, Baseline, SensorData
 from station.errors import FitError
+from station.fit.blocks import block_exp_mean
 from station.session.model import Kind
 from station.sim.effects import EffectShapes, EffectTruth
 from station.sim.geometry import Kinematics
@@ -435,8 +436,8 @@ def _refit(drive: Drive, sensor: str, triad: Triad, d: np.ndarray) -> tuple[Tria
     tc0 = np.where(triad.drift_on, triad.correlation_time_s, span)
 
     def drift(tc: np.ndarray) -> np.ndarray:  # block means of exp(-t/T_c), (m, ...) for T_c of shape (...)
-        x = 0.5 * sd.width_s.reshape(-1, *([1] * tc.ndim)) / tc
-        return np.exp(-sd.t_s.reshape(-1, *([1] * tc.ndim)) / tc) * np.where(x > 1e-4, np.sinh(x) / x, 1.0)
+        shape = (-1, *([1] * tc.ndim))
+        return block_exp_mean(sd.t_s.reshape(shape), sd.width_s.reshape(shape), tc)
 
     # the residual without the old drift, whitened by the block sizes; then all T_c of the grid at once
     # (Frisch-Waugh: the drift column after projecting out M row and b_stat)

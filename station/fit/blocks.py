@@ -98,8 +98,8 @@ def make_blocks(
     )
 
 
-def block_exp_mean(t_s: np.ndarray, width_s: np.ndarray, tc_s: float) -> np.ndarray:
-    """Mean of ``exp(-t/T_c)`` over blocks centred at ``t_s`` of width ``width_s``.
+def block_exp_mean(t_s: np.ndarray, width_s: np.ndarray, tc_s: float | np.ndarray) -> np.ndarray:
+    """Mean of ``exp(-t/T_c)`` over blocks centred at ``t_s`` of width ``width_s`` (s; arrays broadcast).
 
     For a block [t - h/2, t + h/2]: ``exp(-t/T_c) * sinh(x)/x`` with ``x = h/(2 T_c)``.
     """
