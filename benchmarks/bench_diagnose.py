@@ -57,11 +57,20 @@ CONCEALED: dict[str, float] = {
 }
 
 
+def study_seed(name: str, s: int) -> int:
+    """Seed of the ``s``-th recording of effect ``name``'s study."""
+    return 100 * (NAMES.index(name) + 1) + s
+
+
+def plan_for(seed: int) -> RigPlan:
+    """The random rig plan of recording ``seed`` (sequence, sample rate, durations)."""
+    return random_plan(np.random.default_rng(10_000 + seed))
+
+
 def run(
     effects: dict[str, float], seed: int, sensor_class: SensorClass = TABLE1
 ) -> tuple[set[str], list[float], float]:
-    rng = np.random.default_rng(10_000 + seed)
-    plan = random_plan(rng)
+    plan = plan_for(seed)
     res = simulate_session(seed, plan=plan, effects=Effects(**effects), sensor_class=sensor_class)
     t0 = time.perf_counter()
     d = diagnose(res.session)
@@ -83,8 +92,7 @@ def effect_size(seed: int, effects: dict[str, float]) -> tuple[float, float]:
     """(largest |effect| over the recording, its RMS over the recording), both in single-sample noise
     sigmas, the larger of the two sensors' worst axes. Includes the ADC's +-1 LSB rounding jitter
     (accel 0.12 sigma, gyro ~0.35 sigma)."""
-    rng = np.random.default_rng(10_000 + seed)
-    plan = random_plan(rng)
+    plan = plan_for(seed)
     on = simulate_session(seed, plan=plan, effects=Effects(**effects))
     off = simulate_session(seed, plan=plan)
     peak, rms = [], []
@@ -106,7 +114,7 @@ def sweep(names: list[str], seeds: int) -> None:
         for factor in SWEEP_FACTORS:
             hits, peaks, rmss = 0, [], []
             for s in range(seeds):
-                seed = 100 * (NAMES.index(name) + 1) + s
+                seed = study_seed(name, s)
                 effects = {name: CONCEALED[name] * factor}
                 named, _, _ = run(effects, seed)
                 hits += name in named
@@ -136,9 +144,8 @@ def information(names: list[str], seeds: int) -> None:
     for name in names:
         expected = 0.0
         for s in range(seeds):
-            seed = 100 * (NAMES.index(name) + 1) + s
-            rng = np.random.default_rng(10_000 + seed)
-            plan = random_plan(rng)
+            seed = study_seed(name, s)
+            plan = plan_for(seed)
             on = simulate_session(seed, plan=plan, effects=Effects(**{name: CONCEALED[name]}))
             off = simulate_session(seed, plan=plan)
             baseline = fit_baseline(on.session)
@@ -219,7 +226,7 @@ def main() -> None:
     times: list[float] = []
     for name in NAMES:
         for s in range(args.seeds):
-            named, gains, dt = run({name: CONCEALED[name]}, 100 * (NAMES.index(name) + 1) + s)
+            named, gains, dt = run({name: CONCEALED[name]}, study_seed(name, s))
             times.append(dt)
             for n in named:
                 confusion[name][n] += 1

@@ -46,7 +46,7 @@ from scipy import linalg, optimize, stats
 
 from station.diagnose.candidates import LIBRARY, RIG_STEPS, engineering
 from station.diagnose.residuals import SENSORS, Baseline, SensorData
-from station.fit.blocks import block_exp_mean
+from station.fit.blocks import block_exp_mean, power_on_gm_correlation
 
 #: Significance of a single candidate test (chi^2 tail), on top of the BIC.
 ALPHA = 1e-5
@@ -152,8 +152,7 @@ class SensorProblem:
         T_c re-fit of a nested test visits the same values for the null and the alternative)."""
         hit = self._gm_cache.pop(tc, None)
         if hit is None:
-            e = np.exp(-self.sd.t_s / tc)
-            hit = np.exp(-self.dist / tc) - e[:, None] * e[None, :]
+            hit = power_on_gm_correlation(self.sd.t_s, self.dist, tc)
             hit.flags.writeable = False
             if len(self._gm_cache) >= GM_CACHE:
                 self._gm_cache.pop(next(iter(self._gm_cache)))

@@ -33,7 +33,7 @@ from scipy import linalg, optimize, special
 from scipy.interpolate import PchipInterpolator
 from scipy.linalg import lapack
 
-from station.fit.blocks import Blocks, block_exp_mean
+from station.fit.blocks import Blocks, block_exp_mean, power_on_gm_correlation
 
 _LOG_TC_MIN = np.log(2.0)
 _LOG_Q_MIN, _LOG_Q_MAX = -25.0, 12.0  # q relative to the white variance of a block
@@ -92,9 +92,7 @@ class _Problem:
         if k is None:
             if len(self._kernels) > 64:
                 self._kernels.clear()
-            e = np.exp(-self.t / tc)  # exp(-(ti+tj)/T_c) as an outer product: one exp per block, not per pair
-            k = np.exp(-self.dist / tc)
-            k -= e[:, None] * e[None, :]
+            k = power_on_gm_correlation(self.t, self.dist, tc)
             self._kernels[tc] = k
         return k
 

@@ -107,6 +107,18 @@ def block_exp_mean(t_s: np.ndarray, width_s: np.ndarray, tc_s: float | np.ndarra
     return np.exp(-t_s / tc_s) * _sinhc(x)
 
 
+def power_on_gm_correlation(t_s: np.ndarray, dist_s: np.ndarray, tc_s: float) -> np.ndarray:
+    """Correlation of eq. 3's Gauss-Markov drift noise started at 0 at power-on, between times ``t_s`` (s):
+    ``exp(-|t_i - t_j|/T_c) - exp(-t_i/T_c) exp(-t_j/T_c)``, (m, m); ``dist_s`` is ``|t_i - t_j|`` (s).
+
+    The power-on term is an outer product: one exponential per time, not per pair.
+    """
+    e = np.exp(-t_s / tc_s)
+    k = np.exp(-dist_s / tc_s)
+    k -= e[:, None] * e[None, :]
+    return k
+
+
 def _sinhc(x: np.ndarray) -> np.ndarray:
     """sinh(x)/x, accurate near 0."""
     small = np.abs(x) < 1e-4
