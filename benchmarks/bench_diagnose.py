@@ -13,16 +13,21 @@ concealed magnitude, with the effect's size relative to the white noise of a sin
 recordings; the effect signal is the exact difference of the simulation with and without it).
 
 Run: ``/work/venv/bin/python benchmarks/bench_diagnose.py [--seeds 10] [--clean 50] [--pairs 10]
-[--sweep [--sweep-seeds 5] [--sweep-effects a,b]] [--chamber 10] [--information a,b]``
+[--sweep [--sweep-seeds 5] [--sweep-effects a,b]] [--chamber 10] [--information a,b] [--limits FILE|none]``
+
+The diagnosis gets the sensor class's T_c range of eq. 3 from the station's default limits file
+(``fixtures/limits/default.toml``: Table 1, which is also the range the simulator draws from), as
+``station diagnose --limits`` and the unit page do; ``--limits none`` runs it on the recordings alone.
 
 ``--information a,b`` prints, for the study's recordings of those effects, how much information each
 recording holds about the effect (noncentrality of the exact effect signal against the decision threshold,
 and the detection probability that implies): a miss where that probability is low is information-limited.
 It runs only that study (``--seeds`` recordings per effect).
 
-``--chamber N`` repeats the temperature_bias study with the rig step the diagnosis names when it
-reports temperature and warm-up as inseparable (a climate-chamber temperature cycle), and checks
-N clean recordings made with that step for false findings.
+``--chamber N`` repeats the temperature_bias study (N recordings per row) from the recordings alone,
+with the class's T_c range, and with the rig step the diagnosis names when it reports temperature and
+warm-up as inseparable (a climate-chamber temperature cycle, without the range), and checks N clean
+recordings made with that step for false findings.
 """
 
 from __future__ import annotations
@@ -35,6 +40,7 @@ from dataclasses import replace
 import numpy as np
 
 from station.diagnose import NAMES, diagnose
+from station.sequence.limits_file import DEFAULT_LIMITS_PATH, load_limits
 from station.sim.effects import Effects
 from station.sim.plan import RigPlan, random_plan
 from station.sim.sensor_class import TABLE1, SensorClass
@@ -43,7 +49,9 @@ from station.sim.session_sim import simulate_session
 #: Magnitudes (units of station.sim.effects.Effects) below the white noise of a single sample
 #: (accel 0.017-0.028 m/s^2, gyro 0.010-0.013 deg/s) at typical inputs.
 CONCEALED: dict[str, float] = {
-    "temperature_bias": 0.0005,  # accel 0.5 mm/s^2/K, gyro 2.5 mdeg/s/K: ~2.5 mm/s^2, 12 mdeg/s over the warm-up
+    # accel 2 mm/s^2/K (0.2 mg/K, data-sheet typical), gyro 10 mdeg/s/K: ~10 mm/s^2 (below the accel's sample
+    # noise) and ~50 mdeg/s over the self-heating, which the base fit absorbs as the warm-up of eq. 3
+    "temperature_bias": 0.002,
     "temperature_scale": 50.0,  # ppm/K: 2.5e-4 relative after 5 K
     "g_sensitivity": 0.005,  # deg/s per g
     "scale_nonlinearity": 2e-4,  # relative at 1 g / 200 deg/s
@@ -67,22 +75,28 @@ def plan_for(seed: int) -> RigPlan:
     return random_plan(np.random.default_rng(10_000 + seed))
 
 
+#: The sensor class's T_c range the study gives the diagnosis (``--limits``): the station's default limits file.
+WARMUP_TC: dict[str, tuple[float, float]] | None = None
+
+
 def run(
-    effects: dict[str, float], seed: int, sensor_class: SensorClass = TABLE1
-) -> tuple[set[str], list[float], float]:
+    effects: dict[str, float], seed: int, sensor_class: SensorClass = TABLE1, *, class_range: bool = True
+) -> tuple[set[str], list[float], float, set[str]]:
+    """(named effects, fit improvements of the findings, diagnosis time s, effects listed as inseparable)."""
     plan = plan_for(seed)
     res = simulate_session(seed, plan=plan, effects=Effects(**effects), sensor_class=sensor_class)
     t0 = time.perf_counter()
-    d = diagnose(res.session)
+    d = diagnose(res.session, warmup_tc_s=WARMUP_TC if class_range else None)
     dt = time.perf_counter() - t0
     named = {f["effect"] for f in d.report["findings"]}
+    inseparable = {e for item in d.report["inseparable"] for e in item["effects"]}
     gains = []
     for f in d.report["findings"]:
         fit = f.get("fit") or {}
         if "before" in fit:
             b, a = np.array(fit["before"]["block_chi2"]), np.array(fit["after"]["block_chi2"])
             gains.append(float(np.max(b / a)))
-    return named, gains, dt
+    return named, gains, dt, inseparable
 
 
 SWEEP_FACTORS = (0.5, 1.0, 2.0, 4.0)
@@ -116,7 +130,7 @@ def sweep(names: list[str], seeds: int) -> None:
             for s in range(seeds):
                 seed = study_seed(name, s)
                 effects = {name: CONCEALED[name] * factor}
-                named, _, _ = run(effects, seed)
+                named, *_ = run(effects, seed)
                 hits += name in named
                 peak, rms = effect_size(seed, effects)
                 peaks.append(peak)
@@ -148,7 +162,7 @@ def information(names: list[str], seeds: int) -> None:
             plan = plan_for(seed)
             on = simulate_session(seed, plan=plan, effects=Effects(**{name: CONCEALED[name]}))
             off = simulate_session(seed, plan=plan)
-            baseline = fit_baseline(on.session)
+            baseline = fit_baseline(on.session, warmup_tc_s=WARMUP_TC)
             cells, miss = [], 1.0
             for sensor, data in (("accel", lambda x: x.accel_mps2), ("gyro", lambda x: x.gyro_radps)):
                 cand = LIBRARY.get(name)
@@ -188,20 +202,27 @@ CHAMBER = replace(TABLE1, ambient_cycle_k=2.0, ambient_cycle_period_s=300.0)
 
 
 def chamber(seeds: int) -> None:
-    """temperature_bias (concealed magnitude) with and without the separating rig step, and clean
-    recordings with the step (false findings)."""
-    print(f"\ntemperature_bias with the rig step the diagnosis names (climate chamber +-2 K, 300 s period), "
+    """temperature_bias (concealed magnitude) from the recording alone, with the sensor class's T_c range, with
+    the separating rig step; and clean recordings with the step (false findings)."""
+    print(f"\ntemperature_bias without and with what separates it from the warm-up (the sensor class's T_c range "
+          f"from the limits file; the rig step the diagnosis names: climate chamber +-2 K, 300 s period), "
           f"{seeds} recordings each")
-    for label, cls, mag in (("without the step", TABLE1, CONCEALED["temperature_bias"]),
-                            ("with the step", CHAMBER, CONCEALED["temperature_bias"]),
-                            ("with the step, no effect", CHAMBER, 0.0)):
-        hits, other = 0, 0
+    mag = CONCEALED["temperature_bias"]
+    for label, cls, effects, class_range in (
+        ("recording alone", TABLE1, {"temperature_bias": mag}, False),
+        ("class T_c range", TABLE1, {"temperature_bias": mag}, True),
+        ("chamber step", CHAMBER, {"temperature_bias": mag}, False),
+        ("chamber step, no effect", CHAMBER, {}, False),
+    ):
+        hits, other, listed = 0, 0, 0
         for s in range(seeds):
-            named, _, _ = run({"temperature_bias": mag} if mag else {}, 100 + s, cls)
+            named, _, _, insep = run(effects, study_seed("temperature_bias", s), cls, class_range=class_range)
             hits += "temperature_bias" in named
+            listed += "temperature_bias" in insep
             other += bool(named - {"temperature_bias"})
-            print(f"  {label} seed {s}: named {sorted(named)}", flush=True)
-        print(f"{label:26s} temperature_bias named {hits}/{seeds}, other findings in {other}/{seeds}", flush=True)
+            print(f"  {label} seed {s}: named {sorted(named)}, inseparable {sorted(insep)}", flush=True)
+        print(f"{label:24s} temperature_bias named {hits}/{seeds}, listed as inseparable from the warm-up "
+              f"{listed}/{seeds}, other findings in {other}/{seeds}", flush=True)
 
 
 def main() -> None:
@@ -215,7 +236,13 @@ def main() -> None:
     ap.add_argument("--sweep-effects", default=",".join(NAMES), help="comma-separated effect names")
     ap.add_argument("--information", default="", help="comma-separated effect names: noncentrality and power per "
                     "recording of the study (is a miss information-limited?)")
+    ap.add_argument("--limits", default=str(DEFAULT_LIMITS_PATH),
+                    help="limits file whose correlation_time_s ranges the diagnosis gets as the sensor class's T_c "
+                    "(default: the station's default limits, Table 1); 'none': the recordings alone")
     args = ap.parse_args()
+    global WARMUP_TC
+    WARMUP_TC = None if args.limits == "none" else load_limits(args.limits).correlation_time_s
+    print(f"sensor class T_c range given to the diagnosis: {WARMUP_TC or 'none (the recordings alone)'}")
     if args.information:  # only this study
         information([n for n in args.information.split(",") if n], args.seeds)
         return
@@ -226,7 +253,7 @@ def main() -> None:
     times: list[float] = []
     for name in NAMES:
         for s in range(args.seeds):
-            named, gains, dt = run({name: CONCEALED[name]}, study_seed(name, s))
+            named, gains, dt, _ = run({name: CONCEALED[name]}, study_seed(name, s))
             times.append(dt)
             for n in named:
                 confusion[name][n] += 1
@@ -235,7 +262,7 @@ def main() -> None:
             print(f"  {name:20s} seed {s}: named {sorted(named)} ({dt:.1f} s)", flush=True)
     false = 0
     for s in range(args.clean):
-        named, _, dt = run({}, 5000 + s)
+        named, _, dt, _ = run({}, 5000 + s)
         times.append(dt)
         for n in named:
             confusion["none"][n] += 1
@@ -247,7 +274,7 @@ def main() -> None:
     for s in range(args.pairs):
         a, b = rng.choice(len(NAMES), size=2, replace=False)
         pair = (NAMES[a], NAMES[b])
-        named, _, dt = run({pair[0]: CONCEALED[pair[0]], pair[1]: CONCEALED[pair[1]]}, 9000 + s)
+        named, _, dt, _ = run({pair[0]: CONCEALED[pair[0]], pair[1]: CONCEALED[pair[1]]}, 9000 + s)
         ok = set(pair) <= named
         pair_ok += ok
         pairs.append((pair, sorted(named), ok))

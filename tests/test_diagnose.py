@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -160,6 +161,64 @@ def test_temperature_bias_found_with_the_rig_step_the_report_names() -> None:
     assert np.all(np.abs(value - truth) < 4 * std + 2e-4)
     clean = simulate_session(14, plan=PLAN, sensor_class=chamber)
     assert diagnose(clean.session).report["findings"] == []
+
+
+def test_temperature_bias_found_with_the_sensor_class_tc_range() -> None:
+    """A temperature bias (gyro ~0.01 deg/s/K) over the self-heating (time constant 200-600 s) is absorbed by the
+    warm-up when the recording alone decides T_c: nothing is named, temperature and warm-up are listed as
+    inseparable. With the sensor class's T_c range from the limits file (gyro 1030-3760 s) the diagnosis names
+    it on the gyro with its coefficient; a clean recording with the same range names nothing."""
+    from station.sequence.limits_file import load_limits
+
+    tc_range = load_limits().correlation_time_s
+    res = simulate_session(14, plan=PLAN, effects=Effects(temperature_bias=2e-3))
+    alone = diagnose(res.session).report
+    assert alone["findings"] == [] and alone["warmup_tc_range_s"] is None
+    assert any("temperature_bias" in e["effects"] for e in alone["inseparable"])
+    report = diagnose(res.session, warmup_tc_s=tc_range).report
+    assert report["warmup_tc_range_s"] == {"accel": [50.0, 167.0], "gyro": [1030.0, 3760.0]}
+    assert _named(report) == {("temperature_bias", "gyro")}
+    par = report["findings"][0]["parameters"]
+    value, std = np.array(par["value"]), np.array(par["std"])  # deg/s/K
+    truth = np.degrees(res.effect_truth.gyro_temp_bias)
+    assert np.all(np.abs(value - truth) < 3 * std)
+    assert np.all(std < 0.1 * np.abs(truth))
+    clean = simulate_session(14, plan=PLAN)
+    assert diagnose(clean.session, warmup_tc_s=tc_range).report["findings"] == []
+
+
+def test_cli_diagnose_takes_the_tc_range_from_a_limits_file(tmp_path: Path) -> None:
+    """``station diagnose --limits FILE``: the file's correlation_time_s ranges reach the diagnosis (the
+    temperature bias of the test above is named); a malformed limits file is refused with exit code 2."""
+    from typer.testing import CliRunner
+
+    from station.cli import app
+    from station.sequence.limits_file import DEFAULT_LIMITS_PATH
+    from station.session import write_session
+
+    path = tmp_path / "unit.csv"
+    write_session(simulate_session(14, plan=PLAN, effects=Effects(temperature_bias=2e-3)).session, path)
+    runner = CliRunner()
+    r = runner.invoke(app, ["diagnose", str(path), "--json", "--limits", str(DEFAULT_LIMITS_PATH)])
+    assert r.exit_code == 0, r.output
+    doc = json.loads(r.stdout)
+    assert doc["format"] == FORMAT
+    assert {(f["effect"], f["sensor"]) for f in doc["findings"]} == {("temperature_bias", "gyro")}
+    assert doc["warmup_tc_range_s"]["gyro"] == [1030.0, 3760.0]
+    bad = tmp_path / "bad.toml"
+    bad.write_text(DEFAULT_LIMITS_PATH.read_text().replace("correlation_time_s = [1030.0, 3760.0]",
+                                                           "correlation_time_s = [3760.0, 1030.0]"))
+    r = runner.invoke(app, ["diagnose", str(path), "--limits", str(bad)])
+    assert r.exit_code == 2
+    assert "correlation_time_s" in r.output
+
+
+def test_warmup_tc_range_is_checked() -> None:
+    res = simulate_session(14, plan=PLAN)
+    with pytest.raises(ValueError, match="0 < low <= high"):
+        fit_baseline(res.session, warmup_tc_s={"gyro": (3000.0, 1000.0)})
+    with pytest.raises(ValueError, match="unknown sensor"):
+        fit_baseline(res.session, warmup_tc_s={"mag": (1.0, 2.0)})
 
 
 def test_nonlinearity_that_distorts_the_base_warmup_names_no_temperature_bias() -> None:

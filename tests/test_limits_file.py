@@ -42,6 +42,8 @@ def test_default_file_is_table1() -> None:
         for f in ("scale", "cross_axis", "bias_static", "bias_drift", "noise_std"):
             np.testing.assert_allclose(getattr(a, f), getattr(b, f), rtol=1e-12, err_msg=f"{tri}.{f}")
         assert a.correlation_time_s is None  # check_correlation_time = false
+    # ... but the sensor class's T_c range is kept for the diagnosis
+    assert lim.correlation_time_s == {"accel": (50.0, 167.0), "gyro": (1030.0, 3760.0)}
     assert lim.product.gyro.bias_static[1] == pytest.approx(2.739 * math.pi / 180)
     assert lim.retest.max_attempts == 3
     assert lim.marginal_fraction == 0.05

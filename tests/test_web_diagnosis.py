@@ -14,6 +14,7 @@ import json
 import threading
 import time
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -197,3 +198,36 @@ def test_busy_queue_and_strict_json(store: dict[str, Any]) -> None:
             assert codes[-1] == 200 and r.json()["report"] == {"findings": [], "odd": None}  # strict JSON
     finally:
         release.set()
+
+
+def _wait_ready(service: DiagnosisService, rec: Recording, limit_s: float = 180.0) -> Result:
+    deadline = time.monotonic() + limit_s
+    while (result := service.get(rec)).status not in (READY, "error"):
+        assert time.monotonic() < deadline, "the diagnosis did not finish"
+        time.sleep(0.1)
+    return result
+
+
+def test_service_diagnoses_with_the_limits_tc_range(tmp_path: Path) -> None:
+    """The service's T_c range (the station's limits file, as create_app sets it) reaches the diagnosis: a gyro
+    temperature bias the recording alone cannot tell from the warm-up is named with it. A result persisted with
+    another range is not taken for this one's."""
+    from station.sequence.limits_file import load_limits
+    from station.store.recorder import sha256_file
+
+    path = tmp_path / "temp.csv"
+    write_session(simulate_session(14, plan=PLAN, effects=Effects(temperature_bias=2e-3)).session, path)
+    rec = Recording("run-x", path, sha256_file(path)[0])
+    with_range = DiagnosisService(nice=0, warmup_tc_s=load_limits().correlation_time_s)
+    alone = DiagnosisService(nice=0)
+    try:
+        found = _wait_ready(with_range, rec)
+        assert {(f["effect"], f["sensor"]) for f in found.report["findings"]} == {("temperature_bias", "gyro")}
+        saved = json.loads(sidecar_path(path).read_text(encoding="utf-8"))
+        assert saved["settings"] == {"warmup_tc_range_s": {"accel": [50.0, 167.0], "gyro": [1030.0, 3760.0]}}
+        assert alone.peek(rec) is None  # persisted with another range: computed again
+        assert _wait_ready(alone, rec).report["findings"] == []
+        assert DiagnosisService(warmup_tc_s=load_limits().correlation_time_s).peek(rec) is None
+    finally:
+        with_range.stop()
+        alone.stop()

@@ -36,6 +36,9 @@ def _print_text(report: dict[str, Any]) -> None:
                        f"{r['unit']} with this effect")
     for item in report["inseparable"]:
         typer.echo(f"  inseparable ({item['sensor']}): {' / '.join(item['effects'])}; rig step: {item['rig_step']}")
+    if report.get("warmup_tc_range_s"):
+        ranges = ", ".join(f"{k} {lo:g}-{hi:g} s" for k, (lo, hi) in report["warmup_tc_range_s"].items())
+        typer.echo(f"  warm-up T_c kept in the sensor class's range: {ranges}")
     if not findings and not report["inseparable"]:
         typer.echo("  the base model (eq. 1 + eq. 3) explains this recording")
     _print_rerun(report.get("rerun"))
@@ -66,14 +69,20 @@ def diagnose(
     session_path: Annotated[Path, typer.Argument(metavar="SESSION.csv", help="session CSV v1 recording")],
     as_json: Annotated[bool, typer.Option("--json", help="print the diagnosis as one JSON object")] = False,
     plot: Annotated[Path | None, typer.Option("--plot", help="write a PNG of the residual before/after")] = None,
+    limits: Annotated[Path | None, typer.Option(
+        "--limits", help="limits file (e.g. fixtures/limits/default.toml) whose correlation_time_s ranges are the "
+        "sensor class's T_c: a warm-up outside them is not taken for eq. 3's drift. Default: the recording "
+        "alone decides T_c")] = None,
 ) -> None:
     """Find the physics the base model misses in a recording, fit it and show the improvement."""
     from station.diagnose.report import diagnose as run_diagnosis
     from station.diagnose.report import save_figure
+    from station.sequence.limits_file import load_limits
     from station.session import read_session
 
     try:
-        result = run_diagnosis(read_session(session_path))
+        warmup_tc = load_limits(limits).correlation_time_s if limits is not None else None
+        result = run_diagnosis(read_session(session_path), warmup_tc_s=warmup_tc)
     except StationError as exc:
         typer.echo(f"error: {exc}", err=True)
         raise typer.Exit(2) from None

@@ -5,7 +5,7 @@ returns a :class:`Diagnosis`; ``Diagnosis.report`` is the object ``station diagn
 prints::
 
     {"format": "station-diagnosis/1", "findings": [...], "rejected": [...], "inseparable": [...],
-     "location": {...}, "base_fit": {...}, "rerun": {...}}
+     "location": {...}, "warmup_tc_range_s": {...} | null, "base_fit": {...}, "rerun": {...}}
 
 Each finding has ``effect``, ``sensor`` (accel|gyro), ``axes``, ``parameters`` (value, std,
 unit in engineering units), ``evidence`` (likelihood gain, BIC gain, held-out error) and
@@ -17,13 +17,15 @@ with the base model and with the accepted effects, compared with the recording p
 ``{"method", "effects", "not_simulated", "base": {SENSOR: STATS}, "extended": {SENSOR: STATS},
 "improvement": {SENSOR: {"rms_ratio", "chi2_ratio"}}}`` where STATS holds ``unit``, ``blocks``,
 ``rms``, ``noise_rms``, ``chi2`` per axis and the same ``per_kind`` (rest/pose/rate/move);
-``{"error": ...}`` when the recording cannot drive the simulator. Pure numerics: only
+``{"error": ...}`` when the recording cannot drive the simulator. ``warmup_tc_range_s``: the
+sensor class's T_c range per sensor the diagnosis kept eq. 3's warm-up in (null: none given). Pure numerics: only
 :func:`save_figure` writes a file.
 """
 
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -31,7 +33,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from station.diagnose.rerun import FittedEffect, Rerun, rerun
-from station.diagnose.residuals import Baseline, fit_baseline, locate
+from station.diagnose.residuals import SENSORS, Baseline, fit_baseline, locate
 from station.diagnose.select import select
 from station.errors import FitError
 from station.session.model import Session
@@ -61,14 +63,18 @@ class Diagnosis:
         return [(f["effect"], f["sensor"]) for f in self.report["findings"]]
 
 
-def diagnose(session: Session) -> Diagnosis:
+def diagnose(session: Session, *, warmup_tc_s: Mapping[str, tuple[float, float]] | None = None) -> Diagnosis:
     """Diagnose ``session``: which physics the base model (eq. 1 + eq. 3) is missing.
+
+    ``warmup_tc_s``: the sensor class's range of eq. 3's T_c (s) per sensor, e.g.
+    ``LimitsFile.correlation_time_s``; see :func:`station.diagnose.residuals.fit_baseline`. None: the
+    recording alone decides T_c (a temperature bias then often cannot be told from the warm-up).
 
     Raises :class:`station.errors.FitError` when the base fit refuses the recording.
     """
     # the linear algebra is on a few hundred blocks: BLAS threads only spin
     with threadpool_limits(limits=1, user_api="blas"):
-        baseline = fit_baseline(session)
+        baseline = fit_baseline(session, warmup_tc_s=warmup_tc_s)
         decision = select(baseline)
         curves = []
         findings = []
@@ -101,6 +107,8 @@ def diagnose(session: Session) -> Diagnosis:
         "rejected": decision.rejected,
         "inseparable": decision.inseparable,
         "location": locate(baseline),
+        "warmup_tc_range_s": {s: list(sd.tc_range_s) for s in SENSORS
+                              if (sd := baseline.sensor(s)).tc_range_s is not None} or None,
         "base_fit": {
             "accel_residual_rms_mps2": np.round(p.accel.residual_rms, 9).tolist(),
             "gyro_residual_rms_dps": np.round(np.degrees(p.gyro.residual_rms), 9).tolist(),

@@ -426,14 +426,16 @@ TC_FACTORS = np.geomspace(0.2, 5.0, 17)
 def _refit(drive: Drive, sensor: str, triad: Triad, d: np.ndarray) -> tuple[Triad, np.ndarray]:
     """Re-fit the base model's linear terms to the block residual ``d`` (m, 3): per axis the row of M,
     b_stat and the eq. (3) drift ``b_drift exp(-t/T_c)`` (T_c from a grid around the base fit's, or around
-    the record's span where the base fit left it unresolved), weighted least squares (weights: block sizes).
+    the record's span where the base fit left it unresolved; inside the sensor class's range where the
+    baseline has one), weighted least squares (weights: block sizes).
 
     Returns the corrected triad and the block residual it leaves (the linear terms taken off ``d``).
     """
     sd = drive.baseline.sensor(sensor)
     q, sw = drive.fixed_basis(sensor)
     span = float(sd.t_s.max() + 0.5 * sd.width_s.max())
-    tc0 = np.where(triad.drift_on, triad.correlation_time_s, span)
+    tc_old = np.where(triad.drift_on, triad.correlation_time_s, span)
+    tc0 = sd.clip_tc(tc_old)
 
     def drift(tc: np.ndarray) -> np.ndarray:  # block means of exp(-t/T_c), (m, ...) for T_c of shape (...)
         shape = (-1, *([1] * tc.ndim))
@@ -441,8 +443,8 @@ def _refit(drive: Drive, sensor: str, triad: Triad, d: np.ndarray) -> tuple[Tria
 
     # the residual without the old drift, whitened by the block sizes; then all T_c of the grid at once
     # (Frisch-Waugh: the drift column after projecting out M row and b_stat)
-    y = (d + drift(tc0) * np.where(triad.drift_on, triad.bias_drift, 0.0)) * sw[:, None]  # (m, 3)
-    grid = tc0[None, :] * TC_FACTORS[:, None]  # (g, 3)
+    y = (d + drift(tc_old) * np.where(triad.drift_on, triad.bias_drift, 0.0)) * sw[:, None]  # (m, 3)
+    grid = sd.clip_tc(tc0[None, :] * TC_FACTORS[:, None])  # (g, 3), inside the sensor class's T_c range
     e = drift(grid) * sw[:, None, None]  # (m, g, 3)
     ry = y - q @ (q.T @ y)
     re = e - np.einsum("mp,pgk->mgk", q, np.einsum("mp,mgk->pgk", q, e))

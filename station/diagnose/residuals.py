@@ -15,7 +15,9 @@ Units: SI (accelerometer m/s^2, gyroscope rad/s, time s, temperature K).
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -49,6 +51,8 @@ class SensorData:
         t_s, width_s, count: block centre time (s), span (s) and sample count, (m,).
         y: block-mean residual, (m, 3).
         segment, kind: segment index and :class:`Kind` code per block, (m,).
+        tc_range_s: the sensor class's range of eq. 3's correlation time T_c (s), (low, high), that the
+            diagnosis keeps the warm-up drift in; None: the recording alone decides T_c.
     """
 
     sensor: str
@@ -67,6 +71,12 @@ class SensorData:
     y: np.ndarray
     segment: np.ndarray
     kind: np.ndarray
+    tc_range_s: tuple[float, float] | None = None
+
+    def clip_tc(self, tc_s: np.ndarray | float) -> np.ndarray:
+        """``tc_s`` (s) clipped into :attr:`tc_range_s` (unchanged without a range)."""
+        tc = np.asarray(tc_s, dtype=float)
+        return tc if self.tc_range_s is None else np.clip(tc, *self.tc_range_s)
 
     def block_mean(self, values: np.ndarray) -> np.ndarray:
         """Mean of per-sample ``values`` (n, ...) over each block's kept samples, (m, ...)."""
@@ -184,11 +194,27 @@ def _sensor_data(
     )
 
 
-def fit_baseline(session: Session, *, max_settled_blocks: int = 150) -> Baseline:
+def fit_baseline(
+    session: Session, *, max_settled_blocks: int = 150, warmup_tc_s: Mapping[str, tuple[float, float]] | None = None
+) -> Baseline:
     """Fit the base model to ``session`` and compute both triads' residuals and blocks.
 
-    Raises :class:`station.errors.FitError` when the base fit refuses the recording.
+    ``warmup_tc_s``: per sensor (``accel``, ``gyro``), the sensor class's range (low, high) of eq. 3's
+    correlation time T_c in s (qualification data, e.g. a limits file's ``correlation_time_s``): the
+    diagnosis then takes a warm-up that decays faster or slower than that for something other than eq. 3's
+    drift. Sensors not in it, or None: the recording alone decides T_c.
+
+    Raises :class:`station.errors.FitError` when the base fit refuses the recording, ValueError for a range
+    that is not ``0 < low <= high``.
     """
+    ranges: dict[str, tuple[float, float]] = {}
+    for name, rng in (warmup_tc_s or {}).items():
+        if name not in SENSORS:
+            raise ValueError(f"warm-up T_c range for unknown sensor {name!r} (expected one of {SENSORS})")
+        lo, hi = (float(v) for v in rng)
+        if not (0.0 < lo <= hi and math.isfinite(hi)):
+            raise ValueError(f"warm-up T_c range of the {name} must be 0 < low <= high (s), got {rng!r}")
+        ranges[name] = (lo, hi)
     params = fit_session(session)
     g_ref = session.ref_gyro_radps
     if params.quality.get("gyro_scale_method") != "rate":
@@ -198,6 +224,8 @@ def fit_baseline(session: Session, *, max_settled_blocks: int = 150) -> Baseline
     accel = _sensor_data(session, "accel", params.accel, session.accel_mps2, session.ref_accel_mps2,
                          max_settled_blocks)
     gyro = _sensor_data(session, "gyro", params.gyro, session.gyro_radps, g_ref, max_settled_blocks)
+    accel = replace(accel, tc_range_s=ranges.get("accel"))
+    gyro = replace(gyro, tc_range_s=ranges.get("gyro"))
     return Baseline(session=session, params=params, d_temp=_temperature(session), accel=accel, gyro=gyro)
 
 

@@ -33,6 +33,12 @@ re-fitted with it). When it is not found and the temperature course, after the o
 terms, is an exponential ``exp(-t/T)`` to ``R^2 > TEMPERATURE_R2`` (self-heating usually is),
 the recording cannot tell a temperature bias from the warm-up drift of eq. 3: that pair is
 listed as inseparable with the rig step that separates them.
+
+With the sensor class's range of T_c (``SensorData.tc_range_s``, e.g. from the station's limits
+file), the warm-up's T_c stays inside it throughout (base model, re-fits, and the warm-up shapes a
+temperature course is compared with): a self-heating course that decays faster than the class's
+drift (gyroscope T_c 1030-3760 s against a self-heating time constant of a few hundred seconds) is
+then no longer the same signal as the warm-up. Without it the recording alone decides T_c.
 """
 
 from __future__ import annotations
@@ -126,7 +132,8 @@ class SensorProblem:
         self.dist = np.abs(t[:, None] - t[None, :])
         self.tmin = np.minimum(t[:, None], t[None, :])
         self.d_temp = sd.block_mean(baseline.d_temp)  # temperature rise per block (K)
-        self.tc = np.array([tc if np.isfinite(tc) and tc > 0 else span for tc in sd.params.correlation_time_s])
+        # eq. 3's T_c inside the sensor class's range, where one is given (SensorData.tc_range_s)
+        self.tc = sd.clip_tc([tc if np.isfinite(tc) and tc > 0 else span for tc in sd.params.correlation_time_s])
         self._gm_cache: dict[float, np.ndarray] = {}
         self.gm = [self._gm(float(tc)) for tc in self.tc]
         ref_b = sd.block_mean(sd.ref)
@@ -160,7 +167,9 @@ class SensorProblem:
         return hit
 
     def _set_tc(self, k: int, tc: float) -> None:
-        """Set axis k's warm-up time constant T_c (s): its drift column and its GM covariance (eq. 3)."""
+        """Set axis k's warm-up time constant T_c (s), clipped into the sensor class's range: its drift column
+        and its GM covariance (eq. 3)."""
+        tc = float(self.sd.clip_tc(tc))
         self.tc[k] = tc
         self.base[k] = self._base_design(tc)
         self.gm[k] = self._gm(tc)
@@ -179,10 +188,13 @@ class SensorProblem:
                 tc0 = float(self.tc[k])
                 best = (self._axis_nll(k, float(self.q[k]), self.k2, extra), tc0)
                 for f in (0.25, 0.5, 0.7, 1.4, 2.0, 4.0):
-                    self._set_tc(k, tc0 * f)
+                    tc = float(self.sd.clip_tc(tc0 * f))
+                    if tc == tc0:
+                        continue
+                    self._set_tc(k, tc)
                     val = self._axis_nll(k, float(self.q[k]), self.k2, extra)
                     if val < best[0]:
-                        best = (val, tc0 * f)
+                        best = (val, tc)
                 self._set_tc(k, best[1])
                 moved = moved or best[1] != tc0
             self._fit_q()
@@ -494,7 +506,7 @@ class SensorProblem:
         """
         sd = self.sd
         span = float(sd.t_s.max())
-        grid = np.geomspace(10.0, 20.0 * span, 40)
+        grid = np.geomspace(*sd.tc_range_s, 12) if sd.tc_range_s else np.geomspace(10.0, 20.0 * span, 40)
         r2 = np.zeros((len(grid), 3))
         energy = np.zeros(3)
         cols = [block_exp_mean(sd.t_s, sd.width_s, float(tc)) for tc in grid]
@@ -513,8 +525,9 @@ class SensorProblem:
 
     def temperature_collinearity(self) -> tuple[float, float]:
         """(R^2, T) of the best explanation of the temperature course by eq. 3's warm-up exp(-t/T), T from
-        10 s to 20 records: the smallest R^2 over the axes at the T that fits best. R^2 near 1: a temperature
-        bias and a warm-up drift are the same signal in this recording."""
+        10 s to 20 records (or over the sensor class's T_c range): the smallest R^2 over the axes at the T
+        that fits best. R^2 near 1: a temperature bias and a warm-up drift are the same signal in this
+        recording."""
         grid, r2, _ = self._temperature_vs_warmup()
         worst = r2.min(axis=1)
         i = int(np.argmax(worst))
@@ -522,7 +535,8 @@ class SensorProblem:
 
     def temperature_unique(self, theta: np.ndarray) -> float:
         """chi^2 of the part of a temperature bias ``theta`` (U/K per axis) that no warm-up exp(-t/T) of
-        eq. 3 (any T from 10 s to 20 records, per axis) can take over: what tells the two apart."""
+        eq. 3 (any T from 10 s to 20 records, or in the sensor class's T_c range, per axis) can take over: what
+        tells the two apart."""
         _, r2, energy = self._temperature_vs_warmup()
         return float(np.sum(np.asarray(theta) ** 2 * energy * (1.0 - r2.max(axis=0))))
 

@@ -21,7 +21,7 @@ from __future__ import annotations
 import hashlib
 import math
 import tomllib
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -94,6 +94,9 @@ class LimitsFile:
         product: product limits (SI) for :func:`station.sequence.limits.check_limits`, with ``fit_quality``.
         marginal_fraction: edge band of each range, as a fraction of its width (1).
         fit_quality, verification, retest: see their classes.
+        correlation_time_s: the sensor class's range of eq. 3's T_c (s) per triad (``accel``, ``gyro``) as
+            the file gives it, checked or not (``check_correlation_time``); the diagnosis keeps the warm-up
+            drift inside it (:func:`station.diagnose.diagnose`). Empty when the file gives none.
     """
 
     name: str
@@ -105,6 +108,7 @@ class LimitsFile:
     fit_quality: FitQualityLimits
     verification: VerificationLimits
     retest: RetestPolicy
+    correlation_time_s: dict[str, tuple[float, float]] = field(default_factory=dict)
 
 
 class _Table:
@@ -174,7 +178,8 @@ class _Table:
             raise LimitsFileError(f"{self.source}: unknown key(s) {', '.join(self._key(k) for k in extra)}")
 
 
-def _triad(t: _Table, gyro: bool, check_tc: bool) -> TriadLimits:
+def _triad(t: _Table, gyro: bool, check_tc: bool) -> tuple[TriadLimits, tuple[float, float] | None]:
+    """The triad's product limits (T_c only if checked) and its T_c range (s) as given, or None."""
     unit, scale = ("dps", _DEG) if gyro else ("mps2", 1.0)
     out = TriadLimits(
         scale=t.range("scale"),
@@ -184,12 +189,13 @@ def _triad(t: _Table, gyro: bool, check_tc: bool) -> TriadLimits:
         noise_std=t.range(f"noise_std_{unit}", scale),
         correlation_time_s=t.range("correlation_time_s") if t.has("correlation_time_s") else None,
     )
-    if out.correlation_time_s is not None and out.correlation_time_s[0] <= 0:
+    tc = out.correlation_time_s
+    if tc is not None and tc[0] <= 0:
         raise t.fail("correlation_time_s", "must be a positive range")
     if not check_tc:
         out = replace(out, correlation_time_s=None)
     t.done()
-    return out
+    return out, tc
 
 
 def parse_limits(text: str | bytes, source: str = "<limits>", path: Path | None = None) -> LimitsFile:
@@ -212,8 +218,9 @@ def parse_limits(text: str | bytes, source: str = "<limits>", path: Path | None 
     if k_sigma < 0:
         raise prod.fail("k_sigma", f"must be >= 0, got {k_sigma}")
     check_tc = prod.boolean("check_correlation_time")
-    accel = _triad(prod.table("accel"), False, check_tc)
-    gyro = _triad(prod.table("gyro"), True, check_tc)
+    accel, accel_tc = _triad(prod.table("accel"), False, check_tc)
+    gyro, gyro_tc = _triad(prod.table("gyro"), True, check_tc)
+    tc_ranges = {name: r for name, r in (("accel", accel_tc), ("gyro", gyro_tc)) if r is not None}
     prod.done()
 
     marg = top.table("marginal")
@@ -272,6 +279,7 @@ def parse_limits(text: str | bytes, source: str = "<limits>", path: Path | None 
         fit_quality=fit_quality,
         verification=verification,
         retest=RetestPolicy(n),
+        correlation_time_s=tc_ranges,
     )
 
 

@@ -105,20 +105,23 @@ def create_app(db_url: str | None = None, *, token: str | None = None, live: Liv
         token: bearer token that allows the write actions (None: they always answer 401).
         live: the station's live status, a subscriber of the running sequence (None: an idle station).
             Its ``on_start``/``on_abort`` hooks start and abort runs; unset hooks answer 503.
-        limits_path: limits file for the marginal band (default: the station's default limits file).
+        limits_path: limits file for the marginal band and the sensor class's T_c range of the default diagnosis
+            service (default: the station's default limits file).
         database: an already open database (instead of ``db_url``).
         diagnosis: the background diagnosis of recordings (default: one worker thread, results kept next to
-            the recordings); started and stopped with the application.
+            the recordings, the limits file's T_c range); started and stopped with the application.
     """
     db = database if database is not None else open_database(db_url)
     live = live if live is not None else LiveStatus(db)
     if live.db is None:
         live.db = db
-    marginal_fraction = load_limits(limits_path).marginal_fraction
+    limits = load_limits(limits_path)
+    marginal_fraction = limits.marginal_fraction
     templates = Jinja2Templates(directory=str(TEMPLATES_DIR))
     templates.env.filters["fmt"] = _fmt
     cache = _PlotCache()
-    diagnoses = diagnosis if diagnosis is not None else DiagnosisService()
+    # the unit page's diagnoses keep eq. 3's warm-up inside the sensor class's T_c range of the station's limits
+    diagnoses = diagnosis if diagnosis is not None else DiagnosisService(warmup_tc_s=limits.correlation_time_s)
 
     @asynccontextmanager
     async def lifespan(_app: FastAPI) -> AsyncIterator[None]:

@@ -37,7 +37,7 @@ import tempfile
 import threading
 import time
 from collections import OrderedDict
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -184,9 +184,10 @@ def _curves_of(diagnosis: Any) -> tuple[Curve, ...]:
     return tuple(out)
 
 
-def compute(recording: Recording) -> Result:
+def compute(recording: Recording, *, warmup_tc_s: Mapping[str, tuple[float, float]] | None = None) -> Result:
     """Diagnose ``recording`` now (seconds): ready, or error with the reason the recording gives.
 
+    ``warmup_tc_s``: the sensor class's T_c range per sensor (s), see :func:`station.diagnose.diagnose`.
     Raises OSError when the file cannot be read.
     """
     from station.diagnose import diagnose
@@ -199,23 +200,33 @@ def compute(recording: Recording) -> Result:
                       lasting=False)
     t0 = time.perf_counter()
     try:
-        diagnosis = diagnose(read_session(recording.path))
+        diagnosis = diagnose(read_session(recording.path), warmup_tc_s=warmup_tc_s)
     except StationError as exc:
         return Result(ERROR, error=f"{type(exc).__name__}: {exc}", elapsed_s=time.perf_counter() - t0)
     return Result(READY, report=json_safe(diagnosis.report), curves=_curves_of(diagnosis),
                   elapsed_s=time.perf_counter() - t0)
 
 
+#: :func:`compute` under a name that DiagnosisService's ``compute`` argument does not shadow.
+_compute_default = compute
+
+
 def _round(a: np.ndarray) -> list[Any]:
     return json_safe(np.vectorize(lambda v: float(f"{v:.7g}"), otypes=[float])(a) if a.size else a)
 
 
-def _dump(recording: Recording, result: Result) -> str:
+def _settings(warmup_tc_s: Mapping[str, tuple[float, float]] | None) -> dict[str, Any]:
+    """What a diagnosis depends on besides the recording and the code (kept in, and checked against, the file)."""
+    ranges = {k: [float(lo), float(hi)] for k, (lo, hi) in sorted((warmup_tc_s or {}).items())}
+    return {"warmup_tc_range_s": ranges or None}
+
+
+def _dump(recording: Recording, result: Result, settings: dict[str, Any]) -> str:
     curves = [{"title": c.title, "unit": c.unit, "labels": list(c.labels), "t_s": _round(c.t_s),
                "before": _round(c.before), "after": None if c.after is None else _round(c.after)}
               for c in result.curves]
     return json.dumps({"format": FORMAT, "session_sha256": recording.sha256, "code": code_digest(),
-                       "status": result.status, "report": result.report, "error": result.error,
+                       "settings": settings, "status": result.status, "report": result.report, "error": result.error,
                        "elapsed_s": result.elapsed_s, "curves": curves}, allow_nan=False)
 
 
@@ -224,13 +235,13 @@ def _array(v: Any) -> np.ndarray:
                     else [[np.nan if x is None else x for x in row] for row in v], dtype=float)
 
 
-def _load(recording: Recording) -> Result | None:
-    """The persisted result of ``recording`` when it is for these bytes and this code, else None."""
+def _load(recording: Recording, settings: dict[str, Any]) -> Result | None:
+    """The persisted result of ``recording`` when it is for these bytes, this code and these settings, else None."""
     path = sidecar_path(recording.path)
     try:
         d = json.loads(path.read_text(encoding="utf-8"))
         if (d.get("format") != FORMAT or d.get("session_sha256") != recording.sha256 or d.get("code") != code_digest()
-                or d.get("status") not in (READY, ERROR)):
+                or d.get("settings") != settings or d.get("status") not in (READY, ERROR)):
             return None
         curves = tuple(Curve(c["title"], c["unit"], _array(c["t_s"]), _array(c["before"]),
                              None if c["after"] is None else _array(c["after"]), tuple(c["labels"]))
@@ -244,10 +255,10 @@ def _load(recording: Recording) -> Result | None:
         return None
 
 
-def _save(recording: Recording, result: Result) -> None:
+def _save(recording: Recording, result: Result, settings: dict[str, Any]) -> None:
     path = sidecar_path(recording.path)
     try:
-        text = _dump(recording, result)
+        text = _dump(recording, result, settings)
         fd, tmp = tempfile.mkstemp(prefix=path.name, suffix=".tmp", dir=path.parent)
         try:
             with os.fdopen(fd, "w", encoding="utf-8") as f:
@@ -279,14 +290,20 @@ class DiagnosisService:
         memory_entries: results kept in memory (least recently used dropped first).
         nice: how much lower the workers' scheduling priority is (Linux nice steps; 0: unchanged).
         retry_s: a result that is not lasting (see :class:`Result`) is recomputed when asked for after this (s).
-        compute: the function that diagnoses one recording (tests may replace it).
+        compute: the function that diagnoses one recording (tests may replace it; default :func:`compute`).
+        warmup_tc_s: the sensor class's T_c range per sensor (s) the default ``compute`` gives the diagnosis,
+            e.g. the station's limits file's (``LimitsFile.correlation_time_s``); persisted results made with
+            another range are recomputed.
     """
 
     def __init__(self, *, workers: int = 1, max_queued: int = 16, persist: bool = True, memory_entries: int = 64,
-                 nice: int = 10, retry_s: float = 60.0, compute: Callable[[Recording], Result] = compute) -> None:
+                 nice: int = 10, retry_s: float = 60.0, compute: Callable[[Recording], Result] | None = None,
+                 warmup_tc_s: Mapping[str, tuple[float, float]] | None = None) -> None:
         self.workers, self.max_queued, self.persist, self.memory_entries = workers, max_queued, persist, memory_entries
         self.nice, self.retry_s = nice, retry_s
-        self._compute = compute
+        self._settings = _settings(warmup_tc_s)
+        self._compute = (compute if compute is not None
+                         else functools.partial(_compute_default, warmup_tc_s=warmup_tc_s))
         self._lock = threading.Lock()
         self._results: OrderedDict[str, tuple[Result, float]] = OrderedDict()  # result, monotonic time kept
         self._pending: set[str] = set()
@@ -337,7 +354,7 @@ class DiagnosisService:
                 del self._results[recording.sha256]  # a passing failure: try again
             if recording.sha256 in self._pending:
                 return Result(PENDING)
-        loaded = _load(recording) if self.persist else None
+        loaded = _load(recording, self._settings) if self.persist else None
         if loaded is not None:
             self._keep(recording.sha256, loaded)
         return loaded
@@ -382,7 +399,7 @@ class DiagnosisService:
                 result = Result(ERROR, error=f"the diagnosis failed: {type(exc).__name__}: {exc}", lasting=False)
             result = dataclasses.replace(result, report=json_safe(result.report))
             if self.persist and result.lasting and result.status in (READY, ERROR):
-                _save(rec, result)
+                _save(rec, result, self._settings)
             self._keep(rec.sha256, result)
             with self._lock:
                 self._pending.discard(rec.sha256)
