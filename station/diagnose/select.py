@@ -80,6 +80,9 @@ GM_CACHE = 48
 #: Candidates that look like the warm-up drift: tested with the drift's T_c re-fitted.
 PROFILE_TC = ("temperature_bias", "temperature_scale", "bias_random_walk")
 
+#: The drift state of a :class:`SensorProblem`: T_c per axis, base columns, GM correlations, q per axis.
+_State = tuple[np.ndarray, list[np.ndarray], list[np.ndarray], np.ndarray]
+
 
 @dataclass
 class Test:
@@ -327,7 +330,7 @@ class SensorProblem:
         r0 = self._rank(x0)
         saved = None
         if name in PROFILE_TC:
-            saved = (self.tc.copy(), list(self.base), list(self.gm), self.q.copy())
+            saved = self._snapshot()
             # the null gets the same T_c refinement as the alternative: only the candidate may make the gain
             self.refit_drift()
             nll0 = self.total_nll()
@@ -347,7 +350,7 @@ class SensorProblem:
             self.accepted.append(zb)
             gain = 2.0 * (nll0 - self.total_nll())
             self.accepted.pop()
-            self.tc, self.base, self.gm, self.q = saved
+            self._restore(saved)
         p = zb.shape[2]
         nfix = x1.shape[1] - p
         zcols = x1[:, nfix:]
@@ -363,11 +366,24 @@ class SensorProblem:
             test.heldout_before, test.heldout_after = self.heldout(zb)
         return test
 
+    def _snapshot(self) -> _State:
+        """The drift's current T_c, base columns, GM correlations and q (see :meth:`_restore`)."""
+        return self.tc.copy(), list(self.base), list(self.gm), self.q.copy()
+
+    def _restore(self, state: _State) -> None:
+        tc, base, gm, q = state
+        self.tc, self.base, self.gm, self.q = tc.copy(), list(base), list(gm), q.copy()
+
     def heldout(self, zb: np.ndarray) -> tuple[float, float]:
         """Predictive error on held-out segments without/with ``zb``: mean squared Mahalanobis residual
-        per held-out block (1 = as expected), under the block covariance, the linear parameters fitted
-        by GLS on the other segments (4 folds by segment; the power-on rest always stays in training).
+        per held-out block (1 = as expected), under the block covariance at the current drift (T_c, q), the
+        linear parameters fitted by GLS on the other segments (4 folds by segment; the power-on rest always
+        stays in training).
         """
+        return self._heldout_error(self.accepted), self._heldout_error([*self.accepted, zb])
+
+    def _heldout_error(self, blocks: list[np.ndarray]) -> float:
+        """The held-out error of :meth:`heldout` for the mean model with ``blocks``."""
         folds = self.sd.segment % FOLDS
         folds[self.sd.segment == self.sd.segment.min()] = -1
         covs = []
@@ -375,50 +391,47 @@ class SensorProblem:
             c = float(self.q[k]) * self.gm[k] + self.k2 * self.tmin
             c[np.diag_indices_from(c)] += self.white[:, k]
             covs.append(c)
-        errs = []
-        for blocks in (self.accepted, [*self.accepted, zb]):
-            total, count = 0.0, 0
-            for f in range(FOLDS):
-                te = folds == f
-                tr = ~te
-                if not te.any() or te.sum() < 2:
-                    continue
-                nb = [b.shape[1] for b in self.base]
-                p = sum(b.shape[2] for b in blocks)
-                ntr = int(tr.sum())
-                x = np.zeros((3 * ntr, sum(nb) + p))
-                y = np.zeros(3 * ntr)
-                xte, chols = [], []
-                col = 0
-                for k in range(3):
-                    ch = linalg.cholesky(covs[k][np.ix_(tr, tr)], lower=True, check_finite=False)
-                    chols.append(ch)
-                    xk = np.zeros((self.m, sum(nb) + p))
-                    xk[:, col:col + nb[k]] = self.base[k]
-                    col += nb[k]
-                    if p:
-                        xk[:, sum(nb):] = np.concatenate([b[:, k, :] for b in blocks], axis=1)
-                    xte.append(xk)
-                    rows = slice(k * ntr, (k + 1) * ntr)
-                    x[rows] = linalg.solve_triangular(ch, xk[tr], lower=True, check_finite=False)
-                    y[rows] = linalg.solve_triangular(ch, self.y[tr, k], lower=True, check_finite=False)
-                beta, *_ = linalg.lstsq(x, y, cond=RCOND, check_finite=False)
-                for k in range(3):
-                    r = self.y[:, k] - xte[k] @ beta
-                    ch = chols[k]
-                    a = linalg.cho_solve((ch, True), covs[k][np.ix_(tr, te)], check_finite=False)
-                    mu = a.T @ r[tr]
-                    cond = covs[k][np.ix_(te, te)] - covs[k][np.ix_(te, tr)] @ a
-                    e = r[te] - mu
-                    try:
-                        cc = linalg.cholesky(cond, lower=True, check_finite=False)
-                        ew = linalg.solve_triangular(cc, e, lower=True, check_finite=False)
-                    except linalg.LinAlgError:
-                        ew = e / np.sqrt(self.white[te, k])
-                    total += float(ew @ ew)
-                    count += len(e)
-            errs.append(total / max(count, 1))
-        return errs[0], errs[1]
+        total, count = 0.0, 0
+        for f in range(FOLDS):
+            te = folds == f
+            tr = ~te
+            if not te.any() or te.sum() < 2:
+                continue
+            nb = [b.shape[1] for b in self.base]
+            p = sum(b.shape[2] for b in blocks)
+            ntr = int(tr.sum())
+            x = np.zeros((3 * ntr, sum(nb) + p))
+            y = np.zeros(3 * ntr)
+            xte, chols = [], []
+            col = 0
+            for k in range(3):
+                ch = linalg.cholesky(covs[k][np.ix_(tr, tr)], lower=True, check_finite=False)
+                chols.append(ch)
+                xk = np.zeros((self.m, sum(nb) + p))
+                xk[:, col:col + nb[k]] = self.base[k]
+                col += nb[k]
+                if p:
+                    xk[:, sum(nb):] = np.concatenate([b[:, k, :] for b in blocks], axis=1)
+                xte.append(xk)
+                rows = slice(k * ntr, (k + 1) * ntr)
+                x[rows] = linalg.solve_triangular(ch, xk[tr], lower=True, check_finite=False)
+                y[rows] = linalg.solve_triangular(ch, self.y[tr, k], lower=True, check_finite=False)
+            beta, *_ = linalg.lstsq(x, y, cond=RCOND, check_finite=False)
+            for k in range(3):
+                r = self.y[:, k] - xte[k] @ beta
+                ch = chols[k]
+                a = linalg.cho_solve((ch, True), covs[k][np.ix_(tr, te)], check_finite=False)
+                mu = a.T @ r[tr]
+                cond = covs[k][np.ix_(te, te)] - covs[k][np.ix_(te, tr)] @ a
+                e = r[te] - mu
+                try:
+                    cc = linalg.cholesky(cond, lower=True, check_finite=False)
+                    ew = linalg.solve_triangular(cc, e, lower=True, check_finite=False)
+                except linalg.LinAlgError:
+                    ew = e / np.sqrt(self.white[te, k])
+                total += float(ew @ ew)
+                count += len(e)
+        return total / max(count, 1)
 
     # --- random walk -------------------------------------------------------------
     def drift_noise_max(self, k: int) -> float:
@@ -460,7 +473,7 @@ class SensorProblem:
         Alternative: K^2 >= 0 added, q kept at the null's value (which makes the test conservative).
         Both at the warm-up T_c re-fitted with the temperature term (then restored).
         """
-        saved = (self.tc.copy(), list(self.base), list(self.gm), self.q.copy())
+        saved = self._snapshot()
         try:
             if np.any(self.d_temp):
                 # a temperature bias that the warm-up absorbed (T_c pulled to the self-heating's time constant)
@@ -472,7 +485,7 @@ class SensorProblem:
                     self.accepted.pop()
             return self._random_walk_at_current_tc()
         finally:
-            self.tc, self.base, self.gm, self.q = saved
+            self._restore(saved)
 
     def _random_walk_at_current_tc(self) -> Test:
         """:meth:`test_random_walk` at the current T_c."""
