@@ -215,8 +215,8 @@ def test_cli_diagnose_takes_the_tc_range_from_a_limits_file(tmp_path: Path) -> N
 
 def test_temperature_bias_is_not_taken_for_a_random_walk() -> None:
     """A temperature bias of 2 mm/s^2/K (gyro ~0.01 deg/s/K) on a random plan (seeds of the concealed-data study,
-    benchmarks/bench_diagnose.py --chamber). From the recording alone the warm-up absorbs it (T_c pulled to the
-    self-heating's time constant); what eq. 3's slower drift then leaves is not a random walk: the walk's null
+    benchmarks/bench_diagnose.py --chamber). From the recording alone the warm-up absorbs most of it (T_c pulled to
+    the self-heating's time constant); what eq. 3's slower drift then leaves is not a random walk: the walk's null
     re-fits T_c with the temperature term. With a climate-chamber cycle the bias is named on both sensors, and
     what the accel's warm-up amplitude cannot exclude bounds its drift noise: again no random walk."""
     from station.sim.plan import random_plan
@@ -226,7 +226,12 @@ def test_temperature_bias_is_not_taken_for_a_random_walk() -> None:
 
     alone = simulate_session(107, plan=plan(107), effects=Effects(temperature_bias=2e-3))
     report = diagnose(alone.session).report
-    assert report["findings"] == []
+    assert {f["effect"] for f in report["findings"]} <= {"temperature_bias"}  # no random walk
+    for f in report["findings"]:  # where named at all (the gyro's z here, marginally), with the true coefficient
+        truth = np.degrees(alone.effect_truth.gyro_temp_bias) if f["sensor"] == "gyro" else (
+            alone.effect_truth.accel_temp_bias / 9.80665e-3)  # deg/s/K, mg/K
+        value, std = np.array(f["parameters"]["value"]), np.array(f["parameters"]["std"])
+        assert np.all(np.abs(value - truth) < 3 * std)
     assert any("temperature_bias" in e["effects"] for e in report["inseparable"])
     chamber = replace(TABLE1, ambient_cycle_k=2.0, ambient_cycle_period_s=300.0)
     cycled = simulate_session(105, plan=plan(105), sensor_class=chamber, effects=Effects(temperature_bias=2e-3))
