@@ -18,9 +18,10 @@ eq. 3 in full, its T_c re-fitted, see :func:`base_drift`), so a candidate only c
 with what the base model cannot absorb. Decision (forward selection, one effect at a
 time): twice the log-likelihood gain must exceed the BIC penalty ``p ln N`` and the
 chi^2 critical value at ``ALPHA``, and the error on held-out segments (4-fold by segment)
-must not rise by more than ``HELDOUT_SE`` standard errors of its paired change. Where the best candidate's fitted signal and a competitor's are nearly
-collinear with this recording, both are reported as inseparable, unless the best one
-stays significant given the competitor while the competitor does not given the best.
+must not rise by more than ``HELDOUT_SE`` standard errors of its paired change. Where the
+best candidate's fitted signal and a competitor's are nearly collinear with this recording,
+both are reported as inseparable, unless the best one stays significant given the
+competitor while the competitor does not given the best.
 
 ``bias_random_walk`` is tested once no mean candidate passes (an unmodelled mean signal
 also looks like a wander): a constrained likelihood-ratio test of ``K^2`` against eq. 3's
