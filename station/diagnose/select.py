@@ -83,6 +83,8 @@ GM_CACHE = 48
 #: Candidates that look like the warm-up drift: tested with the drift's T_c re-fitted.
 PROFILE_TC = ("temperature_bias", "temperature_scale", "bias_random_walk")
 
+#: Per axis of a held-out fold: Cholesky of the training covariance, kriging weights, conditional Cholesky.
+_FoldAxis = tuple[np.ndarray, np.ndarray, np.ndarray | None]
 #: The drift state of a :class:`SensorProblem`: T_c per axis, base columns, GM correlations, q per axis.
 _State = tuple[np.ndarray, list[np.ndarray], list[np.ndarray], np.ndarray]
 
@@ -391,17 +393,19 @@ class SensorProblem:
         linear parameters fitted by GLS on the other segments (4 folds by segment; the power-on rest always
         stays in training); and the standard error of their difference, paired over the held-out blocks.
         """
-        before = self._heldout_errors(self.accepted)
-        after = self._heldout_errors([*self.accepted, zb])
+        folds = self._heldout_folds()
+        before = self._heldout_errors(self.accepted, folds)
+        after = self._heldout_errors([*self.accepted, zb], folds)
         d = after - before
         se = float(np.std(d, ddof=1) / math.sqrt(len(d))) if len(d) > 1 else math.inf
         return float(before.mean()), float(after.mean()), se
 
-    def _heldout_errors(self, blocks: list[np.ndarray]) -> np.ndarray:
-        """The squared whitened prediction errors of :meth:`heldout` per held-out block (folds and axes in
-        turn) for the mean model with ``blocks``."""
-        folds = self.sd.segment % FOLDS
-        folds[self.sd.segment == self.sd.segment.min()] = -1
+    def _heldout_folds(self) -> list[tuple[np.ndarray, np.ndarray, list[_FoldAxis]]]:
+        """Per fold (held-out mask, training mask, per axis): the block covariance's factorizations, which
+        do not depend on the mean model: Cholesky of the training part, kriging weights of the held-out
+        blocks on the training blocks, Cholesky of the conditional covariance (None when not positive)."""
+        seg = self.sd.segment % FOLDS
+        seg[self.sd.segment == self.sd.segment.min()] = -1
         covs = []
         for k in range(3):
             c = float(self.q[k]) * self.gm[k] + self.k2 * self.tmin
@@ -409,41 +413,49 @@ class SensorProblem:
             covs.append(c)
         out = []
         for f in range(FOLDS):
-            te = folds == f
+            te = seg == f
             tr = ~te
             if not te.any() or te.sum() < 2:
                 continue
-            nb = [b.shape[1] for b in self.base]
-            p = sum(b.shape[2] for b in blocks)
-            ntr = int(tr.sum())
-            x = np.zeros((3 * ntr, sum(nb) + p))
-            y = np.zeros(3 * ntr)
-            xte, chols = [], []
-            col = 0
-            for k in range(3):
-                ch = linalg.cholesky(covs[k][np.ix_(tr, tr)], lower=True, check_finite=False)
-                chols.append(ch)
-                xk = np.zeros((self.m, sum(nb) + p))
-                xk[:, col:col + nb[k]] = self.base[k]
-                col += nb[k]
-                if p:
-                    xk[:, sum(nb):] = np.concatenate([b[:, k, :] for b in blocks], axis=1)
-                xte.append(xk)
-                rows = slice(k * ntr, (k + 1) * ntr)
-                x[rows] = linalg.solve_triangular(ch, xk[tr], lower=True, check_finite=False)
-                y[rows] = linalg.solve_triangular(ch, self.y[tr, k], lower=True, check_finite=False)
-            beta, *_ = linalg.lstsq(x, y, cond=RCOND, check_finite=False)
-            for k in range(3):
-                r = self.y[:, k] - xte[k] @ beta
-                ch = chols[k]
-                a = linalg.cho_solve((ch, True), covs[k][np.ix_(tr, te)], check_finite=False)
-                mu = a.T @ r[tr]
-                cond = covs[k][np.ix_(te, te)] - covs[k][np.ix_(te, tr)] @ a
-                e = r[te] - mu
+            axes = []
+            for c in covs:
+                ch = linalg.cholesky(c[np.ix_(tr, tr)], lower=True, check_finite=False)
+                a = linalg.cho_solve((ch, True), c[np.ix_(tr, te)], check_finite=False)
                 try:
-                    cc = linalg.cholesky(cond, lower=True, check_finite=False)
-                    ew = linalg.solve_triangular(cc, e, lower=True, check_finite=False)
+                    cc = linalg.cholesky(c[np.ix_(te, te)] - c[np.ix_(te, tr)] @ a, lower=True, check_finite=False)
                 except linalg.LinAlgError:
+                    cc = None
+                axes.append((ch, a, cc))
+            out.append((te, tr, axes))
+        return out
+
+    def _heldout_errors(
+        self, blocks: list[np.ndarray], folds: list[tuple[np.ndarray, np.ndarray, list[_FoldAxis]]]
+    ) -> np.ndarray:
+        """The squared whitened prediction errors of :meth:`heldout` per held-out block (folds and axes in
+        turn) for the mean model with ``blocks``."""
+        nb = [b.shape[1] for b in self.base]
+        p = sum(b.shape[2] for b in blocks)
+        xs = []
+        for k in range(3):
+            xk = np.zeros((self.m, sum(nb) + p))
+            xk[:, sum(nb[:k]):sum(nb[:k + 1])] = self.base[k]
+            if p:
+                xk[:, sum(nb):] = np.concatenate([b[:, k, :] for b in blocks], axis=1)
+            xs.append(xk)
+        out = []
+        for te, tr, axes in folds:
+            x = np.concatenate([linalg.solve_triangular(ch, xs[k][tr], lower=True, check_finite=False)
+                                for k, (ch, _, _) in enumerate(axes)])
+            y = np.concatenate([linalg.solve_triangular(ch, self.y[tr, k], lower=True, check_finite=False)
+                                for k, (ch, _, _) in enumerate(axes)])
+            beta, *_ = linalg.lstsq(x, y, cond=RCOND, check_finite=False)
+            for k, (_, a, cc) in enumerate(axes):
+                r = self.y[:, k] - xs[k] @ beta
+                e = r[te] - a.T @ r[tr]
+                if cc is not None:
+                    ew = linalg.solve_triangular(cc, e, lower=True, check_finite=False)
+                else:
                     ew = e / np.sqrt(self.white[te, k])
                 out.append(ew**2)
         return np.concatenate(out) if out else np.zeros(0)

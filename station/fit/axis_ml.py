@@ -252,7 +252,6 @@ class _ProfileGrid:
         lo, hi = _edges(self.s, prof, i, rise)
         return est, (hi - lo) / (2.0 * z)
 
-
     def beta_covariance(self, beta: np.ndarray, over_tc: bool) -> np.ndarray:
         """Covariance of the estimate ``beta`` (linear parameters, then ``d``), averaged over the likelihood.
 
