@@ -41,6 +41,7 @@ from dataclasses import replace
 import numpy as np
 
 from station.diagnose import NAMES, diagnose
+from station.diagnose.candidates import LIBRARY
 from station.sequence.limits_file import DEFAULT_LIMITS_PATH, load_limits
 from station.sim.effects import Effects
 from station.sim.plan import RigPlan, random_plan
@@ -53,7 +54,10 @@ CONCEALED: dict[str, float] = {
     # accel 2 mm/s^2/K (0.2 mg/K, data-sheet typical), gyro 10 mdeg/s/K: ~10 mm/s^2 (below the accel's sample
     # noise) and ~50 mdeg/s over the self-heating, which the base fit absorbs as the warm-up of eq. 3
     "temperature_bias": 0.002,
-    "temperature_scale": 50.0,  # ppm/K: 2.5e-4 relative after 5 K
+    # 100 ppm/K = 0.01 %/K (data sheets list 0.005-0.026 %/K typical): 5e-4 relative after 5 K, RMS over the
+    # recording ~0.8 single-sample sigma; the base fit takes most of it into M. At 50 ppm/K the recordings
+    # carry too little of it for any test at ALPHA (--information: 8.4/10 expected).
+    "temperature_scale": 100.0,
     "g_sensitivity": 0.005,  # deg/s per g
     "scale_nonlinearity": 2e-4,  # relative at 1 g / 200 deg/s
     "scale_asymmetry": 2e-4,
@@ -141,61 +145,97 @@ def sweep(names: list[str], seeds: int) -> None:
         print(f"{name:20s} " + " ".join(cells), flush=True)
 
 
+def _power_cells(name: str, seed: int, on: dict[str, float], off: dict[str, float]) -> tuple[list[str], float]:
+    """Per sensor, the noncentrality of effect ``name``'s exact signal in recording ``seed`` (simulation with the
+    effects ``on`` minus with ``off``), the part its regressors capture, the threshold and the test's power;
+    and P(found on either sensor)."""
+    from scipy import linalg, stats
+
+    from station.diagnose.residuals import fit_baseline
+    from station.diagnose.select import RCOND, SensorProblem
+
+    plan = plan_for(seed)
+    sim_on = simulate_session(seed, plan=plan, effects=Effects(**on))
+    sim_off = simulate_session(seed, plan=plan, effects=Effects(**off))
+    baseline = fit_baseline(sim_on.session, warmup_tc_s=WARMUP_TC)
+    cells, miss = [], 1.0
+    for sensor, data in (("accel", lambda x: x.accel_mps2), ("gyro", lambda x: x.gyro_radps)):
+        cand = LIBRARY.get(name)
+        if cand is None or sensor not in cand.sensors:
+            continue
+        sd = baseline.sensor(sensor)
+        z = cand.build(baseline, sd)
+        if z is None:
+            continue
+        prob = SensorProblem(baseline, sd)
+        chols, _ = prob.whitened()
+        exact = sd.block_mean(data(sim_on.session) - data(sim_off.session))
+        sw = np.concatenate([linalg.solve_triangular(chols[k], exact[:, k], lower=True) for k in range(3)])
+
+        def left(x: np.ndarray, sw: np.ndarray = sw) -> float:
+            beta, *_ = linalg.lstsq(x, sw, cond=RCOND)
+            return float(np.sum((sw - x @ beta) ** 2))
+
+        x0, _ = prob.design(chols, [])
+        x1, _ = prob.design(chols, [sd.block_mean(z)])
+        lam = left(x0)
+        captured = lam - left(x1)
+        test = prob.test_mean(name, sd.block_mean(z))
+        p = max(test.params, 1)
+        thr = max(test.critical, p * math.log(prob.n_rows))
+        power = float(stats.ncx2.sf(thr, p, max(captured, 1e-12)))
+        miss *= 1.0 - power
+        cells.append(f"{sensor} lambda {lam:7.1f} captured {captured:7.1f} threshold {thr:5.1f} "
+                     f"power {power:4.2f} gain {test.gain:7.1f}")
+    return cells, 1.0 - miss
+
+
 def information(names: list[str], seeds: int) -> None:
     """Whether a miss is information-limited: per recording of the study and sensor, the noncentrality
     ``lambda`` of the exact effect signal (simulation with minus without the effect, same seed; block means
     whitened by the diagnosis's block covariance, after the base model's terms), the part of it the
     candidate's regressors capture, the decision threshold (max of the chi^2 critical value and the BIC
     penalty) and the power ``P(chi^2_p(lambda) > threshold)`` of the test with the captured part.
-    ``lambda`` includes the ADC's rounding jitter (a few units); T_c and q are held at the diagnosis's start."""
-    from scipy import linalg, stats
-
-    from station.diagnose.candidates import LIBRARY
-    from station.diagnose.residuals import fit_baseline
-    from station.diagnose.select import RCOND, SensorProblem
-
+    ``lambda`` includes the ADC's rounding jitter (a few units); T_c and q are held at the diagnosis's start.
+    ``name@pairs`` does this for the pair study's recordings that hold ``name``, the other effect of the
+    pair in the data (present in both simulations, so in the noise the test sees)."""
     print("\ninformation per recording (noncentrality lambda in chi^2 units; power = P(the test passes) given "
           "the captured part)")
-    for name in names:
-        expected = 0.0
-        for s in range(seeds):
-            seed = study_seed(name, s)
-            plan = plan_for(seed)
-            on = simulate_session(seed, plan=plan, effects=Effects(**{name: CONCEALED[name]}))
-            off = simulate_session(seed, plan=plan)
-            baseline = fit_baseline(on.session, warmup_tc_s=WARMUP_TC)
-            cells, miss = [], 1.0
-            for sensor, data in (("accel", lambda x: x.accel_mps2), ("gyro", lambda x: x.gyro_radps)):
-                cand = LIBRARY.get(name)
-                if cand is None or sensor not in cand.sensors:
-                    continue
-                sd = baseline.sensor(sensor)
-                z = cand.build(baseline, sd)
-                if z is None:
-                    continue
-                prob = SensorProblem(baseline, sd)
-                chols, _ = prob.whitened()
-                exact = sd.block_mean(data(on.session) - data(off.session))
-                sw = np.concatenate([linalg.solve_triangular(chols[k], exact[:, k], lower=True) for k in range(3)])
+    for spec in names:
+        name, _, where = spec.partition("@")
+        if name not in LIBRARY:
+            print(f"{name}: not a mean candidate (a noise-model or outlier test): no noncentrality", flush=True)
+            continue
+        expected, count = 0.0, 0
+        if where == "pairs":
+            runs = [(f"pair {pair} seed {seed}", seed, {n: CONCEALED[n] for n in pair},
+                     {n: CONCEALED[n] for n in pair if n != name})
+                    for seed, pair in study_pairs(PAIRS) if name in pair]
+        else:
+            runs = [(f"seed {s}", study_seed(name, s), {name: CONCEALED[name]}, {}) for s in range(seeds)]
+        for label, seed, on, off in runs:
+            cells, p_found = _power_cells(name, seed, on, off)
+            expected += p_found
+            count += 1
+            print(f"  {name} {label}: " + " | ".join(cells) + f" | P(found) {p_found:.2f}", flush=True)
+            if len(on) > 1:  # the same recording without the other effect
+                cells, p_alone = _power_cells(name, seed, {name: CONCEALED[name]}, {})
+                print("    without the other effect: " + " | ".join(cells) + f" | P(found) {p_alone:.2f}", flush=True)
+        print(f"{name}: expected detections from the powers {expected:.1f}/{count}", flush=True)
 
-                def left(x: np.ndarray, sw: np.ndarray = sw) -> float:
-                    beta, *_ = linalg.lstsq(x, sw, cond=RCOND)
-                    return float(np.sum((sw - x @ beta) ** 2))
 
-                x0, _ = prob.design(chols, [])
-                x1, _ = prob.design(chols, [sd.block_mean(z)])
-                lam = left(x0)
-                captured = lam - left(x1)
-                test = prob.test_mean(name, sd.block_mean(z))
-                p = max(test.params, 1)
-                thr = max(test.critical, p * math.log(prob.n_rows))
-                power = float(stats.ncx2.sf(thr, p, max(captured, 1e-12)))
-                miss *= 1.0 - power
-                cells.append(f"{sensor} lambda {lam:7.1f} captured {captured:7.1f} threshold {thr:5.1f} "
-                             f"power {power:4.2f} gain {test.gain:7.1f}")
-            expected += 1.0 - miss
-            print(f"  {name} seed {s}: " + " | ".join(cells) + f" | P(found) {1.0 - miss:.2f}", flush=True)
-        print(f"{name}: expected detections from the powers {expected:.1f}/{seeds}", flush=True)
+#: Recordings in the pair study.
+PAIRS = 10
+
+
+def study_pairs(n: int) -> list[tuple[int, tuple[str, str]]]:
+    """The pair study's first ``n`` recordings: (seed, the two effects hidden together)."""
+    rng = np.random.default_rng(7)
+    out = []
+    for s in range(n):
+        a, b = rng.choice(len(NAMES), size=2, replace=False)
+        out.append((9000 + s, (NAMES[a], NAMES[b])))
+    return out
 
 
 #: The rig step the diagnosis names for temperature_bias: a climate-chamber cycle, +-2 K with a 5 min period.
@@ -231,13 +271,14 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, default=10)
     ap.add_argument("--effects", default=",".join(NAMES), help="comma-separated effects of the per-effect study")
     ap.add_argument("--clean", type=int, default=50)
-    ap.add_argument("--pairs", type=int, default=10)
+    ap.add_argument("--pairs", type=int, default=PAIRS)
     ap.add_argument("--chamber", type=int, default=0, help="recordings for the temperature rig-step study")
     ap.add_argument("--sweep", action="store_true", help="also the detection rate against magnitude")
     ap.add_argument("--sweep-seeds", type=int, default=5)
     ap.add_argument("--sweep-effects", default=",".join(NAMES), help="comma-separated effect names")
     ap.add_argument("--information", default="", help="comma-separated effect names: noncentrality and power per "
-                    "recording of the study (is a miss information-limited?)")
+                    "recording of the study (is a miss information-limited?); name@pairs: the pair study's "
+                    "recordings that hold it")
     ap.add_argument("--limits", default=str(DEFAULT_LIMITS_PATH),
                     help="limits file whose correlation_time_s ranges the diagnosis gets as the sensor class's T_c "
                     "(default: the station's default limits, Table 1); 'none': the recordings alone")
@@ -272,12 +313,9 @@ def main() -> None:
         false += bool(named)
         print(f"  none                 seed {s}: named {sorted(named)} ({dt:.1f} s)", flush=True)
     pair_ok = 0
-    rng = np.random.default_rng(7)
     pairs = []
-    for s in range(args.pairs):
-        a, b = rng.choice(len(NAMES), size=2, replace=False)
-        pair = (NAMES[a], NAMES[b])
-        named, _, dt, _ = run({pair[0]: CONCEALED[pair[0]], pair[1]: CONCEALED[pair[1]]}, 9000 + s)
+    for seed, pair in study_pairs(args.pairs):
+        named, _, dt, _ = run({pair[0]: CONCEALED[pair[0]], pair[1]: CONCEALED[pair[1]]}, seed)
         ok = set(pair) <= named
         pair_ok += ok
         pairs.append((pair, sorted(named), ok))

@@ -187,6 +187,22 @@ def test_temperature_bias_found_with_the_sensor_class_tc_range() -> None:
     assert diagnose(clean.session, warmup_tc_s=tc_range).report["findings"] == []
 
 
+def test_temperature_scale_at_the_concealed_magnitude_with_its_coefficient() -> None:
+    """100 ppm/K per axis (shape 0.5-1, random signs; the study's concealed magnitude, RMS over the recording
+    below one sample's noise) is named on the gyro, and nothing else; each axis's coefficient in ppm/K lies within
+    3 of its standard errors of the truth and is resolved to better than 25 %."""
+    from station.sequence.limits_file import load_limits
+
+    res = simulate_session(17, plan=PLAN, effects=Effects(temperature_scale=100.0))
+    report = diagnose(res.session, warmup_tc_s=load_limits().correlation_time_s).report
+    assert _named(report) == {("temperature_scale", "gyro")}
+    par = report["findings"][0]["parameters"]
+    value, std = np.array(par["value"]), np.array(par["std"])  # ppm/K
+    truth = res.effect_truth.gyro_temp_scale * 1e6
+    assert np.all(np.abs(value - truth) < 3 * std)
+    assert np.all(std < 0.25 * np.abs(truth))
+
+
 def test_cli_diagnose_takes_the_tc_range_from_a_limits_file(tmp_path: Path) -> None:
     """``station diagnose --limits FILE``: the file's correlation_time_s ranges reach the diagnosis (the
     temperature bias of the test above is named); a malformed limits file is refused with exit code 2."""
