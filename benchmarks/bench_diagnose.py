@@ -185,8 +185,9 @@ def _power_cells(name: str, seed: int, on: dict[str, float], off: dict[str, floa
         thr = max(test.critical, p * math.log(prob.n_rows))
         power = float(stats.ncx2.sf(thr, p, max(captured, 1e-12)))
         miss *= 1.0 - power
-        cells.append(f"{sensor} lambda {lam:7.1f} captured {captured:7.1f} threshold {thr:5.1f} "
-                     f"power {power:4.2f} gain {test.gain:7.1f}")
+        absorbed = 1.0 - lam / max(float(sw @ sw), 1e-300)  # share of the signal's chi^2 the base terms take
+        cells.append(f"{sensor} absorbed {100.0 * absorbed:5.1f} % lambda {lam:7.1f} captured {captured:7.1f} "
+                     f"threshold {thr:5.1f} power {power:4.2f} gain {test.gain:7.1f}")
     return cells, 1.0 - miss
 
 
@@ -197,6 +198,7 @@ def information(names: list[str], seeds: int) -> None:
     candidate's regressors capture, the decision threshold (max of the chi^2 critical value and the BIC
     penalty) and the power ``P(chi^2_p(lambda) > threshold)`` of the test with the captured part.
     ``lambda`` includes the ADC's rounding jitter (a few units); T_c and q are held at the diagnosis's start.
+    ``absorbed``: the share of the signal's whitened chi^2 that the base model's terms take (concealment).
     ``name@pairs`` does this for the pair study's recordings that hold ``name``, the other effect of the
     pair in the data (present in both simulations, so in the noise the test sees)."""
     print("\ninformation per recording (noncentrality lambda in chi^2 units; power = P(the test passes) given "
