@@ -306,3 +306,32 @@ def test_drift_refit_reaches_its_optimum() -> None:
         prob.refit_drift()
         assert prob.total_nll() == pytest.approx(nll, abs=1e-9)
         assert np.array_equal(prob.tc, tc)
+
+
+def test_detectable_from_is_the_size_at_the_quoted_power() -> None:
+    """A rejected candidate's ``detectable_from``: per parameter the size whose noncentrality (with the marginal
+    std) gives the test the quoted power; on the recording itself, an effect at twice that size on every axis is
+    found, one at a fifth of the smallest is not."""
+    from scipy import stats
+
+    from station.diagnose.select import DETECT_POWER, Test, detectable_from
+
+    cov = np.diag([1e-10, 4e-10, 9e-10])
+    t = Test(effect="temperature_scale", sensor="gyro", gain=3.0, params=3, bic_gain=3.0 - 3 * math.log(900.0),
+             critical=float(stats.chi2.isf(1e-5, 3)), theta=np.zeros(3), cov=cov)
+    d = detectable_from(t)
+    assert d is not None and d["unit"] == "ppm/K" and d["power"] == DETECT_POWER
+    threshold = max(t.critical, 3 * math.log(900.0))
+    for k, value in enumerate(d["value"]):
+        lam = (value * 1e-6) ** 2 / cov[k, k]
+        assert stats.ncx2.sf(threshold, 3, lam) == pytest.approx(DETECT_POWER, abs=0.005)
+    assert detectable_from(replace(t, params=2)) is None  # not every parameter determined
+
+    clean = diagnose(simulate_session(21, plan=PLAN).session).report
+    rejected = next(r for r in clean["rejected"] if (r["effect"], r["sensor"]) == ("temperature_scale", "gyro"))
+    sizes = np.abs(rejected["detectable_from"]["value"])  # ppm/K
+    # the simulator's per-axis coefficients are the magnitude times 0.5-1
+    big = simulate_session(21, plan=PLAN, effects=Effects(temperature_scale=2.0 * sizes.max() / 0.5))
+    assert ("temperature_scale", "gyro") in _named(diagnose(big.session).report)
+    small = simulate_session(21, plan=PLAN, effects=Effects(temperature_scale=0.2 * sizes.min()))
+    assert "temperature_scale" not in {f["effect"] for f in diagnose(small.session).report["findings"]}

@@ -204,47 +204,52 @@ LIBRARY: dict[str, Candidate] = {
 }
 
 
-def engineering(name: str, sensor: str, theta: np.ndarray, cov: np.ndarray) -> dict[str, object]:
-    """Fitted SI parameters (and covariance) of candidate ``name`` in engineering units.
+def unit_factor(name: str, sensor: str) -> tuple[float, str]:
+    """The factor from candidate ``name``'s SI parameters to its engineering unit, and that unit.
 
     temperature_bias: mg/K (accel) or deg/s/K (gyro); temperature_scale: ppm/K;
-    g_sensitivity: deg/s per g (3x3); scale_nonlinearity: relative scale error at 1 g or
+    g_sensitivity: deg/s per g; scale_nonlinearity: relative scale error at 1 g or
     200 deg/s; scale_asymmetry: relative scale difference positive minus negative;
-    lever_arm: mm; earth_rotation: multiple of the Earth rate and deg/h; time_offset: ms.
+    lever_arm: mm; earth_rotation: multiple of the Earth rate; time_offset: ms; pose_tilt: deg.
     """
-    std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     gyro = sensor == "gyro"
-
-    def pack(factor: float, unit: str, shape: tuple[int, ...] | None = None) -> dict[str, object]:
-        v, s = theta * factor, std * factor
-        if shape:
-            v, s = v.reshape(shape), s.reshape(shape)
-        return {"value": np.round(v, 9).tolist(), "std": np.round(s, 9).tolist(), "unit": unit}
-
     if name == "temperature_bias":
-        return pack(1.0 / _DEG, "deg/s/K") if gyro else pack(1e3 / STANDARD_GRAVITY, "mg/K")
-    if name == "temperature_scale":
-        return pack(1e6, "ppm/K")
-    if name == "g_sensitivity":
-        return pack(STANDARD_GRAVITY / _DEG, "deg/s per g", (3, 3))
+        return (1.0 / _DEG, "deg/s/K") if gyro else (1e3 / STANDARD_GRAVITY, "mg/K")
     if name == "scale_nonlinearity":
         ref = GYRO_NONLINEARITY_REF_RADPS if gyro else STANDARD_GRAVITY
-        return pack(ref, "relative scale error at " + ("200 deg/s" if gyro else "1 g"))
-    if name == "scale_asymmetry":
-        return pack(1.0, "relative (positive - negative scale)")
-    if name == "lever_arm":
-        out = pack(1e3, "mm")
-        out["length_mm"] = round(float(np.linalg.norm(theta) * 1e3), 3)
-        return out
-    if name == "earth_rotation":
-        out = pack(1.0, "multiple of the Earth rate")
-        out["deg_per_h"] = round(float(theta[0] * EARTH_RATE_RADPS / _DEG * 3600.0), 4)
-        return out
+        return ref, "relative scale error at " + ("200 deg/s" if gyro else "1 g")
+    fixed = {
+        "temperature_scale": (1e6, "ppm/K"),
+        "g_sensitivity": (STANDARD_GRAVITY / _DEG, "deg/s per g"),
+        "scale_asymmetry": (1.0, "relative (positive - negative scale)"),
+        "lever_arm": (1e3, "mm"),
+        "earth_rotation": (1.0, "multiple of the Earth rate"),
+        "time_offset": (1e3, "ms"),
+        "pose_tilt": (1.0 / _DEG, "deg"),
+    }
+    return fixed[name]
+
+
+#: Candidates whose parameters form a matrix rather than a per-axis vector.
+SHAPES: dict[str, tuple[int, int]] = {"g_sensitivity": (3, 3)}
+
+
+def engineering(name: str, sensor: str, theta: np.ndarray, cov: np.ndarray) -> dict[str, object]:
+    """Fitted SI parameters (and covariance) of candidate ``name`` in engineering units (:func:`unit_factor`);
+    lever_arm adds the arm's length in mm, earth_rotation the rate in deg/h; pose_tilt per pose pair
+    (:func:`station.diagnose.pose_tilt.engineering`)."""
     if name == "pose_tilt":
         return pose_tilt.engineering(theta, cov)
-    if name == "time_offset":
-        return pack(1e3, "ms")
-    raise KeyError(name)
+    factor, unit = unit_factor(name, sensor)
+    v, s = theta * factor, np.sqrt(np.clip(np.diag(cov), 0.0, None)) * factor
+    if name in SHAPES:
+        v, s = v.reshape(SHAPES[name]), s.reshape(SHAPES[name])
+    out: dict[str, object] = {"value": np.round(v, 9).tolist(), "std": np.round(s, 9).tolist(), "unit": unit}
+    if name == "lever_arm":
+        out["length_mm"] = round(float(np.linalg.norm(theta) * 1e3), 3)
+    if name == "earth_rotation":
+        out["deg_per_h"] = round(float(theta[0] * EARTH_RATE_RADPS / _DEG * 3600.0), 4)
+    return out
 
 
 #: The rig step that separates a candidate from the base model or from another candidate.

@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 from typing import Annotated, Any
 
+import numpy as np
 import typer
 
 from station.errors import StationError
@@ -41,6 +42,19 @@ def _print_text(report: dict[str, Any]) -> None:
         typer.echo(f"  warm-up T_c kept in the sensor class's range: {ranges}")
     if not findings and not report["inseparable"]:
         typer.echo("  the base model (eq. 1 + eq. 3) explains this recording")
+    sizes = [r for r in report["rejected"] if r.get("detectable_from")]
+    if sizes:
+        power = sizes[0]["detectable_from"]["power"]
+        typer.echo(f"  not found; this recording would show them ({100 * power:.0f} % power, "
+                   "one parameter at a time) from:")
+        for r in sizes:
+            d = r["detectable_from"]
+            v = np.abs(np.asarray(d["value"], dtype=float)).ravel()
+            v = v[v > 0]
+            if not v.size:
+                continue
+            span = f"{v.min():.3g}" if v.min() == v.max() else f"{v.min():.3g}-{v.max():.3g}"
+            typer.echo(f"    {r['effect']} ({r['sensor']}): {span} {d['unit']}")
     _print_rerun(report.get("rerun"))
 
 

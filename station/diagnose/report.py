@@ -11,6 +11,9 @@ Each finding has ``effect``, ``sensor`` (accel|gyro), ``axes``, ``parameters`` (
 unit in engineering units), ``evidence`` (likelihood gain, BIC gain, held-out error) and
 ``fit`` (before/after: BIC, block chi^2 per axis, block residual RMS); a simulated finding also
 has ``rerun`` (block RMS of its sensor per axis: base, base + this effect, all effects).
+Each ``rejected`` entry has ``effect``, ``sensor`` and ``reason``; a mean candidate that brought no
+significant improvement also has ``detectable_from`` (per parameter, in its engineering unit, the size
+this recording would have shown with the quoted ``power``; :func:`station.diagnose.select.detectable_from`).
 
 ``rerun`` (:mod:`station.diagnose.rerun`): the simulator re-run on the recording's own motion
 with the base model and with the accepted effects, compared with the recording per block:

@@ -51,7 +51,7 @@ from typing import Any
 import numpy as np
 from scipy import linalg, optimize, stats
 
-from station.diagnose.candidates import LIBRARY, RIG_STEPS, engineering
+from station.diagnose.candidates import LIBRARY, RIG_STEPS, SHAPES, engineering, unit_factor
 from station.diagnose.residuals import SENSORS, Baseline, SensorData
 from station.fit.blocks import block_exp_mean, power_on_gm_correlation
 
@@ -80,6 +80,8 @@ WARMUP_SIGMAS = 2.0
 REFIT_ROUNDS = 8
 #: Drift-noise correlation matrices kept per T_c (each (m, m) for m blocks).
 GM_CACHE = 48
+#: Power at which a rejected candidate's ``detectable_from`` is quoted (:func:`detectable_from`).
+DETECT_POWER = 0.9
 #: Candidates that look like the warm-up drift: tested with the drift's T_c re-fitted.
 PROFILE_TC = ("temperature_bias", "temperature_scale", "bias_random_walk")
 
@@ -662,6 +664,36 @@ def _unique(prob: SensorProblem, best: Test, twin: Test, regs: dict[str, np.ndar
     return not t.passes
 
 
+def detectable_from(t: Test) -> dict[str, Any] | None:
+    """How large each of a mean candidate's parameters would have had to be for this recording to show it.
+
+    Per parameter, in engineering units: the size at which the test (chi^2 with ``t.params`` degrees of
+    freedom against the larger of the critical value and the BIC penalty) passes with probability
+    ``DETECT_POWER``, that parameter alone non-zero. It takes the parameter's marginal standard error,
+    so the true noncentrality of such an effect is at least the one quoted (conservative); the held-out
+    gate and the re-fitted T_c are not part of it. None where the recording does not determine every
+    parameter (the base model absorbs some of them).
+    """
+    p = int(t.params)
+    if p <= 0 or p < t.theta.size:
+        return None
+    threshold = max(t.critical, t.gain - t.bic_gain)  # gain - bic_gain = the BIC penalty p ln N
+    lam = optimize.brentq(lambda x: stats.ncx2.sf(threshold, p, x) - DETECT_POWER, 1e-9, 1e6)
+    factor, unit = unit_factor(t.effect, t.sensor)
+    size = math.sqrt(lam) * np.sqrt(np.clip(np.diag(t.cov), 0.0, None)) * factor
+    if t.effect in SHAPES:
+        size = size.reshape(SHAPES[t.effect])
+    return {"value": _round_sig(size).tolist(), "unit": unit, "power": DETECT_POWER,
+            "noncentrality": round(lam, 2)}
+
+
+def _round_sig(x: np.ndarray, digits: int = 3) -> np.ndarray:
+    """``x`` rounded to ``digits`` significant figures (0 stays 0)."""
+    x = np.asarray(x, dtype=float)
+    scale = np.where(x != 0.0, 10.0 ** (digits - 1 - np.floor(np.log10(np.abs(np.where(x != 0.0, x, 1.0))))), 1.0)
+    return np.round(x * scale) / scale
+
+
 def _outlier_test(sd: SensorData) -> dict[str, Any]:
     n = max(sd.settled_samples, 1)
     count = int(sd.outlier_count.sum())
@@ -772,6 +804,8 @@ def select(baseline: Baseline, *, max_effects: int = 4) -> Decision:
                 entry["rig_step"] = RIG_STEPS[t.effect]
             elif not t.passes:
                 entry["reason"] = "no significant improvement"
+                if t.effect in LIBRARY:
+                    entry["detectable_from"] = detectable_from(t)
             else:
                 entry["reason"] = "worse on held-out segments"
             rejected.append(entry)
