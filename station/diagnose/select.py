@@ -734,7 +734,7 @@ def select(baseline: Baseline, *, max_effects: int = 4) -> Decision:
                 z = cand.build(baseline, sd)
                 if z is not None and np.any(z):
                     regs[name] = sd.block_mean(z)
-                elif z is None:
+                else:  # no data for it (e.g. no temperature column), or the recording never excites it
                     rejected.append({"effect": name, "sensor": sensor, "reason": "not testable: no data for it"})
         pool = set(regs) | {"bias_random_walk"}
         last: dict[str, Test] = {}
