@@ -14,7 +14,11 @@ recordings; the effect signal is the exact difference of the simulation with and
 
 Run: ``/work/venv/bin/python benchmarks/bench_diagnose.py [--seeds 10] [--clean 50] [--pairs 10]
 [--effects a,b] [--sweep [--sweep-seeds 5] [--sweep-effects a,b]] [--chamber 10] [--information a,b]
-[--limits FILE|none]``
+[--detectable 10 [--detectable-effects a,b]] [--limits FILE|none]``
+
+``--detectable N`` checks the sizes the report quotes for candidates it did not find (``detectable_from``):
+N random recordings per effect, each diagnosed clean, then with the effect at the quoted size and at a
+quarter of it (only this study).
 
 The diagnosis gets the sensor class's T_c range of eq. 3 from the station's default limits file
 (``fixtures/limits/default.toml``: Table 1, which is also the range the simulator draws from), as
@@ -268,6 +272,49 @@ def chamber(seeds: int) -> None:
               f"{listed}/{seeds}, other findings in {other}/{seeds}", flush=True)
 
 
+#: Effects whose reported parameters are the simulator's magnitude times a shape with the given smallest
+#: magnitude (station.sim.effects.Effects): an effect of ``quoted / smallest shape`` has every parameter at or
+#: above the size ``detectable_from`` quoted for it.
+DETECTABLE_SHAPE_MIN = {"temperature_scale": 0.5, "g_sensitivity": 0.5, "time_offset": 1.0}
+
+
+def detectable(names: list[str], seeds: int) -> None:
+    """Is a rejected candidate's ``detectable_from`` a size at which the effect is found? Per random recording
+    (plan, rate, unit; seeds 20000+): the sizes quoted on the clean recording (the sensor with the smallest
+    largest quote), then the same recording with the effect at those sizes (every parameter at or above its
+    quote: found in >= 90 % expected) and at a quarter of the smallest quote (rarely found)."""
+    print("\ndetectable_from: found at the quoted size (every parameter >= its quote; expect >= 90 %) and at a "
+          "quarter of the smallest quote")
+    for name in names:
+        hi_found = lo_found = tested = 0
+        quotes = []
+        for s in range(seeds):
+            seed = 20_000 + s
+            plan = plan_for(seed)
+            clean = diagnose(simulate_session(seed, plan=plan).session, warmup_tc_s=WARMUP_TC).report
+            sizes = {r["sensor"]: np.abs(np.asarray(r["detectable_from"]["value"], dtype=float)).ravel()
+                     for r in clean["rejected"] if r["effect"] == name and r.get("detectable_from")}
+            if not sizes:
+                print(f"  {name} seed {s}: nothing quoted (not testable in full)", flush=True)
+                continue
+            sensor = min(sizes, key=lambda k: sizes[k].max())
+            hi = float(sizes[sensor].max()) / DETECTABLE_SHAPE_MIN[name]
+            lo = 0.25 * float(min(v.min() for v in sizes.values()))
+            found = []
+            for magnitude in (hi, lo):
+                res = simulate_session(seed, plan=plan, effects=Effects(**{name: magnitude}))
+                report = diagnose(res.session, warmup_tc_s=WARMUP_TC).report
+                found.append(name in {f["effect"] for f in report["findings"]})
+            tested += 1
+            hi_found += found[0]
+            lo_found += found[1]
+            quotes.append(hi * DETECTABLE_SHAPE_MIN[name])
+            print(f"  {name} seed {s}: quoted on the {sensor} up to {hi * DETECTABLE_SHAPE_MIN[name]:.3g}; "
+                  f"at that size found {found[0]}, at a quarter of the smallest quote found {found[1]}", flush=True)
+        print(f"{name:20s} at the quoted size found {hi_found}/{tested}, at a quarter {lo_found}/{tested}; "
+              f"median largest quote {np.median(quotes) if quotes else math.nan:.3g}", flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--seeds", type=int, default=10)
@@ -284,12 +331,18 @@ def main() -> None:
     ap.add_argument("--limits", default=str(DEFAULT_LIMITS_PATH),
                     help="limits file whose correlation_time_s ranges the diagnosis gets as the sensor class's T_c "
                     "(default: the station's default limits, Table 1); 'none': the recordings alone")
+    ap.add_argument("--detectable", type=int, default=0, help="recordings per effect for the check of the "
+                    "sizes rejected candidates quote (detectable_from); runs only that study")
+    ap.add_argument("--detectable-effects", default=",".join(DETECTABLE_SHAPE_MIN))
     args = ap.parse_args()
     global WARMUP_TC
     WARMUP_TC = None if args.limits == "none" else load_limits(args.limits).correlation_time_s
     print(f"sensor class T_c range given to the diagnosis: {WARMUP_TC or 'none (the recordings alone)'}")
     if args.information:  # only this study
         information([n for n in args.information.split(",") if n], args.seeds)
+        return
+    if args.detectable:  # only this study
+        detectable([n for n in args.detectable_effects.split(",") if n], args.detectable)
         return
 
     studied = [n for n in args.effects.split(",") if n]
