@@ -292,8 +292,10 @@ def detectable(names: list[str], seeds: int) -> None:
             seed = 20_000 + s
             plan = plan_for(seed)
             clean = diagnose(simulate_session(seed, plan=plan).session, warmup_tc_s=WARMUP_TC).report
+            quoted = [r for r in clean["rejected"] if r["effect"] == name and r.get("detectable_from")]
             sizes = {r["sensor"]: np.abs(np.asarray(r["detectable_from"]["value"], dtype=float)).ravel()
-                     for r in clean["rejected"] if r["effect"] == name and r.get("detectable_from")}
+                     for r in quoted}
+            clean_gain = {r["sensor"]: r["gain"] for r in quoted}
             if not sizes:
                 print(f"  {name} seed {s}: nothing quoted (not testable in full)", flush=True)
                 continue
@@ -309,8 +311,9 @@ def detectable(names: list[str], seeds: int) -> None:
             hi_found += found[0]
             lo_found += found[1]
             quotes.append(hi * DETECTABLE_SHAPE_MIN[name])
-            print(f"  {name} seed {s}: quoted on the {sensor} up to {hi * DETECTABLE_SHAPE_MIN[name]:.3g}; "
-                  f"at that size found {found[0]}, at a quarter of the smallest quote found {found[1]}", flush=True)
+            print(f"  {name} seed {s}: quoted on the {sensor} up to {hi * DETECTABLE_SHAPE_MIN[name]:.3g} (the clean "
+                  f"recording's own chi^2 gain {clean_gain[sensor]:.2f}); at that size found {found[0]}, at a quarter "
+                  f"of the smallest quote found {found[1]}", flush=True)
         print(f"{name:20s} at the quoted size found {hi_found}/{tested}, at a quarter {lo_found}/{tested}; "
               f"median largest quote {np.median(quotes) if quotes else math.nan:.3g}", flush=True)
 
