@@ -734,8 +734,9 @@ def select(baseline: Baseline, *, max_effects: int = 4) -> Decision:
                 z = cand.build(baseline, sd)
                 if z is not None and np.any(z):
                     regs[name] = sd.block_mean(z)
-                else:  # no data for it (e.g. no temperature column), or the recording never excites it
-                    rejected.append({"effect": name, "sensor": sensor, "reason": "not testable: no data for it"})
+                else:
+                    why = "no data for it" if z is None else "the recording never excites it (all regressors 0)"
+                    rejected.append({"effect": name, "sensor": sensor, "reason": f"not testable: {why}"})
         pool = set(regs) | {"bias_random_walk"}
         last: dict[str, Test] = {}
         for _step in range(max_effects):
