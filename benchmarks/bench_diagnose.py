@@ -185,9 +185,8 @@ def _power_cells(name: str, seed: int, on: dict[str, float], off: dict[str, floa
         lam = left(x0)
         captured = lam - left(x1)
         test = prob.test_mean(name, sd.block_mean(z))
-        p = max(test.params, 1)
-        thr = max(test.critical, p * math.log(prob.n_rows))
-        power = float(stats.ncx2.sf(thr, p, max(captured, 1e-12)))
+        thr = test.threshold
+        power = float(stats.ncx2.sf(thr, max(test.params, 1), max(captured, 1e-12)))
         miss *= 1.0 - power
         absorbed = 1.0 - lam / max(float(sw @ sw), 1e-300)  # share of the signal's chi^2 the base terms take
         cells.append(f"{sensor} absorbed {100.0 * absorbed:5.1f} % lambda {lam:7.1f} captured {captured:7.1f} "

@@ -110,6 +110,11 @@ class Test:
     span: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))  # whitened effect columns
 
     @property
+    def threshold(self) -> float:
+        """The chi^2 gain the test must exceed: the larger of the critical value and the BIC penalty ``p ln N``."""
+        return max(self.critical, self.gain - self.bic_gain)
+
+    @property
     def passes(self) -> bool:
         return self.params > 0 and self.bic_gain > 0 and self.gain > self.critical
 
@@ -677,8 +682,7 @@ def detectable_from(t: Test) -> dict[str, Any] | None:
     p = int(t.params)
     if p <= 0 or p < t.theta.size:
         return None
-    threshold = max(t.critical, t.gain - t.bic_gain)  # gain - bic_gain = the BIC penalty p ln N
-    lam = optimize.brentq(lambda x: stats.ncx2.sf(threshold, p, x) - DETECT_POWER, 1e-9, 1e6)
+    lam = optimize.brentq(lambda x: stats.ncx2.sf(t.threshold, p, x) - DETECT_POWER, 1e-9, 1e6)
     factor, unit = unit_factor(t.effect, t.sensor)
     size = math.sqrt(lam) * np.sqrt(np.clip(np.diag(t.cov), 0.0, None)) * factor
     if t.effect in SHAPES:
