@@ -116,7 +116,7 @@ class Test:
 
     @property
     def passes(self) -> bool:
-        return self.params > 0 and self.bic_gain > 0 and self.gain > self.critical
+        return self.params > 0 and self.gain > self.threshold
 
     @property
     def validates(self) -> bool:
