@@ -22,8 +22,8 @@ from multiprocessing.connection import Connection
 
 import numpy as np
 
+from station.kernel.clock import SimClock
 from station.sensor.client import SampleBlock, SerialSensor, open_sensor
-from station.sim.clock import SimClock
 from station.sim.sensor_peer import SimulatedSensor
 
 

@@ -1,7 +1,7 @@
 """Concealed-data study of ``station.diagnose``: is the missing physics found, and only then?
 
 For every candidate effect, simulated recordings (random rig plans, sample rates and units,
-``station.sim.plan.random_plan``) with that effect at a magnitude below the white noise of a
+``station.kernel.plan.random_plan``) with that effect at a magnitude below the white noise of a
 single sample; recordings without missing physics; and pairs of effects hidden together.
 Prints the confusion matrix (true effect x named effects), the detection and false-finding
 rates, the median fit improvement (block chi^2 before/after on the affected axes), and the
@@ -46,13 +46,13 @@ import numpy as np
 
 from station.diagnose import NAMES, diagnose
 from station.diagnose.candidates import LIBRARY
-from station.sequence.limits_file import DEFAULT_LIMITS_PATH, load_limits
-from station.sim.effects import Effects
-from station.sim.plan import RigPlan, random_plan
-from station.sim.sensor_class import TABLE1, SensorClass
+from station.kernel.limits_file import DEFAULT_LIMITS_PATH, load_limits
+from station.kernel.plan import RigPlan, random_plan
+from station.kernel.sensor_class import TABLE1, SensorClass
+from station.physics.effects import Effects
 from station.sim.session_sim import simulate_session
 
-#: Magnitudes (units of station.sim.effects.Effects) below the white noise of a single sample
+#: Magnitudes (units of station.physics.effects.Effects) below the white noise of a single sample
 #: (accel 0.017-0.028 m/s^2, gyro 0.010-0.013 deg/s) at typical inputs.
 CONCEALED: dict[str, float] = {
     # accel 2 mm/s^2/K (0.2 mg/K, data-sheet typical), gyro 10 mdeg/s/K: ~10 mm/s^2 (below the accel's sample
@@ -272,7 +272,7 @@ def chamber(seeds: int) -> None:
 
 
 #: Effects whose reported parameters are the simulator's magnitude times a shape with the given smallest
-#: magnitude (station.sim.effects.Effects): an effect of ``quoted / smallest shape`` has every parameter at or
+#: magnitude (station.physics.effects.Effects): an effect of ``quoted / smallest shape`` has every parameter at or
 #: above the size ``detectable_from`` quoted for it.
 DETECTABLE_SHAPE_MIN = {"temperature_scale": 0.5, "g_sensitivity": 0.5, "time_offset": 1.0}
 

@@ -18,8 +18,8 @@ from threadpoolctl import threadpool_limits
 
 from station.diagnose import diagnose
 from station.diagnose.rerun import rerun
-from station.sim.effects import Effects
-from station.sim.plan import RigPlan
+from station.kernel.plan import RigPlan
+from station.physics.effects import Effects
 from station.sim.session_sim import simulate_session
 
 CASES = (

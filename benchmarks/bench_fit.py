@@ -26,8 +26,8 @@ from rich.table import Table
 
 from station.fit.acf import correlation_time_acf
 from station.fit.calibrate import fit_session
+from station.kernel.plan import default_plan
 from station.session.model import Kind, Session
-from station.sim.plan import default_plan
 from station.sim.session_sim import simulate_session
 
 

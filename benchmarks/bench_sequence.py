@@ -27,11 +27,11 @@ import argparse
 import logging
 import time
 
+from station.kernel.plan import default_plan
 from station.rig import open_rig
 from station.sensor import open_sensor
 from station.sequence import SequenceOptions, SequenceRunner
 from station.sequence.records import Outcome
-from station.sim.plan import default_plan
 from station.sim.station_sim import SimStation
 
 

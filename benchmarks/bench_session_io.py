@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from station.errors import SessionFormatError
+from station.kernel.errors import SessionFormatError
 from station.session import Kind, Session, read_session, write_session
 
 

@@ -29,9 +29,9 @@ import httpx
 import numpy as np
 from rich.console import Console
 
-from station.sequence.demo import run_demo
+from station.kernel.plan import RigPlan, default_plan
 from station.sequence.records import Measurement, Record, StepStarted
-from station.sim.plan import RigPlan, default_plan
+from station.sim.demo import run_demo
 from station.store import Recorder, open_database
 from station.web.app import create_app
 from station.web.serve import ServerThread

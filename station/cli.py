@@ -1,4 +1,4 @@
-"""The ``station`` command: wires sessions, simulator, fit and corrector together.
+"""The ``station`` command: the production commands, the record commands, and the plugins' commands.
 
 Every command reports expected failures (a malformed file, an unfittable session, a
 station fault) as one line on stderr and a non-zero exit code, never a traceback.
@@ -13,7 +13,7 @@ from typing import Annotated
 import numpy as np
 import typer
 
-from station.errors import StationError
+from station.kernel.errors import StationError
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, help="IMU end-of-line calibration station.")
 import_app = typer.Typer(no_args_is_help=True, help="Convert recordings made elsewhere into session CSV v1.")
@@ -21,9 +21,9 @@ app.add_typer(import_app, name="import")
 
 
 def _add_subapps() -> None:
-    from station.diagnose.command import diagnose as diagnose_command
-    from station.eeprom.commands import eeprom_app
-    from station.store.commands import units_app
+    from station.commands.diagnose import diagnose as diagnose_command
+    from station.commands.eeprom import eeprom_app
+    from station.commands.units import units_app
 
     app.add_typer(eeprom_app, name="eeprom")
     app.add_typer(units_app, name="units")
@@ -38,39 +38,22 @@ DbOption = Annotated[
 _add_subapps()
 
 
-def _fail(exc: StationError, code: int = 2) -> typer.Exit:
+def _add_plugins() -> None:
+    """Commands that other packages contribute through the ``station.commands`` entry point group.
+
+    Each entry point names a ``register(app)`` function. The simulated station (``station.sim``)
+    adds ``demo``, ``sim`` and ``simulate`` this way, so nothing in the station imports the simulator.
+    """
+    from importlib.metadata import entry_points
+
+    for ep in entry_points(group="station.commands"):
+        ep.load()(app)
+
+
+def fail(exc: StationError, code: int = 2) -> typer.Exit:
+    """One line on stderr and the exit to raise: how every command reports an expected failure."""
     typer.echo(f"error: {exc}", err=True)
     return typer.Exit(code)
-
-
-@app.command()
-def simulate(
-    output: Annotated[Path, typer.Option("-o", "--output", help="session CSV to write")],
-    seed: Annotated[int, typer.Option(help="seed: the same seed gives the same bytes")] = 0,
-    effect: Annotated[list[str] | None, typer.Option(help="extra physics NAME=VALUE (repeatable)")] = None,
-    sample_rate: Annotated[float | None, typer.Option(help="sample rate (Hz); default from the plan")] = None,
-    random_plan: Annotated[bool, typer.Option(help="draw a random rig plan from the seed")] = False,
-) -> None:
-    """Simulate one unit on the rig and write its session recording."""
-    from dataclasses import replace
-
-    from station.session import write_session
-    from station.sim.effects import Effects
-    from station.sim.plan import default_plan
-    from station.sim.plan import random_plan as draw_plan
-    from station.sim.session_sim import simulate_session
-
-    try:
-        effects = Effects.parse(effect or [])
-        plan = draw_plan(np.random.default_rng(seed)) if random_plan else default_plan()
-        if sample_rate is not None:
-            plan = replace(plan, sample_rate_hz=sample_rate)
-        result = simulate_session(seed, plan=plan, effects=effects)
-        write_session(result.session, output)
-    except StationError as exc:
-        raise _fail(exc) from None
-    typer.echo(f"wrote {output} ({len(result.session)} samples, {result.session.duration_s:.1f} s, "
-               f"serial {result.session.serial})")
 
 
 def _print_params(params: object) -> None:
@@ -122,7 +105,7 @@ def fit(
     try:
         params = fit_session(read_session(session_path), FitOptions(g_sensitivity=g_sensitivity))
     except StationError as exc:
-        raise _fail(exc) from None
+        raise fail(exc) from None
     if as_json:
         sys.stdout.write(params.to_json() + "\n")
     else:
@@ -144,9 +127,9 @@ def correct(
         params = ParameterSet.from_json(params_path.read_text())
         write_session(correct_session(read_session(session_path), params), output)
     except StationError as exc:
-        raise _fail(exc) from None
+        raise fail(exc) from None
     except OSError as exc:
-        raise _fail(StationError(str(exc))) from None
+        raise fail(StationError(str(exc))) from None
     typer.echo(f"wrote {output}")
 
 
@@ -168,40 +151,12 @@ def import_imucal(
             session = import_imucal_annotated(csv_path, serial=serial)
         write_session(session, output)
     except StationError as exc:
-        raise _fail(exc) from None
+        raise fail(exc) from None
     typer.echo(f"wrote {output} ({len(session)} samples)")
 
 
-_OUTCOME_EXIT = {"PASS": 0, "FAIL": 1, "ERROR": 2, "ABORTED": 130}
-
-
-@app.command()
-def demo(
-    units: Annotated[int, typer.Option(min=1, max=64, help="units in the fixture")] = 4,
-    scale: Annotated[float, typer.Option(min=0.1, help="simulated seconds per wall second")] = 30.0,
-    seed: Annotated[int, typer.Option(help="seed: the same seed gives the same units")] = 0,
-    out: Annotated[Path, typer.Option(help="directory for session CSVs and parameter JSONs")] = Path("demo-out"),
-    db: DbOption = None,
-) -> None:
-    """Simulated rig + N sensors, the whole sequence, fit, limits, summary: the station end to end.
-
-    Exit code: 0 all PASS, 1 a unit FAILed, 2 ERROR (station fault), 130 ABORTED.
-    """
-    from station.sequence.demo import run_demo
-    from station.sequence.limits_file import load_limits
-    from station.sim.plan import default_plan
-    from station.store.commands import attach_recorder
-    from station.store.queries import retest_gate
-
-    try:
-        subscribers: list = []
-        limits = load_limits()
-        recorder = attach_recorder(subscribers.append, db, station_name="demo", plan=default_plan(), limits=limits)
-        result = run_demo(units, scale, seed, out, subscribers=subscribers, on_provision=recorder.provisioned,
-                          admit=retest_gate(recorder.db, limits.retest.max_attempts))
-    except StationError as exc:
-        raise _fail(exc) from None
-    raise typer.Exit(_OUTCOME_EXIT[result.outcome.value])
+#: Exit code of a run by its outcome.
+OUTCOME_EXIT = {"PASS": 0, "FAIL": 1, "ERROR": 2, "ABORTED": 130}
 
 
 @app.command("run")
@@ -224,39 +179,27 @@ def run_station(
 
     from rich.console import Console
 
-    from station.sequence.demo import ProgressDisplay, summary_table
-    from station.sequence.options import SequenceOptions, rig_client_options
-    from station.sequence.runner import run_sequence
-    from station.sim.clock import SimClock, WallClock
-    from station.sim.plan import default_plan
+    from station.compose import Station, StationConfig
+    from station.kernel.plan import default_plan
+    from station.terminal import ProgressDisplay, summary_table
 
     plan = default_plan()
     if gravity is not None:
         plan = replace(plan, gravity_mps2=gravity)
     if latitude is not None:
         plan = replace(plan, latitude_deg=latitude)
-    clock = WallClock() if scale == 1.0 else SimClock(scale)
+    config = StationConfig(rig, tuple(sensor), station_id=name, db_url=db, out_dir=out, clock_scale=scale,
+                           plan=plan, operator=operator)
     console = Console()
     display = ProgressDisplay(console, list(sensor), scale)
     try:
-        from station.sequence.limits_file import load_limits
-        from station.store.commands import attach_recorder
-        from station.store.queries import retest_gate
-
-        limits = load_limits()
-        subscribers: list = [display]
-        recorder = attach_recorder(subscribers.append, db, station_name=name, operator=operator, plan=plan,
-                                   limits=limits)
+        station = Station(config, subscribers=[display])
         with display:
-            result = run_sequence(
-                rig, sensor, clock, rig_options=rig_client_options(scale), plan=plan,
-                options=SequenceOptions().for_scale(scale), out_dir=out, station=name, subscribers=subscribers,
-                limits=limits.product, admit=retest_gate(recorder.db, limits.retest.max_attempts),
-            )
+            result = station.run()
     except StationError as exc:
-        raise _fail(exc) from None
+        raise fail(exc) from None
     console.print(summary_table(result))
-    raise typer.Exit(_OUTCOME_EXIT[result.outcome.value])
+    raise typer.Exit(OUTCOME_EXIT[result.outcome.value])
 
 
 @app.command()
@@ -282,64 +225,25 @@ def serve(
     token = os.environ.get("STATION_TOKEN") or None
     live = None
     if rig is not None and sensor:
-        from station.sequence.limits_file import load_limits
-        from station.sequence.options import SequenceOptions, rig_client_options
-        from station.sim.clock import SimClock, WallClock
-        from station.sim.plan import default_plan
-        from station.store.commands import attach_recorder
-        from station.store.queries import retest_gate
+        from station.compose import Station, StationConfig
         from station.web.control import StationControl
         from station.web.state import LiveStatus
 
+        config = StationConfig(rig, tuple(sensor), station_id=name, db_url=db, out_dir=out, clock_scale=scale)
         try:
-            limits = load_limits()
-            plan = default_plan()
-            subscribers: list = []
-            recorder = attach_recorder(subscribers.append, db, station_name=name, plan=plan, limits=limits)
-            live = LiveStatus(recorder.db)
-            subscribers.append(live)  # after the recorder: the page reads what it stored
-            control = StationControl(
-                rig, sensor, WallClock() if scale == 1.0 else SimClock(scale), subscribers, on_error=live.set_fault,
-                rig_options=rig_client_options(scale), plan=plan, options=SequenceOptions().for_scale(scale),
-                limits=limits.product, admit=retest_gate(recorder.db, limits.retest.max_attempts), out_dir=out,
-                station=name,
-            )
+            station = Station(config)
         except StationError as exc:
-            raise _fail(exc) from None
+            raise fail(exc) from None
+        assert station.recorder is not None
+        live = LiveStatus(station.recorder.db)
+        station.subscribe(live)  # after the recorder: the page reads what it stored
+        control = StationControl(station.run, on_error=live.set_fault)
         live.on_start = control.start
         live.on_abort = control.abort
     run_server(host, port, db, token, live)
 
 
-@app.command()
-def sim(
-    units: Annotated[int, typer.Option(min=1, max=64, help="simulated sensors")] = 4,
-    scale: Annotated[float, typer.Option(min=0.1, help="simulated seconds per wall second")] = 1.0,
-    seed: Annotated[int, typer.Option(help="seed: the same seed gives the same units")] = 0,
-    port: Annotated[int, typer.Option(help="Modbus/TCP port of the rig (0: a free port)")] = 0,
-) -> None:
-    """Start a simulated rig and sensors, print their URLs, run until Ctrl-C (or SIGTERM)."""
-    import signal
-    import threading
-
-    from station.sim.station_sim import SimStation
-
-    stop = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
-
-    with SimStation(units, scale, seed, port=port) as station:
-        typer.echo(f"rig: {station.rig_url}")
-        for unit in station.units:
-            typer.echo(f"sensor {unit.slot}: {unit.sensor.url} (serial {unit.truth.serial})")
-        args = " ".join(f"--sensor {u}" for u in station.sensor_urls)
-        typer.echo(f"run the sequence with:\n  station run --rig '{station.rig_url}' {args} --scale {scale:g}")
-        typer.echo("Ctrl-C stops the simulation.")
-        try:
-            while not stop.wait(0.5):
-                pass
-        except KeyboardInterrupt:
-            pass
-        typer.echo("stopped")
+_add_plugins()
 
 
 def main() -> None:  # pragma: no cover - console entry

@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 from scipy.signal import lfilter
 
-from station.errors import FitError
 from station.fit.acf import (
     _zero_phase_fir,
     _zero_phase_fir_adjoint,
@@ -18,6 +17,7 @@ from station.fit.acf import (
     finite_record_acf,
     lowpass_record,
 )
+from station.kernel.errors import FitError
 
 FS = 20.0  # Hz; block mean to 1 Hz with the default 10 s low-pass, like 100 Hz data
 

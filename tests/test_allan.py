@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 from scipy.signal import lfilter
 
-from station.errors import FitError
 from station.fit.allan import (
     BIAS_INSTABILITY_FACTOR,
     AllanCurve,
@@ -23,6 +22,7 @@ from station.fit.allan import (
     white_std_from_random_walk,
 )
 from station.fit.params import AllanCoefficients
+from station.kernel.errors import FitError
 
 FS = 100.0
 

@@ -1,4 +1,4 @@
-"""station.datafiles: the source tree's files first, the wheel's installed copies otherwise."""
+"""station.kernel.datafiles: the source tree's files first, the wheel's installed copies otherwise."""
 
 from __future__ import annotations
 
@@ -6,8 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from station import datafiles
-from station.sequence.limits_file import DEFAULT_LIMITS_PATH, load_limits
+from station.kernel import datafiles
+from station.kernel.limits_file import DEFAULT_LIMITS_PATH, load_limits
 from station.store.db import MIGRATIONS_DIR
 
 

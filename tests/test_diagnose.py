@@ -13,9 +13,9 @@ import pytest
 from station.diagnose import FORMAT, NAMES, diagnose
 from station.diagnose.candidates import LIBRARY, attitude
 from station.diagnose.residuals import fit_baseline
-from station.sim.effects import Effects
-from station.sim.plan import RigPlan
-from station.sim.sensor_class import TABLE1
+from station.kernel.plan import RigPlan
+from station.kernel.sensor_class import TABLE1
+from station.physics.effects import Effects
 from station.sim.session_sim import simulate_session
 
 #: A short plan (~8 min at 100 Hz) with two rate magnitudes, so every candidate is identifiable.
@@ -168,7 +168,7 @@ def test_temperature_bias_found_with_the_sensor_class_tc_range() -> None:
     warm-up when the recording alone decides T_c: nothing is named, temperature and warm-up are listed as
     inseparable. With the sensor class's T_c range from the limits file (gyro 1030-3760 s) the diagnosis names
     it on the gyro with its coefficient; a clean recording with the same range names nothing."""
-    from station.sequence.limits_file import load_limits
+    from station.kernel.limits_file import load_limits
 
     tc_range = load_limits().correlation_time_s
     res = simulate_session(14, plan=PLAN, effects=Effects(temperature_bias=2e-3))
@@ -191,7 +191,7 @@ def test_temperature_scale_at_the_concealed_magnitude_with_its_coefficient() -> 
     """100 ppm/K per axis (shape 0.5-1, random signs; the study's concealed magnitude, RMS over the recording
     below one sample's noise) is named on the gyro, and nothing else; each axis's coefficient in ppm/K lies within
     3 of its standard errors of the truth and is resolved to better than 25 %."""
-    from station.sequence.limits_file import load_limits
+    from station.kernel.limits_file import load_limits
 
     res = simulate_session(17, plan=PLAN, effects=Effects(temperature_scale=100.0))
     report = diagnose(res.session, warmup_tc_s=load_limits().correlation_time_s).report
@@ -209,7 +209,7 @@ def test_cli_diagnose_takes_the_tc_range_from_a_limits_file(tmp_path: Path) -> N
     from typer.testing import CliRunner
 
     from station.cli import app
-    from station.sequence.limits_file import DEFAULT_LIMITS_PATH
+    from station.kernel.limits_file import DEFAULT_LIMITS_PATH
     from station.session import write_session
 
     path = tmp_path / "unit.csv"
@@ -235,7 +235,7 @@ def test_temperature_bias_is_not_taken_for_a_random_walk() -> None:
     the self-heating's time constant); what eq. 3's slower drift then leaves is not a random walk: the walk's null
     re-fits T_c with the temperature term. With a climate-chamber cycle the bias is named on both sensors, and
     what the accel's warm-up amplitude cannot exclude bounds its drift noise: again no random walk."""
-    from station.sim.plan import random_plan
+    from station.kernel.plan import random_plan
 
     def plan(seed: int) -> RigPlan:
         return random_plan(np.random.default_rng(10_000 + seed))

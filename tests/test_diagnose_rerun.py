@@ -17,10 +17,12 @@ import pytest
 from station.diagnose import diagnose
 from station.diagnose.rerun import Drive, FittedEffect, rerun, run_model
 from station.diagnose.residuals import SensorData, fit_baseline
-from station.sim.effects import Effects
-from station.sim.imu import Environment, ImuModel
-from station.sim.plan import RigPlan, build_trajectory
-from station.sim.sensor_class import TABLE1, draw_unit
+from station.kernel.plan import RigPlan
+from station.kernel.sensor_class import TABLE1
+from station.physics.effects import Effects
+from station.physics.imu import Environment, ImuModel
+from station.physics.trajectory import build_trajectory
+from station.physics.unit import draw_unit
 from station.sim.session_sim import simulate_session
 
 #: The short plan of tests/test_diagnose.py (~8 min at 100 Hz), two rate magnitudes per axis.

@@ -16,7 +16,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from typer.testing import CliRunner
 
-from station.eeprom.commands import eeprom_app
+from station.commands.eeprom import eeprom_app
 from station.eeprom.image import (
     BODY_SIZE,
     DEFAULT_SLOTS,
@@ -38,9 +38,10 @@ from station.eeprom.image import (
     read_slots,
     select_image,
 )
-from station.errors import FormatError, UnsupportedVersionError
 from station.fit.params import ParameterSet
-from station.sim.sensor_class import TABLE1, draw_unit
+from station.kernel.errors import FormatError, UnsupportedVersionError
+from station.kernel.sensor_class import TABLE1
+from station.physics.unit import draw_unit
 
 T0 = datetime(2026, 3, 4, 5, 6, 7, 890123, tzinfo=UTC)
 

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+from station.commands.eeprom import eeprom_app
 from station.correct import correct_batch
-from station.eeprom.commands import eeprom_app
 from station.eeprom.image import (
     IMAGE_SIZE,
     CalibrationImage,
@@ -22,24 +22,25 @@ from station.eeprom.image import (
     select_image,
 )
 from station.eeprom.provision import (
-    EepromProvisioner,
     EepromUnusableError,
     ReadbackMismatchError,
     SerialMismatchError,
     read_current_image,
     write_image,
 )
-from station.eeprom.verify import RigVerifier, VerificationLimits
-from station.errors import HardwareError, UnitRejected
 from station.fit.params import ParameterSet
+from station.kernel.clock import SimClock
+from station.kernel.errors import HardwareError, UnitRejected
+from station.kernel.sensor_class import TABLE1
+from station.physics.unit import draw_unit
 from station.rig import open_rig
 from station.sensor.client import SerialSensor, open_sensor
+from station.sequence.provision import EepromProvisioner
 from station.sequence.records import Outcome
 from station.sequence.runner import UnitResult
-from station.sim.clock import SimClock
+from station.sequence.verify import RigVerifier, VerificationLimits
 from station.sim.eeprom import Eeprom
 from station.sim.firmware import CalibrationFirmware, install_firmware
-from station.sim.sensor_class import TABLE1, draw_unit
 from station.sim.sensor_peer import SimulatedSensor
 from station.sim.station_sim import SimStation
 

@@ -16,8 +16,8 @@ import pytest
 
 from station.correct.session_correct import correct_session, cross_correlation, reference_session
 from station.fit.calibrate import fit_session
+from station.kernel.plan import default_plan, random_plan
 from station.session.model import Kind, Session
-from station.sim.plan import default_plan, random_plan
 from station.sim.session_sim import simulate_session
 
 

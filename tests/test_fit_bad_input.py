@@ -9,8 +9,8 @@ import pytest
 from typer.testing import CliRunner
 
 from station.cli import app
-from station.errors import FitError
 from station.fit.calibrate import fit_session
+from station.kernel.errors import FitError
 from station.session import write_session
 from station.session.model import Kind, Session
 from station.sim.session_sim import simulate_session

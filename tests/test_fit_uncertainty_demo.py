@@ -14,7 +14,8 @@ import pytest
 
 from station.fit.calibrate import fit_session
 from station.fit.params import ParameterSet
-from station.sim.sensor_class import TABLE1, UnitTruth, draw_unit
+from station.kernel.sensor_class import TABLE1
+from station.physics.unit import UnitTruth, draw_unit
 from station.sim.session_sim import simulate_session
 
 #: fixtures/limits/default.toml: accel_bias_static_std_mps2

@@ -9,7 +9,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from station.errors import FormatError
+from station.kernel.errors import FormatError
 from station.session import Kind, Session, format_session, parse_session
 from station.session.imucal_import import import_imucal_annotated, import_imucal_ferraris
 

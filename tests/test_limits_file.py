@@ -9,19 +9,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from station.errors import UnsupportedVersionError
 from station.fit.params import ParameterSet
-from station.sequence.limits import LimitCheck, check_limits, table1_limits
-from station.sequence.limits_file import (
-    DEFAULT_LIMITS_PATH,
-    FitQualityLimits,
-    LimitsFileError,
-    check_fit_quality,
-    is_marginal,
-    load_limits,
-    parse_limits,
-)
-from station.sim.sensor_class import TABLE1, draw_unit
+from station.kernel.errors import UnsupportedVersionError
+from station.kernel.limits import table1_limits
+from station.kernel.limits_file import DEFAULT_LIMITS_PATH, FitQualityLimits, LimitsFileError, load_limits, parse_limits
+from station.kernel.sensor_class import TABLE1
+from station.physics.unit import draw_unit
+from station.sequence.limits import LimitCheck, check_fit_quality, check_limits, is_marginal
 
 DEFAULT_TEXT = DEFAULT_LIMITS_PATH.read_text()
 

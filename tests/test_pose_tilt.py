@@ -11,12 +11,13 @@ import pytest
 
 from station.diagnose import pose_tilt
 from station.diagnose.residuals import fit_baseline
+from station.kernel.geometry import rotation_vector_matrix, up_vector
+from station.kernel.plan import RigPlan
+from station.kernel.sensor_class import TABLE1
+from station.physics.effects import POSES, Effects, EffectShapes
+from station.physics.unit import draw_unit
 from station.session import format_session
 from station.session.model import Kind
-from station.sim.effects import POSES, Effects, EffectShapes
-from station.sim.geometry import rotation_vector_matrix, up_vector
-from station.sim.plan import RigPlan
-from station.sim.sensor_class import TABLE1, draw_unit
 from station.sim.session_sim import SimResult, simulate_session
 
 #: A short plan (~8 min at 100 Hz), as in test_diagnose.py.

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from station.compose import attach_recorder
+from station.kernel.plan import RigPlan
 from station.rig import open_rig
 from station.sensor import open_sensor
 from station.sequence import Outcome, SequenceOptions, SequenceRunner
-from station.sim.plan import RigPlan
 from station.sim.station_sim import SimStation
-from station.store.commands import attach_recorder
 from station.store.db import open_database
 from station.store.queries import attempt_count, retest_gate
 from station.store.recorder import record_disposition

@@ -15,9 +15,9 @@ from collections.abc import Iterator
 
 import pytest
 
+from station.kernel.clock import SimClock
 from station.rig import registers as reg
 from station.rig.registers import HR, IR, AckResult, Command, Status
-from station.sim.clock import SimClock
 from station.sim.rig_server import SimulatedRig
 
 MBPOLL = shutil.which("mbpoll")

@@ -13,7 +13,10 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from station.errors import HardwareError, StationError
+from station.kernel.clock import SimClock
+from station.kernel.errors import HardwareError, StationError
+from station.kernel.geometry import POSE_ANGLES_DEG, up_vector
+from station.physics.motion import AxisTrajectory
 from station.rig import (
     ModbusRig,
     Rig,
@@ -28,9 +31,6 @@ from station.rig import (
 )
 from station.rig import registers as reg
 from station.rig.registers import HR, AckResult, Command, FaultCode, Status
-from station.sim.clock import SimClock
-from station.sim.geometry import POSE_ANGLES_DEG, up_vector
-from station.sim.motion import AxisTrajectory
 from station.sim.rig_server import RigModel, SimulatedRig
 
 pytestmark = pytest.mark.integration

@@ -10,7 +10,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from station.errors import FormatError
+from station.kernel.errors import FormatError
 from station.sensor.commands import (
     BootEvent,
     BootReason,

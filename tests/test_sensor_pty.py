@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import serial
 
+from station.kernel.clock import SimClock
 from station.sensor.client import (
     CrcStormError,
     SampleBlock,
@@ -28,7 +29,6 @@ from station.sensor.commands import (
     pack_eeprom_write,
 )
 from station.sensor.frames import FrameParser, FrameType, SampleFlag
-from station.sim.clock import SimClock
 from station.sim.eeprom import (
     Eeprom,
     EepromAddressError,

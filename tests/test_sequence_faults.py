@@ -19,6 +19,8 @@ from pathlib import Path
 
 import pytest
 
+from station.kernel.limits import table1_limits
+from station.kernel.plan import RigPlan
 from station.rig import open_rig
 from station.rig.registers import FaultCode, Status
 from station.sensor import open_sensor
@@ -35,9 +37,7 @@ from station.sequence import (
     StepStarted,
     UnitResult,
 )
-from station.sequence.limits import table1_limits
 from station.sim.eeprom import ERASED
-from station.sim.plan import RigPlan
 from station.sim.station_sim import SimStation
 
 pytestmark = pytest.mark.integration
@@ -302,8 +302,8 @@ def test_next_run_clears_the_watchdog_fault_the_last_one_left(sim: SimStation) -
 def run_with_verification(sim: SimStation, limits: object = None) -> tuple[RunResult, list[Record]]:
     """A run whose PASS units are written to EEPROM by the real provisioner and verified on the rig,
     with the simulated sensors running the calibration firmware (Algorithm 1 from their EEPROM)."""
-    from station.eeprom.provision import EepromProvisioner
-    from station.eeprom.verify import RigVerifier
+    from station.sequence.provision import EepromProvisioner
+    from station.sequence.verify import RigVerifier
     from station.sim.firmware import install_firmware
 
     for u in sim.units:
@@ -332,7 +332,7 @@ def verify_measurements(records: list[Record]) -> list[Measurement]:
 
 def test_failed_verification_is_fail_with_the_residuals_recorded(sim: SimStation) -> None:
     """The EEPROM is written and the firmware corrects, but the corrected output misses a limit: FAIL, not ERROR."""
-    from station.sequence.limits_file import VerificationLimits
+    from station.kernel.limits_file import VerificationLimits
 
     result, records = run_with_verification(sim, VerificationLimits(accel_mps2=1e-9))  # no residual is that small
     assert [u.outcome for u in result.units] == [Outcome.FAIL, Outcome.FAIL]

@@ -22,6 +22,8 @@ import numpy as np
 import pytest
 
 from station.fit.calibrate import fit_session
+from station.kernel.geometry import up_vector
+from station.kernel.plan import RigPlan
 from station.rig import open_rig
 from station.sensor import open_sensor
 from station.sensor.client import SerialSensor
@@ -41,8 +43,6 @@ from station.sequence import (
 from station.sequence.steps import plan_steps
 from station.session import read_session
 from station.session.model import Kind
-from station.sim.geometry import up_vector
-from station.sim.plan import RigPlan
 from station.sim.session_sim import simulate_session
 from station.sim.station_sim import SimStation
 

@@ -10,17 +10,20 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from station.kernel.clock import SimClock
+from station.kernel.limits import table1_limits
+from station.kernel.plan import RigPlan, default_plan
+from station.kernel.sensor_class import TABLE1
+from station.physics.unit import draw_unit
+from station.rig import rig_client_options
 from station.sensor.client import SampleBlock, SensorTimeout
 from station.sequence.capture import UnitChannel, Window, build_session
 from station.sequence.gates import detrended_std, dropped_frames, evaluate, link_gates, rate_gates, still_gates
-from station.sequence.limits import check_limits, table1_limits
-from station.sequence.options import SequenceOptions, rig_client_options
+from station.sequence.limits import check_limits
+from station.sequence.options import SequenceOptions
 from station.sequence.records import Outcome, worst
 from station.sequence.steps import plan_steps
 from station.session.model import Kind
-from station.sim.clock import SimClock
-from station.sim.plan import RigPlan, default_plan
-from station.sim.sensor_class import TABLE1, draw_unit
 
 G = 9.8128
 OPT = SequenceOptions()

@@ -12,7 +12,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from station.errors import SessionFormatError, UnsupportedVersionError
+from station.kernel.errors import SessionFormatError, UnsupportedVersionError
 from station.session import Kind, Session, format_session, parse_session, read_session, write_session
 from station.session.csv_v1 import (
     _DECIMALS,

@@ -9,12 +9,14 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from station.errors import StationError
+from station.kernel.errors import StationError
+from station.kernel.plan import RigPlan
+from station.kernel.sensor_class import TABLE1, SensorClass
+from station.physics.effects import EARTH_RATE_RADPS, GYRO_PER_ACCEL, STANDARD_GRAVITY, Effects
+from station.physics.imu import Environment, ImuModel
+from station.physics.trajectory import build_trajectory
+from station.physics.unit import draw_unit
 from station.session.model import Kind, Session
-from station.sim.effects import EARTH_RATE_RADPS, GYRO_PER_ACCEL, STANDARD_GRAVITY, Effects
-from station.sim.imu import Environment, ImuModel
-from station.sim.plan import RigPlan, build_trajectory
-from station.sim.sensor_class import TABLE1, SensorClass, draw_unit
 from station.sim.session_sim import SimResult, simulate_session
 
 DEG = math.pi / 180.0
@@ -223,7 +225,7 @@ def test_gauss_markov_drift_noise_statistics() -> None:
     model = ImuModel(unit, seed=3, environment=Environment(23.0, 0.0))
     t = np.arange(0, 20000.0, 0.5)
     n = len(t)
-    from station.sim.geometry import Kinematics
+    from station.kernel.geometry import Kinematics
 
     kin = Kinematics(t, np.broadcast_to(np.eye(3), (n, 3, 3)), np.zeros((n, 3)), np.zeros((n, 3)))
     x = model.render(kin, 0.0).accel_mps2 - accel.bias_static

@@ -1,4 +1,4 @@
-"""Whole simulated sessions (station.sim.session_sim, station.sim.plan): determinism, plan, reference columns."""
+"""Whole simulated sessions (station.sim.session_sim, station.kernel.plan): determinism, plan, reference columns."""
 
 from __future__ import annotations
 
@@ -8,12 +8,14 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from station.errors import StationError
+from station.kernel.errors import StationError
+from station.kernel.geometry import AXIS_INDEX, up_vector
+from station.kernel.plan import RigPlan, default_plan, random_plan
+from station.kernel.sensor_class import TABLE1
+from station.physics.effects import Effects
+from station.physics.trajectory import build_trajectory
+from station.physics.unit import draw_unit
 from station.session.model import Kind, Session
-from station.sim.effects import Effects
-from station.sim.geometry import AXIS_INDEX, up_vector
-from station.sim.plan import RigPlan, build_trajectory, default_plan, random_plan
-from station.sim.sensor_class import TABLE1, draw_unit
 from station.sim.session_sim import SimResult, simulate_session
 
 DEG = math.pi / 180.0

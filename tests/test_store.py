@@ -19,6 +19,8 @@ from alembic.runtime.migration import MigrationContext
 from sqlalchemy import func, inspect, select
 from typer.testing import CliRunner
 
+from station.commands.units import units_app
+from station.compose import attach_recorder
 from station.fit.params import ParameterSet
 from station.sequence.records import (
     Measurement,
@@ -44,7 +46,6 @@ from station.store import (
     recover_unfinished,
     show_unit,
 )
-from station.store.commands import attach_recorder, units_app
 from station.store.db import current_revision, downgrade, head_revision, make_engine, upgrade
 from station.store.models import (
     UNFINISHED,
@@ -273,10 +274,10 @@ def test_attach_recorder_to_a_subscriber_list(tmp_path: Path) -> None:
 
 @pytest.mark.integration
 def test_recorder_fed_by_a_simulated_sequence(tmp_path: Path) -> None:
+    from station.kernel.plan import RigPlan
     from station.rig import open_rig
     from station.sensor import open_sensor
     from station.sequence import SequenceOptions, SequenceRunner
-    from station.sim.plan import RigPlan
     from station.sim.station_sim import SimStation
 
     scale = 200.0

@@ -17,8 +17,8 @@ from pathlib import Path
 
 from sqlalchemy import select
 
+from station.compose import attach_recorder
 from station.store import open_database, show_unit
-from station.store.commands import attach_recorder
 from station.store.models import UNFINISHED, LimitCheck, Run, RunUnit, StepTiming
 from station.store.recorder import RECOVERY_NOTE
 
@@ -26,7 +26,7 @@ CHILD = textwrap.dedent(
     """
     import sys, time
     from station.sequence.records import Measurement, Outcome, RunStarted, StepFinished, StepStarted, UnitFinished
-    from station.store.commands import attach_recorder
+    from station.compose import attach_recorder
 
     subscribers = []
     rec = attach_recorder(subscribers.append, sys.argv[1], station_name="kill-st", operator="victim")
@@ -91,9 +91,9 @@ REAL_CHILD = textwrap.dedent(
     from station.rig import open_rig
     from station.sensor import open_sensor
     from station.sequence import SequenceOptions, SequenceRunner
-    from station.sim.plan import RigPlan
+    from station.kernel.plan import RigPlan
     from station.sim.station_sim import SimStation
-    from station.store.commands import attach_recorder
+    from station.compose import attach_recorder
 
     scale = 20.0  # slow enough that the parent kills it mid-run
     plan = RigPlan(sample_rate_hz=50.0, rest_s=20.0, pose_hold_s=20.0, rate_steps=(("z", 50.0),), rate_hold_s=20.0)

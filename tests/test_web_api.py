@@ -20,8 +20,8 @@ from fastapi.testclient import TestClient
 from station.eeprom.image import decode_image
 from station.fit.calibrate import fit_session
 from station.fit.params import ParameterSet
+from station.kernel.limits_file import load_limits
 from station.sequence.limits import check_limits
-from station.sequence.limits_file import load_limits
 from station.sequence.records import (
     Measurement,
     Outcome,

@@ -26,9 +26,9 @@ sync_api = pytest.importorskip("playwright.sync_api", reason="Playwright's Pytho
 
 from rich.console import Console  # noqa: E402
 
-from station.sequence.demo import run_demo  # noqa: E402
+from station.kernel.plan import RigPlan  # noqa: E402
 from station.sequence.records import Outcome  # noqa: E402
-from station.sim.plan import RigPlan  # noqa: E402
+from station.sim.demo import run_demo  # noqa: E402
 from station.store import Recorder, open_database  # noqa: E402
 from station.web.app import create_app  # noqa: E402
 from station.web.serve import ServerThread  # noqa: E402

@@ -3,15 +3,17 @@
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from pathlib import Path
 
 from fastapi.testclient import TestClient
 
+from station.compose import Station, StationConfig
+from station.kernel.limits import table1_limits
+from station.kernel.limits_file import load_limits
+from station.kernel.plan import RigPlan
 from station.sequence import Outcome, RigReading, SequenceOptions
-from station.sequence.limits import table1_limits
-from station.sim.plan import RigPlan
 from station.sim.station_sim import SimStation
-from station.store.commands import attach_recorder
 from station.web.app import create_app
 from station.web.control import StationControl
 from station.web.state import LiveStatus
@@ -24,17 +26,17 @@ AUTH = {"Authorization": "Bearer s3cret"}
 
 def test_start_conflict_abort_through_the_api(tmp_path: Path) -> None:
     with SimStation(1, SCALE, 8, plan=PLAN) as sim:
-        subscribers: list = []
-        recorder = attach_recorder(subscribers.append, f"sqlite:///{tmp_path / 'st.sqlite'}", station_name="web")
-        live = LiveStatus(recorder.db)
-        subscribers.append(live)
-        control = StationControl(
-            sim.rig_url, sim.sensor_urls, sim.clock, subscribers, on_error=live.set_fault,
-            rig_options=sim.rig_client_options(), plan=PLAN, options=SequenceOptions().for_scale(SCALE),
-            limits=table1_limits(), station="web",
-        )
+        config = StationConfig(sim.rig_url, tuple(sim.sensor_urls), station_id="web",
+                               db_url=f"sqlite:///{tmp_path / 'st.sqlite'}", out_dir=None, plan=PLAN,
+                               rig_options=sim.rig_client_options())
+        station = Station(config, clock=sim.clock, limits=replace(load_limits(), product=table1_limits()),
+                          options=SequenceOptions())
+        assert station.recorder is not None
+        live = LiveStatus(station.recorder.db)
+        station.subscribe(live)
+        control = StationControl(station.run, on_error=live.set_fault)
         live.on_start, live.on_abort = control.start, control.abort
-        client = TestClient(create_app(database=recorder.db, token="s3cret", live=live))
+        client = TestClient(create_app(database=station.recorder.db, token="s3cret", live=live))
 
         assert client.post("/api/runs").status_code == 401
         r = client.post("/api/runs", headers=AUTH)

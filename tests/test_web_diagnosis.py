@@ -21,11 +21,11 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
+from station.kernel.plan import RigPlan
+from station.physics.effects import Effects
 from station.sequence.records import Outcome, Record, RunFinished, RunStarted, UnitFinished
 from station.session.csv_v1 import write_session
 from station.session.model import Kind, Session
-from station.sim.effects import Effects
-from station.sim.plan import RigPlan
 from station.sim.session_sim import simulate_session
 from station.store import Recorder, open_database
 from station.web.app import create_app
@@ -212,7 +212,7 @@ def test_service_diagnoses_with_the_limits_tc_range(tmp_path: Path) -> None:
     """The service's T_c range (the station's limits file, as create_app sets it) reaches the diagnosis: a gyro
     temperature bias the recording alone cannot tell from the warm-up is named with it. A result persisted with
     another range is not taken for this one's."""
-    from station.sequence.limits_file import load_limits
+    from station.kernel.limits_file import load_limits
     from station.store.recorder import sha256_file
 
     path = tmp_path / "temp.csv"

@@ -29,8 +29,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from station.errors import FormatError
 from station.fit.params import ParameterSet, TriadParams
+from station.kernel.errors import FormatError
 
 CHANNELS: tuple[str, ...] = ("ax", "ay", "az", "gx", "gy", "gz")
 

@@ -21,8 +21,8 @@ import numpy as np
 
 from station.diagnose import pose_tilt
 from station.diagnose.residuals import Baseline, SensorData
-from station.sim.effects import EARTH_RATE_RADPS, GYRO_NONLINEARITY_REF_RADPS, STANDARD_GRAVITY
-from station.sim.geometry import POSE_ANGLES_DEG, rotation_matrices, up_vector
+from station.kernel.geometry import POSE_ANGLES_DEG, rotation_matrices, up_vector
+from station.physics.effects import EARTH_RATE_RADPS, GYRO_NONLINEARITY_REF_RADPS, STANDARD_GRAVITY
 
 NAMES = (
     "temperature_bias", "temperature_scale", "g_sensitivity", "scale_nonlinearity", "scale_asymmetry",

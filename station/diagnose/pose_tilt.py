@@ -43,9 +43,9 @@ from collections.abc import Mapping
 import numpy as np
 
 from station.diagnose.residuals import Baseline, SensorData
+from station.kernel.geometry import up_vector
+from station.physics.effects import POSES
 from station.session.model import Kind
-from station.sim.effects import POSES
-from station.sim.geometry import up_vector
 
 NAME = "pose_tilt"
 SENSORS = ("accel",)
@@ -76,7 +76,7 @@ def _rotation_axes(up: np.ndarray) -> np.ndarray:
 def pose_groups(baseline: Baseline) -> tuple[np.ndarray, list[tuple[str, np.ndarray]]]:
     """Pose of each sample and the pose list: (index (n,) into the list, -1 outside pose segments;
     [(label, up unit vector (3,))]). The six standard poses come first, always, in the order of
-    :data:`station.sim.effects.POSES`; other reference directions follow in order of first appearance.
+    :data:`station.physics.effects.POSES`; other reference directions follow in order of first appearance.
     """
     session = baseline.session
     ref = np.asarray(session.ref_accel_mps2, dtype=float)
@@ -171,7 +171,7 @@ def _parameter_names() -> tuple[str, ...]:
 
 def theta_of(tilts: Mapping[str, np.ndarray]) -> np.ndarray:
     """The 12 pair parameters of :func:`build` (rad) of per-pose tilts: pose ('+x', ...) -> rotation
-    vector (rad, sensor frame), e.g. :meth:`station.sim.effects.EffectTruth.pose_tilts`; missing poses are 0."""
+    vector (rad, sensor frame), e.g. :meth:`station.physics.effects.EffectTruth.pose_tilts`; missing poses are 0."""
     zero = np.zeros(3)
     out = []
     for k in _PAIR_AXES:

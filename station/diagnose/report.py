@@ -38,7 +38,7 @@ from threadpoolctl import threadpool_limits
 from station.diagnose.rerun import FittedEffect, Rerun, rerun
 from station.diagnose.residuals import SENSORS, Baseline, fit_baseline, locate
 from station.diagnose.select import select
-from station.errors import FitError
+from station.kernel.errors import FitError
 from station.session.model import Session
 
 FORMAT = "station-diagnosis/1"
@@ -73,7 +73,7 @@ def diagnose(session: Session, *, warmup_tc_s: Mapping[str, tuple[float, float]]
     ``LimitsFile.correlation_time_s``; see :func:`station.diagnose.residuals.fit_baseline`. None: the
     recording alone decides T_c (a temperature bias then often cannot be told from the warm-up).
 
-    Raises :class:`station.errors.FitError` when the base fit refuses the recording.
+    Raises :class:`station.kernel.errors.FitError` when the base fit refuses the recording.
     """
     # the linear algebra is on a few hundred blocks: BLAS threads only spin
     with threadpool_limits(limits=1, user_api="blas"):

@@ -2,12 +2,12 @@
 
 The diagnosis names effects from block regressions (:mod:`station.diagnose.select`); this
 module checks the result the other way round: the project's simulator
-(:class:`station.sim.imu.ImuModel`) renders the unit twice on the *recording's own* rig motion
+(:class:`station.physics.imu.ImuModel`) renders the unit twice on the *recording's own* rig motion
 and temperature course,
 
 * **base**: the fitted eq. (1) with the drift of eq. (3) (``baseline.params``),
 * **extended**: the same plus every accepted mean effect with its fitted SI parameters
-  (mapped onto the simulator's :class:`~station.sim.effects.EffectTruth`),
+  (mapped onto the simulator's :class:`~station.physics.effects.EffectTruth`),
 
 and both are compared with the recording per block of :mod:`station.diagnose.residuals`.
 
@@ -50,13 +50,13 @@ import numpy as np
 from station.diagnose import pose_tilt
 from station.diagnose.candidates import attitude, earth_rate_world
 from station.diagnose.residuals import SENSORS, Baseline, SensorData
-from station.errors import FitError
 from station.fit.blocks import block_exp_mean
+from station.kernel.errors import FitError
+from station.kernel.geometry import Kinematics
+from station.physics.effects import EffectShapes, EffectTruth
+from station.physics.imu import Environment, ImuModel
+from station.physics.unit import TriadTruth, UnitTruth
 from station.session.model import Kind
-from station.sim.effects import EffectShapes, EffectTruth
-from station.sim.geometry import Kinematics
-from station.sim.imu import Environment, ImuModel
-from station.sim.sensor_class import TriadTruth, UnitTruth
 
 #: Effects with a mean signal: simulated with their fitted parameters.
 SIMULATED = (
@@ -505,7 +505,7 @@ def rerun(baseline: Baseline, findings: Iterable[FittedEffect], *, refit: bool =
     """Re-run the simulator with the base model and with base + the accepted ``findings`` on the recording
     of ``baseline`` and compare both with it (see the module docstring).
 
-    Raises :class:`station.errors.FitError` when the recording's time stamps cannot drive the simulator.
+    Raises :class:`station.kernel.errors.FitError` when the recording's time stamps cannot drive the simulator.
     """
     simulated, skipped = [], []
     for e in findings:

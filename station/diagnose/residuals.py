@@ -204,7 +204,7 @@ def fit_baseline(
     diagnosis then takes a warm-up that decays faster or slower than that for something other than eq. 3's
     drift. Sensors not in it, or None: the recording alone decides T_c.
 
-    Raises :class:`station.errors.FitError` when the base fit refuses the recording, ValueError for a range
+    Raises :class:`station.kernel.errors.FitError` when the base fit refuses the recording, ValueError for a range
     that is not ``0 < low <= high``.
     """
     ranges: dict[str, tuple[float, float]] = {}

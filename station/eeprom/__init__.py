@@ -3,7 +3,7 @@
 * :mod:`station.eeprom.image` - the versioned binary image (``layout.md``), encode/decode, A/B slots.
 * :mod:`station.eeprom.provision` - page-by-page write through the sensor protocol, read-back, the runner's
   Provisioner.
-* :mod:`station.eeprom.verify` - the sensor's corrected output checked on the rig.
+* :mod:`station.sequence.verify` - the sensor's corrected output checked on the rig.
 """
 
 from station.eeprom.image import (

@@ -32,8 +32,8 @@ from datetime import UTC, datetime
 
 import numpy as np
 
-from station.errors import FormatError, UnsupportedVersionError
 from station.fit.params import AllanCoefficients, ParameterSet, TriadParams
+from station.kernel.errors import FormatError, UnsupportedVersionError
 
 MAGIC = b"SCAL"
 LAYOUT_VERSION = 1

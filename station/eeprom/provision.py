@@ -16,21 +16,14 @@ A power loss at any point leaves the other slot untouched, so the old image stay
 current; the new one becomes current only once its last byte (its header page) and
 CRC are in place.
 
-:class:`EepromProvisioner` implements the sequence runner's ``Provisioner``: called
-only for PASS units, it writes the unit's image, power-cycles the sensor so its
-firmware loads it, and runs the optional post-calibration verification
-(:mod:`station.eeprom.verify`). Every failure is a :class:`~station.errors.HardwareError`
-(the runner makes the unit's outcome ERROR); a failed verification is a
-:class:`VerificationFailed`.
+Every failure is a :class:`~station.kernel.errors.HardwareError` (a station fault). The
+provisioning step of the sequence (:mod:`station.sequence.provision`) calls it.
 """
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
 from dataclasses import dataclass, field
-from datetime import UTC, datetime
-from typing import TYPE_CHECKING, Protocol
 
 from station.eeprom.image import (
     DEFAULT_SLOTS,
@@ -46,12 +39,8 @@ from station.eeprom.image import (
     read_slots,
     select_image,
 )
-from station.errors import HardwareError, UnitRejected
-from station.sensor.client import SerialSensor
-
-if TYPE_CHECKING:
-    from station.eeprom.verify import VerificationResult
-    from station.sequence.runner import UnitResult
+from station.kernel.errors import HardwareError
+from station.sensor.protocol import Sensor
 
 log = logging.getLogger(__name__)
 
@@ -70,14 +59,6 @@ class EepromUnusableError(ProvisionError):
 
 class ReadbackMismatchError(ProvisionError):
     """The image read back differs from the one written, after every attempt."""
-
-
-class VerificationFailed(UnitRejected):
-    """The unit's corrected output is outside the verification limits (see ``result``): a FAIL."""
-
-    def __init__(self, message: str, result: VerificationResult) -> None:
-        super().__init__(message, tuple((c.name, c.value, c.limit, c.unit, c.passed) for c in result.checks))
-        self.result = result
 
 
 @dataclass(frozen=True)
@@ -103,12 +84,12 @@ class WriteReport:
     image: CalibrationImage = field(repr=False, compare=False)
 
 
-def read_unit_slots(sensor: SerialSensor, layout: SlotLayout = DEFAULT_SLOTS) -> list[SlotState]:
+def read_unit_slots(sensor: Sensor, layout: SlotLayout = DEFAULT_SLOTS) -> list[SlotState]:
     """Read and decode both image slots of the unit (EEPROM_READ)."""
     return read_slots(sensor.eeprom_read(layout.base, 2 * layout.slot_size), layout)
 
 
-def read_current_image(sensor: SerialSensor, layout: SlotLayout = DEFAULT_SLOTS) -> CalibrationImage | None:
+def read_current_image(sensor: Sensor, layout: SlotLayout = DEFAULT_SLOTS) -> CalibrationImage | None:
     """The unit's current image (valid, highest update count), or None."""
     current = select_image(read_unit_slots(sensor, layout))
     return current.image if current is not None else None
@@ -126,7 +107,7 @@ def _pages(addr: int, data: bytes, page_size: int) -> list[tuple[int, bytes]]:
 
 
 def write_image(
-    sensor: SerialSensor,
+    sensor: Sensor,
     image: CalibrationImage,
     *,
     layout: SlotLayout = DEFAULT_SLOTS,
@@ -183,102 +164,11 @@ def write_image(
     )
 
 
-class Verifier(Protocol):
-    """Post-calibration verification of a freshly written unit (see :mod:`station.eeprom.verify`)."""
-
-    def verify(self, sensor: SerialSensor, image: CalibrationImage) -> VerificationResult: ...
-
-
-@dataclass(frozen=True, eq=False)
-class ProvisionRecord:
-    """What provisioning did for one unit: the write and, if run, the verification."""
-
-    serial: str
-    slot: int
-    write: WriteReport
-    verification: VerificationResult | None
-
-
-class EepromProvisioner:
-    """The sequence runner's Provisioner: write the PASS unit's image, power-cycle, verify.
-
-    Args:
-        station_id: written into each image (ASCII, 1..16 characters).
-        verifier: post-calibration verification (None: none).
-        layout: image slots.
-        max_attempts: write + read-back rounds per unit.
-        power_cycle: reset the sensor after writing so its firmware loads the new image.
-        boot_timeout_s: wall seconds to wait for the BOOT event after the reset.
-        now: calibration-time source (UTC); default ``datetime.now(UTC)``.
-        on_record: called with each unit's :class:`ProvisionRecord` (e.g. to store it).
-
-    ``records`` maps serial -> the last :class:`ProvisionRecord`.
-    """
-
-    def __init__(
-        self,
-        station_id: str,
-        *,
-        verifier: Verifier | None = None,
-        layout: SlotLayout = DEFAULT_SLOTS,
-        max_attempts: int = 3,
-        power_cycle: bool = True,
-        boot_timeout_s: float = 2.0,
-        now: Callable[[], datetime] | None = None,
-        on_record: Callable[[ProvisionRecord], None] | None = None,
-    ) -> None:
-        self.station_id = station_id
-        self.verifier = verifier
-        self.layout = layout
-        self.max_attempts = max_attempts
-        self.power_cycle = power_cycle
-        self.boot_timeout_s = boot_timeout_s
-        self._now = now if now is not None else (lambda: datetime.now(UTC))
-        self._on_record = on_record
-        self.records: dict[str, ProvisionRecord] = {}
-
-    def image_for(self, unit: UnitResult) -> CalibrationImage:
-        if unit.params is None:
-            raise ProvisionError(f"slot {unit.slot}: no parameter set to write")
-        if unit.serial and unit.params.serial != unit.serial:
-            raise SerialMismatchError(
-                f"slot {unit.slot}: parameter set is for {unit.params.serial!r}, the unit is {unit.serial!r}"
-            )
-        return CalibrationImage.from_params(unit.params, self.station_id, self._now())
-
-    def provision(
-        self, unit: UnitResult, sensor: SerialSensor
-    ) -> tuple[tuple[str, float, float, str, bool], ...] | None:
-        """Write, power-cycle, verify one PASS unit; returns the verification checks (None without verifier).
-
-        Raises a HardwareError subclass when the writing fails (station ERROR) and
-        VerificationFailed (a UnitRejected) when the corrected output misses its limits (unit FAIL).
-        """
-        image = self.image_for(unit)
-        report = write_image(sensor, image, layout=self.layout, max_attempts=self.max_attempts)
-        if self.power_cycle:
-            sensor.power_cycle(self.boot_timeout_s)
-        result = self.verifier.verify(sensor, report.image) if self.verifier is not None else None
-        record = ProvisionRecord(report.serial, unit.slot, report, result)
-        self.records[report.serial] = record
-        if self._on_record is not None:
-            self._on_record(record)
-        if result is not None and not result.passed:
-            raise VerificationFailed(f"verification of corrected output failed: {result.describe()}", result)
-        if result is None:
-            return None
-        return tuple((c.name, c.value, c.limit, c.unit, c.passed) for c in result.checks)
-
-
 __all__ = [
-    "EepromProvisioner",
     "EepromUnusableError",
     "ProvisionError",
-    "ProvisionRecord",
     "ReadbackMismatchError",
     "SerialMismatchError",
-    "VerificationFailed",
-    "Verifier",
     "WriteReport",
     "read_current_image",
     "read_unit_slots",

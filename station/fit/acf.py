@@ -62,8 +62,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import signal
 
-from station.errors import FitError
 from station.fit.allan import white_noise_std
+from station.kernel.errors import FitError
 
 _E_INV = math.exp(-1.0)
 

@@ -36,8 +36,8 @@ from typing import Literal
 import numpy as np
 from scipy.optimize import nnls
 
-from station.errors import FitError
 from station.fit.params import AllanCoefficients
+from station.kernel.errors import FitError
 
 NoiseType = Literal["white", "flicker", "random_walk"]
 

@@ -214,7 +214,7 @@ def _quality(
 def fit_session(session: Session, options: FitOptions | None = None) -> ParameterSet:
     """Fit the full parameter set of eq. (1) to a session recording.
 
-    Raises :class:`station.errors.FitError` with a one-line reason when the recording
+    Raises :class:`station.kernel.errors.FitError` with a one-line reason when the recording
     cannot give a trustworthy result (see :mod:`station.fit.checks`).
     """
     # The linear algebra here is on ~100x100 matrices: BLAS threads only spin.

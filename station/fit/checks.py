@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from station.errors import FitError
+from station.kernel.errors import FitError
 from station.session.model import Kind, Session
 
 AXES = "xyz"

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from station.errors import FormatError, UnsupportedVersionError
+from station.kernel.errors import FormatError, UnsupportedVersionError
 
 FORMAT = "station-params/1"
 

@@ -1,6 +1,6 @@
 """The test rig: register map, the station's :class:`Rig` protocol and the Modbus client."""
 
-from station.rig.modbus import ModbusRig, open_rig
+from station.rig.modbus import ModbusRig, rig_client_options
 from station.rig.protocol import (
     Orientation,
     Rig,
@@ -13,9 +13,11 @@ from station.rig.protocol import (
     RigState,
     RigTimeout,
 )
+from station.rig.registry import RIGS, open_rig
 from station.rig.url import RigUrl, RigUrlError, parse_rig_url
 
 __all__ = [
+    "RIGS",
     "ModbusRig",
     "Orientation",
     "Rig",
@@ -31,4 +33,5 @@ __all__ = [
     "RigUrlError",
     "open_rig",
     "parse_rig_url",
+    "rig_client_options",
 ]

@@ -27,6 +27,8 @@ from pymodbus.client import ModbusSerialClient, ModbusTcpClient
 from pymodbus.constants import ExcCodes
 from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
 
+from station.kernel.clock import Clock, WallClock
+from station.kernel.geometry import POSE_ANGLES_DEG
 from station.rig import registers as reg
 from station.rig.protocol import (
     Orientation,
@@ -40,8 +42,6 @@ from station.rig.protocol import (
 )
 from station.rig.registers import HR, IR, AckResult, Command, Status
 from station.rig.url import RigUrl, parse_rig_url
-from station.sim.clock import Clock, WallClock
-from station.sim.geometry import POSE_ANGLES_DEG
 
 log = logging.getLogger(__name__)
 
@@ -415,6 +415,24 @@ class ModbusRig:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def rig_client_options(scale: float = 1.0) -> dict[str, Any]:
+    """Keyword arguments for :func:`open_rig` on a clock running ``scale`` times real time.
+
+    At scale 1 these are the client defaults (poll 0.1 s, heartbeat 0.5 s, watchdog 2 s).
+    On a fast simulated clock the rig seconds between polls and heartbeats grow so the
+    wall-clock rates stay modest (~50 polls and ~25 heartbeats per wall second), and
+    the watchdog and acknowledgement timeouts keep a margin of several wall periods.
+    """
+    s = float(scale)
+    return {
+        "poll_s": max(0.1, 0.02 * s),
+        "heartbeat_period_s": max(0.5, 0.04 * s),
+        "ack_timeout_s": max(2.0, 0.5 * s),
+        "alive_timeout_s": max(2.0, 0.5 * s),
+        "watchdog_s": min(60.0, max(2.0, 1.0 * s)),
+    }
 
 
 def open_rig(

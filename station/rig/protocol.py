@@ -1,22 +1,23 @@
 """What the station needs from a test rig: the :class:`Rig` protocol, its state and its errors.
 
 The rig is a tumble gimbal (roll about sensor x, pitch about y) on a rate table
-spinning about the world vertical (yaw), see :mod:`station.sim.geometry`. The API
+spinning about the world vertical (yaw), see :mod:`station.kernel.geometry`. The API
 speaks degrees and deg/s because the rig and ``POSE_ANGLES_DEG`` do; the
 ``*_rad`` properties give SI values for the rest of the station. Times are seconds
-of the injected :class:`~station.sim.clock.Clock` ("rig seconds").
+of the injected :class:`~station.kernel.clock.Clock` ("rig seconds").
 
-Every rig error is a :class:`~station.errors.HardwareError`: the run's outcome is
+Every rig error is a :class:`~station.kernel.errors.HardwareError`: the run's outcome is
 ERROR (station fault), never a unit FAIL.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
-from station.errors import HardwareError
+from station.kernel.errors import HardwareError
 from station.rig.registers import AckResult, Status, fault_name
 
 
@@ -178,7 +179,16 @@ class Rig(Protocol):
     Commands return once the rig acknowledged them; the ``wait_*`` calls confirm
     the motion from status bits *and* readbacks within tolerance, never from the
     setpoint. Timeouts are rig seconds of the injected clock.
+
+    Attributes:
+        reconnects: how often the link to the rig was lost and re-established since it was
+            opened (the run treats any as a station fault: the rig went unsupervised).
+        listeners: called with every state the rig reports while the station waits on it
+            (the runner publishes them as live readings).
     """
+
+    reconnects: int
+    listeners: list[Callable[[RigState], None]]
 
     def identify(self) -> RigIdentity: ...
 

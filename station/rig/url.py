@@ -15,7 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from urllib.parse import parse_qs, urlsplit
 
-from station.errors import StationError
+from station.kernel.errors import StationError
 
 SCHEMES = ("modbus-tcp", "modbus-rtu")
 _PARITIES = {"N": "N", "E": "E", "O": "O", "NONE": "N", "EVEN": "E", "ODD": "O"}

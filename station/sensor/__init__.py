@@ -2,25 +2,29 @@
 
 - :mod:`station.sensor.frames`: framing, CRC-16/CCITT-FALSE, sample encoding, :class:`FrameParser`.
 - :mod:`station.sensor.commands`: command/ACK/NAK codes and payloads.
-- :mod:`station.sensor.client`: :func:`open_sensor` -> :class:`SerialSensor`.
+- :mod:`station.sensor.protocol`: the :class:`Sensor` protocol, :class:`SampleBlock`, the link faults.
+- :mod:`station.sensor.client`: :class:`SerialSensor`, the protocol over a serial port.
+- :mod:`station.sensor.registry`: :func:`open_sensor` by URL scheme.
 - :mod:`station.sensor.url`: ``serial:///dev/...?baud=N`` parsing.
 """
 
-from station.sensor.client import (
+from station.sensor.client import SerialSensor
+from station.sensor.commands import EepromInfo, NakCode, OutputMode, SensorIdentity, SensorStatus
+from station.sensor.frames import Frame, FrameParser, FrameType, ParserStats, SampleFlag
+from station.sensor.protocol import (
     CrcStormError,
     LinkStats,
     SampleBlock,
+    Sensor,
     SensorLinkError,
     SensorNak,
     SensorTimeout,
-    SerialSensor,
-    open_sensor,
 )
-from station.sensor.commands import EepromInfo, NakCode, OutputMode, SensorIdentity, SensorStatus
-from station.sensor.frames import Frame, FrameParser, FrameType, ParserStats, SampleFlag
+from station.sensor.registry import SENSORS, open_sensor
 from station.sensor.url import SensorUrlError, SerialUrl, parse_sensor_url
 
 __all__ = [
+    "SENSORS",
     "CrcStormError",
     "EepromInfo",
     "Frame",
@@ -32,6 +36,7 @@ __all__ = [
     "ParserStats",
     "SampleBlock",
     "SampleFlag",
+    "Sensor",
     "SensorIdentity",
     "SensorLinkError",
     "SensorNak",

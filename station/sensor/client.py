@@ -7,14 +7,14 @@ Commands work while streaming (their answers interleave with samples); each is
 retried a bounded number of times with the same command sequence number, which the
 sensor answers from its cache instead of executing twice.
 
-Failures are station faults (:class:`~station.errors.HardwareError`), not unit
+Failures are station faults (:class:`~station.kernel.errors.HardwareError`), not unit
 failures: :class:`SensorTimeout` (no answer), :class:`SensorNak` (refused),
 :class:`CrcStormError` (CRC error rate over the window above threshold; latched until
 :meth:`SerialSensor.clear_fault`), :class:`SensorLinkError` (the port itself failed).
 
 Time: ``command_timeout_s`` is wall-clock time (it covers OS and link latency);
 ``read_samples`` durations and timeouts are in the given clock's seconds (a
-:class:`~station.sim.clock.SimClock` shortens the wall wait by its scale).
+:class:`~station.kernel.clock.SimClock` shortens the wall wait by its scale).
 """
 
 from __future__ import annotations
@@ -28,7 +28,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import serial
 
-from station.errors import FormatError, HardwareError
+from station.kernel.clock import Clock, WallClock
+from station.kernel.errors import FormatError, HardwareError
 from station.sensor.commands import (
     MAX_EEPROM_READ,
     BootEvent,
@@ -48,147 +49,19 @@ from station.sensor.commands import (
     unpack_read_reply,
     unpack_write_reply,
 )
-from station.sensor.frames import FrameParser, FrameType, SampleFlag, decode_sample_payloads
+from station.sensor.frames import FrameParser, FrameType, decode_sample_payloads
+from station.sensor.protocol import (
+    CrcStormError,
+    LinkStats,
+    SampleBlock,
+    SensorLinkError,
+    SensorNak,
+    SensorTimeout,
+)
 from station.sensor.url import parse_sensor_url
-from station.sim.clock import Clock, WallClock
 
 _T_SAMPLE = int(FrameType.SAMPLE)
 _T_REPLY = (int(FrameType.ACK), int(FrameType.NAK))
-
-
-class SensorTimeout(HardwareError):
-    """The sensor did not answer (command after all attempts, or samples within the timeout)."""
-
-
-class SensorNak(HardwareError):
-    """The sensor refused a command; ``code`` is the :class:`NakCode`, ``command`` the :class:`Command`."""
-
-    def __init__(self, command: int, code: int) -> None:
-        try:
-            cname = Command(command).name
-        except ValueError:
-            cname = f"0x{command:02x}"
-        try:
-            ename = NakCode(code).name
-        except ValueError:
-            ename = f"0x{code:02x}"
-        super().__init__(f"sensor refused {cname}: {ename}")
-        self.command = command
-        self.code = code
-
-
-class CrcStormError(HardwareError):
-    """Too many frames fail their CRC: cabling, baud rate or EMI problem at the station."""
-
-
-class SensorLinkError(HardwareError):
-    """The serial port could not be opened, or failed while in use."""
-
-
-@dataclass(frozen=True, eq=False)
-class SampleBlock:
-    """Decoded samples, in arrival order.
-
-    Attributes:
-        seq: (n,) sequence counter (u16, wraps).
-        t_s: (n,) sensor time since power-on (s, µs resolution).
-        accel_mps2: (n, 3) specific force (m/s^2).
-        gyro_radps: (n, 3) angular rate (rad/s).
-        temp_degc: (n,) temperature (degC), NaN if the sensor has none.
-        flags: (n,) :class:`~station.sensor.frames.SampleFlag` bits.
-    """
-
-    seq: np.ndarray
-    t_s: np.ndarray
-    accel_mps2: np.ndarray
-    gyro_radps: np.ndarray
-    temp_degc: np.ndarray
-    flags: np.ndarray
-
-    def __len__(self) -> int:
-        return int(self.seq.shape[0])
-
-    @property
-    def corrected(self) -> np.ndarray:
-        """(n,) bool: the sample is corrected output (else raw)."""
-        return (self.flags & SampleFlag.CORRECTED) != 0
-
-    @classmethod
-    def empty(cls) -> SampleBlock:
-        return cls(
-            np.zeros(0, np.uint16),
-            np.zeros(0),
-            np.zeros((0, 3)),
-            np.zeros((0, 3)),
-            np.zeros(0),
-            np.zeros(0, np.uint8),
-        )
-
-    @classmethod
-    def from_records(cls, rec: np.ndarray) -> SampleBlock:
-        """From a structured array of :data:`~station.sensor.frames.SAMPLE_PAYLOAD_DTYPE`."""
-        return cls(
-            seq=rec["seq"].astype(np.uint16),
-            t_s=rec["t_us"].astype(np.float64) * 1e-6,
-            accel_mps2=rec["accel"].astype(np.float64),
-            gyro_radps=rec["gyro"].astype(np.float64),
-            temp_degc=rec["temp"].astype(np.float64),
-            flags=rec["flags"].astype(np.uint8),
-        )
-
-    @classmethod
-    def concat(cls, blocks: list[SampleBlock]) -> SampleBlock:
-        if not blocks:
-            return cls.empty()
-        if len(blocks) == 1:
-            return blocks[0]
-        return cls(
-            *(np.concatenate([getattr(b, name) for b in blocks]) for name in cls.__dataclass_fields__)  # type: ignore[arg-type]
-        )
-
-    def split(self, k: int) -> tuple[SampleBlock, SampleBlock]:
-        """The first ``k`` samples and the rest."""
-        names = self.__dataclass_fields__
-        head = SampleBlock(*(getattr(self, n)[:k] for n in names))  # type: ignore[arg-type]
-        tail = SampleBlock(*(getattr(self, n)[k:] for n in names))  # type: ignore[arg-type]
-        return head, tail
-
-
-@dataclass(frozen=True)
-class LinkStats:
-    """Link and capture counters of one :class:`SerialSensor` (see also ParserStats).
-
-    Attributes:
-        frames: valid frames received.
-        samples: sample frames received.
-        crc_errors, bad_headers, resyncs, bytes_discarded: parser counters.
-        gaps, lost_frames, duplicates, restarts: sample sequence accounting.
-        retries: command retransmissions.
-        timeouts: commands that got no answer after all attempts.
-        naks: commands refused.
-        boots: BOOT events received.
-        stray_replies: ACK/NAK frames that matched no outstanding command.
-        buffer_overruns: samples dropped because the client buffer was full (nobody read them).
-        crc_storm: the CRC-storm fault is latched.
-    """
-
-    frames: int
-    samples: int
-    crc_errors: int
-    bad_headers: int
-    resyncs: int
-    bytes_discarded: int
-    gaps: int
-    lost_frames: int
-    duplicates: int
-    restarts: int
-    retries: int
-    timeouts: int
-    naks: int
-    boots: int
-    stray_replies: int
-    buffer_overruns: int
-    crc_storm: bool
 
 
 @dataclass
@@ -222,10 +95,12 @@ class SerialSensor:
         crc_window_frames: int = 500,
         crc_error_threshold: float = 0.1,
         max_buffered_samples: int = 1_000_000,
+        url: str | None = None,
     ) -> None:
         if attempts < 1:
             raise ValueError("attempts must be >= 1")
         self._port = port
+        self.url = url if url is not None else f"serial://{port.port}"
         self._clock: Clock = clock if clock is not None else WallClock()
         self.command_timeout_s = float(command_timeout_s)
         self.attempts = int(attempts)
@@ -667,4 +542,5 @@ def open_sensor(
         crc_window_frames=crc_window_frames,
         crc_error_threshold=crc_error_threshold,
         max_buffered_samples=max_buffered_samples,
+        url=url,
     )

@@ -14,7 +14,7 @@ import struct
 from dataclasses import dataclass
 from enum import IntEnum
 
-from station.errors import FormatError
+from station.kernel.errors import FormatError
 from station.sensor.frames import Frame, FrameType, encode_frame
 
 PROTOCOL_VERSION = 1

@@ -25,7 +25,7 @@ from enum import IntEnum, IntFlag
 
 import numpy as np
 
-from station.errors import FormatError
+from station.kernel.errors import FormatError
 
 SYNC = b"\xa5\x5a"
 HEADER_SIZE = 5  # sync (2) + type (1) + length (2)

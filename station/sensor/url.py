@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from urllib.parse import parse_qs, urlsplit
 
-from station.errors import StationError
+from station.kernel.errors import StationError
 
 DEFAULT_BAUD = 921600
 

@@ -1,13 +1,13 @@
-"""The calibration sequence: steps, the concurrent runner, its records, limits and the demo.
+"""The calibration sequence: steps, the concurrent runner, its records, limits, provisioning and verification.
 
 - :mod:`station.sequence.steps`: the plan as plain functions receiving their hardware.
-- :mod:`station.sequence.runner`: :class:`SequenceRunner` / :func:`run_sequence` for N units on one rig.
+- :mod:`station.sequence.runner`: :class:`SequenceRunner` for N units on one rig.
 - :mod:`station.sequence.records`: what a run emits (RunStarted ... RunFinished, :class:`Outcome`).
 - :mod:`station.sequence.limits`: product limits (Table 1 ranges by default).
-- :mod:`station.sequence.demo`: :func:`run_demo`, the one-command simulated station.
+- :mod:`station.sequence.provision`, :mod:`station.sequence.verify`: writing the image and verifying it on the rig.
 """
 
-from station.sequence.options import SequenceOptions, rig_client_options
+from station.sequence.options import SequenceOptions
 from station.sequence.records import (
     Measurement,
     Outcome,
@@ -19,7 +19,7 @@ from station.sequence.records import (
     StepStarted,
     UnitFinished,
 )
-from station.sequence.runner import Provisioner, RunResult, SequenceRunner, UnitResult, run_sequence
+from station.sequence.runner import Provisioner, RunResult, SequenceRunner, UnitResult
 
 __all__ = [
     "Measurement",
@@ -36,6 +36,4 @@ __all__ = [
     "StepStarted",
     "UnitFinished",
     "UnitResult",
-    "rig_client_options",
-    "run_sequence",
 ]

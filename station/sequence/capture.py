@@ -25,11 +25,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from station.errors import HardwareError
-from station.sensor.client import SampleBlock, SensorTimeout, SerialSensor
+from station.kernel.clock import Clock
+from station.kernel.errors import HardwareError
 from station.sensor.commands import SensorIdentity
+from station.sensor.protocol import SampleBlock, Sensor, SensorTimeout
 from station.session.model import Kind, Session
-from station.sim.clock import Clock
 
 _POLL_WALL_S = 0.02
 #: Sample times are whole microseconds: window bounds compare with this slack (s) so that float
@@ -74,7 +74,7 @@ class UnitChannel:
         clock: the station clock (the sensor's samples are mapped onto it by :meth:`sync`).
     """
 
-    def __init__(self, slot: int, url: str, sensor: SerialSensor, clock: Clock) -> None:
+    def __init__(self, slot: int, url: str, sensor: Sensor, clock: Clock) -> None:
         self.slot = slot
         self.url = url
         self.sensor = sensor

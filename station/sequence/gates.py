@@ -23,10 +23,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from station.sensor.client import SampleBlock
+from station.kernel.geometry import AXIS_INDEX
+from station.sensor.protocol import SampleBlock
 from station.sequence.options import SequenceOptions
 from station.session.model import Kind
-from station.sim.geometry import AXIS_INDEX
 
 SEQ_MODULUS = 1 << 16
 

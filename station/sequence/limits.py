@@ -12,7 +12,7 @@ resolve the gyro's 1000-3800 s T_c, and the fit then may return T_c at its searc
 bound with a local (Wald) uncertainty far too small, which failed 5 of 40 simulated
 Table 1 units (``table1_limits(check_correlation_time=True)`` checks it anyway).
 Versioned limits files (``fixtures/limits/*.toml``) are loaded by
-:mod:`station.sequence.limits_file`; a :class:`ProductLimits` from a file also carries
+:mod:`station.kernel.limits_file`; a :class:`ProductLimits` from a file also carries
 :class:`FitQualityLimits` (largest residual RMS and standard uncertainties), which
 :func:`check_limits` then checks too (``table1_limits()`` has none: unchanged verdicts).
 """
@@ -25,87 +25,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from station.fit.params import ParameterSet, TriadParams
-from station.sim.sensor_class import TABLE1, SensorClass
+from station.kernel.limits import FitQualityLimits, ProductLimits, TriadLimits
+from station.kernel.sensor_class import Range
 
 AXES = "xyz"
-Range = tuple[float, float]
-
-
-@dataclass(frozen=True)
-class TriadLimits:
-    """Ranges for one triad (unit U = m/s^2 or rad/s).
-
-    Attributes:
-        scale: diagonal of M (1); cross_axis: off-diagonal of M (1).
-        bias_static, bias_drift: (U); noise_std: (U).
-        correlation_time_s: T_c (s), None: not checked.
-    """
-
-    scale: Range
-    cross_axis: Range
-    bias_static: Range
-    bias_drift: Range
-    noise_std: Range
-    correlation_time_s: Range | None = None
-
-
-@dataclass(frozen=True)
-class FitQualityLimits:
-    """Largest allowed fit-quality figures (SI); None: not checked.
-
-    Attributes:
-        accel_residual_rms_mps2, gyro_residual_rms_radps: residual RMS per axis (m/s^2, rad/s).
-        accel_misalignment_std, gyro_misalignment_std: standard uncertainty of each M element (1).
-        accel_bias_static_std_mps2 (m/s^2), gyro_bias_static_std_radps (rad/s): b_stat uncertainty.
-    """
-
-    accel_residual_rms_mps2: float | None = None
-    gyro_residual_rms_radps: float | None = None
-    accel_misalignment_std: float | None = None
-    gyro_misalignment_std: float | None = None
-    accel_bias_static_std_mps2: float | None = None
-    gyro_bias_static_std_radps: float | None = None
-
-
-@dataclass(frozen=True)
-class ProductLimits:
-    """Limits for a product: both triads, the widening in standard uncertainties, optional fit quality."""
-
-    name: str
-    accel: TriadLimits
-    gyro: TriadLimits
-    k_sigma: float = 3.0
-    fit_quality: FitQualityLimits | None = None
-
-
-def table1_limits(
-    sensor_class: SensorClass = TABLE1, k_sigma: float = 3.0, *, check_correlation_time: bool = False
-) -> ProductLimits:
-    """Table 1 of the paper as product limits (converted to SI); T_c only if ``check_correlation_time``."""
-    c = sensor_class
-    d = math.pi / 180.0
-
-    def dps(r: Range) -> Range:
-        return (r[0] * d, r[1] * d)
-
-    # white noise seen by the fit includes ADC quantization (LSB^2 / 12), far below the range
-    accel = TriadLimits(
-        scale=c.accel_scale,
-        cross_axis=c.accel_cross_axis,
-        bias_static=c.accel_bias_static_mps2,
-        bias_drift=c.accel_bias_drift_mps2,
-        correlation_time_s=c.accel_correlation_time_s if check_correlation_time else None,
-        noise_std=c.accel_noise_std_mps2,
-    )
-    gyro = TriadLimits(
-        scale=c.gyro_scale,
-        cross_axis=c.gyro_cross_axis,
-        bias_static=dps(c.gyro_bias_static_dps),
-        bias_drift=dps(c.gyro_bias_drift_dps),
-        correlation_time_s=c.gyro_correlation_time_s if check_correlation_time else None,
-        noise_std=dps(c.gyro_noise_std_dps),
-    )
-    return ProductLimits(name=f"{c.name}-ranges", accel=accel, gyro=gyro, k_sigma=k_sigma)
 
 
 @dataclass(frozen=True)
@@ -186,3 +109,11 @@ def check_limits(params: ParameterSet, limits: ProductLimits) -> list[LimitCheck
     if limits.fit_quality is not None:
         out += check_fit_quality(params, limits.fit_quality)
     return out
+
+
+def is_marginal(check: LimitCheck, fraction: float) -> bool:
+    """A passed check whose value lies within ``fraction`` of the range width of an edge."""
+    if not check.passed or fraction <= 0:
+        return False
+    band = fraction * (check.high - check.low)
+    return check.value < check.low + band or check.value > check.high - band

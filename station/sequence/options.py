@@ -1,7 +1,7 @@
 """Knobs of the calibration sequence: timeouts, settle guard, capture quality gates.
 
 Times are seconds of the station clock (rig seconds: real seconds on hardware,
-simulated seconds on a :class:`~station.sim.clock.SimClock`) unless the name says
+simulated seconds on a :class:`~station.kernel.clock.SimClock`) unless the name says
 ``wall``. Angles in the rig's degrees, rates deg/s for rig tolerances; gate
 thresholds are SI (m/s^2, rad/s) or fractions (1).
 """
@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from typing import Any
 
 
 @dataclass(frozen=True)
@@ -70,21 +69,3 @@ class SequenceOptions:
         Keeps the rig supervision at no more than ~20 polls per wall second.
         """
         return replace(self, supervise_period_s=max(self.supervise_period_s, 0.05 * scale))
-
-
-def rig_client_options(scale: float = 1.0) -> dict[str, Any]:
-    """Keyword arguments for :func:`station.rig.open_rig` on a clock running ``scale`` times real time.
-
-    At scale 1 these are the client defaults (poll 0.1 s, heartbeat 0.5 s, watchdog 2 s).
-    On a fast simulated clock the rig seconds between polls and heartbeats grow so the
-    wall-clock rates stay modest (~50 polls and ~25 heartbeats per wall second), and
-    the watchdog and acknowledgement timeouts keep a margin of several wall periods.
-    """
-    s = float(scale)
-    return {
-        "poll_s": max(0.1, 0.02 * s),
-        "heartbeat_period_s": max(0.5, 0.04 * s),
-        "ack_timeout_s": max(2.0, 0.5 * s),
-        "alive_timeout_s": max(2.0, 0.5 * s),
-        "watchdog_s": min(60.0, max(2.0, 1.0 * s)),
-    }

@@ -9,7 +9,7 @@ fits it (:func:`station.fit.calibrate.fit_session`), checks the product limits
 JSON) of every unit that recorded anything.
 
 Outcomes: a unit out of limits (or failing a physics gate) is FAIL; a station
-fault (:class:`~station.errors.HardwareError`: rig timeout, rig fault, serial
+fault (:class:`~station.kernel.errors.HardwareError`: rig timeout, rig fault, serial
 fault, lost samples) is ERROR, for all units when it is the rig's and for one unit
 when it is its sensor's; ``KeyboardInterrupt`` (Ctrl-C) or :meth:`SequenceRunner.abort`
 is ABORTED. ``run()`` returns the result in every case and does not re-raise
@@ -35,13 +35,16 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Protocol
 
-from station.errors import FitError, HardwareError, StationError, UnitRejected
 from station.fit.calibrate import FitOptions, fit_session
 from station.fit.params import ParameterSet
+from station.kernel.clock import Clock
+from station.kernel.errors import FitError, HardwareError, StationError, UnitRejected
+from station.kernel.limits import ProductLimits, table1_limits
+from station.kernel.plan import RigPlan, default_plan
 from station.rig.protocol import Rig, RigState
-from station.sensor.client import SerialSensor
+from station.sensor.protocol import Sensor
 from station.sequence.capture import UnitChannel, build_session
-from station.sequence.limits import ProductLimits, check_limits, table1_limits
+from station.sequence.limits import check_limits
 from station.sequence.options import SequenceOptions
 from station.sequence.records import (
     Measurement,
@@ -58,8 +61,6 @@ from station.sequence.records import (
 from station.sequence.steps import STEP_FUNCTIONS, Fixture, Step, StepReport, bring_to_rest, plan_steps
 from station.session import format_session, parse_session
 from station.session.model import Session
-from station.sim.clock import Clock
-from station.sim.plan import RigPlan, default_plan
 
 log = logging.getLogger(__name__)
 
@@ -137,11 +138,11 @@ class Provisioner(Protocol):
     """Writes a passed unit's calibration into the sensor (EEPROM) and verifies it.
 
     Returns the verification checks (recorded as measurements of step 'verify'); raises
-    :class:`~station.errors.UnitRejected` when the unit misses them (FAIL) and a
-    :class:`~station.errors.HardwareError` when the writing fails (ERROR).
+    :class:`~station.kernel.errors.UnitRejected` when the unit misses them (FAIL) and a
+    :class:`~station.kernel.errors.HardwareError` when the writing fails (ERROR).
     """
 
-    def provision(self, unit: UnitResult, sensor: SerialSensor) -> Sequence[VerifyCheck] | None: ...
+    def provision(self, unit: UnitResult, sensor: Sensor) -> Sequence[VerifyCheck] | None: ...
 
 
 @dataclass
@@ -162,7 +163,7 @@ class SequenceRunner:
         rig: an open rig (:func:`station.rig.open_rig`).
         sensors: open sensor clients, one per fixture slot (:func:`station.sensor.open_sensor`).
         clock: the station clock the rig and sensors were opened with.
-        plan: steps and durations (default :func:`station.sim.plan.default_plan`), site gravity.
+        plan: steps and durations (default :func:`station.kernel.plan.default_plan`), site gravity.
         options: timeouts and capture gates.
         limits: product limits (default: Table 1 ranges).
         out_dir: where session CSVs and parameter JSONs go (None: not saved).
@@ -178,7 +179,7 @@ class SequenceRunner:
     def __init__(
         self,
         rig: Rig,
-        sensors: Sequence[SerialSensor],
+        sensors: Sequence[Sensor],
         clock: Clock,
         *,
         plan: RigPlan | None = None,
@@ -263,10 +264,8 @@ class SequenceRunner:
         self._fixture = fx
         if aborted:
             fx.abort.set()
-        reconnects0 = int(getattr(self.rig, "reconnects", 0))
-        listeners = getattr(self.rig, "listeners", None)  # rigs that publish their readings (ModbusRig)
-        if listeners is not None:
-            listeners.append(self._rig_reading)
+        reconnects0 = self.rig.reconnects
+        self.rig.listeners.append(self._rig_reading)
         try:
             try:
                 if not aborted:
@@ -288,8 +287,7 @@ class SequenceRunner:
             post_wall0 = time.monotonic()
             units = self._finish_units(channels, verdicts, aborted, run_message, completed)
         finally:
-            if listeners is not None:
-                listeners.remove(self._rig_reading)
+            self.rig.listeners.remove(self._rig_reading)
             pool.shutdown(wait=True, cancel_futures=True)
             self._fixture = None
         outcome = worst(u.outcome for u in units)
@@ -336,7 +334,7 @@ class SequenceRunner:
             self._emit(StepStarted(self.run_id, step.index, step.name, step.kind.label, t0, step.hold_s))
             try:
                 report = STEP_FUNCTIONS[step.kind](fx, step)
-                reconnects = int(getattr(fx.rig, "reconnects", 0))
+                reconnects = fx.rig.reconnects
                 if self.options.rig_reconnect_is_error and reconnects > reconnects0:
                     raise RigLinkError(
                         f"the rig link dropped during the run and was re-established ({reconnects - reconnects0} "
@@ -583,42 +581,3 @@ class SequenceRunner:
 def _replace_outcome(r: UnitResult, outcome: Outcome, message: str) -> UnitResult:
     return UnitResult(r.slot, r.url, r.serial, outcome, message, r.session, r.params, r.session_path, r.params_path,
                       r.measurements)
-
-
-def run_sequence(
-    rig_url: str,
-    sensor_urls: Sequence[str],
-    clock: Clock,
-    *,
-    rig_options: dict[str, object] | None = None,
-    sensor_options: dict[str, object] | None = None,
-    on_runner: Callable[[SequenceRunner], None] | None = None,
-    **runner_options: object,
-) -> RunResult:
-    """Open the rig and the sensors by URL, run the sequence, close them again.
-
-    ``rig_options`` go to :func:`station.rig.open_rig` (e.g. :func:`~station.sequence.options.rig_client_options`),
-    ``sensor_options`` to :func:`station.sensor.open_sensor`, the rest to :class:`SequenceRunner`.
-    ``on_runner`` gets the runner before it runs (its ``run_id``, and :meth:`SequenceRunner.abort`).
-    Raises :class:`~station.errors.HardwareError` if the rig or a sensor cannot be opened.
-    """
-    from station.rig import open_rig
-    from station.sensor import open_sensor
-
-    rig = open_rig(rig_url, clock, **(rig_options or {}))  # type: ignore[arg-type]
-    sensors: list[SerialSensor] = []
-    try:
-        for url in sensor_urls:
-            sensors.append(open_sensor(url, clock, **(sensor_options or {})))  # type: ignore[arg-type]
-        ident = rig.identify()
-        runner = SequenceRunner(
-            rig, sensors, clock, rig_name=f"{ident.firmware_id} {ident.firmware_version}",
-            sensor_urls=list(sensor_urls), **runner_options,  # type: ignore[arg-type]
-        )
-        if on_runner is not None:
-            on_runner(runner)
-        return runner.run()
-    finally:
-        for s in sensors:
-            s.close()
-        rig.close()

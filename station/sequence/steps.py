@@ -1,6 +1,6 @@
 """The calibration sequence as plain functions that receive their hardware.
 
-:func:`plan_steps` turns a :class:`~station.sim.plan.RigPlan` into steps: the
+:func:`plan_steps` turns a :class:`~station.kernel.plan.RigPlan` into steps: the
 power-on rest (drift and noise, eq. 3: the sensors are power-cycled at its start so
 ``g(0) = 1``), the six gravity poses, and the constant-rate steps about each sensor
 axis. :func:`power_on_rest`, :func:`gravity_pose` and :func:`rate_step` each get a
@@ -8,7 +8,7 @@ axis. :func:`power_on_rest`, :func:`gravity_pose` and :func:`rate_step` each get
 :class:`Step`; they position the rig, confirm it settled from its status bits and
 readbacks, capture every active unit concurrently (one worker thread per sensor),
 supervise the rig while capturing, and return a :class:`StepReport` with each
-unit's gate results or error. Rig problems raise :class:`~station.errors.HardwareError`
+unit's gate results or error. Rig problems raise :class:`~station.kernel.errors.HardwareError`
 (the whole run is an ERROR); a sensor problem only ends its own unit.
 :func:`bring_to_rest` is the teardown. Angles deg, rates deg/s at the rig; SI inside.
 """
@@ -23,16 +23,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from station.errors import HardwareError
+from station.kernel.clock import Clock
+from station.kernel.errors import HardwareError
+from station.kernel.geometry import AXIS_INDEX, POSE_ANGLES_DEG, up_vector
+from station.kernel.plan import RigPlan
 from station.rig.protocol import Rig, RigFault, RigState
 from station.rig.registers import FaultCode, angle_error_deg
 from station.sequence.capture import CaptureStopped, UnitChannel, Window
 from station.sequence.gates import GateResult, evaluate
 from station.sequence.options import SequenceOptions
 from station.session.model import Kind
-from station.sim.clock import Clock
-from station.sim.geometry import AXIS_INDEX, POSE_ANGLES_DEG, up_vector
-from station.sim.plan import RigPlan
 
 _DEG = math.pi / 180.0
 

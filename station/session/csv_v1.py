@@ -4,7 +4,7 @@ Reading: :func:`read_session` / :func:`parse_session`. The happy path hands the 
 the pandas C parser after cheap byte-level screening. When anything looks wrong the data is
 retried in blocks of lines, and a slow line-by-line reference parser reads the blocks the fast
 parser refuses: it either names the offending 1-based line in a
-:class:`~station.errors.SessionFormatError` or (for lines the fast path merely could not handle,
+:class:`~station.kernel.errors.SessionFormatError` or (for lines the fast path merely could not handle,
 e.g. cells padded with spaces) returns their values. The reference parser defines what is
 accepted; the fast path only ever accepts a subset of it.
 
@@ -29,7 +29,7 @@ from typing import IO
 
 import numpy as np
 
-from station.errors import SessionFormatError, UnsupportedVersionError
+from station.kernel.errors import SessionFormatError, UnsupportedVersionError
 from station.session.model import KIND_LABELS, REQUIRED_KEYS, Session
 
 __all__ = [

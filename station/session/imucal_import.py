@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from station.errors import FormatError
+from station.kernel.errors import FormatError
 from station.session.model import Kind, Session
 
 __all__ = ["POSE_LABELS", "ROTATION_LABELS", "import_imucal_annotated", "import_imucal_ferraris"]

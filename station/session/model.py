@@ -14,7 +14,7 @@ from types import MappingProxyType
 
 import numpy as np
 
-from station.errors import SessionFormatError
+from station.kernel.errors import SessionFormatError
 
 REQUIRED_KEYS = ("serial", "sample_rate_hz", "gravity_mps2")
 

@@ -21,8 +21,8 @@ from __future__ import annotations
 
 import threading
 
-from station.errors import HardwareError
-from station.sim.clock import Clock, WallClock
+from station.kernel.clock import Clock, WallClock
+from station.kernel.errors import HardwareError
 
 ERASED = 0xFF
 

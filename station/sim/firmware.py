@@ -32,7 +32,7 @@ import numpy as np
 from station.correct import StreamingCorrector, correct_batch
 from station.eeprom.image import DEFAULT_SLOTS, CalibrationImage, SlotLayout, read_slots, select_image
 from station.fit.params import ParameterSet
-from station.sim.clock import Clock, WallClock
+from station.kernel.clock import Clock, WallClock
 from station.sim.eeprom import Eeprom, EepromError
 from station.sim.sensor_peer import SimulatedSensor
 

@@ -3,7 +3,7 @@
 :class:`PhysicsSource` is a :class:`~station.sim.sensor_peer.SampleSource`: the
 simulated sensor asks it for samples at sensor times (s since power-on), it asks
 the rig what the sensor frame did at the matching rig times and renders the
-unit's raw output with :class:`~station.sim.imu.ImuModel` (eq. 1 with the
+unit's raw output with :class:`~station.physics.imu.ImuModel` (eq. 1 with the
 Gauss-Markov drift of eq. 3, plus any optional effects). This binds a simulated
 sensor to the simulated rig it sits on: whatever the rig does, whoever commands
 it, the sensor feels.
@@ -24,11 +24,12 @@ from typing import Protocol
 
 import numpy as np
 
-from station.sim.clock import Clock
-from station.sim.effects import Effects
-from station.sim.geometry import Kinematics
-from station.sim.imu import Environment, ImuModel
-from station.sim.sensor_class import TABLE1, SensorClass, UnitTruth
+from station.kernel.clock import Clock
+from station.kernel.geometry import Kinematics
+from station.kernel.sensor_class import TABLE1, SensorClass
+from station.physics.effects import Effects
+from station.physics.imu import Environment, ImuModel
+from station.physics.unit import UnitTruth
 
 
 class KinematicsProvider(Protocol):
@@ -43,7 +44,7 @@ class PhysicsSource:
     Args:
         rig: the rig the unit sits on (``SimulatedRig`` or ``RigModel``), evaluated at clock time.
         clock: the clock shared with the rig and the simulated sensor (s).
-        truth: the unit's true parameters (:func:`station.sim.sensor_class.draw_unit`).
+        truth: the unit's true parameters (:func:`station.physics.unit.draw_unit`).
         sensor_class: used to draw the room environment when ``environment`` is None.
         effects: optional physics beyond eq. (1); default none.
         seed: seeds the noise; power cycle ``k`` (1 = first boot) uses child stream ``k``.

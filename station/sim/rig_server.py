@@ -1,7 +1,7 @@
 """A simulated tumble + rate-table rig behind a real pymodbus server.
 
 :class:`RigModel` is the rig's controller and mechanics without I/O: three
-:class:`~station.sim.motion.AxisTrajectory` (roll, pitch, yaw; rad) extended by
+:class:`~station.physics.motion.AxisTrajectory` (roll, pitch, yaw; rad) extended by
 trapezoidal moves and rate ramps when commands arrive, evaluated lazily at
 ``clock.now()`` (rig seconds). Status bits and readbacks come from the
 trajectories, so a simulated sensor mounted on the rig can render exactly what it
@@ -29,11 +29,11 @@ from pymodbus.constants import ExcCodes
 from pymodbus.server import ModbusSerialServer, ModbusTcpServer
 from pymodbus.simulator import DataType, SimData, SimDevice
 
+from station.kernel.clock import Clock
+from station.kernel.geometry import Kinematics, kinematics_from_angles
+from station.physics.motion import AxisTrajectory
 from station.rig import registers as reg
 from station.rig.registers import HR, IR, AckResult, Command, FaultCode, Status
-from station.sim.clock import Clock
-from station.sim.geometry import Kinematics, kinematics_from_angles
-from station.sim.motion import AxisTrajectory
 
 _WRITE_CODES = frozenset({6, 16, 23})
 _EPS_RATE = 1e-9  # rad/s: below this an axis is still

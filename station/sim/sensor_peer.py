@@ -5,7 +5,7 @@ protocol (station/sensor/protocol.md) on the master side in a background thread.
 station connects to ``sensor.url`` (``serial:///dev/pts/N``) with the same
 :func:`station.sensor.client.open_sensor` it uses for real hardware.
 
-Timing follows the given :class:`~station.sim.clock.Clock`: sample ``k`` after
+Timing follows the given :class:`~station.kernel.clock.Clock`: sample ``k`` after
 START_STREAM has sensor time ``t0 + k / rate`` (whole µs since power-on), and frames
 are produced in chunks every ``tick_s`` wall seconds for every sample whose time
 has come, so at ``SimClock(scale=s)`` the sensor sends ``rate * s`` frames per wall
@@ -36,7 +36,8 @@ from typing import Protocol
 
 import numpy as np
 
-from station.errors import FormatError
+from station.kernel.clock import Clock, WallClock
+from station.kernel.errors import FormatError
 from station.sensor.commands import (
     MAX_EEPROM_READ,
     BootEvent,
@@ -65,7 +66,6 @@ from station.sensor.frames import (
     encode_frame,
     encode_sample_frames,
 )
-from station.sim.clock import Clock, WallClock
 from station.sim.eeprom import (
     Eeprom,
     EepromAddressError,
@@ -147,7 +147,7 @@ class SimulatedSensor:
 
     Args:
         source: the sensor physics (:class:`SampleSource`).
-        clock: time base; :class:`~station.sim.clock.SimClock` runs it faster than real time.
+        clock: time base; :class:`~station.kernel.clock.SimClock` runs it faster than real time.
         serial: serial number reported by IDENTIFY.
         firmware: firmware version reported by IDENTIFY.
         rates_hz: supported rates (Hz); each must divide 1e6.

@@ -12,11 +12,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from station.kernel.plan import RigPlan, default_plan
+from station.kernel.sensor_class import TABLE1, SensorClass
+from station.physics.effects import Effects, EffectTruth
+from station.physics.imu import Environment, ImuModel
+from station.physics.trajectory import RigTrajectory, build_trajectory
+from station.physics.unit import UnitTruth, draw_unit
 from station.session.model import Session
-from station.sim.effects import Effects, EffectTruth
-from station.sim.imu import Environment, ImuModel
-from station.sim.plan import RigPlan, RigTrajectory, build_trajectory, default_plan
-from station.sim.sensor_class import TABLE1, SensorClass, UnitTruth, draw_unit
 
 
 @dataclass(frozen=True, eq=False)

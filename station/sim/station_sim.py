@@ -2,7 +2,7 @@
 
 :class:`SimStation` starts a :class:`~station.sim.rig_server.SimulatedRig` (a real
 pymodbus server) and N :class:`~station.sim.sensor_peer.SimulatedSensor` (each on
-its own pty), all on one :class:`~station.sim.clock.SimClock`. Each sensor's
+its own pty), all on one :class:`~station.kernel.clock.SimClock`. Each sensor's
 physics is a :class:`~station.sim.physics_source.PhysicsSource` bound to the rig,
 so all units feel whatever the rig is commanded to do. The station code talks to
 them only through :attr:`SimStation.rig_url` and :attr:`SimStation.sensor_urls`,
@@ -21,14 +21,15 @@ from typing import Any
 
 import numpy as np
 
-from station.sequence.options import rig_client_options
-from station.sim.clock import SimClock
+from station.kernel.clock import SimClock
+from station.kernel.plan import RigPlan, default_plan
+from station.kernel.sensor_class import TABLE1, SensorClass
+from station.physics.effects import Effects
+from station.physics.unit import UnitTruth, draw_unit
+from station.rig import rig_client_options
 from station.sim.eeprom import Eeprom
-from station.sim.effects import Effects
 from station.sim.physics_source import PhysicsSource
-from station.sim.plan import RigPlan, default_plan
 from station.sim.rig_server import SimulatedRig
-from station.sim.sensor_class import TABLE1, SensorClass, UnitTruth, draw_unit
 from station.sim.sensor_peer import SimulatedSensor
 
 

@@ -5,7 +5,7 @@
 - :mod:`station.store.db`: :func:`open_database` (URL, migrations on open).
 - :mod:`station.store.recorder`: :class:`Recorder`, the runner subscriber; :func:`recover_unfinished`.
 - :mod:`station.store.queries`: :func:`list_units`, :func:`show_unit`, :func:`attempt_count`.
-- :mod:`station.store.commands`: ``station units ...`` and :func:`attach_recorder`.
+- :mod:`station.commands.units`: ``station units ...`` and :func:`attach_recorder`.
 """
 
 

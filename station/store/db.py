@@ -24,8 +24,8 @@ from sqlalchemy import Engine, create_engine, event, text
 from sqlalchemy.exc import SQLAlchemyError
 from sqlalchemy.orm import Session, sessionmaker
 
-from station.datafiles import data_path
-from station.errors import StationError
+from station.kernel.datafiles import data_path
+from station.kernel.errors import StationError
 from station.store.url import DEFAULT_URL, ENV_VAR
 
 """The default database: a SQLite file in the working directory."""

@@ -38,9 +38,9 @@ from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from fastapi.templating import Jinja2Templates
 
 from station.eeprom.image import CalibrationImage, ImageError, encode_image
-from station.errors import StationBusy, StationError
 from station.fit.params import ParameterSet
-from station.sequence.limits_file import load_limits
+from station.kernel.errors import StationBusy, StationError
+from station.kernel.limits_file import load_limits
 from station.session.csv_v1 import read_session
 from station.session.model import Session
 from station.store.db import Database, open_database

@@ -1,50 +1,36 @@
 """Starting and aborting runs from the web API: the hooks behind ``POST /api/runs`` and its abort.
 
-One run at a time, in a background thread, on the rig and sensors the station was started
-with. The runner's records go to the store's recorder first and then to the live status.
+One run at a time, in a background thread, on the station the server was started with: the
+control is given the station's ``run`` (:meth:`station.compose.Station.run`), which opens the
+hardware, runs the sequence and hands the runner over before it starts. The runner's records
+go to the store's recorder first and then to the live status.
 """
 
 from __future__ import annotations
 
 import threading
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from typing import Any
 
-from station.errors import StationBusy, StationError
-from station.sequence.records import Record
-from station.sequence.runner import RunResult, SequenceRunner, run_sequence
-from station.sim.clock import Clock
+from station.kernel.errors import StationBusy, StationError
+from station.sequence.runner import RunResult, SequenceRunner
+
+#: Runs the sequence once; calls its argument with the runner before the run starts.
+RunOnce = Callable[[Callable[[SequenceRunner], None]], RunResult]
 
 
 class StationControl:
     """Runs the calibration sequence on request.
 
     Args:
-        rig_url, sensor_urls: the station's hardware (real, or ``station sim``'s).
-        clock: the clock the hardware lives by.
-        subscribers: record subscribers, in order (the store's recorder, then the live status).
-        runner_options: passed to :func:`~station.sequence.runner.run_sequence` (plan, options,
-            limits, admit, out_dir, station, rig_options, sensor_options, ...).
+        run: runs the sequence once on the station's hardware (:meth:`station.compose.Station.run`).
         on_error: called with a station fault that ended a run before it started (e.g. the rig
             cannot be opened).
     """
 
-    def __init__(
-        self,
-        rig_url: str,
-        sensor_urls: Sequence[str],
-        clock: Clock,
-        subscribers: Sequence[Callable[[Record], None]],
-        *,
-        on_error: Callable[[str], None] | None = None,
-        **runner_options: Any,
-    ) -> None:
-        self.rig_url = rig_url
-        self.sensor_urls = list(sensor_urls)
-        self.clock = clock
-        self.subscribers = list(subscribers)
+    def __init__(self, run: RunOnce, *, on_error: Callable[[str], None] | None = None) -> None:
+        self.run = run
         self.on_error = on_error
-        self.runner_options = runner_options
         self._lock = threading.Lock()
         self._runner: SequenceRunner | None = None
         self._thread: threading.Thread | None = None
@@ -68,10 +54,7 @@ class StationControl:
 
             def work() -> None:
                 try:
-                    self.last_result = run_sequence(
-                        self.rig_url, self.sensor_urls, self.clock, on_runner=handed,
-                        subscribers=self.subscribers, **self.runner_options,
-                    )
+                    self.last_result = self.run(handed)
                 except StationError as exc:
                     failure.append(str(exc))
                     if self.on_error is not None:

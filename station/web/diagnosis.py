@@ -16,7 +16,7 @@ code (a different :func:`code_digest`) or for other bytes is ignored and replace
 the directory is not writable the result is kept in memory only. The file holds the report
 and the figure's block residuals (SI: m/s^2, rad/s, time s since power-on).
 
-A diagnosis that the recording refuses (:class:`~station.errors.FitError`, a session format
+A diagnosis that the recording refuses (:class:`~station.kernel.errors.FitError`, a session format
 error, a recording changed since its run) is a result too: status ``error`` with the
 one-line reason.
 """
@@ -44,7 +44,7 @@ from typing import Any
 
 import numpy as np
 
-from station.errors import StationError
+from station.kernel.errors import StationError
 from station.store.recorder import sha256_file
 
 log = logging.getLogger(__name__)

@@ -26,10 +26,10 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from station.correct.session_correct import correct_session
-from station.errors import FitError
 from station.fit.acf import finite_record_acf, lowpass_record
 from station.fit.allan import overlapping_allan_deviation
 from station.fit.params import ParameterSet
+from station.kernel.errors import FitError
 from station.session.model import Kind, Session
 from station.web.diagnosis import Curve
 

@@ -12,7 +12,7 @@ import time
 import uvicorn
 from fastapi import FastAPI
 
-from station.errors import StationError
+from station.kernel.errors import StationError
 from station.web.app import create_app
 from station.web.state import LiveStatus
 

@@ -1,12 +1,4 @@
-"""``station units list|show`` and :func:`attach_recorder`, which connects a run to the database.
-
-Wiring in ``station/cli.py``::
-
-    from station.store.commands import units_app
-    app.add_typer(units_app, name="units")
-
-and in ``demo`` / ``run``: ``attach_recorder(subscribers.append, db_url, station_name=...)`` before the run.
-"""
+"""``station units list|show|params|disposition``: per-unit records in the station database."""
 
 from __future__ import annotations
 
@@ -17,12 +9,11 @@ from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
-from station.errors import StationError
+from station.kernel.errors import StationError
 from station.store.url import ENV_VAR
 
 if TYPE_CHECKING:  # the database code loads only when a command runs
-    from station.sequence.records import Record
-    from station.store.recorder import Recorder, RunContext
+    pass
 
 units_app = typer.Typer(no_args_is_help=True, help="Per-unit records in the station database.")
 
@@ -30,80 +21,6 @@ DbOption = Annotated[
     str | None,
     typer.Option("--db", help=f"database URL (default: ${ENV_VAR} or sqlite:///station.sqlite)"),
 ]
-
-
-def run_context(plan: Any = None, limits: Any = None, operator: str = "") -> RunContext:
-    """A :class:`RunContext` fingerprinting a rig plan (:class:`~station.sim.plan.RigPlan`) and product limits.
-
-    The sequence version names the step count, the hashes are SHA-256 of the frozen objects' ``repr``;
-    the limits version is their ``name`` (for a limits file: its name, version and the file's SHA-256).
-    None leaves the corresponding fields empty.
-    """
-    from station.store.recorder import RunContext, digest_of
-
-    kw: dict[str, str] = {"operator": operator}
-    if limits is not None and hasattr(limits, "sha256") and hasattr(limits, "version"):
-        # a limits file (station.sequence.limits_file.LimitsFile): its own version and file hash
-        kw["limits_version"] = f"{limits.name} {limits.version}"
-        kw["limits_hash"] = str(limits.sha256)
-    elif limits is not None:
-        kw["limits_version"] = str(getattr(limits, "name", ""))
-        kw["limits_hash"] = digest_of(limits)
-    if plan is not None:
-        from station.sequence.steps import plan_steps
-
-        kw["sequence_version"] = f"plan/{len(plan_steps(plan))} steps"
-        kw["sequence_hash"] = digest_of(plan)
-    return RunContext(**kw)
-
-
-def attach_recorder(
-    runner_or_subscribe: Any,
-    db_url: str | None = None,
-    *,
-    station_name: str | None = None,
-    operator: str = "",
-    plan: Any = None,
-    limits: Any = None,
-    context: RunContext | None = None,
-) -> Recorder:
-    """Open the database at ``db_url`` (migrating it), recover stale runs, subscribe a :class:`Recorder`.
-
-    Args:
-        runner_or_subscribe: a :class:`~station.sequence.runner.SequenceRunner` (its ``subscribe`` is used;
-            its station name, plan and limits are taken), or any callable taking a subscriber, such as
-            ``subscribers.append`` of the list later given to the runner.
-        db_url: database URL (None: ``$STATION_DB`` or ``sqlite:///station.sqlite``).
-        station_name: recover only this station's UNFINISHED runs (default: the runner's station; None
-            without a runner: every stale run).
-        operator: who runs the station.
-        plan, limits: the rig plan and product limits the run uses, fingerprinted into the run row
-            (taken from the runner when one is given).
-        context: overrides everything derived above.
-
-    Returns the recorder; its ``db`` stays open for the process (``recorder.db.close()`` to release it).
-    Raises :class:`~station.store.db.StoreError` if the database cannot be opened.
-    """
-    from station.store.db import open_database
-    from station.store.recorder import Recorder
-
-    db = open_database(db_url)
-    subscribe: Callable[[Callable[[Record], None]], Any]
-    if hasattr(runner_or_subscribe, "subscribe"):
-        subscribe = runner_or_subscribe.subscribe
-        plan = plan if plan is not None else getattr(runner_or_subscribe, "plan", None)
-        limits = limits if limits is not None else getattr(runner_or_subscribe, "limits", None)
-        if station_name is None:
-            station_name = getattr(runner_or_subscribe, "station", None)
-    else:
-        subscribe = runner_or_subscribe
-    ctx = context if context is not None else run_context(plan, limits, operator)
-    recorder = Recorder(db, ctx)
-    recovered = recorder.recover(station_name)
-    if recovered:
-        typer.echo(f"recovered {len(recovered)} unfinished run(s): {', '.join(recovered)}", err=True)
-    subscribe(recorder)
-    return recorder
 
 
 def _query(db_url: str | None, query: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:

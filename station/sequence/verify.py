@@ -11,7 +11,7 @@ CORRECTED output and repeats a short check on the rig:
   that axis must equal the commanded rate (rad/s).
 
 Each residual (the largest per-axis error of the window mean) is checked against
-:class:`~station.sequence.limits_file.VerificationLimits` (the ``[verification]`` table
+:class:`~station.kernel.limits_file.VerificationLimits` (the ``[verification]`` table
 of the limits file); every sample must carry the CORRECTED flag. This is the
 paper's online (on-sensor, Algorithm 1) versus post-processed comparison, run on
 every unit. The rig is brought back to rest and the sensor back to RAW output afterwards.
@@ -25,14 +25,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from station.eeprom.image import CalibrationImage
+from station.kernel.clock import Clock
+from station.kernel.geometry import AXIS_INDEX, up_vector
+from station.kernel.limits_file import VerificationLimits
 from station.rig.protocol import Rig
-from station.sensor.client import SerialSensor
-from station.sequence.limits_file import VerificationLimits
+from station.sensor.protocol import Sensor
 from station.sequence.options import SequenceOptions
 from station.sequence.steps import Step, bring_to_rest, check_rig_holding
 from station.session.model import Kind
-from station.sim.clock import Clock
-from station.sim.geometry import AXIS_INDEX, up_vector
 
 _DEG = math.pi / 180.0
 
@@ -115,7 +115,7 @@ class RigVerifier:
             rig.spin(step.table_rate_dps)
             rig.wait_rate_settled(o.spin_timeout_s)
 
-    def _capture(self, sensor: SerialSensor, step: Step) -> tuple[np.ndarray, np.ndarray, int, int]:
+    def _capture(self, sensor: Sensor, step: Step) -> tuple[np.ndarray, np.ndarray, int, int]:
         """(mean accel m/s^2, mean gyro rad/s, samples, uncorrected samples) of a settled window."""
         lim = self.limits
         sensor.drain()
@@ -127,7 +127,7 @@ class RigVerifier:
             return np.full(3, np.nan), np.full(3, np.nan), 0, 0
         return block.accel_mps2.mean(axis=0), block.gyro_radps.mean(axis=0), n, int(n - block.corrected.sum())
 
-    def verify(self, sensor: SerialSensor, image: CalibrationImage) -> VerificationResult:
+    def verify(self, sensor: Sensor, image: CalibrationImage) -> VerificationResult:
         """Switch to corrected output, run the pose and rate checks, restore RAW and rest."""
         lim, g = self.limits, self.gravity_mps2
         axis = lim.rate_pose[1]

@@ -1,27 +1,9 @@
-"""``station demo``: a whole simulated station, end to end, in one command.
-
-:func:`run_demo` starts a simulated rig (real Modbus/TCP server on 127.0.0.1) and N
-simulated sensors (real ptys) on one simulated clock, opens them with the same
-client code a real station uses, runs the default sequence (300 s power-on rest,
-six 30 s poses, 18 rate steps of 12 s: about 15 minutes of rig time) for all units
-concurrently, fits each unit, checks the limits of the limits file (default
-``fixtures/limits/default.toml``: Table 1 ranges and fit quality), saves every session
-CSV and parameter JSON, writes each PASS unit's calibration image into its simulated
-EEPROM (:class:`~station.eeprom.provision.EepromProvisioner`), lets the unit's firmware
-(:mod:`station.sim.firmware`, Algorithm 1) load it, verifies the corrected output on the
-rig (:class:`~station.eeprom.verify.RigVerifier`), and prints a live progress display,
-a summary table and the verification residuals.
-
-At the default clock scale (30 simulated seconds per wall second) the sequence
-takes about 30 s of wall time; fits and set-up add a few seconds per unit.
-"""
+"""The terminal subscriber: a live progress display of a run, and the tables printed after it."""
 
 from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Sequence
-from pathlib import Path
 from typing import Any
 
 from rich.console import Console, Group, RenderableType
@@ -29,11 +11,7 @@ from rich.live import Live
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from station.eeprom.provision import EepromProvisioner, ProvisionRecord
-from station.eeprom.verify import RigVerifier
-from station.sensor import open_sensor
-from station.sequence.limits_file import load_limits
-from station.sequence.options import SequenceOptions
+from station.sequence.provision import EepromProvisioner
 from station.sequence.records import (
     Measurement,
     Outcome,
@@ -44,15 +22,7 @@ from station.sequence.records import (
     StepStarted,
     UnitFinished,
 )
-from station.sequence.runner import RunResult, SequenceRunner
-from station.sim.effects import Effects
-from station.sim.firmware import install_firmware
-from station.sim.plan import RigPlan, default_plan
-from station.sim.station_sim import SimStation
-
-DEMO_UNITS = 4
-DEMO_SCALE = 30.0
-DEMO_OUT = Path("demo-out")
+from station.sequence.runner import RunResult
 
 _STYLE = {Outcome.PASS: "green", Outcome.FAIL: "red", Outcome.ERROR: "magenta", Outcome.ABORTED: "yellow"}
 
@@ -198,81 +168,3 @@ def provisioning_table(provisioner: EepromProvisioner) -> Table:
                      "[green]yes[/green]" if v.passed else f"[red]no[/red] {v.describe()}"]
         table.add_row(serial, f"{rec.write.slot} #{rec.write.update_count}", str(rec.write.attempts), *cells)
     return table
-
-
-def run_demo(
-    units: int = DEMO_UNITS,
-    scale: float = DEMO_SCALE,
-    seed: int = 0,
-    out_dir: Path | None = DEMO_OUT,
-    *,
-    plan: RigPlan | None = None,
-    effects: Effects | None = None,
-    options: SequenceOptions | None = None,
-    console: Console | None = None,
-    limits_path: Path | None = None,
-    provision: bool = True,
-    subscribers: Sequence[Callable[[Record], None]] = (),
-    on_provision: Callable[[ProvisionRecord], None] | None = None,
-    admit: Callable[[str, str], str | None] | None = None,
-) -> RunResult:
-    """Start the simulated station, run the sequence for ``units`` units at clock ``scale``, print, return.
-
-    Args:
-        units: sensors in the fixture.
-        scale: simulated seconds per wall second.
-        seed: the same seed gives the same units.
-        out_dir: where session CSVs and parameter JSONs go (None: not saved).
-        plan: the sequence (default: :func:`station.sim.plan.default_plan`).
-        effects: optional physics of the simulated units.
-        options: sequence options (polling is adapted to ``scale``).
-        console: where to print (default: stdout).
-        limits_path: limits file (default ``fixtures/limits/default.toml``).
-        provision: write each PASS unit's image into its EEPROM and verify its corrected output.
-        subscribers: more record subscribers (e.g. the store's recorder).
-        on_provision: called with each unit's EEPROM write and verification record.
-        admit: the retest policy (see :class:`~station.sequence.runner.SequenceRunner`).
-    """
-    console = console if console is not None else Console()
-    plan = plan if plan is not None else default_plan()
-    options = (options if options is not None else SequenceOptions()).for_scale(scale)
-    limits = load_limits(limits_path)
-    wall0 = time.monotonic()
-    provisioner: EepromProvisioner | None = None
-    with SimStation(units, scale, seed, plan=plan, effects=effects) as sim:
-        for u in sim.units:
-            install_firmware(u.sensor, sim.clock)
-        console.print(f"simulated rig at {sim.rig_url}; {units} sensor(s) on "
-                      f"{', '.join(u.sensor.device for u in sim.units)}; clock x{scale:g}")
-        from station.rig import open_rig
-
-        rig = open_rig(sim.rig_url, sim.clock, **sim.rig_client_options())
-        sensors = []
-        try:
-            for url in sim.sensor_urls:
-                sensors.append(open_sensor(url, sim.clock))
-            ident = rig.identify()
-            display = ProgressDisplay(console, [u.truth.serial for u in sim.units], scale)
-            if provision:
-                verifier = RigVerifier(rig, sim.clock, limits.verification, gravity_mps2=plan.gravity_mps2,
-                                       sample_rate_hz=int(plan.sample_rate_hz), options=options)
-                provisioner = EepromProvisioner("demo", verifier=verifier, on_record=on_provision)
-            runner = SequenceRunner(
-                rig, sensors, sim.clock, plan=plan, options=options, limits=limits.product, out_dir=out_dir,
-                station="demo", rig_name=f"{ident.firmware_id} {ident.firmware_version}",
-                sensor_urls=sim.sensor_urls, subscribers=[display, *subscribers], provisioner=provisioner, admit=admit,
-            )
-            with display:
-                result = runner.run()
-        finally:
-            for s in sensors:
-                s.close()
-            rig.close()
-    console.print(summary_table(result))
-    if provisioner is not None and provisioner.records:
-        console.print(provisioning_table(provisioner))
-    console.print(f"limits: {limits.name} {limits.version} ({limits.path})")
-    if out_dir is not None:
-        console.print(f"recordings in {out_dir}/")
-    console.print(f"demo finished in {time.monotonic() - wall0:.1f} s wall time")
-    return result

@@ -18,8 +18,8 @@ from typing import Annotated, Any
 import numpy as np
 import typer
 
-from station.errors import StationError
 from station.fit.params import ParameterSet, TriadParams
+from station.kernel.errors import StationError
 
 eeprom_app = typer.Typer(no_args_is_help=True, help="Calibration images in the unit's EEPROM.")
 

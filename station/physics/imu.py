@@ -4,7 +4,7 @@
 
     x~ = M x + b_stat + b_drift * g(t) + n,    g(0) = 1,   dg/dt = -g / T_c + w_g   (eq. 3)
 
-plus the optional effects of :mod:`station.sim.effects`, outliers, and the ADC
+plus the optional effects of :mod:`station.physics.effects`, outliers, and the ADC
 (quantization to the LSB, clipping at full scale, applied last). It is stateful and
 chunkable: consecutive :meth:`ImuModel.render` calls continue the time series, and
 rendering in one call or in any split into consecutive chunks gives bit-identical
@@ -35,9 +35,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.signal import lfilter
 
-from station.sim.effects import Effects, EffectTruth
-from station.sim.geometry import Kinematics
-from station.sim.sensor_class import TABLE1, SensorClass, TriadTruth, UnitTruth
+from station.kernel.geometry import Kinematics
+from station.kernel.sensor_class import TABLE1, SensorClass
+from station.physics.effects import Effects, EffectTruth
+from station.physics.unit import TriadTruth, UnitTruth
 
 #: Random streams, each its own generator spawned from the model's seed (order is part of the contract).
 STREAMS = (
@@ -208,9 +209,9 @@ class ImuModel:
     """A stateful renderer of one unit's raw output.
 
     Args:
-        truth: the unit (:func:`station.sim.sensor_class.draw_unit`).
+        truth: the unit (:func:`station.physics.unit.draw_unit`).
         sensor_class: used only to draw the :class:`Environment` when none is given.
-        effects: optional physics (:class:`station.sim.effects.Effects`).
+        effects: optional physics (:class:`station.physics.effects.Effects`).
         seed: seeds every random stream (see :data:`STREAMS`).
         latitude_deg, heading_deg: the site, for ``earth_rotation``.
         environment: the room; drawn from the ``environment`` stream when None.

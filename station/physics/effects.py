@@ -3,7 +3,7 @@
 Every effect is off (0) by default. An :class:`Effects` value holds one magnitude per
 effect in the units documented on the class; a unit's random *shape* of each effect
 (which axes, which signs) is drawn once per unit (:class:`EffectShapes`, part of
-:class:`~station.sim.sensor_class.UnitTruth`), so switching an effect on or off never
+:class:`~station.physics.unit.UnitTruth`), so switching an effect on or off never
 changes the rest of the unit. :meth:`Effects.realize` combines both into the SI
 coefficients the simulator applies (:class:`EffectTruth`), which a diagnosis tool can
 be scored against.
@@ -20,17 +20,14 @@ from dataclasses import asdict, dataclass, fields
 
 import numpy as np
 
-from station.errors import StationError
-from station.sim.geometry import AXIS_INDEX, POSE_ANGLES_DEG
+from station.kernel.constants import EARTH_RATE_RADPS, STANDARD_GRAVITY
+from station.kernel.errors import StationError
+from station.kernel.geometry import AXIS_INDEX, POSE_ANGLES_DEG
 
 #: Gyro magnitude per accelerometer magnitude for two-sensor effects, (deg/s) per (m/s^2).
 #: Typical MEMS data sheets pair an accelerometer tempco of ~0.2 mg/K (~0.002 m/s^2/K) with a gyro
 #: tempco of ~0.01 deg/s/K.
 GYRO_PER_ACCEL = 5.0
-#: Earth rotation rate (rad/s), 15.041 deg/h.
-EARTH_RATE_RADPS = 7.292115e-5
-#: Standard gravity (m/s^2), used only to convert "per g" and the 1 g nonlinearity reference.
-STANDARD_GRAVITY = 9.80665
 #: Reference input of the gyro nonlinearity: 200 deg/s (rad/s).
 GYRO_NONLINEARITY_REF_RADPS = math.radians(200.0)
 
@@ -86,7 +83,7 @@ class Effects:
             sensor class's own; outlier size as set by the sensor class.
         pose_tilt: rms tilt (deg) of the rig's actual attitude in each still gravity pose against
             the commanded one: per pose (each of the six, see
-            :data:`station.sim.geometry.POSE_ANGLES_DEG`) a small rotation of the sensor about the
+            :data:`station.kernel.geometry.POSE_ANGLES_DEG`) a small rotation of the sensor about the
             two axes perpendicular to that pose's up axis, each component normal with std
             ``pose_tilt / sqrt(2)`` times the unit's shape (so the tilt's rms size is ``pose_tilt``).
             It acts in ``pose`` segments only; the reference columns keep the nominal +-g.
@@ -130,7 +127,7 @@ class Effects:
 
         A single string may hold several items separated by commas; ``""`` and ``"none"``
         mean no effects (the inverse of :meth:`describe`). Raises :class:`EffectError`
-        (a :class:`~station.errors.StationError`) for an unknown name or a bad value.
+        (a :class:`~station.kernel.errors.StationError`) for an unknown name or a bad value.
         """
         if isinstance(items, str):
             items = [items]
@@ -290,7 +287,7 @@ class EffectTruth:
             sensor feels is ``exp(-[phi]x) f_ref ~ f_ref + f_ref x phi``. Pose segments only.
 
     Temperature effects act on ``T - T_ref``, the true sensor temperature minus its
-    value at power-on (:attr:`station.sim.imu.Environment.ambient_degc`).
+    value at power-on (:attr:`station.physics.imu.Environment.ambient_degc`).
     """
 
     accel_temp_bias: np.ndarray

@@ -25,15 +25,9 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from station.datafiles import data_path
-from station.errors import FormatError, UnsupportedVersionError
-from station.sequence.limits import (
-    FitQualityLimits,
-    LimitCheck,
-    ProductLimits,
-    TriadLimits,
-    check_fit_quality,
-)
+from station.kernel.datafiles import data_path
+from station.kernel.errors import FormatError, UnsupportedVersionError
+from station.kernel.limits import FitQualityLimits, ProductLimits, TriadLimits
 
 LIMITS_FORMAT = "station-limits/1"
 DEFAULT_LIMITS_PATH = data_path("fixtures", "limits", "default.toml")
@@ -46,7 +40,7 @@ class LimitsFileError(FormatError):
 
 @dataclass(frozen=True)
 class VerificationLimits:
-    """Limits and plan of the post-calibration verification (see :mod:`station.eeprom.verify`).
+    """Limits and plan of the post-calibration verification (see :mod:`station.sequence.verify`).
 
     Attributes:
         accel_mps2: largest allowed |mean corrected specific force - g up| per axis (m/s^2).
@@ -293,14 +287,6 @@ def load_limits(path: str | Path | None = None) -> LimitsFile:
     return parse_limits(raw, str(p), p)
 
 
-def is_marginal(check: LimitCheck, fraction: float) -> bool:
-    """A passed check whose value lies within ``fraction`` of the range width of an edge."""
-    if not check.passed or fraction <= 0:
-        return False
-    band = fraction * (check.high - check.low)
-    return check.value < check.low + band or check.value > check.high - band
-
-
 __all__ = [
     "DEFAULT_LIMITS_PATH",
     "LIMITS_FORMAT",
@@ -309,8 +295,6 @@ __all__ = [
     "LimitsFileError",
     "RetestPolicy",
     "VerificationLimits",
-    "check_fit_quality",
-    "is_marginal",
     "load_limits",
     "parse_limits",
 ]

@@ -13,7 +13,7 @@ from typing import Annotated, Any
 import numpy as np
 import typer
 
-from station.errors import StationError
+from station.kernel.errors import StationError
 
 
 def _print_text(report: dict[str, Any]) -> None:
@@ -91,7 +91,7 @@ def diagnose(
     """Find the physics the base model misses in a recording, fit it and show the improvement."""
     from station.diagnose.report import diagnose as run_diagnosis
     from station.diagnose.report import save_figure
-    from station.sequence.limits_file import load_limits
+    from station.kernel.limits_file import load_limits
     from station.session import read_session
 
     try:

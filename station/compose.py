@@ -1,0 +1,295 @@
+"""The composition root: the one place that builds a station from its configuration.
+
+A :class:`StationConfig` names the hardware by URL (a rig and one sensor per fixture
+slot), the database, the limits file, the station id and the clock scale. :class:`Station`
+wires the rest once: the clock, the limits, the record subscribers (the store's recorder
+after the caller's own), the retest gate, and for each run the hardware (opened by URL
+through the scheme registries of :mod:`station.rig` and :mod:`station.sensor`), the
+provisioner with its on-rig verifier, and the :class:`~station.sequence.runner.SequenceRunner`.
+
+``station run``, ``station serve`` (the web control) and ``station demo`` all call it; the
+demo is this root with the URLs of the simulated peers. Nothing here knows whether a URL
+is real hardware or a simulation.
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from station.kernel.clock import Clock, SimClock, WallClock
+from station.kernel.limits_file import LimitsFile, load_limits
+from station.kernel.plan import RigPlan, default_plan
+from station.rig import open_rig, rig_client_options
+from station.rig.protocol import Rig, RigIdentity
+from station.sensor import open_sensor
+from station.sensor.protocol import Sensor
+from station.sequence.options import SequenceOptions
+from station.sequence.provision import EepromProvisioner, ProvisionRecord
+from station.sequence.records import Record
+from station.sequence.runner import RunResult, SequenceRunner
+from station.sequence.steps import plan_steps
+from station.sequence.verify import RigVerifier
+
+if TYPE_CHECKING:  # the database code loads only when a station records
+    from station.store.recorder import Recorder, RunContext
+
+Subscriber = Callable[[Record], None]
+Admit = Callable[[str, str], "str | None"]
+
+
+@dataclass(frozen=True)
+class StationConfig:
+    """What a station is: its hardware by URL, where it records, which limits it applies.
+
+    Attributes:
+        rig_url: the rig (``modbus-tcp://HOST:PORT``, ``modbus-rtu:///dev/ttyX?baud=N``, or any
+            registered scheme).
+        sensor_urls: one sensor URL per fixture slot (``serial:///dev/ttyX``, ...).
+        station_id: the station's name in records, session metadata and EEPROM images.
+        db_url: database URL (None: ``$STATION_DB`` or ``sqlite:///station.sqlite``).
+        record: subscribe the store's recorder (and apply its retest gate).
+        limits_path: limits file (None: ``fixtures/limits/default.toml``).
+        out_dir: where session CSVs and parameter JSONs go (None: not saved).
+        clock_scale: 1 for real hardware; a simulated station's scale otherwise.
+        plan: the rig plan (poses, rate steps, durations, site gravity).
+        operator: who runs the station (recorded on every run).
+        provision: write each PASS unit's image, read it back, verify the corrected output on the rig.
+        rig_options: keyword arguments of the rig's opener (None: :func:`~station.rig.rig_client_options`
+            for ``clock_scale``); sensor_options: of the sensor's opener.
+    """
+
+    rig_url: str
+    sensor_urls: tuple[str, ...]
+    station_id: str = "station"
+    db_url: str | None = None
+    record: bool = True
+    limits_path: Path | None = None
+    out_dir: Path | None = Path("runs")
+    clock_scale: float = 1.0
+    plan: RigPlan = field(default_factory=default_plan)
+    operator: str = ""
+    provision: bool = False
+    rig_options: Mapping[str, Any] | None = None
+    sensor_options: Mapping[str, Any] | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "sensor_urls", tuple(self.sensor_urls))
+
+
+def make_clock(scale: float) -> Clock:
+    """The wall clock at scale 1, a scaled clock (``station sim``'s speed) otherwise."""
+    return WallClock() if scale == 1.0 else SimClock(scale)
+
+
+@dataclass(frozen=True, eq=False)
+class Hardware:
+    """An open rig and the fixture's open sensors (slot order)."""
+
+    rig: Rig
+    sensors: tuple[Sensor, ...]
+    identity: RigIdentity
+
+    @property
+    def rig_name(self) -> str:
+        return f"{self.identity.firmware_id} {self.identity.firmware_version}"
+
+
+@contextmanager
+def open_hardware(
+    rig_url: str,
+    sensor_urls: Sequence[str],
+    clock: Clock,
+    *,
+    rig_options: Mapping[str, Any] | None = None,
+    sensor_options: Mapping[str, Any] | None = None,
+) -> Iterator[Hardware]:
+    """Open the rig and the sensors by URL, identify the rig, and close everything on the way out.
+
+    Raises a :class:`~station.kernel.errors.HardwareError` (or a URL error) when any of them cannot
+    be opened; whatever was opened by then is closed.
+    """
+    rig = open_rig(rig_url, clock, **dict(rig_options or {}))
+    sensors: list[Sensor] = []
+    try:
+        for url in sensor_urls:
+            sensors.append(open_sensor(url, clock, **dict(sensor_options or {})))
+        identity = rig.identify()
+        yield Hardware(rig, tuple(sensors), identity)
+    finally:
+        for s in sensors:
+            s.close()
+        rig.close()
+
+
+def run_context(plan: RigPlan | None = None, limits: Any = None, operator: str = "") -> RunContext:
+    """A :class:`~station.store.recorder.RunContext` fingerprinting a rig plan and product limits.
+
+    The sequence version names the step count, the hashes are SHA-256 of the frozen objects' ``repr``;
+    the limits version is their ``name`` (for a limits file: its name, version and the file's SHA-256).
+    None leaves the corresponding fields empty.
+    """
+    from station.store.recorder import RunContext, digest_of
+
+    kw: dict[str, str] = {"operator": operator}
+    if isinstance(limits, LimitsFile):
+        kw["limits_version"] = f"{limits.name} {limits.version}"
+        kw["limits_hash"] = str(limits.sha256)
+    elif limits is not None:
+        kw["limits_version"] = str(getattr(limits, "name", ""))
+        kw["limits_hash"] = digest_of(limits)
+    if plan is not None:
+        kw["sequence_version"] = f"plan/{len(plan_steps(plan))} steps"
+        kw["sequence_hash"] = digest_of(plan)
+    return RunContext(**kw)
+
+
+def attach_recorder(
+    runner_or_subscribe: SequenceRunner | Callable[[Subscriber], Any],
+    db_url: str | None = None,
+    *,
+    station_name: str | None = None,
+    operator: str = "",
+    plan: RigPlan | None = None,
+    limits: Any = None,
+    context: RunContext | None = None,
+    notify: Callable[[str], None] | None = None,
+) -> Recorder:
+    """Open the database at ``db_url`` (migrating it), recover stale runs, subscribe a recorder.
+
+    Args:
+        runner_or_subscribe: a :class:`~station.sequence.runner.SequenceRunner` (its ``subscribe`` is used;
+            its station name, plan and limits are taken), or any callable taking a subscriber, such as
+            ``subscribers.append`` of the list later given to the runner.
+        db_url: database URL (None: ``$STATION_DB`` or ``sqlite:///station.sqlite``).
+        station_name: recover only this station's UNFINISHED runs (default: the runner's station; None
+            without a runner: every stale run).
+        operator: who runs the station.
+        plan, limits: the rig plan and limits the run uses, fingerprinted into the run row
+            (taken from the runner when one is given).
+        context: overrides everything derived above.
+        notify: where to say that stale runs were recovered (default: stderr).
+
+    Returns the recorder; its ``db`` stays open for the process (``recorder.db.close()`` to release it).
+    Raises :class:`~station.store.db.StoreError` if the database cannot be opened.
+    """
+    from station.store.db import open_database
+    from station.store.recorder import Recorder
+
+    db = open_database(db_url)
+    subscribe: Callable[[Subscriber], Any]
+    if isinstance(runner_or_subscribe, SequenceRunner):
+        subscribe = runner_or_subscribe.subscribe
+        plan = plan if plan is not None else runner_or_subscribe.plan
+        limits = limits if limits is not None else runner_or_subscribe.limits
+        if station_name is None:
+            station_name = runner_or_subscribe.station
+    else:
+        subscribe = runner_or_subscribe
+    ctx = context if context is not None else run_context(plan, limits, operator)
+    recorder = Recorder(db, ctx)
+    recovered = recorder.recover(station_name)
+    if recovered:
+        message = f"recovered {len(recovered)} unfinished run(s): {', '.join(recovered)}"
+        (notify or (lambda text: print(text, file=sys.stderr)))(message)
+    subscribe(recorder)
+    return recorder
+
+
+class Station:
+    """A station built from its configuration; :meth:`run` runs the sequence once on its hardware.
+
+    Args:
+        config: the station's configuration.
+        clock: the clock its hardware lives by (default: :func:`make_clock` of ``config.clock_scale``).
+        limits: the limits file (default: loaded from ``config.limits_path``).
+        options: sequence options (default :class:`SequenceOptions`), adapted to the clock's scale.
+        subscribers: record subscribers called before the store's recorder (e.g. a display).
+        admit: the retest policy (default: the store's retest gate when recording, else none).
+        on_provision: called with each unit's EEPROM write and verification (default: the recorder's).
+
+    Raises :class:`~station.kernel.errors.StationError` when the limits file or the database cannot
+    be used: a station that cannot record or judge does not start.
+    """
+
+    def __init__(
+        self,
+        config: StationConfig,
+        *,
+        clock: Clock | None = None,
+        limits: LimitsFile | None = None,
+        options: SequenceOptions | None = None,
+        subscribers: Sequence[Subscriber] = (),
+        admit: Admit | None = None,
+        on_provision: Callable[[ProvisionRecord], None] | None = None,
+    ) -> None:
+        self.config = config
+        self.clock = clock if clock is not None else make_clock(config.clock_scale)
+        self.limits = limits if limits is not None else load_limits(config.limits_path)
+        self.options = (options if options is not None else SequenceOptions()).for_scale(self.clock.scale)
+        self.subscribers: list[Subscriber] = list(subscribers)
+        self.recorder: Recorder | None = None
+        if config.record:
+            self.recorder = attach_recorder(
+                self.subscribers.append, config.db_url, station_name=config.station_id,
+                operator=config.operator, plan=config.plan, limits=self.limits,
+            )
+        if admit is None and self.recorder is not None:
+            from station.store.queries import retest_gate
+
+            admit = retest_gate(self.recorder.db, self.limits.retest.max_attempts)
+        self.admit = admit
+        if on_provision is None and self.recorder is not None:
+            on_provision = self.recorder.provisioned
+        self.on_provision = on_provision
+        self.provisioner: EepromProvisioner | None = None  # the last run's, with its records
+
+    def subscribe(self, fn: Subscriber) -> None:
+        """Call ``fn`` with every record of later runs (after the subscribers given so far)."""
+        self.subscribers.append(fn)
+
+    def _rig_options(self) -> Mapping[str, Any]:
+        c = self.config
+        return c.rig_options if c.rig_options is not None else rig_client_options(self.clock.scale)
+
+    def _provisioner(self, hw: Hardware) -> EepromProvisioner | None:
+        if not self.config.provision:
+            return None
+        plan = self.config.plan
+        verifier = RigVerifier(hw.rig, self.clock, self.limits.verification, gravity_mps2=plan.gravity_mps2,
+                               sample_rate_hz=int(plan.sample_rate_hz), options=self.options)
+        return EepromProvisioner(self.config.station_id, verifier=verifier, on_record=self.on_provision)
+
+    def run(self, on_runner: Callable[[SequenceRunner], None] | None = None) -> RunResult:
+        """Open the hardware, run the sequence once, close the hardware; the run's result.
+
+        ``on_runner`` gets the runner before it runs (its ``run_id``, and :meth:`SequenceRunner.abort`).
+        Raises :class:`~station.kernel.errors.HardwareError` if the rig or a sensor cannot be opened.
+        """
+        c = self.config
+        with open_hardware(c.rig_url, c.sensor_urls, self.clock, rig_options=self._rig_options(),
+                           sensor_options=c.sensor_options) as hw:
+            self.provisioner = self._provisioner(hw)
+            runner = SequenceRunner(
+                hw.rig, hw.sensors, self.clock, plan=c.plan, options=self.options, limits=self.limits.product,
+                out_dir=c.out_dir, station=c.station_id, rig_name=hw.rig_name, sensor_urls=list(c.sensor_urls),
+                subscribers=self.subscribers, provisioner=self.provisioner, admit=self.admit,
+            )
+            if on_runner is not None:
+                on_runner(runner)
+            return runner.run()
+
+
+__all__ = [
+    "Hardware",
+    "Station",
+    "StationConfig",
+    "attach_recorder",
+    "make_clock",
+    "open_hardware",
+    "run_context",
+]

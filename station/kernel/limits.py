@@ -1,0 +1,92 @@
+"""Product limits of a sensor class: ranges per parameter family of eq. (1) and (3), in SI.
+
+A :class:`ProductLimits` holds one range per parameter family (m/s^2 for the accelerometer,
+rad/s for the gyroscope, s, 1) and optional :class:`FitQualityLimits`. :func:`table1_limits`
+gives the paper's Table 1 as limits. Versioned limits files are read by
+:mod:`station.kernel.limits_file`; checking a parameter set against limits is the sequence's
+job (:mod:`station.sequence.limits`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from station.kernel.sensor_class import TABLE1, Range, SensorClass
+
+
+@dataclass(frozen=True)
+class TriadLimits:
+    """Ranges for one triad (unit U = m/s^2 or rad/s).
+
+    Attributes:
+        scale: diagonal of M (1); cross_axis: off-diagonal of M (1).
+        bias_static, bias_drift: (U); noise_std: (U).
+        correlation_time_s: T_c (s), None: not checked.
+    """
+
+    scale: Range
+    cross_axis: Range
+    bias_static: Range
+    bias_drift: Range
+    noise_std: Range
+    correlation_time_s: Range | None = None
+
+
+@dataclass(frozen=True)
+class FitQualityLimits:
+    """Largest allowed fit-quality figures (SI); None: not checked.
+
+    Attributes:
+        accel_residual_rms_mps2, gyro_residual_rms_radps: residual RMS per axis (m/s^2, rad/s).
+        accel_misalignment_std, gyro_misalignment_std: standard uncertainty of each M element (1).
+        accel_bias_static_std_mps2 (m/s^2), gyro_bias_static_std_radps (rad/s): b_stat uncertainty.
+    """
+
+    accel_residual_rms_mps2: float | None = None
+    gyro_residual_rms_radps: float | None = None
+    accel_misalignment_std: float | None = None
+    gyro_misalignment_std: float | None = None
+    accel_bias_static_std_mps2: float | None = None
+    gyro_bias_static_std_radps: float | None = None
+
+
+@dataclass(frozen=True)
+class ProductLimits:
+    """Limits for a product: both triads, the widening in standard uncertainties, optional fit quality."""
+
+    name: str
+    accel: TriadLimits
+    gyro: TriadLimits
+    k_sigma: float = 3.0
+    fit_quality: FitQualityLimits | None = None
+
+
+def table1_limits(
+    sensor_class: SensorClass = TABLE1, k_sigma: float = 3.0, *, check_correlation_time: bool = False
+) -> ProductLimits:
+    """Table 1 of the paper as product limits (converted to SI); T_c only if ``check_correlation_time``."""
+    c = sensor_class
+    d = math.pi / 180.0
+
+    def dps(r: Range) -> Range:
+        return (r[0] * d, r[1] * d)
+
+    # white noise seen by the fit includes ADC quantization (LSB^2 / 12), far below the range
+    accel = TriadLimits(
+        scale=c.accel_scale,
+        cross_axis=c.accel_cross_axis,
+        bias_static=c.accel_bias_static_mps2,
+        bias_drift=c.accel_bias_drift_mps2,
+        correlation_time_s=c.accel_correlation_time_s if check_correlation_time else None,
+        noise_std=c.accel_noise_std_mps2,
+    )
+    gyro = TriadLimits(
+        scale=c.gyro_scale,
+        cross_axis=c.gyro_cross_axis,
+        bias_static=dps(c.gyro_bias_static_dps),
+        bias_drift=dps(c.gyro_bias_drift_dps),
+        correlation_time_s=c.gyro_correlation_time_s if check_correlation_time else None,
+        noise_std=dps(c.gyro_noise_std_dps),
+    )
+    return ProductLimits(name=f"{c.name}-ranges", accel=accel, gyro=gyro, k_sigma=k_sigma)

@@ -1,0 +1,104 @@
+"""The simulator's commands, contributed to ``station`` through the ``station.commands`` entry point.
+
+``station simulate`` writes one simulated session recording, ``station sim`` serves a simulated
+rig and sensors on their real transports (Modbus/TCP on 127.0.0.1, ptys), ``station demo`` runs
+the whole station against them. They live here so that nothing outside :mod:`station.sim`
+imports the simulator: :func:`register` is loaded by ``station.cli`` from the entry point.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import typer
+
+from station.cli import OUTCOME_EXIT, DbOption, fail
+from station.kernel.errors import StationError
+
+
+def simulate(
+    output: Annotated[Path, typer.Option("-o", "--output", help="session CSV to write")],
+    seed: Annotated[int, typer.Option(help="seed: the same seed gives the same bytes")] = 0,
+    effect: Annotated[list[str] | None, typer.Option(help="extra physics NAME=VALUE (repeatable)")] = None,
+    sample_rate: Annotated[float | None, typer.Option(help="sample rate (Hz); default from the plan")] = None,
+    random_plan: Annotated[bool, typer.Option(help="draw a random rig plan from the seed")] = False,
+) -> None:
+    """Simulate one unit on the rig and write its session recording."""
+    from dataclasses import replace
+
+    from station.kernel.plan import default_plan
+    from station.kernel.plan import random_plan as draw_plan
+    from station.physics.effects import Effects
+    from station.session import write_session
+    from station.sim.session_sim import simulate_session
+
+    try:
+        effects = Effects.parse(effect or [])
+        plan = draw_plan(np.random.default_rng(seed)) if random_plan else default_plan()
+        if sample_rate is not None:
+            plan = replace(plan, sample_rate_hz=sample_rate)
+        result = simulate_session(seed, plan=plan, effects=effects)
+        write_session(result.session, output)
+    except StationError as exc:
+        raise fail(exc) from None
+    typer.echo(f"wrote {output} ({len(result.session)} samples, {result.session.duration_s:.1f} s, "
+               f"serial {result.session.serial})")
+
+
+def demo(
+    units: Annotated[int, typer.Option(min=1, max=64, help="units in the fixture")] = 4,
+    scale: Annotated[float, typer.Option(min=0.1, help="simulated seconds per wall second")] = 30.0,
+    seed: Annotated[int, typer.Option(help="seed: the same seed gives the same units")] = 0,
+    out: Annotated[Path, typer.Option(help="directory for session CSVs and parameter JSONs")] = Path("demo-out"),
+    db: DbOption = None,
+) -> None:
+    """Simulated rig + N sensors, the whole sequence, fit, limits, summary: the station end to end.
+
+    Exit code: 0 all PASS, 1 a unit FAILed, 2 ERROR (station fault), 130 ABORTED.
+    """
+    from station.sim.demo import run_demo
+
+    try:
+        result = run_demo(units, scale, seed, out, db_url=db, record=True)
+    except StationError as exc:
+        raise fail(exc) from None
+    raise typer.Exit(OUTCOME_EXIT[result.outcome.value])
+
+
+def sim(
+    units: Annotated[int, typer.Option(min=1, max=64, help="simulated sensors")] = 4,
+    scale: Annotated[float, typer.Option(min=0.1, help="simulated seconds per wall second")] = 1.0,
+    seed: Annotated[int, typer.Option(help="seed: the same seed gives the same units")] = 0,
+    port: Annotated[int, typer.Option(help="Modbus/TCP port of the rig (0: a free port)")] = 0,
+) -> None:
+    """Start a simulated rig and sensors, print their URLs, run until Ctrl-C (or SIGTERM)."""
+    import signal
+    import threading
+
+    from station.sim.station_sim import SimStation
+
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+
+    with SimStation(units, scale, seed, port=port) as station:
+        typer.echo(f"rig: {station.rig_url}")
+        for unit in station.units:
+            typer.echo(f"sensor {unit.slot}: {unit.sensor.url} (serial {unit.truth.serial})")
+        args = " ".join(f"--sensor {u}" for u in station.sensor_urls)
+        typer.echo(f"run the sequence with:\n  station run --rig '{station.rig_url}' {args} --scale {scale:g}")
+        typer.echo("Ctrl-C stops the simulation.")
+        try:
+            while not stop.wait(0.5):
+                pass
+        except KeyboardInterrupt:
+            pass
+        typer.echo("stopped")
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``simulate``, ``demo`` and ``sim`` to the ``station`` command."""
+    app.command()(simulate)
+    app.command()(demo)
+    app.command()(sim)
