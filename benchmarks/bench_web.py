@@ -30,7 +30,7 @@ import numpy as np
 from rich.console import Console
 
 from station.kernel.plan import RigPlan, default_plan
-from station.sequence.records import Measurement, Record, StepStarted
+from station.sequence.records import Measured, Record, StepStarted
 from station.sim.demo import run_demo
 from station.store import Recorder, open_database
 from station.web.app import create_app
@@ -53,11 +53,11 @@ class LinkTally:
     def __call__(self, r: Record) -> None:
         if isinstance(r, StepStarted):
             self.hold_s[r.name] = r.hold_s
-        elif isinstance(r, Measurement) and r.name == "dropped_fraction":
+        elif isinstance(r, Measured) and r.measurement.name == "dropped_fraction":
             n = self.hold_s.get(r.step, 0.0) * self.rate_hz
             self.windows += 1
             self.expected += n
-            self.lost += r.value * n
+            self.lost += r.measurement.value * n
 
 
 def _load_process(base: str, clients: int, sse: int, stop: Any, ready: Any, out: Any) -> None:

@@ -13,7 +13,7 @@ from rich.table import Table
 
 from station.sequence.provision import EepromProvisioner
 from station.sequence.records import (
-    Measurement,
+    Measured,
     Outcome,
     Record,
     RunFinished,
@@ -98,9 +98,10 @@ class ProgressDisplay:
                     self.state[k] = f"measuring: {record.name} done"
             if record.index + 1 == self.steps_total:
                 self.state = ["fitting" if st.startswith("measuring") else st for st in self.state]
-        elif isinstance(record, Measurement):
-            if not record.passed and record.step != "limits":
-                self.state[record.slot] = f"[red]{record.step}: {record.name} = {record.value:.4g} out of limits"
+        elif isinstance(record, Measured):
+            m = record.measurement
+            if not m.passed and record.step != "limits":
+                self.state[record.slot] = f"[red]{record.step}: {m.name} = {m.value:.4g} out of limits"
         elif isinstance(record, UnitFinished):
             style = _STYLE[record.outcome]
             text = f"[{style}]{record.outcome.value}[/{style}]"

@@ -13,9 +13,10 @@ from station.fit.params import ParameterSet
 from station.kernel.errors import UnsupportedVersionError
 from station.kernel.limits import table1_limits
 from station.kernel.limits_file import DEFAULT_LIMITS_PATH, FitQualityLimits, LimitsFileError, load_limits, parse_limits
+from station.kernel.measurement import Measurement
 from station.kernel.sensor_class import TABLE1
 from station.physics.unit import draw_unit
-from station.sequence.limits import LimitCheck, check_fit_quality, check_limits, is_marginal
+from station.sequence.limits import check_fit_quality, check_limits, is_marginal
 
 DEFAULT_TEXT = DEFAULT_LIMITS_PATH.read_text()
 
@@ -125,8 +126,8 @@ def test_fit_quality_checks() -> None:
 
 
 def test_marginal_band() -> None:
-    def c(v: float, ok: bool = True) -> LimitCheck:
-        return LimitCheck("x", v, 0.0, 0.0, 1.0, "1", ok)
+    def c(v: float, ok: bool = True) -> Measurement:
+        return Measurement("x", v, "1", 0.0, 1.0, ok, 0.0)
 
     assert is_marginal(c(0.04), 0.05) and is_marginal(c(0.97), 0.05)
     assert not is_marginal(c(0.5), 0.05) and not is_marginal(c(0.04), 0.0)

@@ -20,13 +20,14 @@ from pathlib import Path
 import pytest
 
 from station.kernel.limits import table1_limits
+from station.kernel.measurement import Measurement
 from station.kernel.plan import RigPlan
 from station.rig import open_rig
 from station.rig.registers import FaultCode, Status
 from station.sensor import open_sensor
 from station.sensor.client import SerialSensor
 from station.sequence import (
-    Measurement,
+    Measured,
     Outcome,
     Record,
     RunFinished,
@@ -326,8 +327,9 @@ def run_with_verification(sim: SimStation, limits: object = None) -> tuple[RunRe
     return result, records
 
 
-def verify_measurements(records: list[Record]) -> list[Measurement]:
-    return [r for r in records if isinstance(r, Measurement) and r.step == "verify"]
+def verify_measurements(records: list[Record]) -> list[tuple[int, Measurement]]:
+    """(slot, measurement) of every 'verify' measurement."""
+    return [(r.slot, r.measurement) for r in records if isinstance(r, Measured) and r.step == "verify"]
 
 
 def test_failed_verification_is_fail_with_the_residuals_recorded(sim: SimStation) -> None:
@@ -338,8 +340,8 @@ def test_failed_verification_is_fail_with_the_residuals_recorded(sim: SimStation
     assert [u.outcome for u in result.units] == [Outcome.FAIL, Outcome.FAIL]
     assert result.outcome == Outcome.FAIL and result.rig_at_rest
     verify = verify_measurements(records)
-    assert {r.slot for r in verify} == {0, 1}
-    assert any(not r.passed and "accel" in r.name for r in verify)
+    assert {slot for slot, _ in verify} == {0, 1}
+    assert any(not m.passed and "accel" in m.name for _, m in verify)
     assert all(u.sensor.eeprom.page_writes > 0 for u in sim.units)  # written, then verified
 
 
@@ -348,5 +350,5 @@ def test_passed_verification_records_its_residuals(sim: SimStation) -> None:
     result, records = run_with_verification(sim)
     assert [u.outcome for u in result.units] == [Outcome.PASS, Outcome.PASS]
     verify = verify_measurements(records)
-    assert {r.slot for r in verify} == {0, 1} and all(r.passed for r in verify)
-    assert {r.name for r in verify} >= {"verify.rate.rate_error"}
+    assert {slot for slot, _ in verify} == {0, 1} and all(m.passed for _, m in verify)
+    assert {m.name for _, m in verify} >= {"verify.rate.rate_error"}

@@ -28,7 +28,7 @@ from station.rig import open_rig
 from station.sensor import open_sensor
 from station.sensor.client import SerialSensor
 from station.sequence import (
-    Measurement,
+    Measured,
     Outcome,
     RunFinished,
     RunResult,
@@ -118,13 +118,13 @@ def test_records_tell_the_run(done: Done) -> None:
     finished = [r for r in recs if isinstance(r, StepFinished)]
     assert started == [s.name for s in steps] == [r.name for r in finished]
     assert all(r.ok and r.units_active == 2 for r in finished)
-    gates = [m for m in recs if isinstance(m, Measurement) and m.step != "limits"]
+    gates = [m.measurement for m in recs if isinstance(m, Measured) and m.step != "limits"]
     # link gates on every step, stillness + gravity on rest and poses, rate gates on rate steps
     per_unit = sum(2 + (3 if s.kind in (Kind.REST, Kind.POSE) else 2) for s in steps)
     assert len(gates) == 2 * per_unit and all(m.passed for m in gates)
     ratios = [m.value for m in gates if m.name == "gravity_ratio"]
     assert min(ratios) > 0.95 and max(ratios) < 1.05
-    limits = [m for m in recs if isinstance(m, Measurement) and m.step == "limits"]
+    limits = [m.measurement for m in recs if isinstance(m, Measured) and m.step == "limits"]
     assert limits and all(m.passed for m in limits)
     units = [r for r in recs if isinstance(r, UnitFinished)]
     assert [u.outcome for u in units] == [Outcome.PASS, Outcome.PASS]

@@ -22,8 +22,9 @@ from typer.testing import CliRunner
 from station.commands.units import units_app
 from station.compose import attach_recorder
 from station.fit.params import ParameterSet
+from station.kernel.measurement import Measurement
 from station.sequence.records import (
-    Measurement,
+    Measured,
     Outcome,
     Record,
     RunFinished,
@@ -79,13 +80,14 @@ def synthetic_run(
         recs.append(StepStarted(run_id, i, f"s{i}", "pose", t, 10.0))
         for k, serial in enumerate(serials):
             ratio = 1.0 + 0.001 * i
-            recs.append(Measurement(run_id, k, serial, f"s{i}", "gravity_ratio", ratio, 0.95, 1.05, "1", True))
+            gate = Measurement("gravity_ratio", ratio, "1", 0.95, 1.05, True)
+            recs.append(Measured(run_id, k, serial, f"s{i}", gate))
         recs.append(StepFinished(run_id, i, f"s{i}", t + 12.5, 12.5, True, len(serials)))
         t += 12.5
     finished = []
     for k, (serial, outcome) in enumerate(zip(serials, outcomes, strict=True)):
-        recs.append(Measurement(run_id, k, serial, "limits", "accel.bias_static.x", 0.01, -0.1, 0.1, "m/s^2",
-                                outcome != Outcome.FAIL, math.nan))
+        check = Measurement("accel.bias_static.x", 0.01, "m/s^2", -0.1, 0.1, outcome != Outcome.FAIL, math.nan)
+        recs.append(Measured(run_id, k, serial, "limits", check))
         session_path = params_path = None
         if out_dir is not None:
             session_path = out_dir / f"{serial}_{run_id}.csv"
@@ -301,7 +303,7 @@ def test_recorder_fed_by_a_simulated_sequence(tmp_path: Path) -> None:
     assert recorder.errors == []
     unit = result.units[0]
     print(f"simulated run {result.run_id}: {result.outcome.value} {unit.message}, {len(result.records)} records")
-    measurements = [r for r in result.records if isinstance(r, Measurement)]
+    measurements = [r.measurement for r in result.records if isinstance(r, Measured)]
     with recorder.db.transaction() as s:
         run = s.scalars(select(Run)).one()
         assert (run.run_uid, run.outcome, run.message) == (result.run_id, result.outcome.value, result.message)

@@ -25,7 +25,8 @@ from station.store.recorder import RECOVERY_NOTE
 CHILD = textwrap.dedent(
     """
     import sys, time
-    from station.sequence.records import Measurement, Outcome, RunStarted, StepFinished, StepStarted, UnitFinished
+    from station.kernel.measurement import Measurement
+    from station.sequence.records import Measured, Outcome, RunStarted, StepFinished, StepStarted, UnitFinished
     from station.compose import attach_recorder
 
     subscribers = []
@@ -34,7 +35,7 @@ CHILD = textwrap.dedent(
     rec(RunStarted(run, "2026-11-21T12:00:00+00:00", 0.0, "kill-st", "rig", ("pty0",), ("rest", "pose +z", "x+")))
     for i, name in enumerate(("rest", "pose +z")):
         rec(StepStarted(run, i, name, "pose", 10.0 * i, 10.0))
-        rec(Measurement(run, 0, "SNK1", name, "gravity_ratio", 1.0, 0.95, 1.05, "1", True))
+        rec(Measured(run, 0, "SNK1", name, Measurement("gravity_ratio", 1.0, "1", 0.95, 1.05, True)))
         rec(StepFinished(run, i, name, 10.0 * i + 10.0, 10.0, True, 1))
     rec(StepStarted(run, 2, "x+", "rate", 20.0, 10.0))
     rec(UnitFinished(run, 0, "SNK1", Outcome.PASS, ""))

@@ -28,8 +28,9 @@ from alembic.runtime.migration import MigrationContext
 from sqlalchemy import create_engine, func, inspect, select, text
 from sqlalchemy.engine import make_url
 
+from station.kernel.measurement import Measurement
 from station.sequence.records import (
-    Measurement,
+    Measured,
     Outcome,
     Record,
     RunFinished,
@@ -144,13 +145,13 @@ def _run_records(run_id: str, station: str, serial: str, outcome: Outcome) -> li
     return [
         RunStarted(run_id, "2026-11-21T10:00:00+00:00", 0.0, station, "rig", ("pty0",), ("rest", "pose +z")),
         StepStarted(run_id, 0, "rest", "rest", 0.0, 60.0),
-        Measurement(run_id, 0, serial, "rest", "stillness", 0.001, 0.0, 0.01, "rad/s", True),
+        Measured(run_id, 0, serial, "rest", Measurement("stillness", 0.001, "rad/s", 0.0, 0.01, True)),
         StepFinished(run_id, 0, "rest", 60.0, 60.0, True, 1),
         StepStarted(run_id, 1, "pose +z", "pose", 60.0, 30.0),
-        Measurement(run_id, 0, serial, "pose +z", "gravity_ratio", 1.001, 0.95, 1.05, "1", True),
+        Measured(run_id, 0, serial, "pose +z", Measurement("gravity_ratio", 1.001, "1", 0.95, 1.05, True)),
         StepFinished(run_id, 1, "pose +z", 95.0, 35.0, True, 1),
-        Measurement(run_id, 0, serial, "limits", "gyro.bias_static.z", 1e-4, -1e-3, 1e-3, "rad/s",
-                    outcome == Outcome.PASS, float("nan")),
+        Measured(run_id, 0, serial, "limits",
+                 Measurement("gyro.bias_static.z", 1e-4, "rad/s", -1e-3, 1e-3, outcome == Outcome.PASS, float("nan"))),
         UnitFinished(run_id, 0, serial, outcome, "" if outcome == Outcome.PASS else "out of limits"),
         RunFinished(run_id, outcome, 95.0, 95.0, 0.01,
                     (UnitFinished(run_id, 0, serial, outcome, "" if outcome == Outcome.PASS else "out of limits"),)),

@@ -21,9 +21,10 @@ from station.eeprom.image import decode_image
 from station.fit.calibrate import fit_session
 from station.fit.params import ParameterSet
 from station.kernel.limits_file import load_limits
+from station.kernel.measurement import Measurement
 from station.sequence.limits import check_limits
 from station.sequence.records import (
-    Measurement,
+    Measured,
     Outcome,
     Record,
     RunFinished,
@@ -44,7 +45,7 @@ TOKEN = "s3cret-token"
 RUN1, RUN2 = "run-0001", "run-0002"
 
 
-def run_records(run_id: str, at: str, units: list[tuple[str, Outcome, list[Measurement], str | None, str | None]],
+def run_records(run_id: str, at: str, units: list[tuple[str, Outcome, list[Measured], str | None, str | None]],
                 *, station: str = "st1") -> list[Record]:
     """A two-step run: each unit ``(serial, outcome, limit measurements, session path, params path)``."""
     recs: list[Record] = [RunStarted(run_id, at, 0.0, station, "sim-rig", tuple(f"pty{k}" for k in range(len(units))),
@@ -53,7 +54,7 @@ def run_records(run_id: str, at: str, units: list[tuple[str, Outcome, list[Measu
         t0 = 0.0 if i == 0 else 305.0
         recs.append(StepStarted(run_id, i, name, "rest" if i == 0 else "pose", t0, hold))
         for k, (serial, *_rest) in enumerate(units):
-            recs.append(Measurement(run_id, k, serial, name, "gravity_ratio", 1.0, 0.95, 1.05, "1", True))
+            recs.append(Measured(run_id, k, serial, name, Measurement("gravity_ratio", 1.0, "1", 0.95, 1.05, True)))
         recs.append(StepFinished(run_id, i, name, t0 + hold + 5.0, hold + 5.0, True, len(units)))
     finished = []
     for k, (serial, outcome, measurements, session_path, params_path) in enumerate(units):
@@ -75,10 +76,12 @@ def store(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Any]]:
     write_session(sim.session, session_path)
     params_path.write_text(params.to_json(), encoding="utf-8")
     checks = check_limits(params, load_limits().product)
-    good = [Measurement(RUN2, 0, params.serial, "limits", c.name, c.value, c.low, c.high, c.unit, c.passed, c.std)
+    good = [Measured(RUN2, 0, params.serial, "limits", c)
             for c in checks]
-    bad = [Measurement(RUN1, 0, "BAD-1", "limits", "accel.bias_static.x", 0.5, -0.1, 0.1, "m/s^2", False, 0.01),
-           Measurement(RUN1, 0, "BAD-1", "limits", "accel.bias_static.y", 0.095, -0.1, 0.1, "m/s^2", True, 0.01)]
+    bad = [Measured(RUN1, 0, "BAD-1", "limits",
+                    Measurement("accel.bias_static.x", 0.5, "m/s^2", -0.1, 0.1, False, 0.01)),
+           Measured(RUN1, 0, "BAD-1", "limits",
+                    Measurement("accel.bias_static.y", 0.095, "m/s^2", -0.1, 0.1, True, 0.01))]
     url = f"sqlite:///{tmp / 'station.sqlite'}"
     db = open_database(url)
     recorder = Recorder(db)

@@ -6,6 +6,11 @@ for inputs we cannot use and for station faults.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from station.kernel.measurement import Measurement
+
 
 class StationError(Exception):
     """Root of every error the station raises on purpose."""
@@ -47,11 +52,11 @@ class HardwareError(StationError):
 class UnitRejected(StationError):
     """A unit failed a check after its calibration (e.g. verification of corrected output).
 
-    The outcome is FAIL, not ERROR: the station worked, the unit did not. ``checks`` holds
-    ``(name, value, limit, unit, passed)`` tuples of what was measured.
+    The outcome is FAIL, not ERROR: the station worked, the unit did not. ``checks`` holds the
+    :class:`~station.kernel.measurement.Measurement` values that were measured.
     """
 
-    def __init__(self, message: str, checks: tuple[tuple[str, float, float, str, bool], ...] = ()) -> None:
+    def __init__(self, message: str, checks: tuple[Measurement, ...] = ()) -> None:
         super().__init__(message)
         self.checks = checks
 

@@ -9,7 +9,7 @@
 
 from station.sequence.options import SequenceOptions
 from station.sequence.records import (
-    Measurement,
+    Measured,
     Outcome,
     Record,
     RigReading,
@@ -22,7 +22,7 @@ from station.sequence.records import (
 from station.sequence.runner import Provisioner, RunResult, SequenceRunner, UnitResult
 
 __all__ = [
-    "Measurement",
+    "Measured",
     "Outcome",
     "Provisioner",
     "Record",

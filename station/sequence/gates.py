@@ -13,48 +13,23 @@ compares it with its limits (:class:`~station.sequence.options.SequenceOptions`)
 
 A failed link gate (sample count, dropped frames) is a station fault: ERROR. A
 failed physics gate (stillness, gravity, rate) says the unit measures nonsense in a
-step the rig confirmed: the unit FAILs. Units: m/s^2, rad/s, s, 1.
+step the rig confirmed: the unit FAILs. Every gate is a :class:`~station.kernel.measurement.Measurement`
+(``link`` set for the link gates). Units: m/s^2, rad/s, s, 1.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
 from station.kernel.geometry import AXIS_INDEX
+from station.kernel.measurement import Measurement
 from station.sensor.protocol import SampleBlock
 from station.sequence.options import SequenceOptions
 from station.session.model import Kind
 
 SEQ_MODULUS = 1 << 16
-
-
-@dataclass(frozen=True)
-class GateResult:
-    """One gate's measured value against its limits.
-
-    Attributes:
-        name: gate name; value: measured value (``unit``); low, high: limits (``unit``).
-        passed: within limits; link: a link gate (failure = station ERROR, else unit FAIL).
-    """
-
-    name: str
-    value: float
-    low: float
-    high: float
-    unit: str
-    passed: bool
-    link: bool = False
-
-    def describe(self) -> str:
-        return f"{self.name} = {self.value:.6g} {self.unit} outside [{self.low:.6g}, {self.high:.6g}]"
-
-
-def _gate(name: str, value: float, low: float, high: float, unit: str, link: bool = False) -> GateResult:
-    ok = bool(math.isfinite(value) and low <= value <= high)
-    return GateResult(name, float(value), float(low), float(high), unit, ok, link)
 
 
 def detrended_std(t_s: np.ndarray, x: np.ndarray) -> np.ndarray:
@@ -76,17 +51,18 @@ def dropped_frames(seq: np.ndarray) -> int:
     return int(np.sum(np.where(d > 0, d - 1, 0)))
 
 
-def link_gates(block: SampleBlock, t0_s: float, t1_s: float, rate_hz: float, opt: SequenceOptions) -> list[GateResult]:
+def link_gates(block: SampleBlock, t0_s: float, t1_s: float, rate_hz: float, opt: SequenceOptions) -> list[Measurement]:
     """Sample count and dropped frames of the window [t0_s, t1_s) (sensor time, s)."""
     expected = max(math.floor((t1_s - t0_s) * rate_hz + 1e-6), 1)
     n = len(block)
     return [
-        _gate("sample_fraction", n / expected, opt.min_sample_fraction, math.inf, "1", link=True),
-        _gate("dropped_fraction", dropped_frames(block.seq) / expected, 0.0, opt.max_dropped_fraction, "1", link=True),
+        Measurement.in_range("sample_fraction", n / expected, opt.min_sample_fraction, math.inf, "1", link=True),
+        Measurement.in_range("dropped_fraction", dropped_frames(block.seq) / expected, 0.0, opt.max_dropped_fraction,
+                             "1", link=True),
     ]
 
 
-def still_gates(block: SampleBlock, gravity_mps2: float, opt: SequenceOptions) -> list[GateResult]:
+def still_gates(block: SampleBlock, gravity_mps2: float, opt: SequenceOptions) -> list[Measurement]:
     """Stillness and gravity magnitude of a rest or pose window."""
     if len(block) < 3:
         return []
@@ -94,13 +70,13 @@ def still_gates(block: SampleBlock, gravity_mps2: float, opt: SequenceOptions) -
     a_std = float(np.max(detrended_std(block.t_s, block.accel_mps2)))
     ratio = float(np.linalg.norm(block.accel_mps2.mean(axis=0)) / gravity_mps2)
     return [
-        _gate("stillness_gyro", g_std, 0.0, opt.stillness_gyro_radps, "rad/s"),
-        _gate("stillness_accel", a_std, 0.0, opt.stillness_accel_mps2, "m/s^2"),
-        _gate("gravity_ratio", ratio, 1.0 - opt.gravity_tolerance, 1.0 + opt.gravity_tolerance, "1"),
+        Measurement.in_range("stillness_gyro", g_std, 0.0, opt.stillness_gyro_radps, "rad/s"),
+        Measurement.in_range("stillness_accel", a_std, 0.0, opt.stillness_accel_mps2, "m/s^2"),
+        Measurement.in_range("gravity_ratio", ratio, 1.0 - opt.gravity_tolerance, 1.0 + opt.gravity_tolerance, "1"),
     ]
 
 
-def rate_gates(block: SampleBlock, axis: str, rate_radps: float, opt: SequenceOptions) -> list[GateResult]:
+def rate_gates(block: SampleBlock, axis: str, rate_radps: float, opt: SequenceOptions) -> list[Measurement]:
     """Mean rate error and steadiness about the commanded axis of a rate-step window."""
     if len(block) < 3:
         return []
@@ -108,8 +84,8 @@ def rate_gates(block: SampleBlock, axis: str, rate_radps: float, opt: SequenceOp
     tol = opt.rate_tolerance * abs(rate_radps) + opt.rate_offset_radps
     steady = float(detrended_std(block.t_s, w[:, None])[0])
     return [
-        _gate("rate_error", float(w.mean()) - rate_radps, -tol, tol, "rad/s"),
-        _gate("rate_steadiness", steady, 0.0, opt.rate_steadiness_radps, "rad/s"),
+        Measurement.in_range("rate_error", float(w.mean()) - rate_radps, -tol, tol, "rad/s"),
+        Measurement.in_range("rate_steadiness", steady, 0.0, opt.rate_steadiness_radps, "rad/s"),
     ]
 
 
@@ -123,7 +99,7 @@ def evaluate(
     opt: SequenceOptions,
     rate_axis: str | None = None,
     rate_radps: float = 0.0,
-) -> list[GateResult]:
+) -> list[Measurement]:
     """Every gate that applies to a window of ``kind``: link gates first, then physics gates."""
     out = link_gates(block, t0_s, t1_s, rate_hz, opt)
     if kind in (Kind.REST, Kind.POSE):

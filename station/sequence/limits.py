@@ -20,40 +20,27 @@ Versioned limits files (``fixtures/limits/*.toml``) are loaded by
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
 from station.fit.params import ParameterSet, TriadParams
 from station.kernel.limits import FitQualityLimits, ProductLimits, TriadLimits
+from station.kernel.measurement import Measurement
 from station.kernel.sensor_class import Range
 
 AXES = "xyz"
 
 
-@dataclass(frozen=True)
-class LimitCheck:
-    """One parameter against its range: passed when within ``[low - k std, high + k std]``."""
-
-    name: str
-    value: float
-    std: float
-    low: float
-    high: float
-    unit: str
-    passed: bool
-
-
-def _check(name: str, value: float, std: float, rng: Range, unit: str, k: float) -> LimitCheck | None:
+def _check(name: str, value: float, std: float, rng: Range, unit: str, k: float) -> Measurement | None:
     if not math.isfinite(value):
         return None
     s = std if math.isfinite(std) else 0.0
     ok = rng[0] - k * s <= value <= rng[1] + k * s
-    return LimitCheck(name, float(value), float(std), float(rng[0]), float(rng[1]), unit, bool(ok))
+    return Measurement(name, float(value), unit, float(rng[0]), float(rng[1]), bool(ok), float(std))
 
 
-def _triad_checks(prefix: str, tri: TriadParams, lim: TriadLimits, unit: str, k: float) -> list[LimitCheck]:
-    out: list[LimitCheck | None] = []
+def _triad_checks(prefix: str, tri: TriadParams, lim: TriadLimits, unit: str, k: float) -> list[Measurement]:
+    out: list[Measurement | None] = []
     m, ms = np.asarray(tri.misalignment), np.asarray(tri.misalignment_std)
     for i in range(3):
         for j in range(3):
@@ -75,12 +62,12 @@ def _triad_checks(prefix: str, tri: TriadParams, lim: TriadLimits, unit: str, k:
     return [c for c in out if c is not None]
 
 
-def check_fit_quality(params: ParameterSet, limits: FitQualityLimits) -> list[LimitCheck]:
+def check_fit_quality(params: ParameterSet, limits: FitQualityLimits) -> list[Measurement]:
     """Fit-quality figures of ``params`` against ``limits`` (each passes when ``0 <= value <= max``).
 
     Names start with ``fit.``; unresolved figures (NaN) are not checked.
     """
-    out: list[LimitCheck] = []
+    out: list[Measurement] = []
 
     def add(name: str, values: np.ndarray, limit: float | None, unit: str) -> None:
         if limit is None:
@@ -89,7 +76,7 @@ def check_fit_quality(params: ParameterSet, limits: FitQualityLimits) -> list[Li
             if not math.isfinite(float(v)):
                 continue
             suffix = "".join(AXES[i] for i in idx)
-            out.append(LimitCheck(f"fit.{name}.{suffix}", float(v), math.nan, 0.0, limit, unit, bool(0 <= v <= limit)))
+            out.append(Measurement.in_range(f"fit.{name}.{suffix}", float(v), 0.0, limit, unit))
 
     a, g = params.accel, params.gyro
     add("accel.residual_rms", a.residual_rms, limits.accel_residual_rms_mps2, "m/s^2")
@@ -101,7 +88,7 @@ def check_fit_quality(params: ParameterSet, limits: FitQualityLimits) -> list[Li
     return out
 
 
-def check_limits(params: ParameterSet, limits: ProductLimits) -> list[LimitCheck]:
+def check_limits(params: ParameterSet, limits: ProductLimits) -> list[Measurement]:
     """Every checked parameter of ``params`` against ``limits``, accelerometer first, then fit quality."""
     out = _triad_checks("accel", params.accel, limits.accel, "m/s^2", limits.k_sigma) + _triad_checks(
         "gyro", params.gyro, limits.gyro, "rad/s", limits.k_sigma
@@ -111,7 +98,7 @@ def check_limits(params: ParameterSet, limits: ProductLimits) -> list[LimitCheck
     return out
 
 
-def is_marginal(check: LimitCheck, fraction: float) -> bool:
+def is_marginal(check: Measurement, fraction: float) -> bool:
     """A passed check whose value lies within ``fraction`` of the range width of an edge."""
     if not check.passed or fraction <= 0:
         return False

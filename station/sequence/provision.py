@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Protocol
 from station.eeprom.image import DEFAULT_SLOTS, CalibrationImage, SlotLayout
 from station.eeprom.provision import ProvisionError, SerialMismatchError, WriteReport, write_image
 from station.kernel.errors import UnitRejected
+from station.kernel.measurement import Measurement
 from station.sensor.protocol import Sensor
 
 if TYPE_CHECKING:
@@ -30,7 +31,7 @@ class VerificationFailed(UnitRejected):
     """The unit's corrected output is outside the verification limits (see ``result``): a FAIL."""
 
     def __init__(self, message: str, result: VerificationResult) -> None:
-        super().__init__(message, tuple((c.name, c.value, c.limit, c.unit, c.passed) for c in result.checks))
+        super().__init__(message, result.checks)
         self.result = result
 
 
@@ -99,7 +100,7 @@ class EepromProvisioner:
 
     def provision(
         self, unit: UnitResult, sensor: Sensor
-    ) -> tuple[tuple[str, float, float, str, bool], ...] | None:
+    ) -> tuple[Measurement, ...] | None:
         """Write, power-cycle, verify one PASS unit; returns the verification checks (None without verifier).
 
         Raises a HardwareError subclass when the writing fails (station ERROR) and
@@ -118,7 +119,7 @@ class EepromProvisioner:
             raise VerificationFailed(f"verification of corrected output failed: {result.describe()}", result)
         if result is None:
             return None
-        return tuple((c.name, c.value, c.limit, c.unit, c.passed) for c in result.checks)
+        return result.checks
 
 
 

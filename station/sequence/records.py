@@ -1,8 +1,8 @@
 """Immutable records a sequence run emits to its subscribers.
 
 A run emits, in order: one :class:`RunStarted`; per step a :class:`StepStarted`,
-the step's :class:`Measurement` records (one per unit and quality gate) and a
-:class:`StepFinished`; after the fit the limit :class:`Measurement` records; one
+the step's :class:`Measured` records (one per unit and quality gate) and a
+:class:`StepFinished`; after the fit the limit :class:`Measured` records; one
 :class:`UnitFinished` per fixture slot; and one :class:`RunFinished`. Every record
 carries the ``run_id``. Times ``t_s`` are station clock seconds (rig seconds);
 ``at`` is the wall-clock time (UTC, ISO 8601) for people and databases.
@@ -17,6 +17,8 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import dataclass
 from enum import Enum
+
+from station.kernel.measurement import Measurement
 
 
 class Outcome(Enum):
@@ -103,31 +105,21 @@ class StepFinished:
 
 
 @dataclass(frozen=True)
-class Measurement:
-    """One measured value of one unit against its limits (a capture gate or a product limit).
+class Measured:
+    """A unit's :class:`~station.kernel.measurement.Measurement` in a step (a capture gate, a limit check).
 
     Attributes:
         slot: fixture slot; serial: the unit's serial number ('' if unknown yet).
-        step: the step name, or ``'limits'`` for the product limits after the fit.
-        name: what was measured, e.g. ``'gravity_ratio'``, ``'accel.bias_static.x'``.
-        value: the measured value (``unit``); low, high: its limits (``unit``).
-        unit: SI unit or ``'1'``.
-        passed: ``low <= value <= high`` (limit checks may widen by the uncertainty, see
-            :mod:`station.sequence.limits`).
-        std: standard uncertainty of ``value`` (NaN if none).
+        step: the step name, ``'limits'`` for the product limits after the fit, ``'verify'`` for the
+            on-rig verification of the corrected output.
+        measurement: what was measured, its limits and verdict, unchanged.
     """
 
     run_id: str
     slot: int
     serial: str
     step: str
-    name: str
-    value: float
-    low: float
-    high: float
-    unit: str
-    passed: bool
-    std: float = float("nan")
+    measurement: Measurement
 
 
 @dataclass(frozen=True)
@@ -193,4 +185,4 @@ class RigReading:
     fault_code: int
 
 
-Record = RunStarted | StepStarted | StepFinished | Measurement | UnitFinished | RunFinished | RigReading
+Record = RunStarted | StepStarted | StepFinished | Measured | UnitFinished | RunFinished | RigReading

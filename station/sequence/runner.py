@@ -40,6 +40,7 @@ from station.fit.params import ParameterSet
 from station.kernel.clock import Clock
 from station.kernel.errors import FitError, HardwareError, StationError, UnitRejected
 from station.kernel.limits import ProductLimits, table1_limits
+from station.kernel.measurement import Measurement
 from station.kernel.plan import RigPlan, default_plan
 from station.rig.protocol import Rig, RigState
 from station.sensor.protocol import Sensor
@@ -47,7 +48,7 @@ from station.sequence.capture import UnitChannel, build_session
 from station.sequence.limits import check_limits
 from station.sequence.options import SequenceOptions
 from station.sequence.records import (
-    Measurement,
+    Measured,
     Outcome,
     Record,
     RigReading,
@@ -92,7 +93,7 @@ class UnitResult:
     params: ParameterSet | None = None
     session_path: Path | None = None
     params_path: Path | None = None
-    measurements: tuple[Measurement, ...] = ()
+    measurements: tuple[Measured, ...] = ()
 
 
 @dataclass(frozen=True, eq=False)
@@ -131,9 +132,6 @@ class RunResult:
         return self.units[slot]
 
 
-VerifyCheck = tuple[str, float, float, str, bool]  # name, value, limit (|value| <= limit), unit, passed
-
-
 class Provisioner(Protocol):
     """Writes a passed unit's calibration into the sensor (EEPROM) and verifies it.
 
@@ -142,14 +140,14 @@ class Provisioner(Protocol):
     :class:`~station.kernel.errors.HardwareError` when the writing fails (ERROR).
     """
 
-    def provision(self, unit: UnitResult, sensor: Sensor) -> Sequence[VerifyCheck] | None: ...
+    def provision(self, unit: UnitResult, sensor: Sensor) -> Sequence[Measurement] | None: ...
 
 
 @dataclass
 class _Verdict:
     outcome: Outcome | None = None
     message: str = ""
-    measurements: list[Measurement] = field(default_factory=list)
+    measurements: list[Measured] = field(default_factory=list)
 
 
 def _new_run_id() -> str:
@@ -366,8 +364,7 @@ class SequenceRunner:
             if gates is None:
                 continue
             for g in gates:
-                m = Measurement(self.run_id, unit.slot, unit.serial, step.name, g.name, g.value, g.low, g.high,
-                                g.unit, g.passed)
+                m = Measured(self.run_id, unit.slot, unit.serial, step.name, g)
                 v.measurements.append(m)
                 self._emit(m)
             failed = [g for g in gates if not g.passed]
@@ -512,8 +509,7 @@ class SequenceRunner:
     def _check_unit_limits(self, unit: UnitChannel, v: _Verdict, params: ParameterSet) -> None:
         checks = check_limits(params, self.limits)
         for c in checks:
-            m = Measurement(self.run_id, unit.slot, unit.serial, "limits", c.name, c.value, c.low, c.high, c.unit,
-                            c.passed, c.std)
+            m = Measured(self.run_id, unit.slot, unit.serial, "limits", c)
             v.measurements.append(m)
             self._emit(m)
         failed = [c for c in checks if not c.passed]
@@ -550,10 +546,9 @@ class SequenceRunner:
             return None, None
         return session_path, params_path
 
-    def _emit_verify(self, r: UnitResult, checks: Sequence[VerifyCheck]) -> None:
-        for name, value, limit, unit, passed in checks:
-            self._emit(Measurement(self.run_id, r.slot, r.serial, "verify", name, value, -limit, limit, unit,
-                                   passed, float("nan")))
+    def _emit_verify(self, r: UnitResult, checks: Sequence[Measurement]) -> None:
+        for c in checks:
+            self._emit(Measured(self.run_id, r.slot, r.serial, "verify", c))
 
     def _provision(self, results: list[UnitResult]) -> list[UnitResult]:
         assert self.provisioner is not None

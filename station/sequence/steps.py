@@ -26,11 +26,12 @@ import numpy as np
 from station.kernel.clock import Clock
 from station.kernel.errors import HardwareError
 from station.kernel.geometry import AXIS_INDEX, POSE_ANGLES_DEG, up_vector
+from station.kernel.measurement import Measurement
 from station.kernel.plan import RigPlan
 from station.rig.protocol import Rig, RigFault, RigState
 from station.rig.registers import FaultCode, angle_error_deg
 from station.sequence.capture import CaptureStopped, UnitChannel, Window
-from station.sequence.gates import GateResult, evaluate
+from station.sequence.gates import evaluate
 from station.sequence.options import SequenceOptions
 from station.session.model import Kind
 
@@ -131,7 +132,7 @@ class StepReport:
         rig_moved: the rig had to move or change rate for the step.
     """
 
-    gates: dict[int, list[GateResult]] = field(default_factory=dict)
+    gates: dict[int, list[Measurement]] = field(default_factory=dict)
     errors: dict[int, HardwareError] = field(default_factory=dict)
     rig_moved: bool = False
 
@@ -165,13 +166,18 @@ def clear_stale_watchdog(rig: Rig) -> bool:
 
 
 def position_rig(fx: Fixture, step: Step) -> bool:
+    """Bring the fixture's rig to the step's pose and table rate (:func:`drive_rig`)."""
+    return drive_rig(fx.rig, step, fx.options)
+
+
+def drive_rig(rig: Rig, step: Step, o: SequenceOptions) -> bool:
     """Bring the rig to the step's pose and table rate, confirmed; returns whether it had to move.
 
     A tumble needs the table still: a spinning table is first ramped to 0. Every
     motion is confirmed by :meth:`Rig.wait_in_position` / :meth:`Rig.wait_rate_settled`
-    (status bits and readbacks, never the setpoint).
+    (status bits and readbacks, never the setpoint). A latched rig fault raises
+    :class:`~station.rig.protocol.RigFault` before anything moves.
     """
-    rig, o = fx.rig, fx.options
     st = rig.state()
     _raise_if_faulted(st)
     moved = False
@@ -210,7 +216,7 @@ def bring_to_rest(rig: Rig, timeout_s: float) -> RigState:
 
 def _capture_unit(
     fx: Fixture, unit: UnitChannel, step: Step, start: str, t_confirm: float, stop: threading.Event
-) -> list[GateResult]:
+) -> list[Measurement]:
     """One unit's capture of ``step`` (runs in a worker thread)."""
     o = fx.options
     unit.sync(o.sync_tries)
@@ -244,7 +250,7 @@ def capture(fx: Fixture, step: Step, start: str) -> StepReport:
     o, clock = fx.options, fx.clock
     t_confirm = clock.now()
     stop = threading.Event()
-    futures: dict[Future[list[GateResult]], UnitChannel] = {
+    futures: dict[Future[list[Measurement]], UnitChannel] = {
         fx.pool.submit(_capture_unit, fx, u, step, start, t_confirm, stop): u for u in fx.active
     }
     report = StepReport()

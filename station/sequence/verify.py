@@ -28,24 +28,14 @@ from station.eeprom.image import CalibrationImage
 from station.kernel.clock import Clock
 from station.kernel.geometry import AXIS_INDEX, up_vector
 from station.kernel.limits_file import VerificationLimits
+from station.kernel.measurement import Measurement
 from station.rig.protocol import Rig
 from station.sensor.protocol import Sensor
 from station.sequence.options import SequenceOptions
-from station.sequence.steps import Step, bring_to_rest, check_rig_holding
+from station.sequence.steps import Step, bring_to_rest, check_rig_holding, drive_rig
 from station.session.model import Kind
 
 _DEG = math.pi / 180.0
-
-
-@dataclass(frozen=True)
-class VerificationCheck:
-    """One residual against its limit: passed when ``|value| <= limit``."""
-
-    name: str
-    value: float
-    limit: float
-    unit: str
-    passed: bool
 
 
 @dataclass(frozen=True)
@@ -53,7 +43,7 @@ class VerificationResult:
     """All checks of one unit, plus how many samples were (not) corrected."""
 
     serial: str
-    checks: tuple[VerificationCheck, ...]
+    checks: tuple[Measurement, ...]
     samples: int
     uncorrected_samples: int
     notes: tuple[str, ...] = field(default=())
@@ -63,16 +53,12 @@ class VerificationResult:
         return self.uncorrected_samples == 0 and self.samples > 0 and all(c.passed for c in self.checks)
 
     def describe(self) -> str:
-        bad = [f"{c.name}={c.value:.3g} {c.unit} (limit {c.limit:.3g})" for c in self.checks if not c.passed]
+        bad = [f"{c.name}={c.value:.3g} {c.unit} (limit {c.high:.3g})" for c in self.checks if not c.passed]
         if self.uncorrected_samples:
             bad.append(f"{self.uncorrected_samples} of {self.samples} samples not corrected")
         if self.samples == 0:
             bad.append("no samples")
         return "; ".join(bad) if bad else "all residuals within limits"
-
-
-def _check(name: str, value: float, limit: float, unit: str) -> VerificationCheck:
-    return VerificationCheck(name, float(value), float(limit), unit, bool(abs(value) <= limit))
 
 
 class RigVerifier:
@@ -103,18 +89,6 @@ class RigVerifier:
         self.sample_rate_hz = int(sample_rate_hz)
         self.options = options if options is not None else SequenceOptions()
 
-    def _position(self, step: Step) -> None:
-        rig, o = self.rig, self.options
-        st = rig.state()
-        if abs(st.rate_dps) > o.rate_tol_dps:
-            rig.spin(0.0)
-            rig.wait_rate_settled(o.spin_timeout_s)
-        rig.move_to(step.pose)
-        rig.wait_in_position(o.move_timeout_s)
-        if step.table_rate_dps:
-            rig.spin(step.table_rate_dps)
-            rig.wait_rate_settled(o.spin_timeout_s)
-
     def _capture(self, sensor: Sensor, step: Step) -> tuple[np.ndarray, np.ndarray, int, int]:
         """(mean accel m/s^2, mean gyro rad/s, samples, uncorrected samples) of a settled window."""
         lim = self.limits
@@ -135,24 +109,25 @@ class RigVerifier:
         pose_step = Step(0, f"verify pose {lim.pose}", Kind.POSE, lim.pose, 0.0, lim.hold_s)
         rate_step = Step(1, f"verify rate {axis}", Kind.RATE, lim.rate_pose, sign * lim.rate_dps, lim.hold_s, axis,
                          lim.rate_dps)
-        checks: list[VerificationCheck] = []
+        checks: list[Measurement] = []
+        check = Measurement.at_most_abs
         samples = uncorrected = 0
         sensor.set_output("corrected")
         try:
             sensor.start_stream(self.sample_rate_hz)
-            self._position(pose_step)
+            drive_rig(self.rig, pose_step, self.options)
             a, w, n, u = self._capture(sensor, pose_step)
             samples, uncorrected = samples + n, uncorrected + u
             da = a - g * up_vector(lim.pose)
-            checks.append(_check("verify.pose.accel_error", float(np.max(np.abs(da))), lim.accel_mps2, "m/s^2"))
-            checks.append(_check("verify.pose.gyro_error", float(np.max(np.abs(w))), lim.gyro_static_radps, "rad/s"))
-            self._position(rate_step)
+            checks.append(check("verify.pose.accel_error", float(np.max(np.abs(da))), lim.accel_mps2, "m/s^2"))
+            checks.append(check("verify.pose.gyro_error", float(np.max(np.abs(w))), lim.gyro_static_radps, "rad/s"))
+            drive_rig(self.rig, rate_step, self.options)
             a, w, n, u = self._capture(sensor, rate_step)
             samples, uncorrected = samples + n, uncorrected + u
             k = AXIS_INDEX[axis]
-            checks.append(_check("verify.rate.rate_error", float(w[k] - lim.rate_dps * _DEG), lim.rate_radps, "rad/s"))
+            checks.append(check("verify.rate.rate_error", float(w[k] - lim.rate_dps * _DEG), lim.rate_radps, "rad/s"))
             da = a - g * up_vector(lim.rate_pose)
-            checks.append(_check("verify.rate.accel_error", float(np.max(np.abs(da))), lim.accel_mps2, "m/s^2"))
+            checks.append(check("verify.rate.accel_error", float(np.max(np.abs(da))), lim.accel_mps2, "m/s^2"))
         finally:
             try:
                 sensor.stop_stream()

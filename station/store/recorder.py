@@ -5,7 +5,7 @@
 - ``RunStarted``: the station, its fixture slots, the run (outcome UNFINISHED) and
   one :class:`~station.store.models.RunUnit` per slot (UNFINISHED) in one transaction;
 - ``StepStarted`` / ``StepFinished``: the step's timing row (station clock, s);
-- ``Measurement``: buffered and written with the next state change (the step's end,
+- ``Measured``: buffered and written with the next state change (the step's end,
   or the unit's end for the product limits), so a step's gates land together;
 - ``UnitFinished``: the unit's outcome, its session recording (path, SHA-256) and
   its parameter set (JSON, format, uncertainties);
@@ -38,7 +38,7 @@ from sqlalchemy.orm import Session
 
 import station
 from station.sequence.records import (
-    Measurement,
+    Measured,
     Outcome,
     Record,
     RigReading,
@@ -170,7 +170,7 @@ class _RunState:
     run_pk: int
     run_units: dict[int, int]  # slot -> run_units.id
     steps: dict[int, int] = field(default_factory=dict)  # step index -> step_timings.id
-    pending: list[Measurement] = field(default_factory=list)
+    pending: list[Measured] = field(default_factory=list)
     linked: set[int] = field(default_factory=set)  # slots whose unit is known
 
 
@@ -224,7 +224,7 @@ class Recorder:
         state = self._runs.get(record.run_id)
         if state is None:
             raise StoreError(f"record for unknown run {record.run_id!r}: {type(record).__name__}")
-        if isinstance(record, Measurement):
+        if isinstance(record, Measured):
             state.pending.append(record)
             return
         with self.db.transaction() as s:
@@ -292,8 +292,9 @@ class Recorder:
             if ru is None:
                 log.warning("measurement for unknown slot %d ignored", m.slot)
                 continue
-            s.add(LimitCheck(run_unit_id=ru.id, step=m.step, name=m.name, value=_num(m.value), low=_num(m.low),
-                             high=_num(m.high), std=_num(m.std), unit=m.unit, passed=bool(m.passed)))
+            c = m.measurement
+            s.add(LimitCheck(run_unit_id=ru.id, step=m.step, name=c.name, value=_num(c.value), low=_num(c.low),
+                             high=_num(c.high), std=_num(c.std), unit=c.unit, passed=bool(c.passed)))
         state.pending.clear()
 
     def _unit_finished(self, s: Session, state: _RunState, r: UnitFinished) -> None:

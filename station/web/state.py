@@ -33,7 +33,7 @@ from typing import Any
 from sqlalchemy import select
 
 from station.sequence.records import (
-    Measurement,
+    Measured,
     Outcome,
     Record,
     RigReading,
@@ -245,12 +245,13 @@ class LiveStatus:
                 for sl in lv.slots:
                     if sl.verdict is None and sl.state == "measuring":
                         sl.state = "fitting"
-        elif isinstance(r, Measurement):
+        elif isinstance(r, Measured):
             sl = self._slot(r.slot)
             if r.serial:
                 sl.serial = r.serial
-            if not r.passed and r.step != "limits":
-                sl.state = f"{r.step}: {r.name} = {r.value:.4g} out of limits"
+            m = r.measurement
+            if not m.passed and r.step != "limits":
+                sl.state = f"{r.step}: {m.name} = {m.value:.4g} out of limits"
         elif isinstance(r, UnitFinished):
             sl = self._slot(r.slot)
             sl.serial = r.serial or sl.serial

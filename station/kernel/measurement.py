@@ -1,0 +1,78 @@
+"""One measurement type for every check the station makes (as OpenHTF's measurements).
+
+A :class:`Measurement` is a measured value with its unit, the limits it was judged against,
+its standard uncertainty where one is known, and the verdict. Capture gates, product-limit
+checks, fit-quality checks and the on-rig verification of the corrected output are all
+measurements; the sequence's records carry them unchanged to the store, the web page and the
+terminal. A failed measurement is a result (a FAIL, or for a ``link`` gate a station ERROR),
+never an exception.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from enum import Enum
+
+
+class Verdict(Enum):
+    """A measurement's verdict. MARGINAL is a PASS close to a limit (the limits file's band)."""
+
+    PASS = "PASS"
+    MARGINAL = "MARGINAL"
+    FAIL = "FAIL"
+
+
+@dataclass(frozen=True)
+class Measurement:
+    """One measured value against its limits.
+
+    Attributes:
+        name: what was measured, e.g. ``'gravity_ratio'``, ``'accel.bias_static.x'``.
+        value: the measured value (``unit``).
+        unit: SI unit, or ``'1'`` for a ratio.
+        low, high: the limits (``unit``); ``-inf`` / ``inf`` where one side is open.
+        passed: the verdict of the rule that judged it (see the constructors and
+            :func:`station.sequence.limits.check_limits`).
+        std: standard uncertainty of ``value`` (``unit``), NaN if none.
+        link: a link gate: its failure is a station fault (ERROR), not the unit's (FAIL).
+        marginal: a pass close enough to a limit to be flagged.
+    """
+
+    name: str
+    value: float
+    unit: str
+    low: float = -math.inf
+    high: float = math.inf
+    passed: bool = True
+    std: float = math.nan
+    link: bool = False
+    marginal: bool = False
+
+    @classmethod
+    def in_range(
+        cls, name: str, value: float, low: float, high: float, unit: str, *, std: float = math.nan, link: bool = False
+    ) -> Measurement:
+        """Passed when ``value`` is finite and ``low <= value <= high``."""
+        v = float(value)
+        ok = bool(math.isfinite(v) and low <= v <= high)
+        return cls(name, v, unit, float(low), float(high), ok, float(std), link)
+
+    @classmethod
+    def at_most_abs(cls, name: str, value: float, limit: float, unit: str) -> Measurement:
+        """Passed when ``|value| <= limit`` (limits ``-limit`` and ``limit``)."""
+        return cls.in_range(name, value, -float(limit), float(limit), unit)
+
+    @property
+    def verdict(self) -> Verdict:
+        if not self.passed:
+            return Verdict.FAIL
+        return Verdict.MARGINAL if self.marginal else Verdict.PASS
+
+    def describe(self) -> str:
+        """One line: the value, its unit and the limits it missed or met."""
+        where = "outside" if not self.passed else "within"
+        return f"{self.name} = {self.value:.6g} {self.unit} {where} [{self.low:.6g}, {self.high:.6g}]"
+
+
+__all__ = ["Measurement", "Verdict"]
