@@ -8,12 +8,15 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import numpy as np
 import typer
 
 from station.kernel.errors import StationError
+
+if TYPE_CHECKING:
+    from station.compose import StationConfig
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, help="IMU end-of-line calibration station.")
 import_app = typer.Typer(no_args_is_help=True, help="Convert recordings made elsewhere into session CSV v1.")
@@ -155,32 +158,68 @@ def import_imucal(
     typer.echo(f"wrote {output} ({len(session)} samples)")
 
 
-#: Exit code of a run by its outcome.
-OUTCOME_EXIT = {"PASS": 0, "FAIL": 1, "ERROR": 2, "ABORTED": 130}
+
+
+ConfigOption = Annotated[
+    Path | None, typer.Option("--config", help="station configuration file (TOML, station-config/1): rig, sensors, "
+                                                "station, db, limits, out, scale, operator; options given here win")
+]
+LimitsOption = Annotated[
+    Path | None, typer.Option("--limits", help="limits file (default: fixtures/limits/default.toml)")
+]
+
+
+def station_config(
+    config: Path | None, rig: str | None, sensor: list[str] | None, **overrides: object
+) -> StationConfig:
+    """The station's configuration from ``--config`` and the command's options (the options win)."""
+    from station.compose import StationConfig
+
+    given = {k: v for k, v in overrides.items() if v is not None}
+    if rig is not None:
+        given["rig_url"] = rig
+    if sensor:
+        given["sensor_urls"] = tuple(sensor)
+    if config is not None:
+        return StationConfig.from_file(config, **given)
+    if "rig_url" not in given or "sensor_urls" not in given:
+        raise StationError("give the rig and sensors (--rig and --sensor) or a station configuration (--config)")
+    return StationConfig(**given)  # type: ignore[arg-type]
 
 
 @app.command("run")
 def run_station(
-    rig: Annotated[str, typer.Option("--rig", help="rig URL: modbus-tcp://HOST:PORT or modbus-rtu:///dev/ttyX?baud=N")],
-    sensor: Annotated[list[str], typer.Option("--sensor", help="sensor URL serial:///dev/ttyX (repeat per unit)")],
-    out: Annotated[Path, typer.Option(help="directory for session CSVs and parameter JSONs")] = Path("runs"),
-    scale: Annotated[float, typer.Option(min=0.1, help="clock scale; 1 = real time (as `station sim`)")] = 1.0,
+    rig: Annotated[str | None, typer.Option("--rig", help="rig URL: modbus-tcp://HOST:PORT or "
+                                                          "modbus-rtu:///dev/ttyX?baud=N")] = None,
+    sensor: Annotated[list[str] | None, typer.Option("--sensor", help="sensor URL serial:///dev/ttyX "
+                                                                      "(repeat per unit)")] = None,
+    config: ConfigOption = None,
+    limits: LimitsOption = None,
+    out: Annotated[Path | None, typer.Option(help="directory for session CSVs and parameter JSONs "
+                                                  "[default: runs]")] = None,
+    scale: Annotated[float | None, typer.Option(min=0.1, help="clock scale; 1 = real time (as `station sim`)")] = None,
     gravity: Annotated[float | None, typer.Option(help="local gravity (m/s^2); default from the plan")] = None,
     latitude: Annotated[float | None, typer.Option(help="site latitude (deg); default from the plan")] = None,
-    name: Annotated[str, typer.Option("--station", help="station name for the records")] = "station",
+    name: Annotated[str | None, typer.Option("--station", help="station id for the records and images")] = None,
     db: DbOption = None,
-    operator: Annotated[str, typer.Option(help="operator name for the records")] = "",
+    operator: Annotated[str | None, typer.Option(help="operator name for the records")] = None,
 ) -> None:
     """Run the calibration sequence against any rig and sensors (real ones, or `station sim`).
 
-    Exit code: 0 all PASS, 1 a unit FAILed, 2 ERROR (station fault), 130 ABORTED.
+    Every passing unit is provisioned: its image is written, read back, and its corrected output
+    verified on the rig. One run per rig: a second run on a held rig is refused before it touches
+    anything. SIGTERM and SIGHUP abort like Ctrl-C (rig to rest, ABORTED with the signal's name).
+
+    Exit code: 0 all PASS, 1 a unit FAILed, 2 ERROR (station fault), 3 a unit REFUSED by the retest
+    policy, 4 a unit to RETEST (inconclusive verdict), 130 ABORTED (Ctrl-C, SIGTERM, SIGHUP).
     """
     from dataclasses import replace
 
     from rich.console import Console
 
-    from station.compose import Station, StationConfig
+    from station.compose import Station, abort_on_signals
     from station.kernel.plan import default_plan
+    from station.sequence.runner import SequenceRunner
     from station.terminal import ProgressDisplay, summary_table
 
     plan = default_plan()
@@ -188,18 +227,29 @@ def run_station(
         plan = replace(plan, gravity_mps2=gravity)
     if latitude is not None:
         plan = replace(plan, latitude_deg=latitude)
-    config = StationConfig(rig, tuple(sensor), station_id=name, db_url=db, out_dir=out, clock_scale=scale,
-                           plan=plan, operator=operator)
+    runners: list[SequenceRunner] = []
     console = Console()
-    display = ProgressDisplay(console, list(sensor), scale)
     try:
-        station = Station(config, subscribers=[display])
-        with display:
-            result = station.run()
+        cfg = station_config(config, rig, sensor, station_id=name, db_url=db, out_dir=out, clock_scale=scale,
+                             plan=plan, operator=operator, limits_path=limits, provision=True)
+        display = ProgressDisplay(console, list(cfg.sensor_urls), cfg.clock_scale)
+        with abort_on_signals(lambda: runners[-1] if runners else None):
+            station = Station(cfg, subscribers=[display])
+            console.print(f"station {cfg.station_id}: database {station.recorder.db.url if station.recorder else '-'}, "
+                          f"limits {station.limits.name} {station.limits.version}")
+            with display:
+                result = station.run(on_runner=runners.append)
     except StationError as exc:
         raise fail(exc) from None
+    except KeyboardInterrupt:
+        typer.echo("aborted before the run started; nothing was moved or written", err=True)
+        raise typer.Exit(130) from None
     console.print(summary_table(result))
-    raise typer.Exit(OUTCOME_EXIT[result.outcome.value])
+    if station.provisioner is not None and station.provisioner.records:
+        from station.terminal import provisioning_table
+
+        console.print(provisioning_table(station.provisioner))
+    raise typer.Exit(result.outcome.exit_code)
 
 
 @app.command()
@@ -209,38 +259,46 @@ def serve(
     db: DbOption = None,
     rig: Annotated[str | None, typer.Option("--rig", help="rig URL: lets the API start and abort runs")] = None,
     sensor: Annotated[list[str] | None, typer.Option("--sensor", help="sensor URL (repeat per unit)")] = None,
-    scale: Annotated[float, typer.Option(min=0.1, help="clock scale of the hardware (as `station sim`)")] = 1.0,
-    out: Annotated[Path, typer.Option(help="directory for session CSVs and parameter JSONs")] = Path("runs"),
-    name: Annotated[str, typer.Option("--station", help="station name for the records")] = "station",
+    config: ConfigOption = None,
+    limits: LimitsOption = None,
+    scale: Annotated[float | None, typer.Option(min=0.1, help="clock scale of the hardware (as `station sim`)")] = None,
+    out: Annotated[Path | None, typer.Option(help="directory for session CSVs and parameter JSONs "
+                                                  "[default: runs]")] = None,
+    name: Annotated[str | None, typer.Option("--station", help="station id for the records and images")] = None,
 ) -> None:
     """Operator status page and JSON API.
 
     Write actions (start/abort a run) need the bearer token in $STATION_TOKEN and a station
-    given with --rig/--sensor; otherwise the server is read-only and they answer 401 (or 503).
+    given with --rig/--sensor or --config; otherwise the server is read-only and they answer 401
+    (or 503). SIGINT, SIGTERM and SIGHUP abort a run in progress (rig to rest, ABORTED with the
+    signal's name) before the server exits.
     """
     import os
 
     from station.web.serve import serve as run_server
 
     token = os.environ.get("STATION_TOKEN") or None
-    live = None
-    if rig is not None and sensor:
-        from station.compose import Station, StationConfig
+    live, on_exit = None, None
+    if config is not None or (rig is not None and sensor):
+        from station.compose import Station
         from station.web.control import StationControl
         from station.web.state import LiveStatus
 
-        config = StationConfig(rig, tuple(sensor), station_id=name, db_url=db, out_dir=out, clock_scale=scale)
         try:
-            station = Station(config)
+            cfg = station_config(config, rig, sensor, station_id=name, db_url=db, out_dir=out, clock_scale=scale,
+                                 limits_path=limits, provision=True)
+            station = Station(cfg)
         except StationError as exc:
             raise fail(exc) from None
         assert station.recorder is not None
+        db = cfg.db_url
         live = LiveStatus(station.recorder.db)
         station.subscribe(live)  # after the recorder: the page reads what it stored
         control = StationControl(station.run, on_error=live.set_fault)
         live.on_start = control.start
         live.on_abort = control.abort
-    run_server(host, port, db, token, live)
+        on_exit = control.stop
+    run_server(host, port, db, token, live, on_exit)
 
 
 _add_plugins()

@@ -14,18 +14,24 @@ is real hardware or a simulation.
 
 from __future__ import annotations
 
+import math
+import signal
 import sys
+import threading
+import tomllib
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from station.kernel.clock import Clock, SimClock, WallClock
+from station.kernel.errors import StationError
 from station.kernel.limits_file import LimitsFile, load_limits
 from station.kernel.plan import RigPlan, default_plan
 from station.rig import open_rig, rig_client_options
 from station.rig.protocol import Rig, RigIdentity
+from station.rig_lock import RigLock
 from station.sensor import open_sensor
 from station.sensor.protocol import Sensor
 from station.sequence.options import SequenceOptions
@@ -39,6 +45,12 @@ if TYPE_CHECKING:  # the database code loads only when a station records
     from station.store.recorder import Recorder, RunContext
 
 Subscriber = Callable[[Record], None]
+CONFIG_FORMAT = "station-config/1"
+
+
+class ConfigError(StationError):
+    """A station configuration the station cannot run with."""
+
 Admit = Callable[[str, str], "str | None"]
 
 
@@ -79,6 +91,60 @@ class StationConfig:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "sensor_urls", tuple(self.sensor_urls))
+        sid = self.station_id
+        if not (isinstance(sid, str) and 1 <= len(sid) <= 16 and sid.isascii() and sid.isprintable()):
+            raise ConfigError(f"station id {sid!r}: 1 to 16 printable ASCII characters (it is written into images)")
+        if not self.sensor_urls:
+            raise ConfigError("a station needs at least one sensor URL")
+        if not (math.isfinite(self.clock_scale) and self.clock_scale > 0):
+            raise ConfigError(f"clock scale must be a positive number, got {self.clock_scale!r}")
+
+    @classmethod
+    def from_file(cls, path: Path, **overrides: Any) -> StationConfig:
+        """A station configuration file (TOML, ``format = "station-config/1"``); ``overrides`` win.
+
+        Keys: ``rig`` (URL), ``sensors`` (list of URLs), ``station`` (id), ``db`` (URL), ``limits``
+        (path, relative to the file), ``out`` (directory, relative to the file), ``scale``, ``operator``.
+        Unknown keys are refused, as in a limits file.
+        """
+        try:
+            data = tomllib.loads(Path(path).read_text(encoding="utf-8"))
+        except OSError as exc:
+            raise ConfigError(f"cannot read station configuration {path}: {exc.strerror or exc}") from None
+        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+            raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+        if data.get("format") != CONFIG_FORMAT:
+            raise ConfigError(f"{path}: format {data.get('format')!r}; this station reads {CONFIG_FORMAT!r}")
+        known = {"format", "rig", "sensors", "station", "db", "limits", "out", "scale", "operator"}
+        extra = sorted(set(data) - known)
+        if extra:
+            raise ConfigError(f"{path}: unknown key(s) {', '.join(extra)}")
+        base = Path(path).resolve().parent
+
+        def text(key: str) -> str | None:
+            v = data.get(key)
+            if v is not None and not isinstance(v, str):
+                raise ConfigError(f"{path}: {key} must be a string, got {v!r}")
+            return v
+
+        sensors = data.get("sensors", [])
+        if not (isinstance(sensors, list) and all(isinstance(u, str) for u in sensors)):
+            raise ConfigError(f"{path}: sensors must be a list of URLs")
+        scale = data.get("scale", 1.0)
+        if isinstance(scale, bool) or not isinstance(scale, int | float):
+            raise ConfigError(f"{path}: scale must be a number, got {scale!r}")
+        kw: dict[str, Any] = {
+            "rig_url": text("rig"), "sensor_urls": tuple(sensors), "station_id": text("station") or "station",
+            "db_url": text("db"), "clock_scale": float(scale), "operator": text("operator") or "",
+        }
+        if text("limits"):
+            kw["limits_path"] = base / str(data["limits"])
+        if text("out"):
+            kw["out_dir"] = base / str(data["out"])
+        kw.update({k: v for k, v in overrides.items() if v is not None})
+        if not kw.get("rig_url"):
+            raise ConfigError(f"{path}: no rig URL (key rig)")
+        return cls(**kw)
 
 
 def make_clock(scale: float) -> Clock:
@@ -200,6 +266,34 @@ def attach_recorder(
     return recorder
 
 
+@contextmanager
+def abort_on_signals(runner: Callable[[], SequenceRunner | None]) -> Iterator[None]:
+    """SIGTERM and SIGHUP do what Ctrl-C does: abort the run (rig to rest, ABORTED with the signal's name).
+
+    ``runner`` returns the run in progress (None before it exists). The handlers give it the reason
+    ``'aborted by SIGTERM'`` (or SIGHUP, SIGINT) and raise :class:`KeyboardInterrupt` in the main
+    thread, the path Ctrl-C takes. The previous handlers are restored on exit. Outside the main
+    thread this does nothing (signals are delivered to the main thread only).
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum: int, _frame: object) -> None:
+        r = runner()
+        if r is not None:
+            r.abort(f"aborted by {signal.Signals(signum).name}")
+        raise KeyboardInterrupt
+
+    wanted = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+    previous = {sig: signal.signal(sig, handler) for sig in wanted}
+    try:
+        yield
+    finally:
+        for sig, old in previous.items():
+            signal.signal(sig, old)
+
+
 class Station:
     """A station built from its configuration; :meth:`run` runs the sequence once on its hardware.
 
@@ -264,15 +358,22 @@ class Station:
                                sample_rate_hz=int(plan.sample_rate_hz), options=self.options)
         return EepromProvisioner(self.config.station_id, verifier=verifier, on_record=self.on_provision)
 
-    def run(self, on_runner: Callable[[SequenceRunner], None] | None = None) -> RunResult:
-        """Open the hardware, run the sequence once, close the hardware; the run's result.
+    def run(self, on_runner: Callable[[SequenceRunner], None] | None = None, operator: str | None = None) -> RunResult:
+        """Take the rig, open the hardware, run the sequence once, close everything; the run's result.
 
         ``on_runner`` gets the runner before it runs (its ``run_id``, and :meth:`SequenceRunner.abort`).
-        Raises :class:`~station.kernel.errors.HardwareError` if the rig or a sensor cannot be opened.
+        ``operator``: who started this run (default: the configuration's), recorded on the run.
+        Raises :class:`~station.rig_lock.RigBusy` (before anything is touched) when another run holds the
+        rig, :class:`~station.kernel.errors.HardwareError` if the rig or a sensor cannot be opened.
         """
         c = self.config
-        with open_hardware(c.rig_url, c.sensor_urls, self.clock, rig_options=self._rig_options(),
-                           sensor_options=c.sensor_options) as hw:
+        db = self.recorder.db if self.recorder is not None else None
+        if self.recorder is not None:
+            who = c.operator if operator is None else operator
+            self.recorder.context = replace(self.recorder.context, operator=who)
+        with RigLock(c.rig_url, c.station_id, db), open_hardware(
+            c.rig_url, c.sensor_urls, self.clock, rig_options=self._rig_options(), sensor_options=c.sensor_options
+        ) as hw:
             self.provisioner = self._provisioner(hw)
             runner = SequenceRunner(
                 hw.rig, hw.sensors, self.clock, plan=c.plan, options=self.options, limits=self.limits.product,
@@ -285,9 +386,12 @@ class Station:
 
 
 __all__ = [
+    "CONFIG_FORMAT",
+    "ConfigError",
     "Hardware",
     "Station",
     "StationConfig",
+    "abort_on_signals",
     "attach_recorder",
     "make_clock",
     "open_hardware",

@@ -24,7 +24,8 @@ from station.sequence.records import (
 )
 from station.sequence.runner import RunResult
 
-_STYLE = {Outcome.PASS: "green", Outcome.FAIL: "red", Outcome.ERROR: "magenta", Outcome.ABORTED: "yellow"}
+_STYLE = {Outcome.PASS: "green", Outcome.RETEST: "cyan", Outcome.FAIL: "red", Outcome.REFUSED: "blue",
+          Outcome.ERROR: "magenta", Outcome.ABORTED: "yellow"}
 
 
 class ProgressDisplay:

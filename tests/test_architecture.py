@@ -36,13 +36,15 @@ ALLOWED: dict[str, set[str]] = {
     # the sequence: steps, runner, records, limits, gates, provisioning, on-rig verification
     "sequence": {"kernel", "session", "fit", "correct", "rig", "sensor", "eeprom"},
     # subscribers to the records
-    "store": {"kernel", "fit", "sequence"},
+    "store": {"kernel", "fit", "eeprom", "sequence"},
     "terminal": {"kernel", "fit", "sequence"},
     "web": NUMERICS | {"eeprom", "sequence", "store"},
-    # the composition root and the command line
-    "compose": {"kernel", "session", "fit", "rig", "sensor", "sequence", "store"},
-    "commands": NUMERICS | {"rig", "sensor", "eeprom", "sequence", "store", "compose"},
-    "cli": NUMERICS | {"rig", "sensor", "eeprom", "sequence", "store", "terminal", "web", "compose", "commands"},
+    # the composition root, its one-run-per-rig lock, and the command line
+    "rig_lock": {"kernel", "store"},
+    "compose": {"kernel", "session", "fit", "rig", "sensor", "sequence", "store", "rig_lock"},
+    "commands": NUMERICS | {"rig", "sensor", "eeprom", "sequence", "store", "compose", "rig_lock"},
+    "cli": NUMERICS | {"rig", "sensor", "eeprom", "sequence", "store", "terminal", "web", "compose", "commands",
+                       "rig_lock"},
     # simulated peers: the kernel, the physics and the wire formats they speak; never the station above
     "sim": NUMERICS | {"rig", "sensor", "eeprom"},
     "__init__": set(),

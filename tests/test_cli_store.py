@@ -14,7 +14,7 @@ from station.fit.params import ParameterSet
 from station.sequence.records import Outcome
 from station.sim.session_sim import simulate_session
 from station.store.db import open_database
-from station.store.queries import attempt_count
+from station.store.queries import attempt_count, show_unit
 from station.store.recorder import Recorder
 from tests.test_store import synthetic_run
 
@@ -50,10 +50,19 @@ def test_parameters_image_kalibr_and_disposition_from_the_store(tmp_path: Path) 
     out = cli.invoke(app, ["eeprom", "image", "NOT-THERE", "-o", str(tmp_path / "x.bin"), "--db", url])
     assert out.exit_code == 2 and "no PASS parameter set" in out.output
 
-    out = cli.invoke(app, ["units", "disposition", serial, "retest", "--note", "re-seated", "--db", url])
+    out = cli.invoke(app, ["units", "disposition", serial, "retest", "--reason", "re-seated", "--db", url])
+    assert out.exit_code == 2 and "needs the operator" in out.output  # who decided is required
+    out = cli.invoke(app, ["units", "disposition", "NOPE", "retest", "--operator", "qa", "--reason", "x",
+                           "--db", url])
+    assert out.exit_code == 2 and "no unit with serial 'NOPE'" in out.output  # no phantom unit
+    out = cli.invoke(app, ["units", "disposition", serial, "maybe", "--operator", "qa", "--reason", "x", "--db", url])
+    assert out.exit_code == 2 and "unknown decision 'maybe'" in out.output
+    out = cli.invoke(app, ["units", "disposition", serial, "retest", "--operator", "qa", "--note", "re-seated",
+                           "--db", url])
     assert out.exit_code == 0, out.output
     with open_database(url) as db:
         assert attempt_count(db, serial) == 0
-        assert attempt_count(db, serial, since_disposition=False) == 1
+        assert attempt_count(db, serial, since_disposition=False) == 0  # a PASS is no failed attempt
+        assert show_unit(db, "NOPE") is None
     shown = json.loads(cli.invoke(app, ["units", "show", serial, "--json", "--db", url]).output)
     assert shown["runs"][0]["outcome"] == "PASS"

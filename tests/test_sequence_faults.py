@@ -62,7 +62,7 @@ class EepromWriter:
     def __init__(self) -> None:
         self.calls: list[int] = []
 
-    def provision(self, unit: UnitResult, sensor: SerialSensor) -> None:
+    def provision(self, unit: UnitResult, sensor: SerialSensor, run_started_at: object = None) -> None:
         self.calls.append(unit.slot)
         sensor.eeprom_write_page(0, b"CAL:" + unit.serial.encode())
 

@@ -66,7 +66,7 @@ class MarkerProvisioner:
     def __init__(self) -> None:
         self.calls: list[str] = []
 
-    def provision(self, unit: UnitResult, sensor: SerialSensor) -> None:
+    def provision(self, unit: UnitResult, sensor: SerialSensor, run_started_at: object = None) -> None:
         self.calls.append(unit.serial)
         sensor.eeprom_write_page(0, MARKER + unit.serial.encode()[:20])
 

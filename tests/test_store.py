@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -51,6 +52,7 @@ from station.store.db import current_revision, downgrade, head_revision, make_en
 from station.store.models import (
     UNFINISHED,
     Base,
+    Disposition,
     LimitCheck,
     ParameterSetRecord,
     Run,
@@ -59,11 +61,12 @@ from station.store.models import (
     StepTiming,
     Unit,
 )
-from station.store.recorder import sha256_file
+from station.store.queries import retest_gate
+from station.store.recorder import DispositionError, sha256_file
 
 TABLES = {
     "stations", "fixture_slots", "units", "runs", "run_units", "step_timings", "limit_checks",
-    "parameter_sets", "session_recordings", "eeprom_writes", "dispositions",
+    "parameter_sets", "session_recordings", "eeprom_writes", "dispositions", "rig_locks",
 }
 
 
@@ -115,7 +118,7 @@ def test_upgrade_from_empty_and_round_trip(tmp_path: Path) -> None:
     engine = make_engine(f"sqlite:///{tmp_path / 'm.sqlite'}")
     assert current_revision(engine) is None
     upgrade(engine)
-    assert current_revision(engine) == head_revision() == "0001"
+    assert current_revision(engine) == head_revision() == "0002"
     assert set(inspect(engine).get_table_names()) == TABLES | {"alembic_version"}
     with engine.connect() as conn:  # the migration builds exactly the ORM's schema
         assert compare_metadata(MigrationContext.configure(conn), Base.metadata) == []
@@ -123,7 +126,7 @@ def test_upgrade_from_empty_and_round_trip(tmp_path: Path) -> None:
     assert current_revision(engine) is None
     assert set(inspect(engine).get_table_names()) <= {"alembic_version"}
     upgrade(engine)
-    assert current_revision(engine) == "0001"
+    assert current_revision(engine) == "0002"
     assert set(inspect(engine).get_table_names()) == TABLES | {"alembic_version"}
     engine.dispose()
 
@@ -133,7 +136,7 @@ def test_default_url_is_sqlite_file_in_working_directory(tmp_path: Path, monkeyp
     monkeypatch.delenv("STATION_DB", raising=False)
     with open_database() as database:
         assert database.url == "sqlite:///station.sqlite"
-        assert current_revision(database.engine) == "0001"
+        assert current_revision(database.engine) == "0002"
     assert (tmp_path / "station.sqlite").is_file()
 
 
@@ -209,13 +212,20 @@ def test_queries_and_retest_attempts(db: Database, tmp_path: Path) -> None:
     for k, outcome in enumerate([Outcome.FAIL, Outcome.FAIL, Outcome.PASS]):
         for r in synthetic_run(f"run{k}", ["SN7", f"OTHER{k}"], [outcome, Outcome.PASS], out_dir=tmp_path):
             rec(r)
-    assert attempt_count(db, "SN7") == 3
+    # only the unit's own failures count as attempts: station faults, aborts, refusals and retests do not
+    for k, outcome in enumerate([Outcome.ERROR, Outcome.ABORTED, Outcome.REFUSED, Outcome.RETEST]):
+        for r in synthetic_run(f"other{k}", ["SN8"], [outcome], out_dir=tmp_path):
+            rec(r)
+    for r in synthetic_run("unfinished", ["SN8"], [Outcome.FAIL], out_dir=tmp_path)[:4]:  # never finished
+        rec(r)
+    assert attempt_count(db, "SN8") == 0
+    assert attempt_count(db, "SN7") == 2
     assert attempt_count(db, "nobody") == 0
     record_disposition(db, "SN7", "retest", operator="bob", note="reseated")
-    assert attempt_count(db, "SN7") == 0 and attempt_count(db, "SN7", since_disposition=False) == 3
+    assert attempt_count(db, "SN7") == 0 and attempt_count(db, "SN7", since_disposition=False) == 2
     record_eeprom_write(db, "SN7", "c" * 64, attempts=2, verified=True, run_id="run2", slot=0, layout_version=1)
     summary = {u.serial: u for u in list_units(db)}
-    assert set(summary) == {"SN7", "OTHER0", "OTHER1", "OTHER2"}
+    assert set(summary) >= {"SN7", "OTHER0", "OTHER1", "OTHER2", "SN8"}
     assert (summary["SN7"].runs, summary["SN7"].last_outcome, summary["SN7"].attempts) == (3, "PASS", 0)
     detail = show_unit(db, "SN7")
     assert detail is not None
@@ -231,6 +241,43 @@ def test_queries_and_retest_attempts(db: Database, tmp_path: Path) -> None:
     assert latest_parameter_set(db, "FAILER") is None  # only a PASS result's parameters by default
     assert latest_parameter_set(db, "nobody") is None
     json.dumps(detail.to_dict())
+
+
+@pytest.mark.parametrize(
+    ("serial", "decision", "operator", "note", "message"),
+    [
+        ("NOPE", "retest", "bob", "why", "no unit with serial 'NOPE'"),
+        ("SN9", "maybe", "bob", "why", "unknown decision 'maybe'"),
+        ("SN9", "retest", "", "why", "needs the operator"),
+        ("SN9", "retest", "bob", " ", "needs its reason"),
+    ],
+)
+def test_dispositions_are_refused_without_a_known_unit_operator_reason(
+    db: Database, tmp_path: Path, serial: str, decision: str, operator: str, note: str, message: str
+) -> None:
+    rec = Recorder(db)
+    for r in synthetic_run("r1", ["SN9"], [Outcome.FAIL], out_dir=tmp_path):
+        rec(r)
+    with pytest.raises(DispositionError, match=re.escape(message)):
+        record_disposition(db, serial, decision, operator=operator, note=note)
+    with db.transaction() as s:
+        assert s.scalar(select(func.count(Disposition.id))) == 0
+        assert s.scalar(select(func.count(Unit.id)).where(Unit.serial == "NOPE")) == 0  # no phantom unit
+
+
+def test_scrap_locks_the_serial(db: Database, tmp_path: Path) -> None:
+    rec = Recorder(db)
+    for r in synthetic_run("r1", ["SN10"], [Outcome.FAIL], out_dir=tmp_path):
+        rec(r)
+    gate = retest_gate(db, max_attempts=3)
+    assert gate("SN10", "next") is None
+    record_disposition(db, "SN10", "scrap", operator="qa", note="cracked housing")
+    reason = gate("SN10", "next")
+    assert reason is not None and "scrapped" in reason
+    assert attempt_count(db, "SN10") == 0  # the count is reset, but a scrapped unit stays refused
+    with pytest.raises(DispositionError, match="is scrapped"):
+        record_disposition(db, "SN10", "retest", operator="qa", note="try again")
+    assert gate("SN10", "next") is not None
 
 
 def test_units_commands(db: Database, tmp_path: Path) -> None:

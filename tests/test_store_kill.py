@@ -81,7 +81,7 @@ def test_kill_9_leaves_unfinished_and_next_start_recovers(tmp_path: Path) -> Non
             assert unit.outcome == "ERROR" and RECOVERY_NOTE in unit.message
         detail = show_unit(recorder.db, "SNK1")
         assert detail is not None and [r.outcome for r in detail.runs] == ["ERROR"]
-        assert detail.attempts == 1
+        assert detail.attempts == 0  # a station fault is no failed attempt of the unit
     finally:
         recorder.db.close()
 

@@ -13,13 +13,16 @@ import json
 import math
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import numpy as np
 import typer
 
 from station.fit.params import ParameterSet, TriadParams
 from station.kernel.errors import StationError
+
+if TYPE_CHECKING:
+    from station.eeprom.image import CalibrationImage
 
 eeprom_app = typer.Typer(no_args_is_help=True, help="Calibration images in the unit's EEPROM.")
 
@@ -52,6 +55,27 @@ def _unit_params(serial: str | None, path: Path | None, db_url: str | None) -> P
     if params is None:
         raise StationError(f"no PASS parameter set of serial {serial!r} in the store {db.url}")
     return params
+
+
+def _unit_image(serial: str | None, path: Path | None, db_url: str | None, station_id: str) -> CalibrationImage:
+    """The image to write or save: of the file at ``path`` (station ``station_id``, now), else the store's."""
+    from station.eeprom.image import CalibrationImage, decode_image
+
+    if path is not None:
+        return CalibrationImage.from_params(_load_params(path, serial), station_id, datetime.now(UTC))
+    if serial is None:
+        raise StationError("give the unit's SERIAL or --params")
+    from station.store.db import open_database
+    from station.store.queries import unit_image
+
+    db = open_database(db_url)
+    try:
+        found = unit_image(db, serial)
+    finally:
+        db.close()
+    if found is None:
+        raise StationError(f"no PASS parameter set of serial {serial!r} in the store {db.url}")
+    return decode_image(found.data)
 
 
 def _load_params(path: Path, serial: str | None) -> ParameterSet:
@@ -101,12 +125,18 @@ def image_cmd(
     db: DbOption = None,
     station_id: Annotated[str, typer.Option("--station", help="station id written into the image")] = "station",
 ) -> None:
-    """Make the EEPROM image of a unit's parameter set (update count 1; the writer renumbers it)."""
-    from station.eeprom.image import CalibrationImage, encode_image, image_sha256
+    """Make the EEPROM image of a unit: the one its newest PASS run wrote (or would write), or of --params.
+
+    From the store the image is byte for byte the one the run wrote (as the API's ``eeprom.bin``); with
+    ``--params`` it is built from the file, with ``--station`` and the current time.
+    """
+    from station.eeprom.image import check_writable, decode_image, encode_image, image_sha256
 
     try:
-        params = _unit_params(serial, params_path, db)
-        data = encode_image(CalibrationImage.from_params(params, station_id, datetime.now(UTC)))
+        image = _unit_image(serial, params_path, db, station_id)
+        check_writable(image)
+        data = encode_image(image)
+        decode_image(data)
         output.write_bytes(data)
     except StationError as exc:
         raise _fail(exc) from None
@@ -153,13 +183,11 @@ def write_cmd(
     power_cycle: Annotated[bool, typer.Option(help="reset the sensor afterwards so it loads the image")] = True,
 ) -> None:
     """Write a unit's image into its EEPROM (free A/B slot, page by page, read back and compared)."""
-    from station.eeprom.image import CalibrationImage
     from station.eeprom.provision import write_image
     from station.sensor import open_sensor
 
     try:
-        params = _unit_params(serial, params_path, db)
-        image = CalibrationImage.from_params(params, station_id, datetime.now(UTC))
+        image = _unit_image(serial, params_path, db, station_id)
         with open_sensor(sensor_url) as sensor:
             report = write_image(sensor, image, max_attempts=attempts)
             if power_cycle:
@@ -178,8 +206,10 @@ def _record_write(db_url: str | None, report: Any) -> None:
 
     db = open_database(db_url)
     try:
-        record_eeprom_write(db, report.serial, report.sha256, attempts=report.attempts, verified=True,
-                            layout_version=1, message=f"written by `station eeprom write` to slot {report.slot}")
+        record_eeprom_write(db, report.serial, report.sha256, attempts=report.attempts, read_back_ok=True,
+                            verified_on_rig=None, image=report.data or None, layout_version=1,
+                            message=f"written by `station eeprom write` to slot {report.slot}; read back, "
+                                    "not verified on the rig")
     finally:
         db.close()
 

@@ -100,14 +100,18 @@ def units_params(
 
 @units_app.command("disposition")
 def units_disposition(
-    serial: Annotated[str, typer.Argument(help="the unit's serial number")],
-    decision: Annotated[str, typer.Argument(help="e.g. retest, scrap, rework")],
-    operator: Annotated[str, typer.Option(help="who decided")] = "",
-    note: Annotated[str, typer.Option(help="why")] = "",
+    serial: Annotated[str, typer.Argument(help="the unit's serial number (a unit the station has tested)")],
+    decision: Annotated[str, typer.Argument(help="retest, scrap, rework or accept-deviation")],
+    operator: Annotated[str, typer.Option(help="who decided (required)")] = "",
+    reason: Annotated[str, typer.Option("--reason", "--note", help="why (required)")] = "",
     db: DbOption = None,
 ) -> None:
-    """Record a disposition: the retest policy counts attempts again from here."""
+    """Record a person's decision about a unit, with who and why.
+
+    ``retest``, ``rework`` and ``accept-deviation`` reset the unit's failed attempts (the retest policy
+    counts again from here); ``scrap`` locks the serial: the station refuses the unit from then on.
+    """
     from station.store.recorder import record_disposition
 
-    _query(db, record_disposition, serial, decision, operator=operator, note=note)
+    _query(db, record_disposition, serial, decision, operator=operator, note=reason)
     typer.echo(f"recorded disposition {decision!r} for {serial}")

@@ -270,6 +270,16 @@ class CalibrationImage:
         )
 
 
+def run_image(params: ParameterSet, station_id: str, run_started_at: datetime) -> CalibrationImage:
+    """The image of a run's parameter set: the one function every writer and reader builds it with.
+
+    Its station and calibration time are the run's (its station id and start, UTC), its update count 1
+    (the writer gives it the next count of the unit's slots). The provisioning step, the stored write,
+    the API download and ``station eeprom image`` therefore agree byte for byte on a unit's first image.
+    """
+    return CalibrationImage.from_params(params, station_id, run_started_at)
+
+
 _ONE_US = datetime(1970, 1, 1, 0, 0, 0, 1, tzinfo=UTC) - datetime(1970, 1, 1, tzinfo=UTC)
 
 
@@ -296,6 +306,71 @@ def _check_content(img: CalibrationImage) -> None:
             raise ImageContentError(f"{name} correlation time must be positive or NaN, got {tc.tolist()}")
     if not np.isfinite(img.g_sensitivity).all():
         raise ImageContentError("g_sensitivity has non-finite entries")
+
+
+#: What the unit's firmware holds and accepts (station/eeprom/layout.md, "Usable content").
+FIRMWARE_MAX_MA_LENGTH = 1000  # samples in the moving-average ring buffer
+MAX_CONDITION = 10.0  # cond(M): a matrix further from a rotation-and-scale is no calibration
+MAX_SCALE_DEVIATION = 0.5  # |M_ii - 1|
+MAX_CROSS_AXIS = 0.2  # |M_ij|, i != j
+MAX_BIAS = {"accel": 16.0 * 9.80665, "gyro": math.radians(4000.0)}  # |b_stat|, |b_drift| (m/s^2, rad/s)
+RATE_TOLERANCE = 0.005  # relative mismatch of 1 / sample period and the unit's rate
+
+
+class ImageRefused(ImageContentError):
+    """An image the station will not write: its content would make the firmware refuse it or miscorrect."""
+
+
+def image_problems(img: CalibrationImage, rates_hz: tuple[int, ...] | None = None) -> list[str]:
+    """Why the unit's firmware could not use ``img`` to correct sensibly; empty when it can.
+
+    Checked: every value finite (an unresolved T_c is NaN by design); each M invertible, with
+    ``cond(M) <= MAX_CONDITION`` and within ``MAX_SCALE_DEVIATION`` / ``MAX_CROSS_AXIS`` of the
+    identity; biases within ``MAX_BIAS``; positive T_c and noise; a moving-average length the
+    firmware holds; and, given the unit's sample rates ``rates_hz``, a sample period that is one of them.
+    """
+    out: list[str] = []
+    if not (math.isfinite(img.sample_period_s) and 1e-5 <= img.sample_period_s <= 1.0):
+        out.append(f"sample period {img.sample_period_s!r} s outside [1e-5, 1] s")
+    elif rates_hz:
+        rate = 1.0 / img.sample_period_s
+        if not any(abs(rate - r) <= RATE_TOLERANCE * r for r in rates_hz):
+            out.append(f"sample period {img.sample_period_s:g} s is {rate:.6g} Hz; the unit samples at "
+                       f"{', '.join(f'{r:g}' for r in rates_hz)} Hz")
+    if not 1 <= img.ma_length <= FIRMWARE_MAX_MA_LENGTH:
+        out.append(f"moving-average length {img.ma_length} outside 1..{FIRMWARE_MAX_MA_LENGTH}")
+    for name, tri in (("accel", img.accel), ("gyro", img.gyro)):
+        m = np.asarray(tri.misalignment)
+        if not np.isfinite(m).all():
+            out.append(f"{name} M has non-finite entries")
+            continue
+        cond = float(np.linalg.cond(m)) if np.isfinite(m).all() else math.inf
+        if not cond <= MAX_CONDITION:
+            out.append(f"{name} M is singular or nearly so (condition number {cond:.3g} > {MAX_CONDITION:g})")
+        off = m - np.diag(np.diag(m))
+        if np.max(np.abs(np.diag(m) - 1.0)) > MAX_SCALE_DEVIATION or np.max(np.abs(off)) > MAX_CROSS_AXIS:
+            out.append(f"{name} M is far from identity (scale {np.diag(m).round(4).tolist()}, largest cross-axis "
+                       f"{float(np.max(np.abs(off))):.3g})")
+        for field in ("bias_static", "bias_drift"):
+            v = np.asarray(getattr(tri, field))
+            if not np.isfinite(v).all() or np.max(np.abs(v)) > MAX_BIAS[name]:
+                out.append(f"{name} {field} {v.tolist()} not finite or beyond {MAX_BIAS[name]:.4g}")
+        tc = np.asarray(tri.correlation_time_s)
+        if np.any(np.isinf(tc)) or np.any(tc[~np.isnan(tc)] <= 0):
+            out.append(f"{name} T_c {tc.tolist()} must be positive or NaN (unresolved)")
+        noise = np.asarray(tri.noise_std)
+        if not (np.isfinite(noise).all() and np.all(noise >= 0)):
+            out.append(f"{name} noise_std {noise.tolist()} must be finite and >= 0")
+    if not np.isfinite(img.g_sensitivity).all():
+        out.append("g_sensitivity has non-finite entries")
+    return out
+
+
+def check_writable(img: CalibrationImage, rates_hz: tuple[int, ...] | None = None) -> None:
+    """Raise :class:`ImageRefused` (one line, the first problems) unless ``img`` is usable (:func:`image_problems`)."""
+    problems = image_problems(img, rates_hz)
+    if problems:
+        raise ImageRefused(f"image of {img.serial} refused, nothing written: " + "; ".join(problems[:3]))
 
 
 def encode_image(img: CalibrationImage) -> bytes:

@@ -3,7 +3,9 @@
 :func:`write_image`:
 
 1. IDENTIFY: the serial the sensor reports must equal the image's, else
-   :class:`SerialMismatchError` (an image is bound to its unit).
+   :class:`SerialMismatchError` (an image is bound to its unit); the content must be usable by
+   the firmware at the unit's own sample rates (:func:`station.eeprom.image.check_writable`),
+   else :class:`~station.eeprom.image.ImageRefused`, before anything is written.
 2. EEPROM_INFO: refuse a write-protected or too small EEPROM.
 3. Read both slots, pick the one *not* holding the current image, give the new image
    the next update count (:func:`station.eeprom.image.next_write`).
@@ -32,6 +34,7 @@ from station.eeprom.image import (
     ImageError,
     SlotLayout,
     SlotState,
+    check_writable,
     decode_image,
     encode_image,
     image_sha256,
@@ -70,7 +73,7 @@ class WriteReport:
         update_count: the new image's count; previous_count: the replaced current image's (0: none).
         attempts: write + read-back rounds needed (1 = first time right).
         length: image bytes; sha256: hex SHA-256 of the bytes written.
-        image: the image as written (with its update count).
+        image: the image as written (with its update count); data: its bytes, as read back.
     """
 
     serial: str
@@ -82,6 +85,7 @@ class WriteReport:
     length: int
     sha256: str
     image: CalibrationImage = field(repr=False, compare=False)
+    data: bytes = field(default=b"", repr=False, compare=False)
 
 
 def read_unit_slots(sensor: Sensor, layout: SlotLayout = DEFAULT_SLOTS) -> list[SlotState]:
@@ -128,6 +132,7 @@ def write_image(
         raise SerialMismatchError(
             f"refusing to write: the image is for serial {image.serial!r}, the sensor reports {ident.serial!r}"
         )
+    check_writable(image, tuple(ident.rates_hz))  # ImageRefused: nothing written
     info = sensor.eeprom_info()
     if info.write_protect:
         raise EepromUnusableError(f"EEPROM of {ident.serial} is write protected (WP pin asserted)")
@@ -154,7 +159,7 @@ def write_image(
             log.info("%s: image #%d written to slot %s in %d attempt(s)", ident.serial, count, SLOT_NAMES[target],
                      attempt)
             return WriteReport(ident.serial, SLOT_NAMES[target], addr, count, previous, attempt, len(data),
-                               image_sha256(data), new)
+                               image_sha256(data), new, back)
         bad = sum(1 for x, y in zip(back, data, strict=True) if x != y)
         log.warning("%s: read-back of slot %s differs in %d of %d bytes (attempt %d of %d)", ident.serial,
                     SLOT_NAMES[target], bad, len(data), attempt, max_attempts)

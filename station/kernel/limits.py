@@ -51,15 +51,45 @@ class FitQualityLimits:
     gyro_bias_static_std_radps: float | None = None
 
 
+#: Conformance rules for a value with a stated standard uncertainty u (see :class:`ProductLimits`).
+WIDEN = "widen"
+GUARD_BAND = "guard-band"
+RULES = (WIDEN, GUARD_BAND)
+#: What an inconclusive verdict of the guard-band rule becomes for the unit.
+INCONCLUSIVE_POLICIES = ("fail", "retest")
+
+
 @dataclass(frozen=True)
 class ProductLimits:
-    """Limits for a product: both triads, the widening in standard uncertainties, optional fit quality."""
+    """Limits for a product: both triads, the conformance rule, optional fit quality.
+
+    Attributes:
+        rule: ``'guard-band'`` (ISO 14253-1 / JCGM 106): a value conforms when ``value +- k u`` lies
+            inside the range, fails when the value itself lies outside, and is inconclusive in
+            between; ``'widen'`` (the rule of ``station-limits/1`` files): a value passes within
+            ``[low - k u, high + k u]``, so a noisier fit passes more easily.
+        k_sigma: the coverage factor k of either rule.
+        inconclusive: what an inconclusive verdict makes the unit: ``'fail'`` or ``'retest'``.
+        marginal_fraction: a pass closer to a limit than this fraction of the range width is
+            flagged MARGINAL; a one-sided limit at zero (``[0, max]``) is flagged near ``max`` only.
+    """
 
     name: str
     accel: TriadLimits
     gyro: TriadLimits
     k_sigma: float = 3.0
     fit_quality: FitQualityLimits | None = None
+    rule: str = WIDEN
+    inconclusive: str = "fail"
+    marginal_fraction: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.rule not in RULES:
+            raise ValueError(f"conformance rule must be one of {', '.join(RULES)}, got {self.rule!r}")
+        if self.inconclusive not in INCONCLUSIVE_POLICIES:
+            raise ValueError(
+                f"inconclusive must be one of {', '.join(INCONCLUSIVE_POLICIES)}, got {self.inconclusive!r}"
+            )
 
 
 def table1_limits(

@@ -1,9 +1,12 @@
-"""Versioned limits files (TOML, format ``station-limits/1``): load, validate, check.
+"""Versioned limits files (TOML, format ``station-limits/2``; ``/1`` still read): load and validate.
 
 A limits file (``fixtures/limits/default.toml`` is the default) holds:
 
 * ``[product]``: ranges per parameter family of eq. (1) and (3) for both triads (the
-  paper's Table 1 by default) and ``k_sigma`` (see :mod:`station.sequence.limits`);
+  paper's Table 1 by default) and the conformance rule: ``rule`` (``"guard-band"`` or
+  ``"widen"``), ``coverage_factor_k`` and what an ``inconclusive`` verdict becomes
+  (``"fail"`` or ``"retest"``); a ``/1`` file has ``k_sigma`` and the ``widen`` rule
+  (see :mod:`station.sequence.limits`);
 * ``[marginal]``: ``fraction`` of the range width at each edge that makes a PASS MARGINAL;
 * ``[fit_quality]``: largest residual RMS per axis and largest standard uncertainties;
 * ``[verification]``: residual limits and the short plan of the post-calibration check;
@@ -27,9 +30,19 @@ from typing import Any
 
 from station.kernel.datafiles import data_path
 from station.kernel.errors import FormatError, UnsupportedVersionError
-from station.kernel.limits import FitQualityLimits, ProductLimits, TriadLimits
+from station.kernel.limits import (
+    INCONCLUSIVE_POLICIES,
+    RULES,
+    WIDEN,
+    FitQualityLimits,
+    ProductLimits,
+    TriadLimits,
+)
 
-LIMITS_FORMAT = "station-limits/1"
+LIMITS_FORMAT = "station-limits/2"
+#: Formats this station reads. ``/1`` files keep their own conformance rule (``widen``: a value passes
+#: within its range widened by ``k_sigma`` standard uncertainties); ``/2`` files name the rule.
+LIMITS_FORMATS = ("station-limits/1", LIMITS_FORMAT)
 DEFAULT_LIMITS_PATH = data_path("fixtures", "limits", "default.toml")
 _DEG = math.pi / 180.0
 
@@ -201,16 +214,28 @@ def parse_limits(text: str | bytes, source: str = "<limits>", path: Path | None 
         raise LimitsFileError(f"{source}: not valid TOML: {exc}") from exc
     top = _Table(data, "", source)
     fmt = top.raw("format")
-    if fmt != LIMITS_FORMAT:
-        raise UnsupportedVersionError(f"{source}: limits format {fmt!r}; this station reads {LIMITS_FORMAT!r} only")
+    if fmt not in LIMITS_FORMATS:
+        raise UnsupportedVersionError(
+            f"{source}: limits format {fmt!r}; this station reads {', '.join(map(repr, LIMITS_FORMATS))} only"
+        )
     name, version = top.text("name"), top.text("version")
     top.raw("description", required=False)
 
     prod = top.table("product")
-    k_sigma = prod.number("k_sigma")
+    if fmt == LIMITS_FORMAT:
+        rule, k_key = prod.text("rule"), "coverage_factor_k"
+        if rule not in RULES:
+            raise prod.fail("rule", f"must be one of {', '.join(map(repr, RULES))}, got {rule!r}")
+        inconclusive = prod.text("inconclusive")
+        if inconclusive not in INCONCLUSIVE_POLICIES:
+            raise prod.fail("inconclusive", f"must be one of {', '.join(map(repr, INCONCLUSIVE_POLICIES))}, "
+                                            f"got {inconclusive!r}")
+    else:
+        rule, k_key, inconclusive = WIDEN, "k_sigma", "fail"
+    k_sigma = prod.number(k_key)
     assert k_sigma is not None
     if k_sigma < 0:
-        raise prod.fail("k_sigma", f"must be >= 0, got {k_sigma}")
+        raise prod.fail(k_key, f"must be >= 0, got {k_sigma}")
     check_tc = prod.boolean("check_correlation_time")
     accel, accel_tc = _triad(prod.table("accel"), False, check_tc)
     gyro, gyro_tc = _triad(prod.table("gyro"), True, check_tc)
@@ -239,7 +264,8 @@ def parse_limits(text: str | bytes, source: str = "<limits>", path: Path | None 
         gyro_bias_static_std_radps=opt("gyro_bias_static_std_dps", _DEG),
     )
     fq.done()
-    product = ProductLimits(name=f"{name}@{version}", accel=accel, gyro=gyro, k_sigma=k_sigma, fit_quality=fit_quality)
+    product = ProductLimits(name=f"{name}@{version}", accel=accel, gyro=gyro, k_sigma=k_sigma, fit_quality=fit_quality,
+                            rule=rule, inconclusive=inconclusive, marginal_fraction=fraction)
 
     ver = top.table("verification")
     try:
@@ -290,6 +316,7 @@ def load_limits(path: str | Path | None = None) -> LimitsFile:
 __all__ = [
     "DEFAULT_LIMITS_PATH",
     "LIMITS_FORMAT",
+    "LIMITS_FORMATS",
     "FitQualityLimits",
     "LimitsFile",
     "LimitsFileError",

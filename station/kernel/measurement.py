@@ -16,10 +16,16 @@ from enum import Enum
 
 
 class Verdict(Enum):
-    """A measurement's verdict. MARGINAL is a PASS close to a limit (the limits file's band)."""
+    """A measurement's verdict.
+
+    MARGINAL is a PASS close to a limit (the limits file's band). INCONCLUSIVE is a value inside
+    the specification whose uncertainty interval ``value +- k u`` reaches outside it (ISO 14253-1):
+    neither conformance nor non-conformance is proven; the limits file maps it to FAIL or a retest.
+    """
 
     PASS = "PASS"
     MARGINAL = "MARGINAL"
+    INCONCLUSIVE = "INCONCLUSIVE"
     FAIL = "FAIL"
 
 
@@ -37,6 +43,8 @@ class Measurement:
         std: standard uncertainty of ``value`` (``unit``), NaN if none.
         link: a link gate: its failure is a station fault (ERROR), not the unit's (FAIL).
         marginal: a pass close enough to a limit to be flagged.
+        inconclusive: not passed, but not proven outside the limits either (see :class:`Verdict`).
+        k: the coverage factor of the uncertainty interval the verdict used (0: none).
     """
 
     name: str
@@ -48,6 +56,8 @@ class Measurement:
     std: float = math.nan
     link: bool = False
     marginal: bool = False
+    inconclusive: bool = False
+    k: float = 0.0
 
     @classmethod
     def in_range(
@@ -66,13 +76,20 @@ class Measurement:
     @property
     def verdict(self) -> Verdict:
         if not self.passed:
-            return Verdict.FAIL
+            return Verdict.INCONCLUSIVE if self.inconclusive else Verdict.FAIL
         return Verdict.MARGINAL if self.marginal else Verdict.PASS
+
+    @property
+    def expanded_uncertainty(self) -> float:
+        """``k u`` (``unit``): the half-width of the interval the verdict used (0 without one)."""
+        return self.k * self.std if self.k > 0 and math.isfinite(self.std) else 0.0
 
     def describe(self) -> str:
         """One line: the value, its unit and the limits it missed or met."""
-        where = "outside" if not self.passed else "within"
-        return f"{self.name} = {self.value:.6g} {self.unit} {where} [{self.low:.6g}, {self.high:.6g}]"
+        ku = self.expanded_uncertainty
+        value = f"{self.value:.6g} +- {ku:.2g}" if ku > 0 else f"{self.value:.6g}"
+        where = {Verdict.FAIL: "outside", Verdict.INCONCLUSIVE: "straddles"}.get(self.verdict, "within")
+        return f"{self.name} = {value} {self.unit} {where} [{self.low:.6g}, {self.high:.6g}]"
 
 
 __all__ = ["Measurement", "Verdict"]

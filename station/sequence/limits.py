@@ -1,51 +1,78 @@
-"""Product limits on a fitted parameter set (minimal: the paper's Table 1 ranges).
+"""Conformance of a fitted parameter set with its product limits.
 
-A :class:`ProductLimits` holds one range per parameter family of eq. (1) and (3)
-(SI: m/s^2 for the accelerometer, rad/s for the gyroscope, s, 1). A fitted value
-fails its limit when it lies outside the range by more than ``k_sigma`` of its
-own standard uncertainty: Table 1 describes the population of true values, so an
-estimate of a unit at the edge of the range may scatter across it without the unit
-being bad. Unresolved estimates (NaN: a drift too small to resolve) are not checked.
+A :class:`~station.kernel.limits.ProductLimits` holds one range per parameter family of eq. (1)
+and (3) (SI: m/s^2 for the accelerometer, rad/s for the gyroscope, s, 1) and the rule that judges
+an estimate with standard uncertainty u against it (every result is a
+:class:`~station.kernel.measurement.Measurement`):
+
+* ``guard-band`` (ISO 14253-1, JCGM 106, the default limits file): the value conforms (PASS) when
+  ``value +- k u`` lies inside the range; it FAILs when the value itself lies outside; in between it
+  is INCONCLUSIVE: neither proven. A larger uncertainty can only make a verdict less favourable.
+* ``widen`` (``station-limits/1`` files, :func:`~station.kernel.limits.table1_limits`): the value
+  passes within ``[low - k u, high + k u]``: Table 1 describes the population of true values, so
+  an estimate of a unit at the edge may scatter across it. A noisier fit passes more easily.
+
+Fit-quality figures (residual RMS, standard uncertainties) are one-sided limits ``[0, max]``.
+MARGINAL flags a pass within the limits file's fraction of the range width of a limit; a one-sided
+limit at zero is flagged near ``max`` only. Unresolved estimates (NaN: a drift too small to resolve)
+are not checked.
 
 The correlation time T_c is not checked by default: a 300 s power-on rest cannot
-resolve the gyro's 1000-3800 s T_c, and the fit then may return T_c at its search
-bound with a local (Wald) uncertainty far too small, which failed 5 of 40 simulated
-Table 1 units (``table1_limits(check_correlation_time=True)`` checks it anyway).
-Versioned limits files (``fixtures/limits/*.toml``) are loaded by
-:mod:`station.kernel.limits_file`; a :class:`ProductLimits` from a file also carries
-:class:`FitQualityLimits` (largest residual RMS and standard uncertainties), which
-:func:`check_limits` then checks too (``table1_limits()`` has none: unchanged verdicts).
+resolve the gyro's 1000-3800 s T_c (``table1_limits(check_correlation_time=True)`` checks it).
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
 from station.fit.params import ParameterSet, TriadParams
-from station.kernel.limits import FitQualityLimits, ProductLimits, TriadLimits
+from station.kernel.limits import GUARD_BAND, FitQualityLimits, ProductLimits, TriadLimits
 from station.kernel.measurement import Measurement
 from station.kernel.sensor_class import Range
 
 AXES = "xyz"
 
 
-def _check(name: str, value: float, std: float, rng: Range, unit: str, k: float) -> Measurement | None:
+def conformance(
+    name: str, value: float, std: float, rng: Range, unit: str, limits: ProductLimits
+) -> Measurement | None:
+    """``value`` (standard uncertainty ``std``) against ``rng`` by the rule of ``limits``; None if NaN."""
     if not math.isfinite(value):
         return None
-    s = std if math.isfinite(std) else 0.0
-    ok = rng[0] - k * s <= value <= rng[1] + k * s
-    return Measurement(name, float(value), unit, float(rng[0]), float(rng[1]), bool(ok), float(std))
+    lo, hi = float(rng[0]), float(rng[1])
+    k = float(limits.k_sigma)
+    ku = k * std if math.isfinite(std) else 0.0
+    inconclusive = False
+    if limits.rule == GUARD_BAND:
+        ok = lo + ku <= value <= hi - ku
+        inconclusive = not ok and lo <= value <= hi
+    else:
+        ok = lo - ku <= value <= hi + ku
+    marginal = ok and _near_edge(value, lo, hi, limits.marginal_fraction)
+    return Measurement(name, float(value), unit, lo, hi, bool(ok), float(std), marginal=marginal,
+                       inconclusive=inconclusive, k=k)
 
 
-def _triad_checks(prefix: str, tri: TriadParams, lim: TriadLimits, unit: str, k: float) -> list[Measurement]:
+def _near_edge(value: float, lo: float, hi: float, fraction: float) -> bool:
+    """Within ``fraction`` of the width of a limit; a one-sided ``[0, max]`` limit only near ``max``."""
+    if fraction <= 0 or not (math.isfinite(lo) and math.isfinite(hi)):
+        return False
+    band = fraction * (hi - lo)
+    return value > hi - band or (lo != 0.0 and value < lo + band)
+
+
+def _triad_checks(
+    prefix: str, tri: TriadParams, lim: TriadLimits, unit: str, limits: ProductLimits
+) -> list[Measurement]:
     out: list[Measurement | None] = []
     m, ms = np.asarray(tri.misalignment), np.asarray(tri.misalignment_std)
     for i in range(3):
         for j in range(3):
             rng = lim.scale if i == j else lim.cross_axis
-            out.append(_check(f"{prefix}.M.{AXES[i]}{AXES[j]}", m[i, j], ms[i, j], rng, "1", k))
+            out.append(conformance(f"{prefix}.M.{AXES[i]}{AXES[j]}", m[i, j], ms[i, j], rng, "1", limits))
     families: list[tuple[str, Range, str]] = [
         ("bias_static", lim.bias_static, unit),
         ("bias_drift", lim.bias_drift, unit),
@@ -58,11 +85,13 @@ def _triad_checks(prefix: str, tri: TriadParams, lim: TriadLimits, unit: str, k:
         for i in range(3):
             if field in ("bias_drift", "correlation_time_s") and not math.isfinite(float(tri.correlation_time_s[i])):
                 continue  # drift not resolved: nothing to check
-            out.append(_check(f"{prefix}.{field}.{AXES[i]}", float(v[i]), float(s[i]), rng, u, k))
+            out.append(conformance(f"{prefix}.{field}.{AXES[i]}", float(v[i]), float(s[i]), rng, u, limits))
     return [c for c in out if c is not None]
 
 
-def check_fit_quality(params: ParameterSet, limits: FitQualityLimits) -> list[Measurement]:
+def check_fit_quality(
+    params: ParameterSet, limits: FitQualityLimits, marginal_fraction: float = 0.0
+) -> list[Measurement]:
     """Fit-quality figures of ``params`` against ``limits`` (each passes when ``0 <= value <= max``).
 
     Names start with ``fit.``; unresolved figures (NaN) are not checked.
@@ -76,7 +105,10 @@ def check_fit_quality(params: ParameterSet, limits: FitQualityLimits) -> list[Me
             if not math.isfinite(float(v)):
                 continue
             suffix = "".join(AXES[i] for i in idx)
-            out.append(Measurement.in_range(f"fit.{name}.{suffix}", float(v), 0.0, limit, unit))
+            m = Measurement.in_range(f"fit.{name}.{suffix}", float(v), 0.0, limit, unit)
+            if m.passed and _near_edge(m.value, 0.0, limit, marginal_fraction):
+                m = replace(m, marginal=True)
+            out.append(m)
 
     a, g = params.accel, params.gyro
     add("accel.residual_rms", a.residual_rms, limits.accel_residual_rms_mps2, "m/s^2")
@@ -90,16 +122,20 @@ def check_fit_quality(params: ParameterSet, limits: FitQualityLimits) -> list[Me
 
 def check_limits(params: ParameterSet, limits: ProductLimits) -> list[Measurement]:
     """Every checked parameter of ``params`` against ``limits``, accelerometer first, then fit quality."""
-    out = _triad_checks("accel", params.accel, limits.accel, "m/s^2", limits.k_sigma) + _triad_checks(
-        "gyro", params.gyro, limits.gyro, "rad/s", limits.k_sigma
+    out = _triad_checks("accel", params.accel, limits.accel, "m/s^2", limits) + _triad_checks(
+        "gyro", params.gyro, limits.gyro, "rad/s", limits
     )
     if limits.fit_quality is not None:
-        out += check_fit_quality(params, limits.fit_quality)
+        out += check_fit_quality(params, limits.fit_quality, limits.marginal_fraction)
     return out
 
 
 def is_marginal(check: Measurement, fraction: float) -> bool:
-    """A passed check whose value lies within ``fraction`` of the range width of an edge."""
+    """A passed check whose value lies within ``fraction`` of the range width of either edge.
+
+    For the verdicts the station records, :func:`conformance` and :func:`check_fit_quality` set
+    ``Measurement.marginal`` themselves (one-sided limits at zero flagged near ``max`` only).
+    """
     if not check.passed or fraction <= 0:
         return False
     band = fraction * (check.high - check.low)

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from datetime import UTC, datetime
 from typing import TYPE_CHECKING, Protocol
 
-from station.eeprom.image import DEFAULT_SLOTS, CalibrationImage, SlotLayout
+from station.eeprom.image import DEFAULT_SLOTS, CalibrationImage, SlotLayout, run_image
 from station.eeprom.provision import ProvisionError, SerialMismatchError, WriteReport, write_image
 from station.kernel.errors import UnitRejected
 from station.kernel.measurement import Measurement
@@ -61,7 +61,8 @@ class EepromProvisioner:
         max_attempts: write + read-back rounds per unit.
         power_cycle: reset the sensor after writing so its firmware loads the new image.
         boot_timeout_s: wall seconds to wait for the BOOT event after the reset.
-        now: calibration-time source (UTC); default ``datetime.now(UTC)``.
+        now: calibration-time source (UTC) when :meth:`provision` is not given the run's start;
+            default ``datetime.now(UTC)``.
         on_record: called with each unit's :class:`ProvisionRecord` (e.g. to store it).
 
     ``records`` maps serial -> the last :class:`ProvisionRecord`.
@@ -89,24 +90,26 @@ class EepromProvisioner:
         self._on_record = on_record
         self.records: dict[str, ProvisionRecord] = {}
 
-    def image_for(self, unit: UnitResult) -> CalibrationImage:
+    def image_for(self, unit: UnitResult, run_started_at: datetime | None = None) -> CalibrationImage:
+        """The unit's image (:func:`~station.eeprom.image.run_image`): station and time are the run's."""
         if unit.params is None:
             raise ProvisionError(f"slot {unit.slot}: no parameter set to write")
         if unit.serial and unit.params.serial != unit.serial:
             raise SerialMismatchError(
                 f"slot {unit.slot}: parameter set is for {unit.params.serial!r}, the unit is {unit.serial!r}"
             )
-        return CalibrationImage.from_params(unit.params, self.station_id, self._now())
+        when = run_started_at if run_started_at is not None else self._now()
+        return run_image(unit.params, self.station_id, when)
 
     def provision(
-        self, unit: UnitResult, sensor: Sensor
+        self, unit: UnitResult, sensor: Sensor, run_started_at: datetime | None = None
     ) -> tuple[Measurement, ...] | None:
         """Write, power-cycle, verify one PASS unit; returns the verification checks (None without verifier).
 
         Raises a HardwareError subclass when the writing fails (station ERROR) and
         VerificationFailed (a UnitRejected) when the corrected output misses its limits (unit FAIL).
         """
-        image = self.image_for(unit)
+        image = self.image_for(unit, run_started_at)
         report = write_image(sensor, image, layout=self.layout, max_attempts=self.max_attempts)
         if self.power_cycle:
             sensor.power_cycle(self.boot_timeout_s)

@@ -22,10 +22,19 @@ from station.kernel.measurement import Measurement
 
 
 class Outcome(Enum):
-    """Result of a unit or a run; the severity order is PASS < FAIL < ERROR < ABORTED."""
+    """Result of a unit or a run; severity PASS < RETEST < FAIL < REFUSED < ERROR < ABORTED.
+
+    PASS: calibrated, within limits, written and verified. RETEST: a limit verdict was inconclusive
+    (its uncertainty interval straddles the limit) and the limits file maps that to a retest; it
+    does not count as a failed attempt. FAIL: the unit is out of limits (counts as an attempt).
+    REFUSED: the retest policy refused the unit before anything moved (over its attempts, or
+    scrapped). ERROR: a station fault. ABORTED: the operator or a signal stopped the run.
+    """
 
     PASS = "PASS"
+    RETEST = "RETEST"
     FAIL = "FAIL"
+    REFUSED = "REFUSED"
     ERROR = "ERROR"
     ABORTED = "ABORTED"
 
@@ -33,8 +42,15 @@ class Outcome(Enum):
     def severity(self) -> int:
         return _SEVERITY[self]
 
+    @property
+    def exit_code(self) -> int:
+        """The command's exit code for a run with this outcome."""
+        return _EXIT[self]
 
-_SEVERITY = {Outcome.PASS: 0, Outcome.FAIL: 1, Outcome.ERROR: 2, Outcome.ABORTED: 3}
+
+_SEVERITY = {o: k for k, o in enumerate(Outcome)}
+_EXIT = {Outcome.PASS: 0, Outcome.FAIL: 1, Outcome.ERROR: 2, Outcome.REFUSED: 3, Outcome.RETEST: 4,
+         Outcome.ABORTED: 130}
 
 
 def worst(outcomes: Iterable[Outcome]) -> Outcome:
@@ -127,7 +143,7 @@ class UnitFinished:
     """A unit's result.
 
     Attributes:
-        outcome: PASS, FAIL, ERROR or ABORTED.
+        outcome: see :class:`Outcome`.
         message: the reason for anything but PASS ('' for PASS).
         session_path: the saved session recording, or None.
         params_path: the saved parameter set (JSON), or None.

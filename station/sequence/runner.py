@@ -40,7 +40,7 @@ from station.fit.params import ParameterSet
 from station.kernel.clock import Clock
 from station.kernel.errors import FitError, HardwareError, StationError, UnitRejected
 from station.kernel.limits import ProductLimits, table1_limits
-from station.kernel.measurement import Measurement
+from station.kernel.measurement import Measurement, Verdict
 from station.kernel.plan import RigPlan, default_plan
 from station.rig.protocol import Rig, RigState
 from station.sensor.protocol import Sensor
@@ -140,7 +140,9 @@ class Provisioner(Protocol):
     :class:`~station.kernel.errors.HardwareError` when the writing fails (ERROR).
     """
 
-    def provision(self, unit: UnitResult, sensor: Sensor) -> Sequence[Measurement] | None: ...
+    def provision(
+        self, unit: UnitResult, sensor: Sensor, run_started_at: datetime | None = None
+    ) -> Sequence[Measurement] | None: ...
 
 
 @dataclass
@@ -168,7 +170,7 @@ class SequenceRunner:
         fit_options: passed to :func:`fit_session`.
         provisioner: called for each PASS unit after a complete, fault-free run.
         admit: the retest policy, ``admit(serial, run_id) -> reason or None``, asked for each unit
-            once the power-on step has identified it; a refused unit is not tested (ABORTED).
+            before anything moves (the unit is identified first); a refused unit is REFUSED, not tested.
         station, rig_name: names for records and session metadata.
         sensor_urls: for records and results (default ``slotN``).
         subscribers: called with every record, in order, from the thread calling :meth:`run`.
@@ -211,8 +213,10 @@ class SequenceRunner:
         self._subscribers: list[Subscriber] = list(subscribers)
         self._records: list[Record] = []
         self._abort_requested = False
+        self.abort_reason = "aborted by the operator"
         self._fixture: Fixture | None = None
         self.run_id = _new_run_id()
+        self.started_at = datetime.now(UTC)  # reset when the run starts; the run's images carry it
 
     # --- records ----------------------------------------------------------------------------------
 
@@ -228,8 +232,13 @@ class SequenceRunner:
             except Exception:  # a display or logger bug must not break the run
                 log.exception("record subscriber %r failed", fn)
 
-    def abort(self) -> None:
-        """Ask the run to stop as soon as possible (thread-safe); the outcome becomes ABORTED."""
+    def abort(self, reason: str = "aborted by the operator") -> None:
+        """Ask the run to stop as soon as possible (thread-safe); the outcome becomes ABORTED with ``reason``.
+
+        The first reason given is kept (e.g. ``'aborted by SIGTERM'``).
+        """
+        if not self._abort_requested:
+            self.abort_reason = reason
         self._abort_requested = True
         if self._fixture is not None:
             self._fixture.abort.set()
@@ -238,6 +247,7 @@ class SequenceRunner:
 
     def run(self) -> RunResult:
         """Run every step, tear down, fit, check limits, save; see the module docstring."""
+        self.started_at = datetime.now(UTC)
         clock = self.clock
         t_start, wall0 = clock.now(), time.monotonic()
         self._run_thread, self._last_reading = threading.current_thread(), 0.0
@@ -247,7 +257,7 @@ class SequenceRunner:
         verdicts = [_Verdict() for _ in channels]
         self._emit(
             RunStarted(
-                self.run_id, datetime.now(UTC).isoformat(), t_start, self.station, self.rig_name,
+                self.run_id, self.started_at.isoformat(), t_start, self.station, self.rig_name,
                 tuple(self.sensor_urls), tuple(s.name for s in self.steps),
             )
         )
@@ -267,11 +277,12 @@ class SequenceRunner:
         try:
             try:
                 if not aborted:
+                    self._admit_units(fx, verdicts)
                     self._run_steps(fx, verdicts, reconnects0)
                     completed = bool(fx.active)
             except KeyboardInterrupt:
                 aborted = True
-                run_message = "aborted by the operator"
+                run_message = self.abort_reason
             except HardwareError as exc:
                 run_message = f"station fault: {exc}"
                 log.warning("run %s: %s", self.run_id, run_message)
@@ -340,13 +351,11 @@ class SequenceRunner:
                     )
             except BaseException as exc:
                 aborted = isinstance(exc, KeyboardInterrupt)
-                why = "aborted by the operator" if aborted else f"{type(exc).__name__}: {exc}"
+                why = self.abort_reason if aborted else f"{type(exc).__name__}: {exc}"
                 self._emit(StepFinished(self.run_id, step.index, step.name, self.clock.now(),
                                         self.clock.now() - t0, False, len(fx.active), why))
                 raise
             problems = self._apply_report(fx, step, report, verdicts)
-            if step.index == 0:
-                problems += self._admit_units(fx, verdicts)
             self._emit(StepFinished(self.run_id, step.index, step.name, self.clock.now(), self.clock.now() - t0,
                                     not problems, len(fx.active), "; ".join(problems)))
 
@@ -376,19 +385,26 @@ class SequenceRunner:
                 problems.append(f"slot {unit.slot}: {text}")
         return problems
 
-    def _admit_units(self, fx: Fixture, verdicts: list[_Verdict]) -> list[str]:
-        """The retest policy, once the power-on step has identified every unit: a refused unit is
-        not tested (ABORTED for that unit, with the reason), and nothing is written to it."""
-        problems: list[str] = []
+    def _admit_units(self, fx: Fixture, verdicts: list[_Verdict]) -> None:
+        """The retest policy, before anything moves: identify every unit and end the ones it refuses.
+
+        A refused unit is REFUSED (not tested, nothing written to it, not counted as an attempt); a
+        sensor that does not answer is a station fault (ERROR) for its slot. With every unit refused
+        the run ends without moving the rig.
+        """
         if self.admit is None:
-            return problems
+            return
         for unit in list(fx.active):
-            reason = self.admit(unit.serial, self.run_id)
+            v = verdicts[unit.slot]
+            try:
+                ident = unit.sensor.identify()
+            except HardwareError as exc:
+                self._end_unit(fx, unit, v, Outcome.ERROR, f"could not identify the unit: {type(exc).__name__}: {exc}")
+                continue
+            reason = self.admit(ident.serial, self.run_id)
             if reason:
-                message = f"refused by the retest policy: {reason}"
-                self._end_unit(fx, unit, verdicts[unit.slot], Outcome.ABORTED, message)
-                problems.append(f"slot {unit.slot}: {reason}")
-        return problems
+                unit.identity = ident
+                self._end_unit(fx, unit, v, Outcome.REFUSED, f"refused by the retest policy: {reason}")
 
     def _end_unit(self, fx: Fixture, unit: UnitChannel, v: _Verdict, outcome: Outcome, message: str) -> None:
         unit.active = False
@@ -451,7 +467,7 @@ class SequenceRunner:
         for unit, v in zip(channels, verdicts, strict=True):
             if v.outcome is None and unit.active:
                 if aborted:
-                    v.outcome, v.message = Outcome.ABORTED, run_message or "aborted by the operator"
+                    v.outcome, v.message = Outcome.ABORTED, run_message or self.abort_reason
                 elif run_message:
                     v.outcome, v.message = Outcome.ERROR, run_message
                 elif not completed:
@@ -482,7 +498,7 @@ class SequenceRunner:
             for k, fut in futures.items():
                 v = verdicts[k]
                 if aborted and not fut.done():
-                    v.outcome, v.message = Outcome.ABORTED, "aborted by the operator during the fit"
+                    v.outcome, v.message = Outcome.ABORTED, f"{self.abort_reason} during the fit"
                     continue
                 exc = fut.exception()
                 if isinstance(exc, FitError):
@@ -512,13 +528,7 @@ class SequenceRunner:
             m = Measured(self.run_id, unit.slot, unit.serial, "limits", c)
             v.measurements.append(m)
             self._emit(m)
-        failed = [c for c in checks if not c.passed]
-        if failed:
-            shown = ", ".join(f"{c.name}={c.value:.4g} not in [{c.low:.4g}, {c.high:.4g}]" for c in failed[:3])
-            more = f" (+{len(failed) - 3} more)" if len(failed) > 3 else ""
-            v.outcome, v.message = Outcome.FAIL, f"out of limits ({self.limits.name}): {shown}{more}"
-        else:
-            v.outcome, v.message = Outcome.PASS, ""
+        v.outcome, v.message = unit_verdict(checks, self.limits)
 
     def _save(
         self,
@@ -559,18 +569,39 @@ class SequenceRunner:
                 out.append(r)
                 continue
             try:
-                checks = self.provisioner.provision(r, self.sensors[r.slot])
+                checks = self.provisioner.provision(r, self.sensors[r.slot], self.started_at)
                 self._emit_verify(r, checks or ())
                 out.append(r)
             except UnitRejected as exc:
                 self._emit_verify(r, exc.checks)
                 out.append(_replace_outcome(r, Outcome.FAIL, f"verification failed: {exc}"))
-            except HardwareError as exc:
+            except StationError as exc:  # a link fault, or an image the writer refused: the station's fault
                 out.append(_replace_outcome(r, Outcome.ERROR, f"provisioning failed: {exc}"))
             except KeyboardInterrupt:
                 stop = True
-                out.append(_replace_outcome(r, Outcome.ABORTED, "aborted by the operator during provisioning"))
+                out.append(_replace_outcome(r, Outcome.ABORTED, f"{self.abort_reason} during provisioning"))
         return out
+
+
+def unit_verdict(checks: Sequence[Measurement], limits: ProductLimits) -> tuple[Outcome, str]:
+    """A unit's outcome and message from its limit checks.
+
+    Any FAIL makes the unit FAIL. Otherwise an INCONCLUSIVE check (its ``value +- k u`` straddles
+    a limit) makes it FAIL or RETEST, as the limits file's ``inconclusive`` says; else PASS.
+    """
+
+    def shown(cs: list[Measurement]) -> str:
+        more = f" (+{len(cs) - 3} more)" if len(cs) > 3 else ""
+        return "; ".join(c.describe() for c in cs[:3]) + more
+
+    failed = [c for c in checks if c.verdict == Verdict.FAIL]
+    if failed:
+        return Outcome.FAIL, f"out of limits ({limits.name}): {shown(failed)}"
+    unsure = [c for c in checks if c.verdict == Verdict.INCONCLUSIVE]
+    if unsure:
+        outcome = Outcome.RETEST if limits.inconclusive == "retest" else Outcome.FAIL
+        return outcome, f"inconclusive ({limits.name}, k = {limits.k_sigma:g}): {shown(unsure)}"
+    return Outcome.PASS, ""
 
 
 def _replace_outcome(r: UnitResult, outcome: Outcome, message: str) -> UnitResult:

@@ -8,13 +8,14 @@ imports the simulator: :func:`register` is loaded by ``station.cli`` from the en
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 from typing import Annotated
 
 import numpy as np
 import typer
 
-from station.cli import OUTCOME_EXIT, DbOption, fail
+from station.cli import DbOption, fail
 from station.kernel.errors import StationError
 
 
@@ -53,18 +54,21 @@ def demo(
     seed: Annotated[int, typer.Option(help="seed: the same seed gives the same units")] = 0,
     out: Annotated[Path, typer.Option(help="directory for session CSVs and parameter JSONs")] = Path("demo-out"),
     db: DbOption = None,
+    limits: Annotated[Path | None, typer.Option("--limits", help="limits file (default: fixtures/limits/default.toml)")]
+    = None,
 ) -> None:
     """Simulated rig + N sensors, the whole sequence, fit, limits, summary: the station end to end.
 
-    Exit code: 0 all PASS, 1 a unit FAILed, 2 ERROR (station fault), 130 ABORTED.
+    Exit code: 0 all PASS, 1 a unit FAILed, 2 ERROR (station fault), 3 a unit REFUSED by the retest
+    policy, 4 a unit to RETEST (inconclusive verdict), 130 ABORTED (Ctrl-C, SIGTERM, SIGHUP).
     """
     from station.sim.demo import run_demo
 
     try:
-        result = run_demo(units, scale, seed, out, db_url=db, record=True)
+        result = run_demo(units, scale, seed, out, db_url=db, record=True, limits_path=limits)
     except StationError as exc:
         raise fail(exc) from None
-    raise typer.Exit(OUTCOME_EXIT[result.outcome.value])
+    raise typer.Exit(result.outcome.exit_code)
 
 
 def sim(
@@ -73,22 +77,31 @@ def sim(
     seed: Annotated[int, typer.Option(help="seed: the same seed gives the same units")] = 0,
     port: Annotated[int, typer.Option(help="Modbus/TCP port of the rig (0: a free port)")] = 0,
 ) -> None:
-    """Start a simulated rig and sensors, print their URLs, run until Ctrl-C (or SIGTERM)."""
+    """Start a simulated rig and sensors, print their URLs, run until Ctrl-C (or SIGTERM).
+
+    Each simulated unit runs the calibration firmware (Algorithm 1 from its EEPROM image), as a real
+    unit does, so ``station run`` against it provisions and verifies the corrected output.
+    """
     import signal
     import threading
 
+    from station.sim.firmware import install_firmware
     from station.sim.station_sim import SimStation
 
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
 
     with SimStation(units, scale, seed, port=port) as station:
+        for unit in station.units:
+            install_firmware(unit.sensor, station.clock)
+        sys.stdout.flush()
         typer.echo(f"rig: {station.rig_url}")
         for unit in station.units:
             typer.echo(f"sensor {unit.slot}: {unit.sensor.url} (serial {unit.truth.serial})")
         args = " ".join(f"--sensor {u}" for u in station.sensor_urls)
         typer.echo(f"run the sequence with:\n  station run --rig '{station.rig_url}' {args} --scale {scale:g}")
         typer.echo("Ctrl-C stops the simulation.")
+        sys.stdout.flush()
         try:
             while not stop.wait(0.5):
                 pass

@@ -29,10 +29,12 @@ from sqlalchemy import (
     Float,
     ForeignKey,
     Integer,
+    LargeBinary,
     MetaData,
     String,
     Text,
     UniqueConstraint,
+    true,
 )
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
 
@@ -186,6 +188,8 @@ class LimitCheck(Base):
     std: Mapped[float | None] = mapped_column(Float)
     unit: Mapped[str] = mapped_column(String(20), default="")
     passed: Mapped[bool] = mapped_column(Boolean)
+    verdict: Mapped[str | None] = mapped_column(String(12))  # PASS, MARGINAL, INCONCLUSIVE, FAIL (None: older)
+    k: Mapped[float | None] = mapped_column(Float)  # coverage factor of the uncertainty interval used
 
     run_unit: Mapped[RunUnit] = relationship(back_populates="checks")
 
@@ -224,7 +228,14 @@ class SessionRecording(Base):
 
 
 class EepromWrite(Base):
-    """A calibration image written into a unit's EEPROM: image SHA-256, attempts, read-back verdict."""
+    """A calibration image written into a unit's EEPROM.
+
+    ``written``: the pages were programmed; ``read_back_ok``: the image read back byte for byte;
+    ``verified_on_rig``: the unit's corrected output was then checked on the rig and met the
+    verification limits (None: not checked, e.g. ``station eeprom write`` off the rig). ``verified``
+    is kept for older readers: read back and (where checked) verified on the rig. ``image`` holds the
+    bytes written (None for rows of older versions).
+    """
 
     __tablename__ = "eeprom_writes"
 
@@ -237,8 +248,30 @@ class EepromWrite(Base):
     verified: Mapped[bool] = mapped_column(Boolean)
     message: Mapped[str] = mapped_column(Text, default="")
     written_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
+    written: Mapped[bool] = mapped_column(Boolean, server_default=true())
+    read_back_ok: Mapped[bool] = mapped_column(Boolean, server_default=true())
+    verified_on_rig: Mapped[bool | None] = mapped_column(Boolean)
+    image: Mapped[bytes | None] = mapped_column(LargeBinary)
 
     run_unit: Mapped[RunUnit | None] = relationship(back_populates="eeprom_writes")
+
+
+class RigLock(Base):
+    """Who holds a rig for a run: one row per rig URL while a run holds it (stations on several hosts).
+
+    ``rig_url`` is the normalized URL; ``holder`` names station, host and process; ``since`` is when it
+    was taken. The row is deleted when the run ends; a row whose process is gone on the same host is
+    taken over.
+    """
+
+    __tablename__ = "rig_locks"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    rig_url: Mapped[str] = mapped_column(String(300), unique=True)
+    station: Mapped[str] = mapped_column(String(100))
+    host: Mapped[str] = mapped_column(String(255))
+    pid: Mapped[int] = mapped_column(Integer)
+    since: Mapped[datetime] = mapped_column(DateTime(timezone=True))
 
 
 class Disposition(Base):

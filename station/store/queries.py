@@ -9,11 +9,12 @@ from __future__ import annotations
 import json
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
-from datetime import datetime
+from datetime import UTC, datetime
 from typing import Any
 
 from sqlalchemy import func, select
 
+from station.eeprom.image import encode_image, run_image
 from station.fit.params import ParameterSet
 from station.store.db import Database
 from station.store.models import (
@@ -95,7 +96,9 @@ class UnitDetail:
 def attempt_count(
     db: Database, serial: str, *, since_disposition: bool = True, exclude_run: str | None = None
 ) -> int:
-    """Runs of ``serial`` (any outcome, unfinished ones too) since its latest disposition (or ever).
+    """Failed attempts of ``serial`` since its latest disposition (or ever): runs whose outcome for the
+    unit was FAIL. Station faults (ERROR, UNFINISHED), aborted runs, refusals and retests are the
+    station's or nobody's doing and do not count against the unit.
 
     ``exclude_run``: a run id not to count (the run asking whether the unit may be tested).
     """
@@ -109,22 +112,34 @@ def attempt_count(
 def retest_gate(db: Database, max_attempts: int) -> Callable[[str, str], str | None]:
     """The retest policy for :class:`~station.sequence.runner.SequenceRunner` ``admit``.
 
-    A unit with ``max_attempts`` runs since its latest disposition is refused (the reason is
-    returned) until a disposition is recorded (``record_disposition``).
+    A scrapped unit is refused for good. A unit with ``max_attempts`` failed attempts since its latest
+    disposition is refused (the reason is returned) until a disposition is recorded
+    (:func:`~station.store.recorder.record_disposition`).
     """
 
     def admit(serial: str, run_id: str) -> str | None:
+        scrapped = scrapped_at(db, serial)
+        if scrapped is not None:
+            return f"{serial} was scrapped ({scrapped.isoformat()}): a scrapped unit is not tested again"
         n = attempt_count(db, serial, exclude_run=run_id)
         if n >= max_attempts:
-            return (f"{serial} has had {n} attempt(s), the limit is {max_attempts}: "
+            return (f"{serial} has failed {n} attempt(s), the limit is {max_attempts}: "
                     "record a disposition before testing it again")
         return None
 
     return admit
 
 
+def scrapped_at(db: Database, serial: str) -> datetime | None:
+    """When ``serial`` was scrapped (its first 'scrap' disposition), None if it never was."""
+    with db.transaction() as s:
+        when = s.scalar(select(func.min(Disposition.decided_at)).join(Unit, Disposition.unit_id == Unit.id)
+                        .where(Unit.serial == serial, Disposition.decision == "scrap"))
+    return None if when is None else (when if when.tzinfo is not None else when.replace(tzinfo=UTC))
+
+
 def _attempts(s: Any, unit_id: int, since_disposition: bool, exclude_run: str | None = None) -> int:
-    q = select(func.count(RunUnit.id)).join(Run).where(RunUnit.unit_id == unit_id)
+    q = select(func.count(RunUnit.id)).join(Run).where(RunUnit.unit_id == unit_id, RunUnit.outcome == "FAIL")
     if exclude_run is not None:
         q = q.where(Run.run_uid != exclude_run)
     if since_disposition:
@@ -144,6 +159,49 @@ def latest_parameter_set(db: Database, serial: str, *, passed_only: bool = True)
             q = q.where(RunUnit.outcome == "PASS")
         text = s.scalar(q.order_by(Run.started_at.desc(), ParameterSetRecord.id.desc()).limit(1))
     return ParameterSet.from_json(text) if text is not None else None
+
+
+@dataclass(frozen=True)
+class UnitImage:
+    """A unit's calibration image: the bytes, where they come from, and the parameter set's run.
+
+    ``written`` is True when the bytes are those the run wrote into the unit (as read back), False when
+    no write was recorded and they were built with :func:`~station.eeprom.image.run_image` from the
+    run's parameter set, station and start time (update count 1: what a first write would write).
+    """
+
+    serial: str
+    data: bytes
+    run_id: str
+    written: bool
+
+
+def unit_image(db: Database, serial: str) -> UnitImage | None:
+    """The image of ``serial``'s newest PASS parameter set (None if there is none).
+
+    One source for the API download and ``station eeprom image``: the image its run wrote, else the one
+    :func:`~station.eeprom.image.run_image` builds from the run's parameter set, station and start.
+    Raises :class:`~station.eeprom.image.ImageError` if the parameter set does not fit the image format.
+    """
+    with db.transaction() as s:
+        row = s.execute(
+            select(ParameterSetRecord.params_json, RunUnit.id, Run.run_uid, Run.started_at, StationRow.name)
+            .join(RunUnit, ParameterSetRecord.run_unit_id == RunUnit.id).join(Run, RunUnit.run_id == Run.id)
+            .join(StationRow, Run.station_id == StationRow.id).join(Unit, ParameterSetRecord.unit_id == Unit.id)
+            .where(Unit.serial == serial, Run.outcome != UNFINISHED, RunUnit.outcome == "PASS")
+            .order_by(Run.started_at.desc(), ParameterSetRecord.id.desc()).limit(1)
+        ).first()
+        if row is None:
+            return None
+        params_json, ru_id, run_uid, started_at, station_name = row
+        written = s.scalar(select(EepromWrite.image).where(EepromWrite.run_unit_id == ru_id,
+                                                           EepromWrite.image.is_not(None))
+                           .order_by(EepromWrite.id.desc()).limit(1))
+    if written is not None:
+        return UnitImage(serial, bytes(written), run_uid, True)
+    when = started_at if started_at.tzinfo is not None else started_at.replace(tzinfo=UTC)
+    image = run_image(ParameterSet.from_json(params_json), station_name, when)
+    return UnitImage(serial, encode_image(image), run_uid, False)
 
 
 def list_units(db: Database) -> list[UnitSummary]:

@@ -199,12 +199,13 @@ class Recorder:
         """
         write = record.write  # type: ignore[attr-defined]
         verification = record.verification  # type: ignore[attr-defined]
-        verified = verification is None or bool(verification.passed)
+        on_rig = None if verification is None else bool(verification.passed)
         run_id = next(reversed(self._runs), None)
         message = "" if verification is None else verification.describe()
         record_eeprom_write(
-            self.db, write.serial, write.sha256, attempts=write.attempts, verified=verified, run_id=run_id,
-            slot=record.slot, layout_version=1, message=message,  # type: ignore[attr-defined]
+            self.db, write.serial, write.sha256, attempts=write.attempts, read_back_ok=True, verified_on_rig=on_rig,
+            image=write.data or None, run_id=run_id, slot=record.slot, layout_version=1,  # type: ignore[attr-defined]
+            message=message,
         )
 
     def __call__(self, record: Record) -> None:
@@ -294,7 +295,8 @@ class Recorder:
                 continue
             c = m.measurement
             s.add(LimitCheck(run_unit_id=ru.id, step=m.step, name=c.name, value=_num(c.value), low=_num(c.low),
-                             high=_num(c.high), std=_num(c.std), unit=c.unit, passed=bool(c.passed)))
+                             high=_num(c.high), std=_num(c.std), unit=c.unit, passed=bool(c.passed),
+                             verdict=c.verdict.value, k=c.k or None))
         state.pending.clear()
 
     def _unit_finished(self, s: Session, state: _RunState, r: UnitFinished) -> None:
@@ -393,16 +395,25 @@ def record_eeprom_write(
     image_sha256: str,
     *,
     attempts: int,
-    verified: bool,
+    verified: bool | None = None,
+    read_back_ok: bool | None = None,
+    verified_on_rig: bool | None = None,
+    image: bytes | None = None,
     run_id: str | None = None,
     slot: int | None = None,
     layout_version: int = 0,
     message: str = "",
 ) -> int:
-    """Record an EEPROM write of ``serial`` (image SHA-256, attempts, read-back verdict); returns its row id.
+    """Record an EEPROM write of ``serial``; returns its row id.
 
-    ``run_id`` and ``slot`` link it to the run in which it happened (None: written outside a run).
+    ``read_back_ok``: the image read back byte for byte; ``verified_on_rig``: the corrected output was
+    checked on the rig and met its limits (None: not checked). ``verified`` (older callers) stands for
+    ``read_back_ok``. The stored ``verified`` is read back and, where checked, verified on the rig.
+    ``image``: the bytes written. ``run_id`` and ``slot`` link it to its run (None: outside a run).
     """
+    if read_back_ok is None:
+        read_back_ok = bool(verified)
+    verified = read_back_ok and verified_on_rig is not False
     with db.transaction() as s:
         unit = get_or_create_unit(s, serial)
         ru_id = None
@@ -410,16 +421,43 @@ def record_eeprom_write(
             ru_id = s.scalar(select(RunUnit.id).join(Run).where(Run.run_uid == run_id, RunUnit.slot == slot))
         row = EepromWrite(run_unit_id=ru_id, unit_id=unit.id, image_sha256=image_sha256,
                           layout_version=layout_version, attempts=attempts, verified=verified, message=message,
-                          written_at=_now())
+                          written_at=_now(), written=True, read_back_ok=read_back_ok,
+                          verified_on_rig=verified_on_rig, image=image)
         s.add(row)
         s.flush()
         return row.id
 
 
+#: What a person may decide about a unit. Every decision but ``scrap`` resets its failed attempts;
+#: ``scrap`` locks the serial for good.
+DECISIONS = ("retest", "scrap", "rework", "accept-deviation")
+
+
+class DispositionError(StoreError):
+    """A disposition the station refuses: unknown decision or serial, no operator, no reason."""
+
+
 def record_disposition(db: Database, serial: str, decision: str, *, operator: str = "", note: str = "") -> int:
-    """Record a decision about ``serial`` (e.g. 'retest'); it resets the unit's attempt count. Returns the row id."""
+    """Record ``operator``'s ``decision`` about the known unit ``serial`` with its reason ``note``; the row id.
+
+    ``decision`` is one of :data:`DECISIONS`. Raises :class:`DispositionError` (nothing written) for an
+    unknown decision, a serial the station never tested, an empty operator or reason, or any decision
+    about a scrapped unit.
+    """
+    if decision not in DECISIONS:
+        raise DispositionError(f"unknown decision {decision!r}: one of {', '.join(DECISIONS)}")
+    if not operator.strip():
+        raise DispositionError("a disposition needs the operator who decided it (--operator)")
+    if not note.strip():
+        raise DispositionError("a disposition needs its reason (--reason)")
     with db.transaction() as s:
-        unit = get_or_create_unit(s, serial)
+        unit = s.scalar(select(Unit).where(Unit.serial == serial))
+        if unit is None:
+            raise DispositionError(f"no unit with serial {serial!r} in {db.url}: nothing recorded")
+        scrapped = s.scalar(select(Disposition.id).where(Disposition.unit_id == unit.id,
+                                                         Disposition.decision == "scrap"))
+        if scrapped is not None:
+            raise DispositionError(f"{serial} is scrapped: no further disposition is recorded")
         row = Disposition(unit_id=unit.id, decision=decision, operator=operator, note=note, decided_at=_now())
         s.add(row)
         s.flush()

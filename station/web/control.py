@@ -15,8 +15,8 @@ from typing import Any
 from station.kernel.errors import StationBusy, StationError
 from station.sequence.runner import RunResult, SequenceRunner
 
-#: Runs the sequence once; calls its argument with the runner before the run starts.
-RunOnce = Callable[[Callable[[SequenceRunner], None]], RunResult]
+#: Runs the sequence once: ``run(on_runner, operator)``; calls ``on_runner`` with the runner before it starts.
+RunOnce = Callable[[Callable[[SequenceRunner], None], str | None], RunResult]
 
 
 class StationControl:
@@ -54,7 +54,8 @@ class StationControl:
 
             def work() -> None:
                 try:
-                    self.last_result = self.run(handed)
+                    operator = (options or {}).get("operator")
+                    self.last_result = self.run(handed, str(operator) if operator else None)
                 except StationError as exc:
                     failure.append(str(exc))
                     if self.on_error is not None:
@@ -76,6 +77,13 @@ class StationControl:
             return False
         runner.abort()
         return True
+
+    def stop(self, reason: str = "aborted: the station is shutting down", timeout_s: float | None = None) -> None:
+        """Abort the run in progress with ``reason`` and wait until it has ended (rig at rest, recorded)."""
+        runner = self._runner
+        if runner is not None and self.busy:
+            runner.abort(reason)
+            self.wait(timeout_s)
 
     def wait(self, timeout_s: float | None = None) -> RunResult | None:
         """Wait for the run in progress to end; its result (None if none ran or it is still going)."""

@@ -6,8 +6,13 @@ thread of a process that also runs the sequence (so the page shows that run live
 
 from __future__ import annotations
 
+import asyncio
+import signal
+import socket
 import threading
 import time
+from collections.abc import Callable
+from types import FrameType
 
 import uvicorn
 from fastapi import FastAPI
@@ -17,9 +22,27 @@ from station.web.app import create_app
 from station.web.state import LiveStatus
 
 
+class _Server(uvicorn.Server):
+    """uvicorn's server that also exits on SIGHUP and, before it shuts down, hands the signal to ``on_exit``."""
+
+    def __init__(self, config: uvicorn.Config, on_exit: Callable[[str], None] | None) -> None:
+        super().__init__(config)
+        self.on_exit = on_exit
+        self.exit_reason = "aborted: the station is shutting down"
+
+    def handle_exit(self, sig: int, frame: FrameType | None) -> None:
+        self.exit_reason = f"aborted by {signal.Signals(sig).name}"
+        super().handle_exit(sig, frame)
+
+    async def shutdown(self, sockets: list[socket.socket] | None = None) -> None:
+        if self.on_exit is not None:
+            await asyncio.to_thread(self.on_exit, self.exit_reason)
+        await super().shutdown(sockets)
+
+
 def serve(host: str = "127.0.0.1", port: int = 8000, db_url: str | None = None, token: str | None = None,
-          live: LiveStatus | None = None) -> None:
-    """Serve the web application on ``host``:``port`` until interrupted.
+          live: LiveStatus | None = None, on_exit: Callable[[str], None] | None = None) -> None:
+    """Serve the web application on ``host``:``port`` until SIGINT, SIGTERM or SIGHUP.
 
     Args:
         host: address to bind (127.0.0.1: this machine only; 0.0.0.0 for the line's network).
@@ -27,9 +50,16 @@ def serve(host: str = "127.0.0.1", port: int = 8000, db_url: str | None = None, 
         db_url: station database URL (None: ``$STATION_DB`` or ``sqlite:///station.sqlite``).
         token: bearer token for the write actions (None: read-only, they answer 401).
         live: the live status of a sequence running in this process (None: an idle station).
+        on_exit: called with the reason (``'aborted by SIGTERM'``) before the server shuts down: the
+            station aborts a run in progress there and waits until the rig is at rest.
     """
     app = create_app(db_url, token=token, live=live)
-    uvicorn.run(app, host=host, port=port, log_level="info")
+    server = _Server(uvicorn.Config(app, host=host, port=port, log_level="info"), on_exit)
+    previous = signal.signal(signal.SIGHUP, server.handle_exit)
+    try:
+        server.run()
+    finally:
+        signal.signal(signal.SIGHUP, previous)
 
 
 class ServerThread:
