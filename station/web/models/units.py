@@ -41,7 +41,8 @@ class LimitCheckResult(BaseModel):
     low: float | None = Field(description="lower limit (in unit); null: none")
     high: float | None = Field(description="upper limit (in unit); null: none")
     unit: str = Field(description="the SI unit of value, std, low and high, e.g. 'm/s^2', 'rad/s', 's', '1'")
-    passed: bool = Field(description="the value is within the limits (with the uncertainty rule of the limits file)")
+    passed: bool = Field(description="the value passed: inside [low, high], or outside by at most k_sigma times "
+                                     "its std (k_sigma of the limits file)")
 
 
 class UnitRunResult(BaseModel):
@@ -74,7 +75,7 @@ class EepromWriteEntry(BaseModel):
     layout_version: int = Field(description="the image layout's version (station/eeprom/layout.md)")
     attempts: int = Field(description="write attempts")
     verified: bool = Field(description="the read-back matched the image")
-    message: Message
+    message: str = Field(description="what the write reported ('' when there is nothing to say)")
     written_at: Timestamp
 
 
