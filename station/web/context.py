@@ -40,8 +40,8 @@ class WebContext:
     svgs: SvgCache = field(default_factory=SvgCache)
 
 
-def web_context(request: Request) -> WebContext:
-    """The context of the application serving ``request``."""
+async def web_context(request: Request) -> WebContext:
+    """The context of the application serving ``request`` (async: resolved on the event loop, no thread hop)."""
     return request.app.state.web
 
 
@@ -49,7 +49,7 @@ Web = Annotated[WebContext, Depends(web_context)]
 _bearer = HTTPBearer(auto_error=False)
 
 
-def require_token(web: Web, creds: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)]) -> None:
+async def require_token(web: Web, creds: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)]) -> None:
     """Let a write action through only with ``Authorization: Bearer <the station's token>``; 401 otherwise."""
     ok = (web.token is not None and creds is not None and creds.scheme.lower() == "bearer"
           and hmac.compare_digest(creds.credentials.encode(), web.token.encode()))
