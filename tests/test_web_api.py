@@ -8,6 +8,7 @@ the default limits file) that passes, and two synthetic units (one FAIL, one ERR
 from __future__ import annotations
 
 import asyncio
+import json
 import math
 from collections.abc import Iterator
 from datetime import UTC, datetime
@@ -37,8 +38,9 @@ from station.sequence.records import (
 from station.session.csv_v1 import write_session
 from station.sim.session_sim import simulate_session
 from station.store import Recorder, open_database
+from station.store.queries import show_unit
 from station.web.app import create_app
-from station.web.listing import is_marginal
+from station.web.listing import is_marginal, latest_checks
 from station.web.state import LiveStatus, shift_start, shift_stats
 
 TOKEN = "s3cret-token"
@@ -295,6 +297,20 @@ def test_openapi_lists_the_api(client: TestClient) -> None:
         assert p in paths
     assert "post" in paths["/api/runs"] and "401" in paths["/api/runs"]["post"]["responses"]
     assert "/" not in paths and "/events" not in paths
+
+
+def test_typed_answers_lose_nothing(client: TestClient, store: dict[str, Any]) -> None:
+    """The response models pass on every field the store and the live status have (nothing dropped on the way)."""
+    for serial in (store["params"].serial, "BAD-1", "ERR-2"):
+        detail = show_unit(store["db"], serial)
+        assert detail is not None
+        expected = {**detail.to_dict(), "checks": [c.model_dump() for c in latest_checks(store["db"], serial)]}
+        assert client.get(f"/api/units/{serial}").json() == json.loads(json.dumps(expected))
+    check = client.get("/api/units/BAD-1").json()["checks"][0]
+    assert check == {"name": "accel.bias_static.x", "value": 0.5, "std": 0.01, "low": -0.1, "high": 0.1,
+                     "unit": "m/s^2", "passed": False}
+    live: LiveStatus = client.app.state.live  # type: ignore[attr-defined]
+    assert client.get("/api/status").json() == json.loads(json.dumps(live.snapshot()))
 
 
 def test_schemathesis_finds_no_server_error(client: TestClient) -> None:

@@ -3,7 +3,8 @@
 Runs (newest first, filtered), units with their latest result (filtered by date,
 outcome and station), a unit's limit checks of its latest finished run, and the
 population of limit-checked values over all units. Every function opens its own read
-transaction and returns plain data. Values are SI as stored (see the ``unit`` field).
+transaction and returns typed results (the JSON API's models, :mod:`station.web.models`).
+Values are SI as stored (see the ``unit`` field).
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from sqlalchemy import select
 from station.store.db import Database
 from station.store.models import UNFINISHED, LimitCheck, Run, RunUnit, Unit
 from station.store.models import Station as StationRow
+from station.web.models import LimitCheckResult, RunSummary, RunUnitOutcome, UnitOverview
 
 
 def _iso(t: datetime | None) -> str | None:
@@ -27,9 +29,8 @@ def _iso(t: datetime | None) -> str | None:
 
 
 def list_runs(db: Database, *, limit: int = 50, station: str | None = None, outcome: str | None = None,
-              ) -> list[dict[str, Any]]:
-    """The newest ``limit`` runs: run_id, station, outcome, started_at, finished_at, duration_s, wall_s, message,
-    operator and units [{slot, serial, outcome, message}]."""
+              ) -> list[RunSummary]:
+    """The newest ``limit`` runs with every slot's unit and outcome."""
     with db.transaction() as s:
         q = select(Run, StationRow.name).join(StationRow, Run.station_id == StationRow.id)
         if station:
@@ -38,24 +39,23 @@ def list_runs(db: Database, *, limit: int = 50, station: str | None = None, outc
             q = q.where(Run.outcome == outcome)
         out = []
         for run, station_name in s.execute(q.order_by(Run.started_at.desc(), Run.id.desc()).limit(limit)).all():
-            units = [{"slot": ru.slot, "serial": ru.unit.serial if ru.unit else "", "outcome": ru.outcome,
-                      "message": ru.message} for ru in run.units]
-            out.append({"run_id": run.run_uid, "station": station_name, "outcome": run.outcome,
-                        "started_at": _iso(run.started_at), "finished_at": _iso(run.finished_at),
-                        "duration_s": run.duration_s, "wall_s": run.wall_s, "message": run.message,
-                        "operator": run.operator, "units": units})
+            units = [RunUnitOutcome(slot=ru.slot, serial=ru.unit.serial if ru.unit else "", outcome=ru.outcome,
+                                    message=ru.message) for ru in run.units]
+            out.append(RunSummary(run_id=run.run_uid, station=station_name, outcome=run.outcome,
+                                  started_at=_iso(run.started_at), finished_at=_iso(run.finished_at),
+                                  duration_s=run.duration_s, wall_s=run.wall_s, message=run.message,
+                                  operator=run.operator, units=units))
     return out
 
 
 def list_unit_results(
     db: Database, *, day_from: date | None = None, day_to: date | None = None, outcome: str | None = None,
     station: str | None = None,
-) -> list[dict[str, Any]]:
+) -> list[UnitOverview]:
     """Units with their latest result among the runs matching the filters.
 
     ``day_from``/``day_to``: inclusive UTC dates of the run start; ``outcome``: the unit's outcome in that run;
-    ``station``: the station name. Each row: serial, runs (matching), last_outcome, last_run_id,
-    last_started_at, station.
+    ``station``: the station name.
     """
     with db.transaction() as s:
         q = (select(Unit.serial, RunUnit.outcome, Run.run_uid, Run.started_at, StationRow.name)
@@ -68,27 +68,23 @@ def list_unit_results(
         if station:
             q = q.where(StationRow.name == station)
         rows = s.execute(q.order_by(Unit.serial, Run.started_at.desc(), Run.id.desc())).all()
-    out: dict[str, dict[str, Any]] = {}
-    for serial, unit_outcome, run_uid, started, station_name in rows:
-        row = out.get(serial)
-        if row is None:
-            out[serial] = {"serial": serial, "runs": 1, "last_outcome": unit_outcome, "last_run_id": run_uid,
-                           "last_started_at": _iso(started), "station": station_name}
-        else:
-            row["runs"] += 1
-    result = list(out.values())
-    if outcome:
-        result = [r for r in result if r["last_outcome"] == outcome]
-    return result
+    latest: dict[str, tuple[Any, ...]] = {}
+    runs: dict[str, int] = {}
+    for row in rows:  # newest run of each unit first
+        latest.setdefault(row[0], row)
+        runs[row[0]] = runs.get(row[0], 0) + 1
+    result = [UnitOverview(serial=serial, runs=runs[serial], last_outcome=unit_outcome, last_run_id=run_uid,
+                           last_started_at=_iso(started), station=station_name)
+              for serial, unit_outcome, run_uid, started, station_name in latest.values()]
+    return [r for r in result if r.last_outcome == outcome] if outcome else result
 
 
 def _num(x: float | None) -> float | None:
     return None if x is None or not math.isfinite(x) else float(x)
 
 
-def latest_checks(db: Database, serial: str) -> list[dict[str, Any]]:
-    """The limit checks (step ``'limits'``) of the unit's newest finished run with any: name, value, std, low,
-    high, unit, passed."""
+def latest_checks(db: Database, serial: str) -> list[LimitCheckResult]:
+    """The limit checks (step ``'limits'``) of the unit's newest finished run with any."""
     with db.transaction() as s:
         ru_id = s.scalar(
             select(RunUnit.id).join(Run, RunUnit.run_id == Run.id).join(Unit, RunUnit.unit_id == Unit.id)
@@ -100,8 +96,8 @@ def latest_checks(db: Database, serial: str) -> list[dict[str, Any]]:
             return []
         checks = s.scalars(select(LimitCheck).where(LimitCheck.run_unit_id == ru_id, LimitCheck.step == "limits")
                            .order_by(LimitCheck.id)).all()
-        return [{"name": c.name, "value": _num(c.value), "std": _num(c.std), "low": _num(c.low),
-                 "high": _num(c.high), "unit": c.unit, "passed": c.passed} for c in checks]
+        return [LimitCheckResult(name=c.name, value=_num(c.value), std=_num(c.std), low=_num(c.low),
+                                 high=_num(c.high), unit=c.unit, passed=c.passed) for c in checks]
 
 
 def is_marginal(value: float | None, low: float | None, high: float | None, fraction: float) -> bool:

@@ -17,6 +17,10 @@ overhead (step duration minus hold: motion and settling) of the steps finished s
 First-pass yield and units per hour for the shift come from the store
 (:func:`shift_stats`), so they include earlier runs and other stations' results in the
 same database.
+
+:meth:`LiveStatus.status` is the typed status (:class:`~station.web.models.StationStatus`, the
+answer of ``GET /api/status``); :meth:`LiveStatus.snapshot` is the same as plain JSON-able data
+for the status page and its events.
 """
 
 from __future__ import annotations
@@ -26,7 +30,7 @@ import contextlib
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from datetime import UTC, datetime, timedelta
 from typing import Any
 
@@ -46,6 +50,9 @@ from station.sequence.records import (
 from station.store.db import Database
 from station.store.models import UNFINISHED, Run, RunUnit, Unit
 from station.store.models import Station as StationRow
+from station.web.listing import list_runs
+from station.web.models import RigState, RunSummary, ShiftStats, SlotStatus, StationStatus, StepProgress
+from station.web.models.status import StationState
 
 SHIFT_HOURS = 8.0
 """Length of a shift (h); shifts start at 06:00, 14:00 and 22:00 UTC."""
@@ -59,25 +66,6 @@ def shift_start(now: datetime) -> datetime:
         anchor -= timedelta(days=1)
     shift = timedelta(hours=SHIFT_HOURS)
     return anchor + shift * int((now - anchor) / shift)
-
-
-@dataclass(frozen=True)
-class ShiftStats:
-    """Production figures since ``since``.
-
-    Attributes:
-        since: shift start (UTC, ISO 8601).
-        units_tested: unit results of finished runs in the shift.
-        first_pass_units: units whose first ever test was in this shift.
-        first_pass_yield: fraction of those that passed that first test (1), None if none.
-        units_per_hour: unit results per hour since the shift started (1/h).
-    """
-
-    since: str
-    units_tested: int
-    first_pass_units: int
-    first_pass_yield: float | None
-    units_per_hour: float
 
 
 def shift_stats(db: Database, now: datetime | None = None, station: str | None = None) -> ShiftStats:
@@ -101,9 +89,8 @@ def shift_stats(db: Database, now: datetime | None = None, station: str | None =
     first = [r for r in in_shift if first_ever.get(r[0]) == (r[2], r[3])]
     passed = sum(1 for r in first if r[1] == Outcome.PASS.value)
     hours = max((now - since).total_seconds() / 3600.0, 1.0 / 60.0)
-    return ShiftStats(
-        since.isoformat(), len(in_shift), len(first), passed / len(first) if first else None, len(in_shift) / hours
-    )
+    return ShiftStats(since=since.isoformat(), units_tested=len(in_shift), first_pass_units=len(first),
+                      first_pass_yield=passed / len(first) if first else None, units_per_hour=len(in_shift) / hours)
 
 
 def _aware(t: datetime) -> datetime:
@@ -111,20 +98,8 @@ def _aware(t: datetime) -> datetime:
 
 
 @dataclass
-class SlotStatus:
-    """One fixture slot's tile: serial ('' until known), what it is doing, its verdict (None until finished)."""
-
-    slot: int
-    sensor: str = ""
-    serial: str = ""
-    state: str = "waiting"
-    verdict: str | None = None
-    message: str = ""
-
-
-@dataclass
 class _Live:
-    state: str = "idle"
+    state: StationState = "idle"
     run_id: str = ""
     station: str = ""
     rig: str = ""
@@ -139,7 +114,7 @@ class _Live:
     steps_done: int = 0
     done_overheads: list[float] = field(default_factory=list)
     hold_by_kind: dict[str, float] = field(default_factory=dict)
-    rig_state: dict[str, Any] | None = None  # the rig's last reading (RigReading) in this run
+    rig_state: RigState | None = None  # the rig's last reading in this run
     slots: list[SlotStatus] = field(default_factory=list)
     outcome: str | None = None
 
@@ -164,7 +139,7 @@ class LiveStatus:
         self._live = _Live()
         self._version = 0
         self._store_epoch = 0
-        self._store_cache: tuple[int, float, dict[str, Any]] | None = None
+        self._store_cache: tuple[int, float, tuple[ShiftStats, list[RunSummary]]] | None = None
         self._waiters: list[tuple[asyncio.AbstractEventLoop, asyncio.Future[None]]] = []
         self.on_start: Callable[[dict[str, Any]], str] | None = None
         """Starts a run when the API is asked to (returns its run id); None: the station cannot start runs."""
@@ -224,14 +199,14 @@ class LiveStatus:
         if isinstance(r, RunStarted):
             self._live = lv = _Live(state="running", run_id=r.run_id, station=r.station, rig=r.rig, steps=r.steps,
                                     t_s=r.t_s, step_started_t_s=r.t_s,
-                                    slots=[SlotStatus(k, sensor=s) for k, s in enumerate(r.sensors)])
+                                    slots=[SlotStatus(slot=k, sensor=s) for k, s in enumerate(r.sensors)])
             for sl in lv.slots:
                 sl.state = "measuring"
         elif isinstance(r, RigReading):
             if r.run_id == lv.run_id:
-                lv.rig_state = {"roll_deg": round(r.roll_deg, 3), "pitch_deg": round(r.pitch_deg, 3),
-                                "yaw_deg": round(r.yaw_deg, 3), "rate_dps": round(r.rate_dps, 3),
-                                "status": r.status, "fault_code": r.fault_code, "t_s": r.t_s}
+                lv.rig_state = RigState(roll_deg=round(r.roll_deg, 3), pitch_deg=round(r.pitch_deg, 3),
+                                        yaw_deg=round(r.yaw_deg, 3), rate_dps=round(r.rate_dps, 3),
+                                        status=r.status, fault_code=r.fault_code, t_s=r.t_s)
         elif isinstance(r, StepStarted):
             lv.step_index, lv.step_name, lv.step_kind = r.index, r.name, r.kind
             lv.step_hold_s, lv.step_started_t_s, lv.t_s = r.hold_s, r.t_s, r.t_s
@@ -270,17 +245,12 @@ class LiveStatus:
 
     def _slot(self, k: int) -> SlotStatus:
         while len(self._live.slots) <= k:
-            self._live.slots.append(SlotStatus(len(self._live.slots)))
+            self._live.slots.append(SlotStatus(slot=len(self._live.slots)))
         return self._live.slots[k]
 
-    def snapshot(self, *, with_store: bool = True) -> dict[str, Any]:
-        """The status as plain JSON-able data (see ``GET /api/status``).
-
-        Keys: version, state, run_id, station, rig, message, outcome, step {index, name, kind, hold_s},
-        steps_done, steps_total, progress (0..1), remaining_s (station clock s, None when idle),
-        slots [{slot, sensor, serial, state, verdict, message}], shift (see :class:`ShiftStats`) or None,
-        recent_runs (see :func:`station.web.listing.list_runs`).
-        """
+    def status(self, *, with_store: bool = True) -> StationStatus:
+        """The status (``GET /api/status``); ``with_store=False``: without the shift figures and recent runs."""
+        shift, recent = self._store_figures() if with_store else (None, [])
         with self._lock:
             lv = self._live
             total = len(lv.steps)
@@ -293,33 +263,30 @@ class LiveStatus:
                 future = lv.steps[max(lv.step_index + 1, lv.steps_done):]
                 remaining = current + sum(
                     lv.hold_by_kind.get(_kind_of(name), lv.step_hold_s) + overhead for name in future)
-            out: dict[str, Any] = {
-                "version": self._version, "state": lv.state, "run_id": lv.run_id, "station": lv.station,
-                "rig": lv.rig, "message": lv.message, "outcome": lv.outcome,
-                "step": {"index": lv.step_index, "name": lv.step_name, "kind": lv.step_kind,
-                         "hold_s": lv.step_hold_s},
-                "steps_done": lv.steps_done, "steps_total": total,
-                "progress": lv.steps_done / total if total else (1.0 if lv.outcome else 0.0),
-                "remaining_s": remaining,
-                "slots": [asdict(s) for s in lv.slots],
-                "rig_state": lv.rig_state,
-            }
-        out.update(self._store_figures() if with_store else {"shift": None, "recent_runs": []})
-        return out
+            return StationStatus(
+                version=self._version, state=lv.state, run_id=lv.run_id, station=lv.station, rig=lv.rig,
+                message=lv.message, outcome=lv.outcome,
+                step=StepProgress(index=lv.step_index, name=lv.step_name, kind=lv.step_kind, hold_s=lv.step_hold_s),
+                steps_done=lv.steps_done, steps_total=total,
+                progress=lv.steps_done / total if total else (1.0 if lv.outcome else 0.0), remaining_s=remaining,
+                slots=[s.model_copy() for s in lv.slots], rig_state=lv.rig_state, shift=shift, recent_runs=recent,
+            )
 
-    def _store_figures(self) -> dict[str, Any]:
+    def snapshot(self, *, with_store: bool = True) -> dict[str, Any]:
+        """:meth:`status` as plain JSON-able data (the status page and its server-sent events)."""
+        return self.status(with_store=with_store).model_dump()
+
+    def _store_figures(self) -> tuple[ShiftStats | None, list[RunSummary]]:
         """Shift figures and recent runs, re-read when a unit or run finished or after 10 s (s of wall time)."""
         if self.db is None:
-            return {"shift": None, "recent_runs": []}
+            return None, []
         with self._lock:
             epoch = self._store_epoch
             cached = self._store_cache
         now = time.monotonic()
         if cached is not None and cached[0] == epoch and now - cached[1] < 10.0:
             return cached[2]
-        from station.web.listing import list_runs
-
-        figures = {"shift": asdict(shift_stats(self.db, self._now())), "recent_runs": list_runs(self.db, limit=10)}
+        figures = shift_stats(self.db, self._now()), list_runs(self.db, limit=10)
         with self._lock:
             self._store_cache = (epoch, now, figures)
         return figures

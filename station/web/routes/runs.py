@@ -1,0 +1,60 @@
+"""Runs: ``GET /api/runs``, and the write actions ``POST /api/runs`` (start) and ``POST /api/runs/{run_id}/abort``.
+
+The write actions need ``Authorization: Bearer <token>`` with the token configured on the station; without a
+configured token they always answer 401 (read-only by default). They go through the live status's
+``on_start``/``on_abort`` hooks (:class:`station.web.control.StationControl`); unset hooks answer 503.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from fastapi import APIRouter, Body, Depends, HTTPException, Query
+
+from station.kernel.errors import StationBusy, StationError
+from station.web.context import Web, require_token
+from station.web.listing import list_runs
+from station.web.models import RunAbortAccepted, RunAccepted, RunFilter, RunSummary, StartRunRequest, problem
+
+router = APIRouter(tags=["runs"])
+UNAUTHORIZED = {401: problem("missing or wrong bearer token (or no token configured)")}
+
+
+@router.get("/api/runs", response_model=list[RunSummary])
+def api_runs(web: Web, query: Annotated[RunFilter, Query()]) -> list[RunSummary]:
+    """Runs, newest first, with every slot's unit and outcome."""
+    return list_runs(web.db, limit=query.limit, station=query.station, outcome=query.outcome)
+
+
+@router.post("/api/runs", status_code=202, response_model=RunAccepted, dependencies=[Depends(require_token)],
+             responses={**UNAUTHORIZED, 409: problem("a run is in progress"),
+                        503: problem("this station cannot start runs")})
+def api_start_run(web: Web, options: Annotated[StartRunRequest | None, Body()] = None) -> RunAccepted:
+    """Start a run on the station (write action: bearer token)."""
+    live = web.live
+    if live.on_start is None:
+        raise HTTPException(503, "this station cannot start runs from the API")
+    if live.status(with_store=False).state == "running":
+        raise HTTPException(409, "a run is in progress")
+    try:
+        return RunAccepted(run_id=live.on_start(options.model_dump() if options is not None else {}))
+    except StationBusy as exc:
+        raise HTTPException(409, str(exc)) from None
+    except StationError as exc:
+        raise HTTPException(503, str(exc)) from None
+
+
+@router.post("/api/runs/{run_id}/abort", status_code=202, response_model=RunAbortAccepted,
+             dependencies=[Depends(require_token)],
+             responses={**UNAUTHORIZED, 404: problem("no running run with this id"),
+                        503: problem("this station cannot abort runs")})
+def api_abort_run(web: Web, run_id: str) -> RunAbortAccepted:
+    """Abort the running run ``run_id`` (write action: bearer token)."""
+    if web.live.on_abort is None:
+        raise HTTPException(503, "this station cannot abort runs from the API")
+    if not web.live.on_abort(run_id):
+        raise HTTPException(404, f"no running run {run_id}")
+    return RunAbortAccepted(run_id=run_id, state="aborting")
+
+
+__all__ = ["api_abort_run", "api_runs", "api_start_run", "router"]

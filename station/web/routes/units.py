@@ -1,0 +1,112 @@
+"""Units: the engineer's unit page (``/units/{serial}``) with its plots, ``GET /api/units``, ``GET
+/api/units/{serial}`` and the EEPROM image download ``GET /api/units/{serial}/eeprom.bin``.
+
+The unit page shows the parameter set against its limits (marginal values highlighted), the run history, the
+plots (``/units/{serial}/plots/{name}.svg``, see :mod:`station.web.plots`) and the diagnosis section (see
+:mod:`station.web.routes.diagnosis`).
+"""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from fastapi import APIRouter, HTTPException, Query, Request
+from fastapi.responses import HTMLResponse, Response
+
+from station.eeprom.image import CalibrationImage, ImageError, encode_image
+from station.kernel.errors import StationError
+from station.session.csv_v1 import read_session
+from station.store.queries import latest_parameter_set, show_unit
+from station.web import plots
+from station.web.context import Web
+from station.web.listing import is_marginal, latest_checks, list_unit_results
+from station.web.lookup import image_origin, plot_source, recordings, unit_or_404
+from station.web.models import UnitFilter, UnitOverview, UnitRecord, problem
+from station.web.templating import templates
+
+PLOT_NAMES = ("raw_corrected", "drift", "acf", "allan", "residuals")
+_UNIT_PLOTS = {"raw_corrected": plots.raw_corrected_svg, "drift": plots.drift_svg, "acf": plots.acf_svg,
+               "allan": plots.allan_svg}
+_SVG_CACHED = {"Cache-Control": "max-age=60"}
+
+router = APIRouter()
+
+
+@router.get("/units/{serial}", response_class=HTMLResponse, include_in_schema=False)
+def unit_page(request: Request, web: Web, serial: str) -> HTMLResponse:
+    detail = show_unit(web.db, serial)
+    if detail is None:
+        return templates.TemplateResponse(request, "missing.html", {"what": f"unit {serial}"}, status_code=404)
+    checks = [(c, c.passed and is_marginal(c.value, c.low, c.high, web.marginal_fraction))
+              for c in latest_checks(web.db, serial)]
+    recorded = {rec.run_id for rec in recordings(detail)}
+    return templates.TemplateResponse(request, "unit.html", {
+        "d": detail, "checks": checks, "plots": PLOT_NAMES if plot_source(detail) is not None else (),
+        "params": detail.latest_params(), "marginal_fraction": web.marginal_fraction,
+        "diag_runs": [r for r in detail.runs if r.run_id in recorded],
+    })
+
+
+@router.get("/units/{serial}/plots/{name}.svg", include_in_schema=False)
+def unit_plot(web: Web, serial: str, name: str) -> Response:
+    if name not in PLOT_NAMES:
+        raise HTTPException(404, f"no plot {name}")
+    detail = unit_or_404(web.db, serial)
+    source = plot_source(detail)
+    if source is None:
+        svg = plots.message_svg("no recording or parameter set for this unit")
+    else:
+        run_id, path = source
+
+        def render() -> str:
+            params = detail.latest_params()
+            assert params is not None
+            try:
+                session = read_session(path)
+                if name == "residuals":
+                    return plots.residuals_svg(params)
+                return _UNIT_PLOTS[name](session, params)
+            except (StationError, ValueError) as exc:
+                return plots.message_svg(f"cannot plot: {exc}")
+
+        svg = web.svgs.get((serial, run_id, name), render)
+    return Response(svg, media_type="image/svg+xml", headers=_SVG_CACHED)
+
+
+@router.get("/api/units", tags=["units"], response_model=list[UnitOverview])
+def api_units(web: Web, query: Annotated[UnitFilter, Query()]) -> list[UnitOverview]:
+    """Units with their latest result among the runs matching the filters."""
+    return list_unit_results(web.db, day_from=query.date_from, day_to=query.date_to, outcome=query.outcome,
+                             station=query.station)
+
+
+@router.get("/api/units/{serial}", tags=["units"], response_model=UnitRecord,
+            responses={404: problem("unknown serial")})
+def api_unit(web: Web, serial: str) -> UnitRecord:
+    """One unit: its runs (newest first), latest parameter set (SI units), limit checks, EEPROM writes."""
+    return UnitRecord.of(unit_or_404(web.db, serial), latest_checks(web.db, serial))
+
+
+@router.get("/api/units/{serial}/eeprom.bin", tags=["units"], response_class=Response,
+            responses={200: {"content": {"application/octet-stream": {}}, "description": "the EEPROM image"},
+                       404: problem("unknown serial, or the unit never passed"),
+                       409: problem("the parameter set does not fit the image format")})
+def api_eeprom(web: Web, serial: str) -> Response:
+    """The calibration image (see ``station/eeprom/layout.md``) of the unit's latest PASS parameter set."""
+    params = latest_parameter_set(web.db, serial, passed_only=True)
+    if params is None:
+        raise HTTPException(404, f"no passed parameter set for unit {serial}")
+    station_name, when = image_origin(web.db, serial)
+    try:
+        data = encode_image(CalibrationImage.from_params(params, station_name, when))
+    except ImageError as exc:
+        raise HTTPException(409, f"cannot encode the image: {exc}") from exc
+    return Response(data, media_type="application/octet-stream",
+                    headers={"Content-Disposition": f'attachment; filename="{_safe(serial)}.eeprom.bin"'})
+
+
+def _safe(serial: str) -> str:
+    return "".join(c if c.isalnum() or c in "-_." else "_" for c in serial) or "unit"
+
+
+__all__ = ["PLOT_NAMES", "api_eeprom", "api_unit", "api_units", "router", "unit_page", "unit_plot"]

@@ -1,0 +1,23 @@
+"""The server-rendered pages' Jinja2 templates (``templates/``, no front-end build step) and their filters."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+from fastapi.templating import Jinja2Templates
+
+TEMPLATES_DIR = Path(__file__).resolve().parent / "templates"
+
+
+def fmt(value: float | None) -> str:
+    """A number for a table cell: 4 significant digits, '—' for a missing or non-finite value."""
+    if value is None or not math.isfinite(value):
+        return "—"
+    return f"{value:.4g}"
+
+
+templates = Jinja2Templates(directory=str(TEMPLATES_DIR))
+templates.env.filters["fmt"] = fmt
+
+__all__ = ["TEMPLATES_DIR", "fmt", "templates"]
