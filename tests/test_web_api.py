@@ -11,6 +11,7 @@ import asyncio
 import json
 import math
 from collections.abc import Iterator
+from dataclasses import replace
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -21,9 +22,10 @@ from fastapi.testclient import TestClient
 from station.eeprom.image import decode_image
 from station.fit.calibrate import fit_session
 from station.fit.params import ParameterSet
+from station.kernel.limits import table1_limits
 from station.kernel.limits_file import load_limits
-from station.kernel.measurement import Measurement
-from station.sequence.limits import check_limits
+from station.kernel.measurement import Measurement, Verdict
+from station.sequence.limits import check_limits, conformance
 from station.sequence.records import (
     Measured,
     Outcome,
@@ -45,6 +47,12 @@ from station.web.state import LiveStatus, shift_start, shift_stats
 
 TOKEN = "s3cret-token"
 RUN1, RUN2 = "run-0001", "run-0002"
+
+
+# what the station's conformance records for 0.095 +- 2 * 0.001 in [-0.1, 0.1] with a 5 % marginal band
+MARGINAL_CHECK = conformance("accel.bias_static.y", 0.095, 0.001, (-0.1, 0.1), "m/s^2",
+                             replace(table1_limits(), rule="guard-band", k_sigma=2.0, marginal_fraction=0.05))
+assert MARGINAL_CHECK is not None and MARGINAL_CHECK.verdict == Verdict.MARGINAL
 
 
 def run_records(run_id: str, at: str, units: list[tuple[str, Outcome, list[Measured], str | None, str | None]],
@@ -83,7 +91,7 @@ def store(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Any]]:
     bad = [Measured(RUN1, 0, "BAD-1", "limits",
                     Measurement("accel.bias_static.x", 0.5, "m/s^2", -0.1, 0.1, False, 0.01)),
            Measured(RUN1, 0, "BAD-1", "limits",
-                    Measurement("accel.bias_static.y", 0.095, "m/s^2", -0.1, 0.1, True, 0.01))]
+                    MARGINAL_CHECK)]
     url = f"sqlite:///{tmp / 'station.sqlite'}"
     db = open_database(url)
     recorder = Recorder(db)
@@ -308,7 +316,7 @@ def test_typed_answers_lose_nothing(client: TestClient, store: dict[str, Any]) -
         assert client.get(f"/api/units/{serial}").json() == json.loads(json.dumps(expected))
     check = client.get("/api/units/BAD-1").json()["checks"][0]
     assert check == {"name": "accel.bias_static.x", "value": 0.5, "std": 0.01, "low": -0.1, "high": 0.1,
-                     "unit": "m/s^2", "passed": False}
+                     "unit": "m/s^2", "passed": False, "verdict": "FAIL", "k": None}
     live: LiveStatus = client.app.state.live  # type: ignore[attr-defined]
     assert client.get("/api/status").json() == json.loads(json.dumps(live.snapshot()))
 

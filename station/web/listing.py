@@ -97,7 +97,15 @@ def latest_checks(db: Database, serial: str) -> list[LimitCheckResult]:
         checks = s.scalars(select(LimitCheck).where(LimitCheck.run_unit_id == ru_id, LimitCheck.step == "limits")
                            .order_by(LimitCheck.id)).all()
         return [LimitCheckResult(name=c.name, value=_num(c.value), std=_num(c.std), low=_num(c.low),
-                                 high=_num(c.high), unit=c.unit, passed=c.passed) for c in checks]
+                                 high=_num(c.high), unit=c.unit, passed=c.passed, verdict=c.verdict, k=c.k)
+                for c in checks]
+
+
+def shown_marginal(c: LimitCheckResult, fraction: float) -> bool:
+    """Whether the page flags a check MARGINAL: its recorded verdict; for older rows, :func:`is_marginal`."""
+    if c.verdict is not None:
+        return c.verdict == "MARGINAL"
+    return c.passed and is_marginal(c.value, c.low, c.high, fraction)
 
 
 def is_marginal(value: float | None, low: float | None, high: float | None, fraction: float) -> bool:

@@ -3,7 +3,6 @@ the recording its plots are made from and the origin of its EEPROM image."""
 
 from __future__ import annotations
 
-from datetime import UTC, datetime
 from pathlib import Path
 
 from fastapi import HTTPException
@@ -47,13 +46,4 @@ def plot_source(detail: UnitDetail) -> tuple[str, str] | None:
     return None
 
 
-def image_origin(db: Database, serial: str) -> tuple[str, datetime]:
-    """Station name (at most 16 characters) and start of the unit's newest PASS run, for its EEPROM image."""
-    detail = show_unit(db, serial)
-    for run in detail.runs if detail else ():
-        if run.outcome == "PASS" and run.started_at:
-            return run.station[:16], datetime.fromisoformat(run.started_at).replace(tzinfo=UTC)
-    return "station", datetime(1970, 1, 1, tzinfo=UTC)
-
-
-__all__ = ["image_origin", "plot_source", "recording_or_404", "recordings", "unit_or_404"]
+__all__ = ["plot_source", "recording_or_404", "recordings", "unit_or_404"]

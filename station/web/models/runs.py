@@ -42,9 +42,12 @@ class RunFilter(BaseModel):
 
 
 class StartRunRequest(BaseModel):
-    """Options of a run started from the API. There are none yet: the station runs the plan it was configured with."""
+    """Options of a run started from the API; the station runs the plan and limits it was configured with."""
 
     model_config = ConfigDict(extra="forbid")
+
+    operator: str | None = Field(default=None, max_length=100,
+                                 description="who starts the run, recorded on it (default: the station's operator)")
 
 
 class RunAccepted(BaseModel):

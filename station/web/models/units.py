@@ -41,8 +41,13 @@ class LimitCheckResult(BaseModel):
     low: float | None = Field(description="lower limit (in unit); null: none")
     high: float | None = Field(description="upper limit (in unit); null: none")
     unit: str = Field(description="the SI unit of value, std, low and high, e.g. 'm/s^2', 'rad/s', 's', '1'")
-    passed: bool = Field(description="the value passed: inside [low, high], or outside by at most k_sigma times "
-                                     "its std (k_sigma of the limits file)")
+    passed: bool = Field(description="the value conforms: by the guard-band rule, value +- k std inside [low, high]; "
+                                     "by the widening rule of station-limits/1 files, outside by at most k std")
+    verdict: str | None = Field(default=None, description="PASS, MARGINAL (a pass near a limit), INCONCLUSIVE (inside, "
+                                                         "but value +- k std straddles a limit) or FAIL; null for "
+                                                         "checks recorded by an older station")
+    k: float | None = Field(default=None, description="the coverage factor k of the uncertainty interval the verdict "
+                                                      "used (1); null: none")
 
 
 class UnitRunResult(BaseModel):

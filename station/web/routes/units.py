@@ -13,14 +13,14 @@ from typing import Annotated
 from fastapi import APIRouter, HTTPException, Query, Request
 from fastapi.responses import HTMLResponse, Response
 
-from station.eeprom.image import CalibrationImage, ImageError, encode_image
+from station.eeprom.image import ImageError
 from station.kernel.errors import StationError
 from station.session.csv_v1 import read_session
-from station.store.queries import latest_parameter_set, show_unit
+from station.store.queries import show_unit, unit_image
 from station.web import plots
 from station.web.context import Web
-from station.web.listing import is_marginal, latest_checks, list_unit_results
-from station.web.lookup import image_origin, plot_source, recordings, unit_or_404
+from station.web.listing import latest_checks, list_unit_results, shown_marginal
+from station.web.lookup import plot_source, recordings, unit_or_404
 from station.web.models import UnitFilter, UnitOverview, UnitRecord, problem
 from station.web.templating import templates
 
@@ -37,8 +37,7 @@ def unit_page(request: Request, web: Web, serial: str) -> HTMLResponse:
     detail = show_unit(web.db, serial)
     if detail is None:
         return templates.TemplateResponse(request, "missing.html", {"what": f"unit {serial}"}, status_code=404)
-    checks = [(c, c.passed and is_marginal(c.value, c.low, c.high, web.marginal_fraction))
-              for c in latest_checks(web.db, serial)]
+    checks = [(c, shown_marginal(c, web.marginal_fraction)) for c in latest_checks(web.db, serial)]
     recorded = {rec.run_id for rec in recordings(detail)}
     return templates.TemplateResponse(request, "unit.html", {
         "d": detail, "checks": checks, "plots": PLOT_NAMES if plot_source(detail) is not None else (),
@@ -92,15 +91,19 @@ def api_unit(web: Web, serial: str) -> UnitRecord:
                        404: problem("unknown serial, or the unit never passed"),
                        409: problem("the parameter set does not fit the image format")})
 def api_eeprom(web: Web, serial: str) -> Response:
-    """The calibration image (see ``station/eeprom/layout.md``) of the unit's latest PASS parameter set."""
-    params = latest_parameter_set(web.db, serial, passed_only=True)
-    if params is None:
-        raise HTTPException(404, f"no passed parameter set for unit {serial}")
-    station_name, when = image_origin(web.db, serial)
+    """The calibration image (see ``station/eeprom/layout.md``) of the unit's latest PASS parameter set.
+
+    The bytes its run wrote into the unit (as read back); without a recorded write, the image that run
+    would write (its station and start time; :func:`station.store.queries.unit_image`). The same bytes
+    as ``station eeprom image SERIAL``.
+    """
     try:
-        data = encode_image(CalibrationImage.from_params(params, station_name, when))
+        found = unit_image(web.db, serial)
     except ImageError as exc:
         raise HTTPException(409, f"cannot encode the image: {exc}") from exc
+    if found is None:
+        raise HTTPException(404, f"no passed parameter set for unit {serial}")
+    data = found.data
     return Response(data, media_type="application/octet-stream",
                     headers={"Content-Disposition": f'attachment; filename="{_safe(serial)}.eeprom.bin"'})
 
