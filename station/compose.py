@@ -2,8 +2,8 @@
 
 A :class:`StationConfig` names the hardware by URL (a rig and one sensor per fixture
 slot), the database, the limits file, the station id and the clock scale. :class:`Station`
-wires the rest once: the clock, the limits, the record subscribers (the store's recorder
-after the caller's own), the retest gate, and for each run the hardware (opened by URL
+wires the rest once: the clock, the limits (and with them the fit's prior on T_c), the record
+subscribers (the store's recorder after the caller's own), the retest gate, and for each run the hardware (opened by URL
 through the scheme registries of :mod:`station.rig` and :mod:`station.sensor`), the
 provisioner with its on-rig verifier, and the :class:`~station.sequence.runner.SequenceRunner`.
 
@@ -25,6 +25,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from station.fit.calibrate import FitOptions
 from station.kernel.clock import Clock, SimClock, WallClock
 from station.kernel.errors import StationError
 from station.kernel.limits_file import LimitsFile, load_limits
@@ -325,6 +326,8 @@ class Station:
         self.clock = clock if clock is not None else make_clock(config.clock_scale)
         self.limits = limits if limits is not None else load_limits(config.limits_path)
         self.options = (options if options is not None else SequenceOptions()).for_scale(self.clock.scale)
+        # the sensor class's T_c range (the limits file's correlation_time_s) is the fit's prior on T_c
+        self.fit_options = FitOptions(tc_range_s=dict(self.limits.correlation_time_s))
         self.subscribers: list[Subscriber] = list(subscribers)
         self.recorder: Recorder | None = None
         if config.record:
@@ -379,6 +382,7 @@ class Station:
                 hw.rig, hw.sensors, self.clock, plan=c.plan, options=self.options, limits=self.limits.product,
                 out_dir=c.out_dir, station=c.station_id, rig_name=hw.rig_name, sensor_urls=list(c.sensor_urls),
                 subscribers=self.subscribers, provisioner=self.provisioner, admit=self.admit,
+                fit_options=self.fit_options,
             )
             if on_runner is not None:
                 on_runner(runner)

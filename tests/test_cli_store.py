@@ -66,3 +66,6 @@ def test_parameters_image_kalibr_and_disposition_from_the_store(tmp_path: Path) 
         assert show_unit(db, "NOPE") is None
     shown = json.loads(cli.invoke(app, ["units", "show", serial, "--json", "--db", url]).output)
     assert shown["runs"][0]["outcome"] == "PASS"
+    listed = json.loads(cli.invoke(app, ["units", "list", "--json", "--db", url]).output)
+    assert [u["serial"] for u in listed] == [serial]
+    assert (listed[0]["runs"], listed[0]["last_outcome"], listed[0]["attempts"]) == (1, "PASS", 0)

@@ -49,7 +49,7 @@ def test_default_file_is_table1() -> None:
     assert lim.marginal_fraction == 0.05
     assert lim.verification.gyro_static_radps == pytest.approx(0.05 * math.pi / 180)
     assert lim.fit_quality.gyro_residual_rms_radps == pytest.approx(0.02 * math.pi / 180)
-    assert lim.fit_quality.gyro_bias_static_std_radps == pytest.approx(0.5 * math.pi / 180)
+    assert lim.fit_quality.gyro_bias_static_std_radps == pytest.approx(0.2 * math.pi / 180)
 
 
 def test_same_verdicts_as_table1_limits() -> None:

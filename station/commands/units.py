@@ -36,11 +36,19 @@ def _query(db_url: str | None, query: Callable[..., Any], *args: Any, **kwargs: 
 
 
 @units_app.command("list")
-def units_list(db: DbOption = None) -> None:
-    """List every unit: runs, latest outcome, attempts since its last disposition."""
+def units_list(
+    as_json: Annotated[bool, typer.Option("--json", help="print as JSON (a list of objects)")] = False,
+    db: DbOption = None,
+) -> None:
+    """List every unit: runs, latest outcome, failed attempts since its last disposition."""
+    from dataclasses import asdict
+
     from station.store.queries import list_units
 
     rows = _query(db, list_units)
+    if as_json:
+        sys.stdout.write(json.dumps([asdict(u) for u in rows], indent=2) + "\n")
+        return
     if not rows:
         typer.echo("no units recorded")
         return

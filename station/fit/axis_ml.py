@@ -303,13 +303,13 @@ def _edges(x: np.ndarray, f: np.ndarray, i0: int, rise: float) -> tuple[float, f
     return out[0], out[1]
 
 
-def _optimize(problem: _Problem, log_tc_max: float) -> np.ndarray:
-    """Coarse grid over (log T_c, log q), then Nelder-Mead within bounds."""
-    grid_tc = np.linspace(np.log(5.0), log_tc_max, 10)
+def _optimize(problem: _Problem, grid: tuple[float, float], bounds: tuple[float, float]) -> np.ndarray:
+    """Coarse grid over (log T_c, log q), log T_c from ``grid``, then Nelder-Mead within ``bounds`` of log T_c."""
+    grid_tc = np.linspace(grid[0], grid[1], 10)
     grid_q = np.array([-10.0, -2.0, 2.0])
     best = min(((problem.nll(np.array([a, b])), a, b) for a in grid_tc for b in grid_q), key=lambda z: z[0])
-    lo = np.array([_LOG_TC_MIN, _LOG_Q_MIN])
-    hi = np.array([log_tc_max + 1.0, _LOG_Q_MAX])
+    lo = np.array([bounds[0], _LOG_Q_MIN])
+    hi = np.array([bounds[1], _LOG_Q_MAX])
 
     def bounded(theta: np.ndarray) -> float:
         if np.any(theta < lo) or np.any(theta > hi):
@@ -336,6 +336,7 @@ def fit_axis(
     sigma_w: float,
     *,
     lr_threshold: float = 9.0,
+    tc_range_s: tuple[float, float] | None = None,
 ) -> AxisFit:
     """Fit axis ``axis`` of ``blocks.y`` with linear ``design`` (m, p) plus GM drift.
 
@@ -343,20 +344,38 @@ def fit_axis(
     is kept when its Wald statistic ``d^2 / var(d)`` at the fitted T_c exceeds
     ``lr_threshold`` (9: 3 sigma) at the fitted T_c or at any T_c up to the record's span;
     otherwise ``d`` is reported as 0 and T_c as NaN.
+
+    ``tc_range_s``: the sensor class's range of eq. 3's T_c (s), a prior flat in log T_c on it. T_c is
+    then searched, profiled, averaged over and worst-cased within that range only, so a recording too
+    short to identify T_c no longer makes b_stat an extrapolation along exp(-t/T_c) to any T_c up to
+    50 record spans (whose uncertainty grew with how long the moves took). None: the record alone.
     """
     y = blocks.y[:, axis]
     span = float(blocks.t_s.max() + 0.5 * blocks.width_s.max())
     log_tc_max = np.log(max(50.0 * span, 100.0))
+    if tc_range_s is not None:
+        lo_s, hi_s = float(tc_range_s[0]), float(tc_range_s[1])
+        if not (0.0 < lo_s <= hi_s and np.isfinite(hi_s)):
+            raise ValueError(f"T_c range must be 0 < low <= high, got {tc_range_s}")
+        lt_lo, lt_hi = float(np.log(lo_s)), float(np.log(hi_s))
+        if lt_hi - lt_lo < 0.1:  # a range too narrow to search: widen it symmetrically to +-5 %
+            mid = 0.5 * (lt_lo + lt_hi)
+            lt_lo, lt_hi = mid - 0.05, mid + 0.05
+        grid_lt, wald_lt = (lt_lo, lt_hi), np.linspace(lt_lo, lt_hi, 8)
+    else:
+        lt_lo, lt_hi = float(_LOG_TC_MIN), float(log_tc_max + 1.0)
+        grid_lt = (float(np.log(5.0)), float(log_tc_max))
+        wald_lt = np.linspace(np.log(5.0), np.log(max(span, 10.0)), 8)
 
     full = _Problem(blocks, y, design, sigma_w, with_drift=True)
-    theta = _optimize(full, log_tc_max)
+    theta = _optimize(full, grid_lt, (lt_lo, lt_hi))
     tc, q = float(np.exp(theta[0])), full.q0 * float(np.exp(theta[1]))
     nll, beta, xw, chol = full.solve(tc, q)
     p = xw.shape[1]
     # Wald statistic of d, z^2 = d^2 / var(d | T_c), at the fitted T_c and, since d and b_stat
     # trade off at long T_c, its largest value over T_c from 5 s to the record's span.
     lr = 0.0
-    for tc_g in (tc, *np.exp(np.linspace(np.log(5.0), np.log(max(span, 10.0)), 8))):
+    for tc_g in (tc, *np.exp(wald_lt)):
         _, beta_g, xw_g, _ = full.solve(float(tc_g), q)
         lr = max(lr, float(beta_g[-1] ** 2 / _inverse(xw_g.T @ xw_g)[-1, -1]))
     resolved = bool(lr > lr_threshold)
@@ -389,7 +408,7 @@ def fit_axis(
         beta_cov = _inverse(jw.T @ jw)[:p, :p]
         # T_c is non-linear: its uncertainty from the profile likelihood (beta re-fitted)
         lo, hi = _profile_interval(lambda u: full.solve(float(np.exp(u)), q_unc)[0], float(np.log(tc)),
-                                   _LOG_TC_MIN, log_tc_max + 1.0)
+                                   lt_lo, lt_hi)
         tc_std = 0.5 * float(np.exp(hi) - np.exp(lo))
         residual = y - full.columns(tc) @ beta
         # The restricted likelihood on a (T_c, q) grid: nodes over 2.5 times T_c's asymmetric
@@ -409,7 +428,7 @@ def fit_axis(
         nodes = np.concatenate([lt0 - below * steps[:0:-1], lt0 + above * steps])
         try:
             grid = _ProfileGrid(
-                full, np.unique(np.clip(nodes, _LOG_TC_MIN, log_tc_max + 1.0)), tc, tc_column=beta[-1] * de_dtc
+                full, np.unique(np.clip(nodes, lt_lo, lt_hi)), tc, tc_column=beta[-1] * de_dtc
             )
             profile_sq = grid.drift_noise()
             averaged = grid.beta_covariance(beta, over_tc)
@@ -420,11 +439,11 @@ def fit_axis(
             drift_noise, sq_std = profile_sq
         if np.all(np.isfinite(averaged)) and np.all(np.diag(averaged) > 0):
             beta_cov = averaged
-        if not _LOG_TC_MIN + 0.05 < theta[0] < log_tc_max + 1.0 - 0.05:
+        if not lt_lo + 0.05 < theta[0] < lt_hi - 0.05:
             # T_c at a bound of the search is a bound, not an estimate (the exponential is then
             # indistinguishable from a trend or from the noise): any T_c of the searched range is
             # possible, and its std is that of a uniform distribution over the range
-            tc_std = max(tc_std, float(np.exp(log_tc_max + 1.0) - np.exp(_LOG_TC_MIN)) / np.sqrt(12.0))
+            tc_std = max(tc_std, float(np.exp(lt_hi) - np.exp(lt_lo)) / np.sqrt(12.0))
     else:
         # No significant drift: report d = 0 and the level from the model without drift,
         # widening the uncertainties by what an unresolved drift could hide. T_c is not
@@ -436,7 +455,7 @@ def fit_axis(
         cov0 = _inverse(xw.T @ xw)
         inflation = np.zeros(p - 1)
         hidden_d = 0.0
-        for tc_g in np.exp(np.linspace(np.log(5.0), np.log(max(span, 10.0)), 8)):
+        for tc_g in np.exp(wald_lt):
             _, beta_g, xw_g, _ = full.solve(tc_g, q_unc)
             var_g = _inverse(xw_g.T @ xw_g)
             hidden = float(beta_g[-1] ** 2 + var_g[-1, -1])

@@ -14,7 +14,8 @@ pose order, rate list, duration or sample rate is assumed.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -45,6 +46,9 @@ class FitOptions:
             mean are outliers and left out of the fit.
         drift_lr_threshold: Wald-statistic threshold for keeping the exponential drift (9: 3 sigma).
         moving_average_length: n of Algorithm 1's moving average (eq. 6); the paper uses 40.
+        tc_range_s: the sensor class's range of eq. 3's T_c (s) per triad (``'accel'``, ``'gyro'``), a
+            prior on T_c (the limits file's ``correlation_time_s``); a triad without one is fitted
+            from the record alone.
     """
 
     max_blocks: int = 70
@@ -53,6 +57,7 @@ class FitOptions:
     outlier_sigma: float = 6.0
     drift_lr_threshold: float = 9.0
     moving_average_length: int = 40
+    tc_range_s: Mapping[str, tuple[float, float]] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -129,14 +134,18 @@ def _fit_triad(
     *,
     with_ref: bool,
     g_sens: bool,
+    triad: str,
 ) -> tuple[_TriadLinear, Blocks]:
     force = np.nan_to_num(session.ref_accel_mps2)
     blocks = make_blocks(
         session.t_s, data, np.nan_to_num(ref), force, noise.keep, runs, 1.0 / session.sample_rate_hz, options.max_blocks
     )
     design = _design(blocks, with_ref, g_sens)
+    tc_range = options.tc_range_s.get(triad)
     fits = [
-        fit_axis(blocks, k, design, float(noise.sigma[k]), lr_threshold=options.drift_lr_threshold) for k in range(3)
+        fit_axis(blocks, k, design, float(noise.sigma[k]), lr_threshold=options.drift_lr_threshold,
+                 tc_range_s=tc_range)
+        for k in range(3)
     ]
     return _TriadLinear(fits=fits, n_ref=3 if with_ref else 0, extra=3 if g_sens else 0), blocks
 
@@ -230,7 +239,7 @@ def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
     a_runs = _settled_runs(session, (Kind.REST, Kind.POSE), session.ref_accel_mps2)
     a_noise = _noise(session, session.accel_mps2, a_runs, options.outlier_sigma)
     a_tri, _ = _fit_triad(session, session.accel_mps2, session.ref_accel_mps2, a_runs, a_noise, options,
-                          with_ref=True, g_sens=False)
+                          with_ref=True, g_sens=False, triad="accel")
     a = _unpack(a_tri)
 
     # --- gyroscope: rest + poses + rate steps, or static + known angles --------
@@ -243,7 +252,7 @@ def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
         g_ref = static_ref
     g_noise = _noise(session, session.gyro_radps, g_runs, options.outlier_sigma)
     g_tri, _ = _fit_triad(session, session.gyro_radps, g_ref, g_runs, g_noise, options,
-                          with_ref=gyro_method == "rate", g_sens=options.g_sensitivity)
+                          with_ref=gyro_method == "rate", g_sens=options.g_sensitivity, triad="gyro")
     g = _unpack(g_tri)
     angle_report: dict[str, Any] = {}
     if gyro_method == "angle":
@@ -300,6 +309,8 @@ def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
             "samples": len(session),
             "duration_s": round(session.duration_s, 6),
             "sample_rate_hz": session.sample_rate_hz,
+            **({"tc_prior_s": {k: [float(v[0]), float(v[1])] for k, v in options.tc_range_s.items()}}
+               if options.tc_range_s else {}),
         },
     )
 

@@ -55,6 +55,8 @@ class FitQualityLimits:
 WIDEN = "widen"
 GUARD_BAND = "guard-band"
 RULES = (WIDEN, GUARD_BAND)
+#: The parameter families of a triad that product limits hold a range for.
+FAMILIES = ("scale", "cross_axis", "bias_static", "bias_drift", "noise_std", "correlation_time_s")
 #: What an inconclusive verdict of the guard-band rule becomes for the unit.
 INCONCLUSIVE_POLICIES = ("fail", "retest")
 
@@ -72,6 +74,10 @@ class ProductLimits:
         inconclusive: what an inconclusive verdict makes the unit: ``'fail'`` or ``'retest'``.
         marginal_fraction: a pass closer to a limit than this fraction of the range width is
             flagged MARGINAL; a one-sided limit at zero (``[0, max]``) is flagged near ``max`` only.
+        plausibility: parameter families (``'bias_drift'``, ``'noise_std'``, ``'correlation_time_s'``)
+            whose range describes the sensor class rather than the calibrated product: they are
+            judged with the ``widen`` rule at ``plausibility_k`` (is the estimate consistent with the
+            class?), the others with ``rule``.
     """
 
     name: str
@@ -82,10 +88,15 @@ class ProductLimits:
     rule: str = WIDEN
     inconclusive: str = "fail"
     marginal_fraction: float = 0.0
+    plausibility: frozenset[str] = frozenset()
+    plausibility_k: float = 3.0
 
     def __post_init__(self) -> None:
         if self.rule not in RULES:
             raise ValueError(f"conformance rule must be one of {', '.join(RULES)}, got {self.rule!r}")
+        unknown = set(self.plausibility) - set(FAMILIES)
+        if unknown:
+            raise ValueError(f"plausibility families must be among {', '.join(FAMILIES)}, got {sorted(unknown)}")
         if self.inconclusive not in INCONCLUSIVE_POLICIES:
             raise ValueError(
                 f"inconclusive must be one of {', '.join(INCONCLUSIVE_POLICIES)}, got {self.inconclusive!r}"

@@ -31,6 +31,7 @@ from typing import Any
 from station.kernel.datafiles import data_path
 from station.kernel.errors import FormatError, UnsupportedVersionError
 from station.kernel.limits import (
+    FAMILIES,
     INCONCLUSIVE_POLICIES,
     RULES,
     WIDEN,
@@ -230,8 +231,14 @@ def parse_limits(text: str | bytes, source: str = "<limits>", path: Path | None 
         if inconclusive not in INCONCLUSIVE_POLICIES:
             raise prod.fail("inconclusive", f"must be one of {', '.join(map(repr, INCONCLUSIVE_POLICIES))}, "
                                             f"got {inconclusive!r}")
+        plaus = prod.raw("plausibility", required=False) or []
+        if not (isinstance(plaus, list) and all(isinstance(f, str) and f in FAMILIES for f in plaus)):
+            raise prod.fail("plausibility", f"expected a list of families among {', '.join(FAMILIES)}, got {plaus!r}")
+        plaus_k = prod.number("plausibility_k", required=bool(plaus))
+        if plaus_k is not None and plaus_k < 0:
+            raise prod.fail("plausibility_k", f"must be >= 0, got {plaus_k}")
     else:
-        rule, k_key, inconclusive = WIDEN, "k_sigma", "fail"
+        rule, k_key, inconclusive, plaus, plaus_k = WIDEN, "k_sigma", "fail", [], None
     k_sigma = prod.number(k_key)
     assert k_sigma is not None
     if k_sigma < 0:
@@ -265,7 +272,8 @@ def parse_limits(text: str | bytes, source: str = "<limits>", path: Path | None 
     )
     fq.done()
     product = ProductLimits(name=f"{name}@{version}", accel=accel, gyro=gyro, k_sigma=k_sigma, fit_quality=fit_quality,
-                            rule=rule, inconclusive=inconclusive, marginal_fraction=fraction)
+                            rule=rule, inconclusive=inconclusive, marginal_fraction=fraction,
+                            plausibility=frozenset(plaus), plausibility_k=3.0 if plaus_k is None else plaus_k)
 
     ver = top.table("verification")
     try:

@@ -13,7 +13,7 @@ trajectory everything is rad, rad/s, rad/s^2.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -89,6 +89,23 @@ class RigPlan:
         for name in ("rest_s", "pose_hold_s", "rate_hold_s", "settle_s"):
             if not getattr(self, name) >= 0:
                 raise PlanError(f"plan: {name} must be >= 0, got {getattr(self, name)!r}")
+
+
+def with_move_time_scale(plan: RigPlan, factor: float) -> RigPlan:
+    """``plan`` on a rig whose moves take ``factor`` times as long (a slower or faster rig, a busier host).
+
+    Tumbles (trapezoids) scale by ``factor`` with the rate divided by it and the acceleration by its
+    square; table ramps with the acceleration divided by it; the settle time with it. Holds are unchanged.
+    """
+    if not factor > 0:
+        raise PlanError(f"move time factor must be > 0, got {factor!r}")
+    return replace(
+        plan,
+        tumble_rate_dps=plan.tumble_rate_dps / factor,
+        tumble_accel_dps2=plan.tumble_accel_dps2 / factor**2,
+        table_accel_dps2=plan.table_accel_dps2 / factor,
+        settle_s=plan.settle_s * factor,
+    )
 
 
 def default_plan() -> RigPlan:

@@ -11,6 +11,9 @@ an estimate with standard uncertainty u against it (every result is a
 * ``widen`` (``station-limits/1`` files, :func:`~station.kernel.limits.table1_limits`): the value
   passes within ``[low - k u, high + k u]``: Table 1 describes the population of true values, so
   an estimate of a unit at the edge may scatter across it. A noisier fit passes more easily.
+  The limits file may name *plausibility* families (drift amplitude, noise, T_c) judged this way
+  while the product's own parameters (M, b_stat) are guard-banded: their range describes the
+  sensor class, and the question is whether the estimate is consistent with it.
 
 Fit-quality figures (residual RMS, standard uncertainties) are one-sided limits ``[0, max]``.
 MARGINAL flags a pass within the limits file's fraction of the range width of a limit; a one-sided
@@ -29,7 +32,7 @@ from dataclasses import replace
 import numpy as np
 
 from station.fit.params import ParameterSet, TriadParams
-from station.kernel.limits import GUARD_BAND, FitQualityLimits, ProductLimits, TriadLimits
+from station.kernel.limits import GUARD_BAND, WIDEN, FitQualityLimits, ProductLimits, TriadLimits
 from station.kernel.measurement import Measurement
 from station.kernel.sensor_class import Range
 
@@ -37,16 +40,21 @@ AXES = "xyz"
 
 
 def conformance(
-    name: str, value: float, std: float, rng: Range, unit: str, limits: ProductLimits
+    name: str, value: float, std: float, rng: Range, unit: str, limits: ProductLimits, family: str = ""
 ) -> Measurement | None:
-    """``value`` (standard uncertainty ``std``) against ``rng`` by the rule of ``limits``; None if NaN."""
+    """``value`` (standard uncertainty ``std``) against ``rng`` by the rule of ``limits``; None if NaN.
+
+    A ``family`` listed in ``limits.plausibility`` is judged with the widening rule at ``plausibility_k``.
+    """
     if not math.isfinite(value):
         return None
     lo, hi = float(rng[0]), float(rng[1])
-    k = float(limits.k_sigma)
+    plausibility = family in limits.plausibility
+    rule = WIDEN if plausibility else limits.rule
+    k = float(limits.plausibility_k if plausibility else limits.k_sigma)
     ku = k * std if math.isfinite(std) else 0.0
     inconclusive = False
-    if limits.rule == GUARD_BAND:
+    if rule == GUARD_BAND:
         ok = lo + ku <= value <= hi - ku
         inconclusive = not ok and lo <= value <= hi
     else:
@@ -71,8 +79,8 @@ def _triad_checks(
     m, ms = np.asarray(tri.misalignment), np.asarray(tri.misalignment_std)
     for i in range(3):
         for j in range(3):
-            rng = lim.scale if i == j else lim.cross_axis
-            out.append(conformance(f"{prefix}.M.{AXES[i]}{AXES[j]}", m[i, j], ms[i, j], rng, "1", limits))
+            rng, family = (lim.scale, "scale") if i == j else (lim.cross_axis, "cross_axis")
+            out.append(conformance(f"{prefix}.M.{AXES[i]}{AXES[j]}", m[i, j], ms[i, j], rng, "1", limits, family))
     families: list[tuple[str, Range, str]] = [
         ("bias_static", lim.bias_static, unit),
         ("bias_drift", lim.bias_drift, unit),
@@ -85,7 +93,7 @@ def _triad_checks(
         for i in range(3):
             if field in ("bias_drift", "correlation_time_s") and not math.isfinite(float(tri.correlation_time_s[i])):
                 continue  # drift not resolved: nothing to check
-            out.append(conformance(f"{prefix}.{field}.{AXES[i]}", float(v[i]), float(s[i]), rng, u, limits))
+            out.append(conformance(f"{prefix}.{field}.{AXES[i]}", float(v[i]), float(s[i]), rng, u, limits, field))
     return [c for c in out if c is not None]
 
 

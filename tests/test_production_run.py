@@ -1,0 +1,145 @@
+"""The production run across processes: `station sim` serves a simulated rig and units, `station run` calibrates.
+
+Every PASS unit's image is written, read back and its corrected output verified on the rig; the image
+recorded in the database, the API's download and `station eeprom image` are the same bytes. A second
+run on a held rig is refused before it touches anything while the first PASSes, and SIGTERM aborts a run
+with the rig brought to rest and the run recorded ABORTED with the signal's name.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+from fastapi.testclient import TestClient
+from sqlalchemy import select
+
+from station.eeprom.image import decode_image, image_sha256
+from station.store.db import open_database
+from station.store.models import EepromWrite, Run, RunUnit, Unit
+from station.web.app import create_app
+
+pytestmark = pytest.mark.integration
+
+STATION = str(Path(sys.executable).with_name("station"))
+SCALE = 60.0
+
+
+@dataclass
+class Sim:
+    proc: subprocess.Popen[str]
+    rig: str
+    sensors: list[str]
+
+    def run_args(self, tmp: Path, db: str, *extra: str) -> list[str]:
+        args = [STATION, "run", "--rig", self.rig, "--scale", f"{SCALE:g}", "--db", db, "--out", str(tmp / "runs"),
+                "--station", "line1", "--operator", "ci"]
+        for s in self.sensors:
+            args += ["--sensor", s]
+        return args + list(extra)
+
+
+@pytest.fixture
+def sim(tmp_path: Path) -> Iterator[Sim]:
+    env = {**os.environ, "STATION_LOCK_DIR": str(tmp_path / "locks")}
+    proc = subprocess.Popen([STATION, "sim", "--units", "2", "--scale", f"{SCALE:g}", "--seed", "3"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    rig, sensors = "", []
+    assert proc.stdout is not None
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline:
+        line = proc.stdout.readline()
+        if line.startswith("rig: "):
+            rig = line.split()[1]
+        elif m := re.match(r"sensor \d+: (\S+)", line):
+            sensors.append(m.group(1))
+        elif line.startswith("Ctrl-C") or not line:
+            break
+    assert rig and len(sensors) == 2, proc.stderr.read() if proc.poll() is not None else "no URLs"
+    os.environ["STATION_LOCK_DIR"] = str(tmp_path / "locks")
+    try:
+        yield Sim(proc, rig, sensors)
+    finally:
+        os.environ.pop("STATION_LOCK_DIR", None)
+        proc.send_signal(signal.SIGTERM)
+        try:
+            proc.wait(15)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+
+
+def _run(args: list[str], **kw: object) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(args, capture_output=True, text=True, timeout=300, env=os.environ.copy(), **kw)  # type: ignore[call-overload]
+
+
+def test_every_pass_unit_is_written_read_back_verified_and_its_image_is_one(sim: Sim, tmp_path: Path) -> None:
+    db_url = f"sqlite:///{tmp_path / 'line.sqlite'}"
+    done = _run(sim.run_args(tmp_path, db_url))
+    assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
+    with open_database(db_url) as db, db.transaction() as s:
+        rows = s.execute(select(Unit.serial, RunUnit.outcome, EepromWrite).join(RunUnit, RunUnit.unit_id == Unit.id)
+                         .join(EepromWrite, EepromWrite.run_unit_id == RunUnit.id)).all()
+        run = s.scalars(select(Run)).one()
+        assert run.operator == "ci" and run.outcome == "PASS"
+    assert len(rows) == 2
+    client = TestClient(create_app(db_url))
+    for serial, outcome, write in rows:
+        assert outcome == "PASS"
+        assert (write.written, write.read_back_ok, write.verified_on_rig, write.verified) == (True, True, True, True)
+        assert write.image is not None and image_sha256(write.image) == write.image_sha256
+        img = decode_image(write.image)
+        assert img.serial == serial and img.station_id == "line1"
+        assert img.calibration_time == run.started_at.replace(tzinfo=img.calibration_time.tzinfo)  # the run's start
+        api = client.get(f"/api/units/{serial}/eeprom.bin")
+        assert api.status_code == 200 and api.content == write.image
+        out = tmp_path / f"{serial}.bin"
+        cli = _run([STATION, "eeprom", "image", serial, "-o", str(out), "--db", db_url])
+        assert cli.returncode == 0, cli.stderr
+        assert out.read_bytes() == write.image
+
+
+def test_a_second_run_on_a_held_rig_is_refused_and_the_first_passes(sim: Sim, tmp_path: Path) -> None:
+    db_url = f"sqlite:///{tmp_path / 'line.sqlite'}"
+    first = subprocess.Popen(sim.run_args(tmp_path, db_url), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                             text=True, env=os.environ.copy())
+    try:
+        time.sleep(4.0)  # the first run holds the rig
+        second = _run(sim.run_args(tmp_path / "second", f"sqlite:///{tmp_path / 'other.sqlite'}"))
+        assert second.returncode == 2
+        assert "in use by station line1" in second.stderr and "since" in second.stderr
+        assert "Traceback" not in second.stderr
+        out, err = first.communicate(timeout=300)
+    finally:
+        if first.poll() is None:
+            first.kill()
+    assert first.returncode == 0, out[-3000:] + err[-3000:]
+    with open_database(f"sqlite:///{tmp_path / 'other.sqlite'}") as other, other.transaction() as s:
+        assert s.scalars(select(Run)).all() == []  # refused before anything was recorded or moved
+
+
+def test_sigterm_aborts_with_the_rig_at_rest(sim: Sim, tmp_path: Path) -> None:
+    db_url = f"sqlite:///{tmp_path / 'line.sqlite'}"
+    proc = subprocess.Popen(sim.run_args(tmp_path, db_url), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env=os.environ.copy())
+    try:
+        time.sleep(6.0)  # mid-run: the power-on rest (300 s of rig time) takes 5 s at this scale
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, out[-2000:] + err[-2000:]
+    assert "Traceback" not in err
+    with open_database(db_url) as db, db.transaction() as s:
+        run = s.scalars(select(Run)).one()
+        assert (run.outcome, run.rig_at_rest) == ("ABORTED", True)
+        assert "SIGTERM" in run.message
+        assert s.scalars(select(EepromWrite)).all() == []  # nothing written to an aborted unit
