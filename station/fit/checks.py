@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from station.fit.consistency import check_consistency
 from station.kernel.errors import FitError
 from station.session.model import Kind, Session
 
@@ -113,6 +114,7 @@ def check_session(session: Session, *, min_pose_samples: int) -> str:
     """Run every check; returns the gyro scale method ('rate' or 'angle')."""
     check_time(session)
     check_finite(session)
+    check_consistency(session)
     check_pose_lengths(session, min_pose_samples)
     settled = np.isin(session.kind, (Kind.REST, Kind.POSE, Kind.RATE))
     if not settled.any():
