@@ -220,8 +220,13 @@ class CalibrationImage:
 
     @property
     def calibration_time(self) -> datetime:
-        """Calibration time (UTC)."""
-        return datetime(1970, 1, 1, tzinfo=UTC) + self.calibration_time_us * _ONE_US
+        """Calibration time (UTC); :class:`ImageContentError` when the field is beyond what a date can be."""
+        try:
+            return datetime(1970, 1, 1, tzinfo=UTC) + self.calibration_time_us * _ONE_US
+        except OverflowError:
+            raise ImageContentError(
+                f"calibration time {self.calibration_time_us} us since 1970 is not a date (beyond years 1..9999)"
+            ) from None
 
     def with_update_count(self, count: int) -> CalibrationImage:
         return replace(self, update_count=count)
@@ -281,8 +286,6 @@ def run_image(params: ParameterSet, station_id: str, run_started_at: datetime) -
 
 
 _ONE_US = datetime(1970, 1, 1, 0, 0, 0, 1, tzinfo=UTC) - datetime(1970, 1, 1, tzinfo=UTC)
-#: the latest calibration time a datetime can hold, in us since the Unix epoch
-_MAX_TIME_US = (datetime(9999, 12, 31, 23, 59, 59, 999999, tzinfo=UTC) - datetime(1970, 1, 1, tzinfo=UTC)) // _ONE_US
 
 
 def _same_float(a: float, b: float) -> bool:
@@ -297,10 +300,6 @@ def _check_content(img: CalibrationImage) -> None:
         raise ImageContentError(f"moving-average length must be 1..65535, got {img.ma_length}")
     if not 1 <= img.update_count <= 0xFFFFFFFF:
         raise ImageContentError(f"update count must be 1..2^32-1, got {img.update_count}")
-    if not 0 <= img.calibration_time_us <= _MAX_TIME_US:
-        raise ImageContentError(
-            f"calibration time {img.calibration_time_us} us since 1970 is outside 1970..9999 (not a calibration time)"
-        )
     if len(img.params_id) != ID_FIELD:
         raise ImageContentError(f"parameter-set id must be {ID_FIELD} bytes, got {len(img.params_id)}")
     for name, tri in (("accel", img.accel), ("gyro", img.gyro)):

@@ -5,7 +5,7 @@ Each check refuses with a one-line :class:`~station.kernel.errors.FitError` that
 silently wrong calibration:
 
 * measurements beyond any MEMS sensor's range (a 1e30 cell, a temperature of 1e300 degC);
-* a ``sample_rate_hz`` that the time column contradicts, and gaps in the time column;
+* a ``sample_rate_hz`` that the time column contradicts, and gaps in the time column inside a segment;
 * pose references whose norm is not the recording's gravity (within ``reference_tolerance_mps2``,
   default :data:`REFERENCE_TOLERANCE` of g), or a measured specific force that points away from
   its reference (a flipped or mislabelled pose) or is far from its magnitude (wrong unit);
@@ -42,7 +42,7 @@ RATE_RELATIVE = 0.3
 RATE_OFFSET_RADPS = float(np.radians(5.0))
 #: sample interval vs 1 / sample_rate_hz: relative tolerance of the median
 RATE_MISMATCH = 0.02
-#: a gap in t longer than this many sample periods (and GAP_MIN_S) is refused
+#: a gap in t inside a segment longer than this many sample periods (and GAP_MIN_S) is refused
 GAP_PERIODS = 1000.0
 GAP_MIN_S = 10.0
 #: known-angle moves: largest angle (deg) between the integrated rate and the stated rotation,
@@ -84,12 +84,13 @@ def check_sample_rate(session: Session) -> None:
             f"is {median:.6g} s ({1.0 / median:.6g} Hz)"
         )
     limit = max(GAP_PERIODS / rate, GAP_MIN_S)
-    gaps = np.flatnonzero(dt > limit)
+    same = (np.diff(session.segment) == 0) & (np.diff(session.kind) == 0)
+    gaps = np.flatnonzero((dt > limit) & same)
     if gaps.size:
         i = int(gaps[0]) + 1
         raise FitError(
-            f"time jumps by {dt[i - 1]:.6g} s at sample {i} (t={session.t_s[i]:.6g} s); a recording may not have "
-            f"gaps longer than {limit:g} s"
+            f"time jumps by {dt[i - 1]:.6g} s at sample {i} (t={session.t_s[i]:.6g} s) inside segment "
+            f"{int(session.segment[i])}; a segment's samples may not have gaps longer than {limit:g} s"
         )
 
 
@@ -214,13 +215,23 @@ def check_rotations(session: Session, bias_radps: np.ndarray, sigma_radps: np.nd
             )
 
 
-def check_consistency(session: Session) -> None:
-    """Every check that needs no fitted parameter (see the module docstring)."""
+def check_recording(session: Session) -> None:
+    """Ranges, sample rate and angle labels: the checks on the recording itself."""
     check_ranges(session)
     check_sample_rate(session)
     check_angle_segments(session)
+
+
+def check_references(session: Session) -> None:
+    """The rig's references against physics and against what the sensor measured."""
     check_pose_references(session)
     check_rate_references(session)
+
+
+def check_consistency(session: Session) -> None:
+    """Every check that needs no fitted parameter (see the module docstring)."""
+    check_recording(session)
+    check_references(session)
 
 
 def check_import(session: Session) -> None:

@@ -26,8 +26,7 @@ from sqlalchemy.exc import SQLAlchemyError
 from sqlalchemy.orm import Session, sessionmaker
 
 from station.kernel.datafiles import data_path
-from station.kernel.errors import StationError
-from station.store.opening import DatabaseRefused, check_schema, check_url
+from station.store.opening import DatabaseRefused, StoreError, check_schema, check_url
 from station.store.url import DEFAULT_URL, ENV_VAR
 
 """The default database: a SQLite file in the working directory."""
@@ -38,10 +37,6 @@ MIGRATIONS_DIR = data_path("migrations")
 
 _MIGRATION_LOCK = threading.Lock()  # Alembic's context is process-global: one migration at a time per process
 _PG_LOCK_KEY = 0x5354_4154  # advisory lock id on PostgreSQL: one migrating station at a time
-
-
-class StoreError(StationError):
-    """The station database could not be opened, migrated or written."""
 
 
 
@@ -137,15 +132,15 @@ def open_database(url: str | None = None, *, migrate: bool = True) -> Database:
     """
     url = database_url(url)
     shown = _redact(url)
-    check_url(url, shown)
     try:
+        check_url(url, shown)
         engine = make_engine(url)
         script = ScriptDirectory.from_config(alembic_config(url))
         check_schema(engine, {r.revision for r in script.walk_revisions()}, script.get_current_head(), shown)
         if migrate:
             upgrade(engine)
-    except DatabaseRefused:
-        raise
+    except DatabaseRefused as exc:
+        raise DatabaseRefused(f"cannot open the station database {exc}") from None
     except (SQLAlchemyError, OSError, CommandError) as exc:
         raise StoreError(f"cannot open the station database {shown}: {_first_line(exc)}") from exc
     return Database(url, engine, sessionmaker(engine, expire_on_commit=False))

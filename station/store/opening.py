@@ -25,7 +25,11 @@ from station.kernel.errors import StationError
 SUPPORTED_SCHEMES = ("sqlite", "postgresql")
 
 
-class DatabaseRefused(StationError):
+class StoreError(StationError):
+    """The station database could not be opened, migrated or written."""
+
+
+class DatabaseRefused(StoreError):
     """A database the station does not open: unsupported, corrupt, foreign or newer."""
 
 
