@@ -134,9 +134,13 @@ def open_database(url: str | None = None, *, migrate: bool = True) -> Database:
     shown = _redact(url)
     try:
         check_url(url, shown)
-        engine = make_engine(url)
         script = ScriptDirectory.from_config(alembic_config(url))
-        check_schema(engine, {r.revision for r in script.walk_revisions()}, script.get_current_head(), shown)
+        probe = create_engine(url)  # without make_engine's pragmas: WAL mode would rewrite a foreign file's header
+        try:
+            check_schema(probe, {r.revision for r in script.walk_revisions()}, script.get_current_head(), shown)
+        finally:
+            probe.dispose()
+        engine = make_engine(url)
         if migrate:
             upgrade(engine)
     except DatabaseRefused as exc:
