@@ -118,14 +118,16 @@ def test_good_recording_passes_goodness_of_fit(good: Session) -> None:
     assert {("accel", "pose"), ("gyro", "rate"), ("gyro", "pose")} <= kinds
 
 
-def test_pose_mean_off_its_reference_fails_goodness_of_fit(tmp_path: Path) -> None:
-    good = simulate_session(1).session
+@pytest.mark.parametrize(("axis", "offset"), [(0, 0.05), (1, 0.01)])
+def test_pose_mean_off_its_reference_fails_goodness_of_fit(good: Session, tmp_path: Path, axis: int,
+                                                           offset: float) -> None:
+    # the x-up pose, off along x or across it (y); a pose mean has ~0.3 mm/s^2 of white noise
     acc = good.accel_mps2.copy()
-    acc[good.segments_of(Kind.POSE)[2].slice, 0] += 0.05  # 50 mm/s^2; a pose mean has ~0.3 mm/s^2 noise
+    acc[_segment(good, _pose(good, 0, 1.0)), axis] += offset
     bad = good.replace(accel_mps2=acc)
     verdict = fit_session(bad).quality["goodness_of_fit"]
     assert not verdict["passed"] and "accel pose" in verdict["failed"]
-    path = tmp_path / "off.csv"
+    path = tmp_path / f"off{axis}.csv"
     write_session(bad, path)
     result = CliRunner().invoke(app, ["fit", str(path), "--json"])
     assert result.exit_code == EXIT_GOODNESS

@@ -223,44 +223,16 @@ def _sample_design(n: int, ref: np.ndarray | None, force: np.ndarray | None) -> 
     return np.column_stack(cols)
 
 
-#: the power-on rest must last this long (s) to bound the accelerometer's drift noise for the goodness of fit
-_MIN_REST_S = 120.0
-
-
-def _rest_drift_var(
-    session: Session, data: np.ndarray, runs: list[tuple[int, int, int]], noise: _Noise, options: FitOptions
-) -> np.ndarray | None:
-    """Upper 95 % bound of the drift variance q per axis from the power-on rest alone, or None.
-
-    On the whole recording the ML fit can take a pose that contradicts its reference for drift
-    noise (q grows until the misfit looks like drift); at rest no reference can be wrong. Used for
-    the accelerometer, whose drift settles within the rest (Table 1: T_c 50-167 s); the gyroscope's
-    (1030-3760 s) does not show its variance within a few minutes, and bounding it there raised false alarms.
-    """
-    rest = [r for r in runs if session.kind[r[1]] == Kind.REST]
-    if sum(float(session.t_s[b - 1] - session.t_s[a]) for _, a, b in rest) < _MIN_REST_S:
-        return None
-    zeros = np.zeros_like(data)
-    blocks = make_blocks(session.t_s, data, zeros, zeros, noise.keep, rest, 1.0 / session.sample_rate_hz,
-                         options.max_blocks // 2)
-    design = np.ones((len(blocks), 1))
-    out = []
-    for k in range(3):
-        f = fit_axis(blocks, k, design, float(noise.sigma[k]), lr_threshold=options.drift_lr_threshold)
-        out.append((f.drift_noise + 2.0 * f.drift_noise_std) ** 2)
-    return np.array(out)
-
-
 def _triad_residual(
     name: str, res: np.ndarray, design: np.ndarray, runs: list[tuple[int, int, int]], noise: _Noise,
-    tri: _TriadLinear, scale: float, unit: str, rest_q: np.ndarray | None = None,
+    tri: _TriadLinear, blocks: Blocks, scale: float, unit: str, reference_var: float = 0.0,
 ) -> TriadResidual:
-    q = np.array([f.drift_noise**2 for f in tri.fits])
-    tc = np.array([f.tc_s for f in tri.fits])
-    if rest_q is not None:
-        q = np.minimum(q, rest_q)
-    return TriadResidual(name=name, residual=res, design=design, runs=runs, keep=noise.keep, sigma=noise.sigma,
-                         drift_var=q, drift_tc_s=tc, unit_scale=scale, unit=unit)
+    return TriadResidual(
+        name=name, residual=res, design=design, runs=runs, keep=noise.keep, sigma=noise.sigma,
+        drift_var=np.array([f.drift_noise**2 for f in tri.fits]), drift_tc_s=np.array([f.tc_s for f in tri.fits]),
+        blocks=blocks, block_residual=np.column_stack([f.residual for f in tri.fits]), unit_scale=scale, unit=unit,
+        reference_var=reference_var,
+    )
 
 
 def fit_session(session: Session, options: FitOptions | None = None) -> ParameterSet:
@@ -282,7 +254,7 @@ def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
     a_runs = _settled_runs(session, (Kind.REST, Kind.POSE), session.ref_accel_mps2)
     with numerics("accelerometer fit (rest and poses)"):
         a_noise = _noise(session, session.accel_mps2, a_runs, options.outlier_sigma)
-        a_tri, _ = _fit_triad(session, session.accel_mps2, session.ref_accel_mps2, a_runs, a_noise, options,
+        a_tri, a_blocks = _fit_triad(session, session.accel_mps2, session.ref_accel_mps2, a_runs, a_noise, options,
                               with_ref=True, g_sens=False)
     a = _unpack(a_tri)
 
@@ -296,7 +268,7 @@ def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
         g_ref = static_ref
     with numerics(f"gyroscope fit ({'rest, poses and rate steps' if gyro_method == 'rate' else 'rest and poses'})"):
         g_noise = _noise(session, session.gyro_radps, g_runs, options.outlier_sigma)
-        g_tri, _ = _fit_triad(session, session.gyro_radps, g_ref, g_runs, g_noise, options,
+        g_tri, g_blocks = _fit_triad(session, session.gyro_radps, g_ref, g_runs, g_noise, options,
                               with_ref=gyro_method == "rate", g_sens=options.g_sensitivity)
     g = _unpack(g_tri)
     angle_report: dict[str, Any] = {}
@@ -334,9 +306,9 @@ def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
     g_design = _sample_design(n, g_ref if gyro_method == "rate" else None,
                               session.ref_accel_mps2 if options.g_sensitivity else None)
     quality["goodness_of_fit"] = goodness_of_fit(session, [
-        _triad_residual("accel", a_res, a_design, a_runs, a_noise, a_tri, 1.0, "m/s^2",
-                        _rest_drift_var(session, a_res, a_runs, a_noise, options)),
-        _triad_residual("gyro", g_res, g_design, g_runs, g_noise, g_tri, deg, "deg/s"),
+        _triad_residual("accel", a_res, a_design, a_runs, a_noise, a_tri, a_blocks, 1.0, "m/s^2",
+                        (0.5 * (session.meta_float("reference_tolerance_mps2") or 0.0)) ** 2),
+        _triad_residual("gyro", g_res, g_design, g_runs, g_noise, g_tri, g_blocks, deg, "deg/s"),
     ], angle_report or None)
 
     def triad(
