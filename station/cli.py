@@ -134,21 +134,25 @@ def correct(
 ) -> None:
     """Apply Algorithm 1 to a session; writes a session CSV v1 with corrected measurements.
 
-    Refused (exit 2, nothing written): an output that is the input, parameters that Algorithm 1
-    cannot run with (station.fit.usable), parameters of another serial (unless --force), a sample
-    period that is not the recording's.
+    Refused (exit 2, nothing written): an output that is the input, parameters of another serial
+    (unless --force), and parameters the firmware's image would refuse (``station.eeprom.image.image_problems``:
+    non-finite values, M singular or far from the identity, absurd biases, a moving-average length the
+    corrector cannot hold, a sample period that is not the recording's rate).
     """
+    from datetime import UTC, datetime
+
     from station.commands.output import check_output
     from station.correct.session_correct import correct_session
+    from station.eeprom.image import CalibrationImage, check_writable
     from station.fit.params import ParameterSet
-    from station.fit.usable import check_usable
     from station.session import read_session, write_session
 
     try:
         check_output(output, inputs=(session_path, params_path))
         params = ParameterSet.read(params_path)
-        check_usable(params)
         session = read_session(session_path)
+        image = CalibrationImage.from_params(params, "correct", datetime.now(UTC))
+        check_writable(image, (session.sample_rate_hz,))  # type: ignore[arg-type]
         if params.serial != session.serial and not force:
             raise StationError(f"{params_path} holds the parameters of serial {params.serial!r}, the recording is of "
                                f"{session.serial!r} (--force to apply them anyway)")

@@ -77,10 +77,11 @@ def _set(*keys: str, value: object):
     ("drift1e300", _set("accel", "bias_drift", value=[1e300, 0, 0]), None, "bias_drift"),
     ("allanlist", _set("accel", "allan", value=[1, 2]), None, "allan"),
     ("ma1e12", _set("moving_average_length", value=10**12), None, "moving-average length"),
-    ("singular", _set("accel", "misalignment", value=[[1, 0, 0], [1, 0, 0], [0, 0, 1]]), None, "accel"),
+    ("ma5000", _set("moving_average_length", value=5000), None, "moving-average length"),
+    ("singular", _set("accel", "misalignment", value=[[1, 0, 0], [1, 0, 0], [0, 0, 1]]), None, "accel M"),
     ("utf8", None, b'{"format": "\xff"}', "not UTF-8"),
     ("deep", None, b"[" * 100000 + b"]" * 100000, "nested too deeply"),
-    ("period_mismatch", _set("sample_period_s", value=0.001), None, "sampled at 100 Hz"),
+    ("period_mismatch", _set("sample_period_s", value=0.001), None, "the unit samples at 100 Hz"),
 ])
 def test_correct_refuses_bad_parameters(files: dict[str, Path], name: str, change: object, raw: bytes | None,
                                         fragment: str) -> None:
@@ -221,10 +222,13 @@ def test_parameter_json_loads_or_refuses(keys: list[str], value: object) -> None
         params = ParameterSet.from_json(json.dumps(d))
     except FormatError:
         return
-    from station.fit.usable import check_usable
+    from datetime import UTC, datetime
 
-    with contextlib.suppress(FormatError):
-        check_usable(params)
+    from station.eeprom.image import CalibrationImage, image_problems
+
+    with contextlib.suppress(FormatError):  # the image's own checks: a list of problems, never an exception
+        assert isinstance(image_problems(CalibrationImage.from_params(params, "S", datetime(2026, 1, 1, tzinfo=UTC))),
+                          list)
 
 
 IMAGE_FIELDS = [(12, "<16s"), (28, "<16s"), (44, "<16s"), (60, "<q"), (68, "<d"), (76, "<H"), (78, "<H"),

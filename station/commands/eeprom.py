@@ -79,10 +79,7 @@ def _unit_image(serial: str | None, path: Path | None, db_url: str | None, stati
 
 
 def _load_params(path: Path, serial: str | None) -> ParameterSet:
-    from station.fit.usable import check_usable
-
     params = ParameterSet.read(path)
-    check_usable(params)
     if serial is not None and params.serial != serial:
         raise StationError(f"{path} holds the parameters of serial {params.serial!r}, not {serial!r}")
     return params
