@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import shutil
 import sqlite3
 import struct
@@ -248,6 +249,7 @@ def params_probes(w: Path, good: Path, params: dict) -> list[Probe]:
     out = [Probe("parameter JSON", name, ["correct", str(good), "--params", str(path), "-o", str(w / "c.csv")])
            for name, path in cases]
     good_params = w / "good.json"
+    serial = params["serial"]
     out += [
         Probe("parameter JSON", "output = input session", ["correct", str(good), "--params", str(good_params),
                                                              "-o", str(good)]),
@@ -259,9 +261,9 @@ def params_probes(w: Path, good: Path, params: dict) -> list[Probe]:
                                                             "-o", "/nonexistent/c.csv"]),
         Probe("parameter JSON", "-o DIR", ["correct", str(good), "--params", str(good_params), "-o", str(w)]),
         Probe("parameter JSON", "eeprom image from bias_drift 1e300",
-              ["eeprom", "image", "X", "--params", str(cases[4][1]), "-o", str(w / "i.bin")]),
+              ["eeprom", "image", serial, "--params", str(cases[4][1]), "-o", str(w / "i.bin")]),
         Probe("parameter JSON", "eeprom image from allan list",
-              ["eeprom", "image", "X", "--params", str(cases[6][1]), "-o", str(w / "i.bin")]),
+              ["eeprom", "image", serial, "--params", str(cases[6][1]), "-o", str(w / "i.bin")]),
     ]
     return out
 
@@ -314,11 +316,13 @@ def limits_probes(w: Path, good: Path) -> list[Probe]:
         "not TOML": "this is = not [toml",
         "empty": "",
         "non-UTF-8": None,
-        "format station-limits/99": text.replace('"station-limits/1"', '"station-limits/99"', 1),
+        "format station-limits/99": re.sub(r'^format = ".*"$', 'format = "station-limits/99"', text, count=1,
+                                           flags=re.M),
         "no format": "\n".join(line for line in text.splitlines() if not line.startswith("format")),
-        "an integer beyond float": text.replace("k_sigma = 3.0", "k_sigma = " + "9" * 400, 1),
-        "a range reversed": text.replace("scale = [0.998, 1.02]", "scale = [1.02, 0.998]", 1),
-        "a number as text": text.replace("k_sigma = 3.0", 'k_sigma = "three"', 1),
+        "an integer beyond float": re.sub(r"^(\w+) = \d+\.\d+", r"\1 = " + "9" * 400, text, count=1, flags=re.M),
+        "a range reversed": re.sub(r"^scale = \[([0-9.]+), ([0-9.]+)\]", r"scale = [\2, \1]", text, count=1,
+                                   flags=re.M),
+        "a number as text": re.sub(r"^(\w+) = \d+\.\d+", r'\1 = "three"', text, count=1, flags=re.M),
         "unknown key": text + "\n[product.extra]\nfoo = 1\n",
     }
     out = []

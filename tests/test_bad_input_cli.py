@@ -159,7 +159,7 @@ def test_databases_are_refused_before_anything_is_written(tmp_path: Path) -> Non
         data[i] = 0xA5
     corrupt.write_bytes(bytes(data))
     cases = {
-        f"sqlite:///{newer}": "9999_future, which this program does not know (it knows up to",
+        f"sqlite:///{newer}": "schema revision 9999_future is newer than this program (it knows revisions up to",
         f"sqlite:///{foreign}": "not a station database",
         f"sqlite:///{corrupt}": "corrupt",
         f"sqlite:///{tmp_path}": "is a directory",

@@ -144,7 +144,7 @@ def open_database(url: str | None = None, *, migrate: bool = True) -> Database:
         if migrate:
             upgrade(engine)
     except DatabaseRefused as exc:
-        raise DatabaseRefused(f"cannot open the station database {exc}") from None
+        raise DatabaseRefused(f"cannot open the station database {exc}") from None  # "{url}: why"
     except (SQLAlchemyError, OSError, CommandError) as exc:
         raise StoreError(f"cannot open the station database {shown}: {_first_line(exc)}") from exc
     return Database(url, engine, sessionmaker(engine, expire_on_commit=False))

@@ -38,10 +38,10 @@ def check_url(url: str, shown: str) -> None:
     try:
         parsed = make_url(url)
     except (ArgumentError, ValueError) as exc:
-        raise DatabaseRefused(f"{shown} is not a database URL (sqlite:///FILE or postgresql+psycopg://...)") from exc
+        raise DatabaseRefused(f"{shown}: not a database URL (sqlite:///FILE or postgresql+psycopg://...)") from exc
     if parsed.get_backend_name() not in SUPPORTED_SCHEMES:
         raise DatabaseRefused(
-            f"database URL scheme {parsed.drivername!r} is not supported; the station stores in "
+            f"{shown}: URL scheme {parsed.drivername!r} is not supported; the station stores in "
             "sqlite:///FILE or postgresql+psycopg://USER@HOST/DB"
         )
     if parsed.get_backend_name() == "sqlite":
@@ -85,11 +85,11 @@ def check_schema(engine: Engine, known: set[str], head: str | None, shown: str) 
             return
         if "alembic_version" not in tables:
             listed = ", ".join(sorted(tables)[:5]) + (", ..." if len(tables) > 5 else "")
-            raise DatabaseRefused(f"{shown} is not a station database (it holds {listed} and no schema version)")
+            raise DatabaseRefused(f"{shown}: not a station database (it holds {listed} and no schema version)")
         revisions = [row[0] for row in conn.execute(text("SELECT version_num FROM alembic_version"))]
     unknown = [r for r in revisions if r not in known]
     if unknown:
         raise DatabaseRefused(
-            f"{shown} has schema revision {unknown[0]}, which this program does not know (it knows up to {head}): "
-            "made by a newer station; use that version or a new database"
+            f"{shown}: schema revision {unknown[0]} is newer than this program (it knows revisions up to {head}); "
+            "use the station version that made it, or another database"
         )
