@@ -101,8 +101,14 @@ def fit(
     as_json: Annotated[bool, typer.Option("--json", help="print the parameter set as JSON")] = False,
     g_sensitivity: Annotated[bool, typer.Option(help="also fit gyro g-sensitivity")] = False,
 ) -> None:
-    """Fit the parameter set of eq. (1) to a session and print it."""
+    """Fit the parameter set of eq. (1) to a session and print it.
+
+    Exit code: 0 a calibration; 2 the recording is refused (one line on stderr); 3 the fit ran but
+    contradicts its own recording (goodness-of-fit test, ``quality.goodness_of_fit``): the parameters
+    are printed, and stderr names the segment kind that failed.
+    """
     from station.fit.calibrate import FitOptions, fit_session
+    from station.fit.goodness import EXIT_GOODNESS, summary
     from station.session import read_session
 
     try:
@@ -113,6 +119,10 @@ def fit(
         sys.stdout.write(params.to_json() + "\n")
     else:
         _print_params(params)
+    verdict = params.quality["goodness_of_fit"]
+    if not verdict["passed"]:
+        typer.echo(f"error: not a calibration: the fit fails its goodness-of-fit test: {summary(verdict)}", err=True)
+        raise typer.Exit(EXIT_GOODNESS)
 
 
 @app.command()
@@ -120,19 +130,37 @@ def correct(
     session_path: Annotated[Path, typer.Argument(metavar="SESSION.csv")],
     params_path: Annotated[Path, typer.Option("--params", help="parameter JSON from `station fit --json`")],
     output: Annotated[Path, typer.Option("-o", "--output", help="corrected session CSV to write")],
+    force: Annotated[bool, typer.Option("--force", help="apply parameters of another serial")] = False,
 ) -> None:
-    """Apply Algorithm 1 to a session; writes a session CSV v1 with corrected measurements."""
+    """Apply Algorithm 1 to a session; writes a session CSV v1 with corrected measurements.
+
+    Refused (exit 2, nothing written): an output that is the input, parameters of another serial
+    (unless --force), and parameters the firmware's image would refuse (``station.eeprom.image.image_problems``:
+    non-finite values, M singular or far from the identity, absurd biases, a moving-average length the
+    corrector cannot hold, a sample period that is not the recording's rate).
+    """
+    from datetime import UTC, datetime
+
+    from station.commands.output import check_output
     from station.correct.session_correct import correct_session
+    from station.eeprom.image import CalibrationImage, check_writable
     from station.fit.params import ParameterSet
     from station.session import read_session, write_session
 
     try:
-        params = ParameterSet.from_json(params_path.read_text())
-        write_session(correct_session(read_session(session_path), params), output)
+        check_output(output, inputs=(session_path, params_path))
+        params = ParameterSet.read(params_path)
+        session = read_session(session_path)
+        image = CalibrationImage.from_params(params, "correct", datetime.now(UTC))
+        check_writable(image, (session.sample_rate_hz,))  # type: ignore[arg-type]
+        if params.serial != session.serial and not force:
+            raise StationError(f"{params_path} holds the parameters of serial {params.serial!r}, the recording is of "
+                               f"{session.serial!r} (--force to apply them anyway)")
+        write_session(correct_session(session, params), output)
     except StationError as exc:
         raise fail(exc) from None
     except OSError as exc:
-        raise fail(StationError(str(exc))) from None
+        raise fail(StationError(f"cannot write {output}: {exc.strerror or exc}")) from None
     typer.echo(f"wrote {output}")
 
 
@@ -142,19 +170,37 @@ def import_imucal(
     output: Annotated[Path, typer.Option("-o", "--output", help="session CSV v1 to write")],
     segments: Annotated[Path | None, typer.Option(help="imucal segment list JSON (Ferraris session)")] = None,
     serial: Annotated[str, typer.Option(help="serial number to record")] = "imucal-example",
+    expected_angle: Annotated[float, typer.Option(
+        help="angle (deg) of each x_rot/y_rot/z_rot turn: imucal's default -360 (clockwise), +360 counter-clockwise",
+    )] = -360.0,
 ) -> None:
-    """Convert an imucal Ferraris recording (+ segment list) or annotated session."""
+    """Convert an imucal Ferraris recording (+ segment list) or annotated session.
+
+    The result is checked against physics (:mod:`station.fit.consistency`: pose references against the
+    measured specific force, each turn against the integrated rate), so swapped labels or a turn in the
+    other direction are refused here, not fitted.
+    """
+    import math
+
+    from station.commands.output import check_output
+    from station.fit.consistency import check_import
     from station.session import write_session
     from station.session.imucal_import import import_imucal_annotated, import_imucal_ferraris
 
     try:
+        check_output(output, inputs=[csv_path, *([segments] if segments is not None else [])])
+        if not (math.isfinite(expected_angle) and 0 < abs(expected_angle) <= 3600):
+            raise StationError(f"--expected-angle {expected_angle:g}: needs a non-zero angle within +-3600 deg")
         if segments is not None:
-            session = import_imucal_ferraris(csv_path, segments, serial=serial)
+            session = import_imucal_ferraris(csv_path, segments, serial=serial, expected_angle_deg=expected_angle)
         else:
-            session = import_imucal_annotated(csv_path, serial=serial)
+            session = import_imucal_annotated(csv_path, serial=serial, expected_angle_deg=expected_angle)
+        check_import(session)
         write_session(session, output)
     except StationError as exc:
         raise fail(exc) from None
+    except OSError as exc:
+        raise fail(StationError(f"cannot write {output}: {exc.strerror or exc}")) from None
     typer.echo(f"wrote {output} ({len(session)} samples)")
 
 

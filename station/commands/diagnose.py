@@ -89,19 +89,31 @@ def diagnose(
         "alone decides T_c")] = None,
 ) -> None:
     """Find the physics the base model misses in a recording, fit it and show the improvement."""
+    import warnings
+
+    from station.commands.output import check_output
     from station.diagnose.report import diagnose as run_diagnosis
     from station.diagnose.report import save_figure
+    from station.fit.boundary import numerics
     from station.kernel.limits_file import load_limits
     from station.session import read_session
 
     try:
+        if plot is not None:
+            check_output(plot, inputs=[session_path], suffix=".png", what="--plot")
         warmup_tc = load_limits(limits).correlation_time_s if limits is not None else None
-        result = run_diagnosis(read_session(session_path), warmup_tc_s=warmup_tc)
+        session = read_session(session_path)
+        with warnings.catch_warnings(), numerics(f"diagnosis of {session.serial!r}"):
+            warnings.simplefilter("ignore", RuntimeWarning)
+            result = run_diagnosis(session, warmup_tc_s=warmup_tc)
+        if plot is not None:
+            save_figure(result, plot)
     except StationError as exc:
         typer.echo(f"error: {exc}", err=True)
         raise typer.Exit(2) from None
-    if plot is not None:
-        save_figure(result, plot)
+    except OSError as exc:
+        typer.echo(f"error: cannot write {plot}: {exc.strerror or exc}", err=True)
+        raise typer.Exit(2) from None
     if as_json:
         sys.stdout.write(json.dumps(result.report) + "\n")
     else:

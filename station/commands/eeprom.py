@@ -79,10 +79,7 @@ def _unit_image(serial: str | None, path: Path | None, db_url: str | None, stati
 
 
 def _load_params(path: Path, serial: str | None) -> ParameterSet:
-    try:
-        params = ParameterSet.from_json(path.read_text())
-    except OSError as exc:
-        raise StationError(f"cannot read {path}: {exc.strerror or exc}") from exc
+    params = ParameterSet.read(path)
     if serial is not None and params.serial != serial:
         raise StationError(f"{path} holds the parameters of serial {params.serial!r}, not {serial!r}")
     return params
@@ -130,9 +127,11 @@ def image_cmd(
     From the store the image is byte for byte the one the run wrote (as the API's ``eeprom.bin``); with
     ``--params`` it is built from the file, with ``--station`` and the current time.
     """
+    from station.commands.output import check_output
     from station.eeprom.image import check_writable, decode_image, encode_image, image_sha256
 
     try:
+        check_output(output, inputs=[params_path] if params_path is not None else [])
         image = _unit_image(serial, params_path, db, station_id)
         check_writable(image)
         data = encode_image(image)

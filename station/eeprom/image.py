@@ -220,8 +220,13 @@ class CalibrationImage:
 
     @property
     def calibration_time(self) -> datetime:
-        """Calibration time (UTC)."""
-        return datetime(1970, 1, 1, tzinfo=UTC) + self.calibration_time_us * _ONE_US
+        """Calibration time (UTC); :class:`ImageContentError` when the field is beyond what a date can be."""
+        try:
+            return datetime(1970, 1, 1, tzinfo=UTC) + self.calibration_time_us * _ONE_US
+        except OverflowError:
+            raise ImageContentError(
+                f"calibration time {self.calibration_time_us} us since 1970 is not a date (beyond years 1..9999)"
+            ) from None
 
     def with_update_count(self, count: int) -> CalibrationImage:
         return replace(self, update_count=count)

@@ -59,16 +59,29 @@ def fit_known_angles(
     dur = np.array(durations)
     angle_std = np.radians(session.meta_float("angle_std_deg") or 0.0)
     m_std = np.zeros((3, 3))
+    chi2, z = 0.0, np.zeros(len(names))
     for k in range(3):
         cov_i = np.diag(sigma_radps[k] ** 2 * ts**2 * np.array(counts, dtype=float))
         cov_i += bias_std_radps[k] ** 2 * np.outer(dur, dur)
         # an error in the applied angle enters as M_k . delta_theta
         cov_i += np.eye(len(dur)) * (angle_std**2) * float(m[k] @ m[k])
         m_std[k] = np.sqrt(np.clip(np.diag(a_mat.T @ cov_i @ a_mat), 0.0, None))
+        # residual of the integrals about the fitted row, in its covariance (rotations beyond three)
+        resid = big_i[k] - m[k] @ theta
+        if len(names) > 3:
+            proj = np.eye(len(names)) - theta.T @ a_mat.T
+            cov_r = proj @ cov_i @ proj.T
+            chi2 += float(resid @ np.linalg.pinv(cov_r, rcond=1e-10, hermitian=True) @ resid)
+            z = np.maximum(z, np.abs(resid) / np.sqrt(np.clip(np.diag(cov_r), 1e-300, None)))
     measured = np.linalg.solve(m, big_i)  # integrated angles after calibration (rad)
     report = {
         "segments": names,
         "applied_deg": np.degrees(theta.T).round(6).tolist(),
         "calibrated_deg": np.degrees(measured.T).round(6).tolist(),
+        "rotations": len(names),
+        "chi2": round(chi2, 3),
+        "dof": 3 * max(len(names) - 3, 0),
+        "worst_segment": int(names[int(np.argmax(z))]),
+        "worst_z": round(float(z.max()), 3),
     }
     return AngleFit(misalignment=m, misalignment_std=m_std, report=report)

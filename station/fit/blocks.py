@@ -14,6 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from station.kernel.errors import FitError
+
 
 @dataclass(frozen=True, eq=False)
 class Blocks:
@@ -75,7 +77,8 @@ def make_blocks(
     m = len(bounds)
     count = np.bincount(lab, minlength=m).astype(np.float64)
     if np.any(count == 0):
-        raise ValueError("a block has no usable sample")
+        seg = bounds[int(np.flatnonzero(count == 0)[0])][0]
+        raise FitError(f"segment {seg}: a block of it has no usable sample (every sample is an outlier)")
 
     def mean(values: np.ndarray) -> np.ndarray:
         v = values[sel]

@@ -27,7 +27,10 @@ from station.fit import allan
 from station.fit.angle import fit_known_angles
 from station.fit.axis_ml import AxisFit, fit_axis
 from station.fit.blocks import Blocks, block_exp_mean, make_blocks
+from station.fit.boundary import numerics
 from station.fit.checks import check_session
+from station.fit.consistency import check_rotations
+from station.fit.goodness import TriadResidual, goodness_of_fit
 from station.fit.params import AllanCoefficients, ParameterSet, TriadParams
 from station.session.model import Kind, Session
 
@@ -220,6 +223,27 @@ def _quality(
     return {"rms": np.sqrt(np.mean(allr**2, axis=0)).round(9).tolist(), "segments": rms_seg, "samples": len(allr)}
 
 
+def _sample_design(n: int, ref: np.ndarray | None, force: np.ndarray | None) -> np.ndarray:
+    """The linear regressors of eq. (1) per sample: reference (if M is fitted here), 1, force (g-sensitivity)."""
+    cols = [np.nan_to_num(ref)] if ref is not None else []
+    cols.append(np.ones((n, 1)))
+    if force is not None:
+        cols.append(np.nan_to_num(force))
+    return np.column_stack(cols)
+
+
+def _triad_residual(
+    name: str, res: np.ndarray, design: np.ndarray, runs: list[tuple[int, int, int]], noise: _Noise,
+    tri: _TriadLinear, blocks: Blocks, scale: float, unit: str, reference_var: float = 0.0,
+) -> TriadResidual:
+    return TriadResidual(
+        name=name, residual=res, design=design, runs=runs, keep=noise.keep, sigma=noise.sigma,
+        drift_var=np.array([f.drift_noise**2 for f in tri.fits]), drift_tc_s=np.array([f.tc_s for f in tri.fits]),
+        blocks=blocks, block_residual=np.column_stack([f.residual for f in tri.fits]), unit_scale=scale, unit=unit,
+        reference_var=reference_var,
+    )
+
+
 def fit_session(session: Session, options: FitOptions | None = None) -> ParameterSet:
     """Fit the full parameter set of eq. (1) to a session recording.
 
@@ -227,7 +251,7 @@ def fit_session(session: Session, options: FitOptions | None = None) -> Paramete
     cannot give a trustworthy result (see :mod:`station.fit.checks`).
     """
     # The linear algebra here is on ~100x100 matrices: BLAS threads only spin.
-    with threadpool_limits(limits=1, user_api="blas"):
+    with threadpool_limits(limits=1, user_api="blas"), numerics(f"fit of {session.serial!r}"):
         return _fit_session(session, options or FitOptions())
 
 
@@ -237,9 +261,10 @@ def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
 
     # --- accelerometer: rest + poses -----------------------------------------
     a_runs = _settled_runs(session, (Kind.REST, Kind.POSE), session.ref_accel_mps2)
-    a_noise = _noise(session, session.accel_mps2, a_runs, options.outlier_sigma)
-    a_tri, _ = _fit_triad(session, session.accel_mps2, session.ref_accel_mps2, a_runs, a_noise, options,
-                          with_ref=True, g_sens=False, triad="accel")
+    with numerics("accelerometer fit (rest and poses)"):
+        a_noise = _noise(session, session.accel_mps2, a_runs, options.outlier_sigma)
+        a_tri, a_blocks = _fit_triad(session, session.accel_mps2, session.ref_accel_mps2, a_runs, a_noise, options,
+                              with_ref=True, g_sens=False, triad="accel")
     a = _unpack(a_tri)
 
     # --- gyroscope: rest + poses + rate steps, or static + known angles --------
@@ -250,9 +275,10 @@ def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
     else:
         g_runs = _settled_runs(session, (Kind.REST, Kind.POSE), static_ref)
         g_ref = static_ref
-    g_noise = _noise(session, session.gyro_radps, g_runs, options.outlier_sigma)
-    g_tri, _ = _fit_triad(session, session.gyro_radps, g_ref, g_runs, g_noise, options,
-                          with_ref=gyro_method == "rate", g_sens=options.g_sensitivity, triad="gyro")
+    with numerics(f"gyroscope fit ({'rest, poses and rate steps' if gyro_method == 'rate' else 'rest and poses'})"):
+        g_noise = _noise(session, session.gyro_radps, g_runs, options.outlier_sigma)
+        g_tri, g_blocks = _fit_triad(session, session.gyro_radps, g_ref, g_runs, g_noise, options,
+                              with_ref=gyro_method == "rate", g_sens=options.g_sensitivity, triad="gyro")
     g = _unpack(g_tri)
     angle_report: dict[str, Any] = {}
     if gyro_method == "angle":
@@ -262,7 +288,9 @@ def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
                 bias_t[:, k] += g["bias_drift"][k] * np.exp(-session.t_s / g["correlation_time_s"][k])
         if np.any(g["g_sensitivity"]):
             bias_t += np.nan_to_num(session.ref_accel_mps2) @ g["g_sensitivity"].T
-        angle_fit = fit_known_angles(session, bias_t, g["bias_static_std"], g_noise.sigma)
+        check_rotations(session, bias_t, g_noise.sigma)
+        with numerics("known-angle gyro fit (angle.N moves)"):
+            angle_fit = fit_known_angles(session, bias_t, g["bias_static_std"], g_noise.sigma)
         g["misalignment"], g["misalignment_std"] = angle_fit.misalignment, angle_fit.misalignment_std
         angle_report = angle_fit.report
 
@@ -281,6 +309,16 @@ def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
     }
     if angle_report:
         quality["known_angle"] = angle_report
+    deg = float(np.degrees(1.0))
+    n = len(session)
+    a_design = _sample_design(n, session.ref_accel_mps2, None)
+    g_design = _sample_design(n, g_ref if gyro_method == "rate" else None,
+                              session.ref_accel_mps2 if options.g_sensitivity else None)
+    quality["goodness_of_fit"] = goodness_of_fit(session, [
+        _triad_residual("accel", a_res, a_design, a_runs, a_noise, a_tri, a_blocks, 1.0, "m/s^2",
+                        (0.5 * (session.meta_float("reference_tolerance_mps2") or 0.0)) ** 2),
+        _triad_residual("gyro", g_res, g_design, g_runs, g_noise, g_tri, g_blocks, deg, "deg/s"),
+    ], angle_report or None)
 
     def triad(
         p: dict[str, np.ndarray], noise: _Noise, res: np.ndarray, runs: list[tuple[int, int, int]]

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from station.fit.consistency import check_recording, check_references
 from station.kernel.errors import FitError
 from station.session.model import Kind, Session
 
@@ -113,11 +114,13 @@ def check_session(session: Session, *, min_pose_samples: int) -> str:
     """Run every check; returns the gyro scale method ('rate' or 'angle')."""
     check_time(session)
     check_finite(session)
+    check_recording(session)
     check_pose_lengths(session, min_pose_samples)
     settled = np.isin(session.kind, (Kind.REST, Kind.POSE, Kind.RATE))
     if not settled.any():
         raise FitError("no settled segment (rest, pose or rate) in the session")
     check_axes_alive(session, "accel", session.accel_mps2, settled)
     check_axes_alive(session, "gyro", session.gyro_radps, settled)
+    check_references(session)
     check_accel_design(session)
     return check_gyro_design(session)

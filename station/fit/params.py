@@ -15,7 +15,9 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from dataclasses import dataclass, field, fields
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -125,10 +127,12 @@ class TriadParams:
     def from_dict(cls, d: dict[str, Any]) -> TriadParams:
         try:
             kwargs = {f.name: _from_json_value(d[f.name]) for f in fields(cls) if f.name != "allan"}
+            if not isinstance(d["allan"], dict):
+                raise TypeError("'allan' must be an object")
             allan = AllanCoefficients(**{k: _from_json_value(v) for k, v in d["allan"].items()})
-        except (KeyError, TypeError) as exc:
-            raise FormatError(f"parameter set: triad is missing or has a bad field: {exc}") from exc
-        return cls(allan=allan, **kwargs)
+            return cls(allan=allan, **kwargs)
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
+            raise FormatError(f"parameter set: triad is missing or has a bad field: {_brief(exc)}") from exc
 
 
 @dataclass(frozen=True, eq=False)
@@ -176,22 +180,57 @@ class ParameterSet:
                 f"parameter set has format {fmt!r}; this station reads {FORMAT!r} only"
             )
         try:
+            serial, period, n = d["serial"], d["sample_period_s"], d["moving_average_length"]
+            if not isinstance(serial, str) or not serial.strip():
+                raise TypeError(f"'serial' must be a non-empty string, got {serial!r}")
+            if isinstance(period, bool) or not isinstance(period, int | float) or not math.isfinite(period):
+                raise TypeError(f"'sample_period_s' must be a finite number, got {period!r}")
+            if isinstance(n, bool) or not isinstance(n, int):
+                raise TypeError(f"'moving_average_length' must be an integer, got {n!r}")
+            for key in ("quality", "source"):
+                if not isinstance(d.get(key, {}), dict):
+                    raise TypeError(f"{key!r} must be an object")
             return cls(
-                serial=str(d["serial"]),
-                sample_period_s=float(d["sample_period_s"]),
-                moving_average_length=int(d["moving_average_length"]),
+                serial=serial,
+                sample_period_s=float(period),
+                moving_average_length=n,
                 accel=TriadParams.from_dict(d["accel"]),
                 gyro=TriadParams.from_dict(d["gyro"]),
                 quality=dict(d.get("quality", {})),
                 source=dict(d.get("source", {})),
             )
-        except (KeyError, TypeError, ValueError) as exc:
-            raise FormatError(f"parameter set: missing or bad field: {exc}") from exc
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
+            raise FormatError(f"parameter set: missing or bad field: {_brief(exc)}") from exc
 
     @classmethod
-    def from_json(cls, text: str) -> ParameterSet:
+    def from_json(cls, text: str | bytes) -> ParameterSet:
+        """Parse a parameter set (text, or UTF-8 bytes); any malformation is a :class:`FormatError`."""
         try:
+            if isinstance(text, bytes):
+                text = text.decode("utf-8")
             d = json.loads(text)
+        except UnicodeDecodeError as exc:
+            raise FormatError(f"parameter set is not UTF-8 text (byte {exc.start})") from exc
         except json.JSONDecodeError as exc:
             raise FormatError(f"parameter set is not JSON: {exc}") from exc
+        except RecursionError as exc:
+            raise FormatError("parameter set is nested too deeply to be a parameter set") from exc
         return cls.from_dict(d)
+
+    @classmethod
+    def read(cls, path: str | os.PathLike[str]) -> ParameterSet:
+        """Read a parameter JSON file; an unreadable or malformed file is a :class:`FormatError`."""
+        try:
+            data = Path(path).read_bytes()
+        except OSError as exc:
+            raise FormatError(f"cannot read parameter set {os.fspath(path)}: {exc.strerror or exc}") from exc
+        try:
+            return cls.from_json(data)
+        except FormatError as exc:
+            raise FormatError(f"{os.fspath(path)}: {exc}") from None
+
+
+def _brief(exc: BaseException) -> str:
+    """An exception's message on one line (KeyError quotes its key)."""
+    text = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+    return f"missing {text}" if isinstance(exc, KeyError) else text

@@ -119,6 +119,16 @@ class LimitsFile:
     correlation_time_s: dict[str, tuple[float, float]] = field(default_factory=dict)
 
 
+def _finite_number(v: Any) -> bool:
+    """A TOML integer or float that is a finite float (TOML integers can be too large for one)."""
+    if isinstance(v, bool) or not isinstance(v, int | float):
+        return False
+    try:
+        return math.isfinite(float(v))
+    except OverflowError:
+        return False
+
+
 class _Table:
     """A TOML table being validated: every key must be read, values are checked as read."""
 
@@ -152,7 +162,7 @@ class _Table:
         v = self.raw(key, required)
         if v is None:
             return None
-        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+        if not _finite_number(v):
             raise self.fail(key, f"expected a finite number, got {v!r}")
         if positive and v <= 0:
             raise self.fail(key, f"must be > 0, got {v!r}")
@@ -173,7 +183,7 @@ class _Table:
     def range(self, key: str, scale: float = 1.0) -> tuple[float, float]:
         v = self.raw(key)
         ok = isinstance(v, list) and len(v) == 2
-        ok = ok and all(not isinstance(x, bool) and isinstance(x, int | float) and math.isfinite(x) for x in v)
+        ok = ok and all(_finite_number(x) for x in v)
         if not ok:
             raise self.fail(key, f"expected [low, high] with two finite numbers, got {v!r}")
         if v[0] > v[1]:

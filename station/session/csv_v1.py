@@ -30,6 +30,7 @@ from typing import IO
 import numpy as np
 
 from station.kernel.errors import SessionFormatError, UnsupportedVersionError
+from station.session.metadata import metadata_problem
 from station.session.model import KIND_LABELS, REQUIRED_KEYS, Session
 
 __all__ = [
@@ -185,6 +186,10 @@ def _parse_preamble(
         raise _fail(f"missing required metadata key(s) before the header: {', '.join(missing)}", header_line, path)
     for key in NUMERIC_KEYS:
         problem = _metadata_number_problem(metadata[key])
+        if problem:
+            raise _fail(f"metadata {key}: {problem}", key_lines[key], path)
+    for key, value in metadata.items():
+        problem = metadata_problem(key, value)
         if problem:
             raise _fail(f"metadata {key}: {problem}", key_lines[key], path)
     return metadata, angles, header_line, pos

@@ -14,6 +14,10 @@ imucal (https://github.com/mad-lab-fau/imucal, MIT) labels the parts of a Ferrar
   Such a segment becomes ``kind = move`` with empty references and an ``angle.N`` of
   ``expected_angle_deg`` about that axis.
 
+The poses are held by hand: the metadata ``reference_tolerance_mps2`` (:data:`HAND_TOLERANCE_MPS2`,
+about 3 deg of alignment) says how far the true specific force may be from the label's reference; the
+goodness-of-fit test of the fit takes it into account (:mod:`station.fit.goodness`).
+
 Samples outside every labelled part become ``move`` segments with empty references. Segments are
 numbered 0, 1, 2, ... in time order. There is no temperature channel (temp is NaN).
 Units in the returned Session are SI: m/s^2, rad/s, s.
@@ -34,6 +38,8 @@ from station.session.model import Kind, Session
 __all__ = ["POSE_LABELS", "ROTATION_LABELS", "import_imucal_annotated", "import_imucal_ferraris"]
 
 STANDARD_GRAVITY_MPS2 = 9.80665  # the "g" of a datasheet sensitivity in LSB/g
+#: how far a hand-held pose's specific force may be from its label's reference (m/s^2, ~3 deg at 1 g)
+HAND_TOLERANCE_MPS2 = 0.5
 
 # label -> (axis index, sign of that axis' specific force): x_p = x axis up, reads +1 g.
 POSE_LABELS: dict[str, tuple[int, float]] = {
@@ -83,6 +89,7 @@ def import_imucal_ferraris(
         "source": "imucal",
         "source_file": Path(csv_name).name,
         "source_sections": Path(os.fspath(segments_json_path)).name,
+        "reference_tolerance_mps2": _number_text(HAND_TOLERANCE_MPS2),
     }
     return _build(counter / sample_rate_hz, accel, gyro, labels, metadata, gravity_mps2, expected_angle_deg)
 
@@ -129,6 +136,7 @@ def import_imucal_annotated(
         "source_file": Path(csv_name).name,
         "accel_lsb_per_g": _number_text(accel_lsb_per_g),
         "gyro_lsb_per_dps": _number_text(gyro_lsb_per_dps),
+        "reference_tolerance_mps2": _number_text(HAND_TOLERANCE_MPS2),
     }
     return _build(counter / sample_rate_hz, accel, gyro, labels, metadata, gravity_mps2, expected_angle_deg)
 

@@ -15,6 +15,7 @@ from types import MappingProxyType
 import numpy as np
 
 from station.kernel.errors import SessionFormatError
+from station.session.metadata import metadata_problem, number_problem
 
 REQUIRED_KEYS = ("serial", "sample_rate_hz", "gravity_mps2")
 
@@ -126,9 +127,18 @@ class Session:
         return float(self.metadata["gravity_mps2"])
 
     def meta_float(self, key: str) -> float | None:
-        """A numeric metadata value, or None when the key is absent."""
+        """A numeric metadata value, or None when the key is absent.
+
+        Raises :class:`SessionFormatError` when the value is not a finite number in its range
+        (:mod:`station.session.metadata`).
+        """
         value = self.metadata.get(key)
-        return None if value is None or value == "" else float(value)
+        if value is None or value == "":
+            return None
+        problem = metadata_problem(key, value) or number_problem(str(value).strip())
+        if problem:
+            raise SessionFormatError(f"metadata {key}: {problem}")
+        return float(value)
 
     def __len__(self) -> int:
         return int(self.t_s.shape[0])

@@ -21,14 +21,16 @@ from station.kernel.errors import StationError
 
 def simulate(
     output: Annotated[Path, typer.Option("-o", "--output", help="session CSV to write")],
-    seed: Annotated[int, typer.Option(help="seed: the same seed gives the same bytes")] = 0,
+    seed: Annotated[int, typer.Option(min=0, max=2**63 - 1, help="seed: the same seed gives the same bytes")] = 0,
     effect: Annotated[list[str] | None, typer.Option(help="extra physics NAME=VALUE (repeatable)")] = None,
-    sample_rate: Annotated[float | None, typer.Option(help="sample rate (Hz); default from the plan")] = None,
+    sample_rate: Annotated[float | None, typer.Option(min=1.0, max=10000.0,
+                                                      help="sample rate (Hz); default from the plan")] = None,
     random_plan: Annotated[bool, typer.Option(help="draw a random rig plan from the seed")] = False,
 ) -> None:
     """Simulate one unit on the rig and write its session recording."""
     from dataclasses import replace
 
+    from station.commands.output import check_output
     from station.kernel.plan import default_plan
     from station.kernel.plan import random_plan as draw_plan
     from station.physics.effects import Effects
@@ -36,6 +38,7 @@ def simulate(
     from station.sim.session_sim import simulate_session
 
     try:
+        check_output(output)
         effects = Effects.parse(effect or [])
         plan = draw_plan(np.random.default_rng(seed)) if random_plan else default_plan()
         if sample_rate is not None:
@@ -51,7 +54,7 @@ def simulate(
 def demo(
     units: Annotated[int, typer.Option(min=1, max=64, help="units in the fixture")] = 4,
     scale: Annotated[float, typer.Option(min=0.1, help="simulated seconds per wall second")] = 30.0,
-    seed: Annotated[int, typer.Option(help="seed: the same seed gives the same units")] = 0,
+    seed: Annotated[int, typer.Option(min=0, max=2**63 - 1, help="seed: the same seed gives the same units")] = 0,
     out: Annotated[Path, typer.Option(help="directory for session CSVs and parameter JSONs")] = Path("demo-out"),
     db: DbOption = None,
     limits: Annotated[Path | None, typer.Option("--limits", help="limits file (default: fixtures/limits/default.toml)")]
@@ -74,8 +77,8 @@ def demo(
 def sim(
     units: Annotated[int, typer.Option(min=1, max=64, help="simulated sensors")] = 4,
     scale: Annotated[float, typer.Option(min=0.1, help="simulated seconds per wall second")] = 1.0,
-    seed: Annotated[int, typer.Option(help="seed: the same seed gives the same units")] = 0,
-    port: Annotated[int, typer.Option(help="Modbus/TCP port of the rig (0: a free port)")] = 0,
+    seed: Annotated[int, typer.Option(min=0, max=2**63 - 1, help="seed: the same seed gives the same units")] = 0,
+    port: Annotated[int, typer.Option(min=0, max=65535, help="Modbus/TCP port of the rig (0: a free port)")] = 0,
 ) -> None:
     """Start a simulated rig and sensors, print their URLs, run until Ctrl-C (or SIGTERM).
 

@@ -20,12 +20,13 @@ from alembic import command
 from alembic.config import Config
 from alembic.runtime.migration import MigrationContext
 from alembic.script import ScriptDirectory
+from alembic.util.exc import CommandError
 from sqlalchemy import Engine, create_engine, event, text
 from sqlalchemy.exc import SQLAlchemyError
 from sqlalchemy.orm import Session, sessionmaker
 
 from station.kernel.datafiles import data_path
-from station.kernel.errors import StationError
+from station.store.opening import DatabaseRefused, StoreError, check_schema, check_url
 from station.store.url import DEFAULT_URL, ENV_VAR
 
 """The default database: a SQLite file in the working directory."""
@@ -37,9 +38,6 @@ MIGRATIONS_DIR = data_path("migrations")
 _MIGRATION_LOCK = threading.Lock()  # Alembic's context is process-global: one migration at a time per process
 _PG_LOCK_KEY = 0x5354_4154  # advisory lock id on PostgreSQL: one migrating station at a time
 
-
-class StoreError(StationError):
-    """The station database could not be opened, migrated or written."""
 
 
 def database_url(url: str | None = None) -> str:
@@ -133,12 +131,22 @@ def open_database(url: str | None = None, *, migrate: bool = True) -> Database:
     Raises :class:`StoreError` if the database cannot be reached or migrated.
     """
     url = database_url(url)
+    shown = _redact(url)
     try:
+        check_url(url, shown)
+        script = ScriptDirectory.from_config(alembic_config(url))
+        probe = create_engine(url)  # without make_engine's pragmas: WAL mode would rewrite a foreign file's header
+        try:
+            check_schema(probe, {r.revision for r in script.walk_revisions()}, script.get_current_head(), shown)
+        finally:
+            probe.dispose()
         engine = make_engine(url)
         if migrate:
             upgrade(engine)
-    except (SQLAlchemyError, OSError) as exc:
-        raise StoreError(f"cannot open the station database {_redact(url)}: {_first_line(exc)}") from exc
+    except DatabaseRefused as exc:
+        raise DatabaseRefused(f"cannot open the station database {exc}") from None  # "{url}: why"
+    except (SQLAlchemyError, OSError, CommandError) as exc:
+        raise StoreError(f"cannot open the station database {shown}: {_first_line(exc)}") from exc
     return Database(url, engine, sessionmaker(engine, expire_on_commit=False))
 
 
