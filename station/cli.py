@@ -344,7 +344,10 @@ def serve(
         live.on_start = control.start
         live.on_abort = control.abort
         on_exit = control.stop
-    run_server(host, port, db, token, live, on_exit)
+    try:
+        run_server(host, port, db, token, live, on_exit)
+    except StationError as exc:  # e.g. a database that cannot be opened
+        raise fail(exc) from None
 
 
 _add_plugins()

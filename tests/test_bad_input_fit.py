@@ -191,3 +191,22 @@ def test_imucal_single_section_is_refused_in_one_line(tmp_path: Path) -> None:
     assert result.exit_code == 0
     result = runner.invoke(app, ["fit", str(out)])
     assert result.exit_code == 2 and result.stderr.startswith("error: ") and result.stderr.count("\n") == 1
+
+
+def test_the_sequence_retests_a_recording_that_contradicts_its_fit(good: Session) -> None:
+    """The station's limits treat a failed goodness of fit as a FAIL of the recording (RETEST, no attempt
+    counted), not of the unit, even when every limit passes."""
+    from station.kernel.limits import table1_limits
+    from station.sequence.limits import check_limits
+    from station.sequence.records import Outcome
+    from station.sequence.runner import recording_verdict, unit_verdict
+
+    params = fit_session(good)
+    assert recording_verdict(params) is None
+    acc = good.accel_mps2.copy()
+    acc[_segment(good, _pose(good, 0, 1.0)), 0] += 0.05
+    bad = fit_session(good.replace(accel_mps2=acc))
+    lim = table1_limits()
+    assert unit_verdict(check_limits(bad, lim), lim)[0] == Outcome.PASS  # the limits alone would pass it
+    verdict = recording_verdict(bad)
+    assert verdict is not None and verdict[0] == Outcome.RETEST and "accel pose" in verdict[1]

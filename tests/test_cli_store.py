@@ -69,3 +69,23 @@ def test_parameters_image_kalibr_and_disposition_from_the_store(tmp_path: Path) 
     listed = json.loads(cli.invoke(app, ["units", "list", "--json", "--db", url]).output)
     assert [u["serial"] for u in listed] == [serial]
     assert (listed[0]["runs"], listed[0]["last_outcome"], listed[0]["attempts"]) == (1, "PASS", 0)
+
+
+def test_read_only_commands_never_create_a_database(tmp_path: Path) -> None:
+    cli = CliRunner()
+    missing = tmp_path / "nowhere.sqlite"
+    for args in (["units", "list"], ["units", "show", "SN1"], ["units", "params", "SN1"],
+                 ["eeprom", "image", "SN1", "-o", str(tmp_path / "x.bin")], ["eeprom", "kalibr", "SN1"]):
+        out = cli.invoke(app, [*args, "--db", f"sqlite:///{missing}"])
+        assert out.exit_code == 2, (args, out.output)
+        assert "no station database at" in out.output and str(missing) in out.output, (args, out.output)
+        assert not missing.exists(), args
+
+
+def test_serve_refuses_a_corrupt_database_in_one_line(tmp_path: Path) -> None:
+    bad = tmp_path / "corrupt.sqlite"
+    bad.write_bytes(b"this is not a database" * 100)
+    out = CliRunner().invoke(app, ["serve", "--db", f"sqlite:///{bad}", "--port", "1"])
+    assert out.exit_code == 2 and "Traceback" not in out.output
+    assert "is not a SQLite database" in out.output and out.output.strip().count("\n") == 0, out.output
+    assert bad.read_bytes() == b"this is not a database" * 100  # nothing written into it

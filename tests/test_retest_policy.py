@@ -19,7 +19,7 @@ from station.sim.station_sim import SimStation
 from station.store.queries import attempt_count
 from station.store.recorder import record_disposition
 
-SCALE = 200.0
+SCALE = 100.0
 PLAN = RigPlan(sample_rate_hz=50.0, rest_s=60.0, pose_hold_s=4.0,
                rate_steps=(("x", 100.0), ("y", 100.0), ("z", 100.0)), rate_hold_s=3.0)
 

@@ -347,3 +347,24 @@ def test_schemathesis_finds_no_server_error(client: TestClient) -> None:
     print(f"schemathesis: {calls} operations, responses by status: {dict(sorted(codes.items()))}")
     assert calls >= 7 and failures == []
     assert codes.get(200, 0) > 0 and codes.get(401, 0) > 0 and codes.get(202, 0) > 0
+
+
+def test_every_outcome_the_station_records_is_served(tmp_path: Path) -> None:
+    """REFUSED and RETEST units (and a far date filter) answer 200 with typed bodies, not 500."""
+    from tests.test_store import synthetic_run
+
+    url = f"sqlite:///{tmp_path / 'outcomes.sqlite'}"
+    with open_database(url) as db:
+        rec = Recorder(db)
+        for k, outcome in enumerate(Outcome):
+            for r in synthetic_run(f"run-{k}", [f"U-{outcome.value}"], [outcome]):
+                rec(r)
+    client = TestClient(create_app(url))
+    units = client.get("/api/units")
+    assert units.status_code == 200
+    assert {u["last_outcome"] for u in units.json()} == {o.value for o in Outcome}
+    assert client.get("/api/runs").status_code == 200
+    for outcome in Outcome:
+        assert client.get(f"/api/units/U-{outcome.value}").status_code == 200
+        assert client.get(f"/api/units?outcome={outcome.value}").json()[0]["serial"] == f"U-{outcome.value}"
+    assert client.get("/api/units?date_to=9999-12-31").status_code == 200

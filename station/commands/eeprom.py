@@ -47,7 +47,7 @@ def _unit_params(serial: str | None, path: Path | None, db_url: str | None) -> P
     from station.store.db import open_database
     from station.store.queries import latest_parameter_set
 
-    db = open_database(db_url)
+    db = open_database(db_url, must_exist=True)
     try:
         params = latest_parameter_set(db, serial)
     finally:
@@ -68,7 +68,7 @@ def _unit_image(serial: str | None, path: Path | None, db_url: str | None, stati
     from station.store.db import open_database
     from station.store.queries import unit_image
 
-    db = open_database(db_url)
+    db = open_database(db_url, must_exist=True)
     try:
         found = unit_image(db, serial)
     finally:
@@ -203,7 +203,7 @@ def _record_write(db_url: str | None, report: Any) -> None:
     from station.store.db import open_database
     from station.store.recorder import record_eeprom_write
 
-    db = open_database(db_url)
+    db = open_database(db_url, must_exist=True)
     try:
         record_eeprom_write(db, report.serial, report.sha256, attempts=report.attempts, read_back_ok=True,
                             verified_on_rig=None, image=report.data or None, layout_version=1,

@@ -24,11 +24,14 @@ DbOption = Annotated[
 
 
 def _query(db_url: str | None, query: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
-    """Open the store, run ``query(database, *args, **kwargs)``, close it; a StationError is one line, exit 2."""
+    """Open the existing store, run ``query(database, *args, **kwargs)``, close it.
+
+    A missing SQLite file is refused, never created; a StationError is one line, exit 2.
+    """
     from station.store.db import open_database
 
     try:
-        with open_database(db_url) as database:
+        with open_database(db_url, must_exist=True) as database:
             return query(database, *args, **kwargs)
     except StationError as exc:
         typer.echo(f"error: {exc}", err=True)
@@ -49,9 +52,12 @@ def units_list(
     if as_json:
         sys.stdout.write(json.dumps([asdict(u) for u in rows], indent=2) + "\n")
         return
+    from station.store.db import shown_url
+
     if not rows:
-        typer.echo("no units recorded")
+        typer.echo(f"no units recorded in {shown_url(db)}")
         return
+    typer.echo(f"{len(rows)} unit(s) in {shown_url(db)}")
     typer.echo(f"{'serial':<24} {'runs':>4} {'attempts':>8}  {'last outcome':<12} last run started")
     for u in rows:
         typer.echo(f"{u.serial:<24} {u.runs:>4} {u.attempts:>8}  {u.last_outcome:<12} {u.last_started_at or '-'}")
@@ -73,7 +79,10 @@ def units_show(
     if as_json:
         sys.stdout.write(json.dumps(detail.to_dict(), indent=2) + "\n")
         return
-    typer.echo(f"unit {detail.serial}: {len(detail.runs)} run(s), {detail.attempts} attempt(s) since last disposition")
+    from station.store.db import shown_url
+
+    typer.echo(f"unit {detail.serial} in {shown_url(db)}: {len(detail.runs)} run(s), {detail.attempts} failed "
+               "attempt(s) since its last disposition")
     for r in detail.runs:
         typer.echo(f"  {r.started_at}  run {r.run_id} on {r.station} slot {r.slot}: {r.outcome}"
                    f"{' - ' + r.message if r.message else ''}")

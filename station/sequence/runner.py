@@ -36,6 +36,7 @@ from pathlib import Path
 from typing import Protocol
 
 from station.fit.calibrate import FitOptions, fit_session
+from station.fit.goodness import summary as goodness_summary
 from station.fit.params import ParameterSet
 from station.kernel.clock import Clock
 from station.kernel.errors import FitError, HardwareError, StationError, UnitRejected
@@ -524,11 +525,15 @@ class SequenceRunner:
 
     def _check_unit_limits(self, unit: UnitChannel, v: _Verdict, params: ParameterSet) -> None:
         checks = check_limits(params, self.limits)
+        goodness = params.quality.get("goodness_of_fit") if isinstance(params.quality, dict) else None
+        if isinstance(goodness, dict) and "passed" in goodness:
+            checks.append(Measurement.in_range("fit.goodness_of_fit.failed_tests", len(goodness.get("failed", ())),
+                                               0.0, 0.0, "1"))
         for c in checks:
             m = Measured(self.run_id, unit.slot, unit.serial, "limits", c)
             v.measurements.append(m)
             self._emit(m)
-        v.outcome, v.message = unit_verdict(checks, self.limits)
+        v.outcome, v.message = recording_verdict(params) or unit_verdict(checks, self.limits)
 
     def _save(
         self,
@@ -581,6 +586,19 @@ class SequenceRunner:
                 stop = True
                 out.append(_replace_outcome(r, Outcome.ABORTED, f"{self.abort_reason} during provisioning"))
         return out
+
+
+def recording_verdict(params: ParameterSet) -> tuple[Outcome, str] | None:
+    """RETEST when the fit's goodness-of-fit test failed, else None (then the limits decide).
+
+    Residuals far beyond the noise the fit itself estimated mean the result is not a calibration: the
+    limit verdicts are meaningless, and it is not the unit's failure either (a disturbed recording, a
+    rig that did not hold): the recording is repeated, and no failed attempt is counted.
+    """
+    goodness = params.quality.get("goodness_of_fit") if isinstance(params.quality, dict) else None
+    if isinstance(goodness, dict) and goodness.get("passed") is False:
+        return Outcome.RETEST, f"the recording contradicts its own fit, retest: {goodness_summary(goodness)}"
+    return None
 
 
 def unit_verdict(checks: Sequence[Measurement], limits: ProductLimits) -> tuple[Outcome, str]:

@@ -14,6 +14,7 @@ import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from alembic import command
@@ -21,8 +22,8 @@ from alembic.config import Config
 from alembic.runtime.migration import MigrationContext
 from alembic.script import ScriptDirectory
 from alembic.util.exc import CommandError
-from sqlalchemy import Engine, create_engine, event, text
-from sqlalchemy.exc import SQLAlchemyError
+from sqlalchemy import Engine, create_engine, event, make_url, text
+from sqlalchemy.exc import ArgumentError, SQLAlchemyError
 from sqlalchemy.orm import Session, sessionmaker
 
 from station.kernel.datafiles import data_path
@@ -125,13 +126,17 @@ class Database:
         self.close()
 
 
-def open_database(url: str | None = None, *, migrate: bool = True) -> Database:
+def open_database(url: str | None = None, *, migrate: bool = True, must_exist: bool = False) -> Database:
     """Open the database at ``url`` (see :func:`database_url`) and run the migrations up to head.
 
+    ``must_exist``: for commands that only read: a SQLite file that does not exist is refused instead of
+    created (an empty database would only say "no units" about the wrong place).
     Raises :class:`StoreError` if the database cannot be reached or migrated.
     """
     url = database_url(url)
     shown = _redact(url)
+    if must_exist:
+        _require_existing(url, shown)
     try:
         check_url(url, shown)
         script = ScriptDirectory.from_config(alembic_config(url))
@@ -148,6 +153,22 @@ def open_database(url: str | None = None, *, migrate: bool = True) -> Database:
     except (SQLAlchemyError, OSError, CommandError) as exc:
         raise StoreError(f"cannot open the station database {shown}: {_first_line(exc)}") from exc
     return Database(url, engine, sessionmaker(engine, expire_on_commit=False))
+
+
+def _require_existing(url: str, shown: str) -> None:
+    try:
+        parsed = make_url(url)
+    except ArgumentError:
+        return  # check_url names what is wrong with it
+    file = parsed.database if parsed.get_backend_name() == "sqlite" else None
+    if file not in (None, "", ":memory:") and not Path(str(file)).exists():
+        raise StoreError(f"no station database at {shown} (nothing is created by a command that only reads; "
+                         f"give --db or set ${ENV_VAR})")
+
+
+def shown_url(url: str | None = None) -> str:
+    """The database URL a command uses (see :func:`database_url`), with any password hidden."""
+    return _redact(database_url(url))
 
 
 def _redact(url: str) -> str:

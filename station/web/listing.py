@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from datetime import UTC, date, datetime, time, timedelta
+from datetime import UTC, date, datetime, time
 from typing import Any
 
 from sqlalchemy import select
@@ -63,8 +63,9 @@ def list_unit_results(
              .join(StationRow, Run.station_id == StationRow.id))
         if day_from is not None:
             q = q.where(Run.started_at >= datetime.combine(day_from, time(0), UTC))
-        if day_to is not None:
-            q = q.where(Run.started_at < datetime.combine(day_to + timedelta(days=1), time(0), UTC))
+        if day_to is not None:  # the end of that day (the last representable day has no next day)
+            end = datetime.combine(day_to, time.max, UTC)
+            q = q.where(Run.started_at <= end)
         if station:
             q = q.where(StationRow.name == station)
         rows = s.execute(q.order_by(Unit.serial, Run.started_at.desc(), Run.id.desc())).all()

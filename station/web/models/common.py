@@ -7,13 +7,15 @@ from typing import Annotated, Literal
 from pydantic import BaseModel, Field
 
 #: The outcomes of a unit or a run as stored (UNFINISHED: not ended yet, or the process died).
-Outcome = Literal["PASS", "FAIL", "ERROR", "ABORTED", "UNFINISHED"]
+Outcome = Literal["PASS", "RETEST", "FAIL", "REFUSED", "ERROR", "ABORTED", "UNFINISHED"]
 
 Serial = Annotated[str, Field(description="the unit's serial number")]
 RunId = Annotated[str, Field(description="the run's id")]
 StationName = Annotated[str, Field(description="the station's name")]
 Message = Annotated[str, Field(description="why the outcome is what it is, one line ('' when there is nothing to say)")]
-OutcomeText = Annotated[str, Field(description="PASS, FAIL, ERROR, ABORTED or UNFINISHED (not ended yet)")]
+OutcomeText = Annotated[
+    str, Field(description="PASS, RETEST, FAIL, REFUSED, ERROR, ABORTED or UNFINISHED (not ended yet)")
+]
 Timestamp = Annotated[str | None, Field(description="UTC time, ISO 8601 (null: not known)")]
 
 
