@@ -57,7 +57,7 @@ class Bench:
         return self.sensor.drain()
 
 
-@pytest.fixture(params=["wire", "fake"])
+@pytest.fixture(params=[pytest.param("wire", marks=pytest.mark.integration), "fake"])
 def bench(request: pytest.FixtureRequest) -> Iterator[Bench]:
     cls = SimStation if request.param == "wire" else FakeStation
     with cls(1, SCALE, SEED) as station:
