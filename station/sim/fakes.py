@@ -236,48 +236,37 @@ class FakeSensor(ProtocolSensor):
     Args:
         device: the sensor (see :func:`open_fake_sensor` to reach one by URL).
         clock: the station clock (default: the device's); must be the device's clock.
-        command_timeout_s, attempts, max_buffered_samples: as for
-            :class:`~station.sensor.client.SerialSensor` (an unanswered command fails at once).
-        crc_window_frames, crc_error_threshold: accepted and ignored (nothing is corrupted in process).
+        url: the URL it was opened by (default: the device's).
+        options: ``command_timeout_s``, ``attempts``, ``max_buffered_samples`` as for
+            :class:`~station.sensor.client.SerialSensor` (an unanswered command fails at once);
+            ``crc_window_frames`` and ``crc_error_threshold`` are accepted and ignored (nothing is
+            corrupted in process).
     """
 
-    def __init__(
-        self,
-        device: FakeSensorDevice,
-        clock: Clock | None = None,
-        *,
-        command_timeout_s: float = 0.5,
-        attempts: int = 3,
-        crc_window_frames: int = 500,
-        crc_error_threshold: float = 0.1,
-        max_buffered_samples: int = 1_000_000,
-        url: str | None = None,
-    ) -> None:
+    def __init__(self, device: FakeSensorDevice, clock: Clock | None = None, *, url: str | None = None,
+                 **options: Any) -> None:
+        for ignored in ("crc_window_frames", "crc_error_threshold"):
+            options.pop(ignored, None)
         url = url if url is not None else device.url
-        super().__init__(
-            clock if clock is not None else device.core.clock,
-            url,
-            url,
-            command_timeout_s=command_timeout_s,
-            attempts=attempts,
-            max_buffered_samples=max_buffered_samples,
-        )
+        super().__init__(clock if clock is not None else device.core.clock, url, url, **options)
         self._device = device
+        self._pump_lock = threading.Lock()  # what was collected first is buffered first
         self._frames = 0
         self._sequence = SequenceTracker()
         device.collect()  # what waited before the open is discarded, as on a port
 
     def _pump(self) -> None:
         """Take in what the device sent."""
-        for item in self._device.collect():
-            if isinstance(item, BootEvent):
-                self._frames += 1
-                self._sequence.boot()
-                self._received_boot()
-            else:
-                self._frames += item.shape[0]
-                self._sequence.feed_records(item)
-                self._received_samples(SampleBlock.from_records(item))
+        with self._pump_lock:
+            for item in self._device.collect():
+                if isinstance(item, BootEvent):
+                    self._frames += 1
+                    self._sequence.boot()
+                    self._received_boot()
+                else:
+                    self._frames += item.shape[0]
+                    self._sequence.feed_records(item)
+                    self._received_samples(SampleBlock.from_records(item))
 
     def _exchange(self, command: Command, args: bytes, attempt: int) -> tuple[Reply | None, int]:
         self._check_fault()

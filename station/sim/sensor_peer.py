@@ -28,12 +28,12 @@ the frames were chunked.
 from __future__ import annotations
 
 import contextlib
-import math
 import os
 import select
 import threading
 import tty
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -41,7 +41,6 @@ from station.kernel.clock import Clock
 from station.kernel.errors import FormatError
 from station.sensor.commands import BootReason, Command, NakCode, decode_command, encode_ack, encode_nak
 from station.sensor.frames import SAMPLE_FRAME_SIZE, FrameParser, FrameType, encode_frame, frame_sample_records
-from station.sim.eeprom import Eeprom
 from station.sim.sensor_core import (
     DEFAULT_RATES_HZ,
     Corrector,
@@ -83,18 +82,13 @@ class SimulatedSensor(SensorUnit):
     Args:
         source: the sensor physics (:class:`SampleSource`).
         clock: time base; :class:`~station.kernel.clock.SimClock` runs it faster than real time.
-        serial: serial number reported by IDENTIFY.
-        firmware: firmware version reported by IDENTIFY.
-        rates_hz: supported rates (Hz); each must divide 1e6.
-        default_rate_hz: rate after power-on (Hz).
-        eeprom: the unit's EEPROM; default 4 KiB, 32-byte pages, 5 ms write cycle on ``clock``.
-        corrector: on-sensor correction used in CORRECTED mode; default identity.
-        accel_range_mps2, gyro_range_radps: full scale reported by IDENTIFY (values are not clipped).
-        accel_resolution_mps2, gyro_resolution_radps: ADC LSB reported by IDENTIFY (0: not quantized).
         seed: seed of the fault-injection generators.
         tick_s: wall-clock period of the firmware loop (s).
         tx_backlog_limit: bytes the sensor buffers when the host does not read; further
             sample frames are dropped and counted as ``tx_overruns``.
+        identity: the unit's keyword arguments of :class:`~station.sim.sensor_core.SensorCore`:
+            ``serial``, ``firmware``, ``rates_hz``, ``default_rate_hz``, ``eeprom``, ``corrector``,
+            the ranges and resolutions reported by IDENTIFY.
     """
 
     def __init__(
@@ -102,36 +96,12 @@ class SimulatedSensor(SensorUnit):
         source: SampleSource,
         clock: Clock | None = None,
         *,
-        serial: str = "SIM-000001",
-        firmware: str = "sim-1.0.0",
-        rates_hz: tuple[int, ...] = DEFAULT_RATES_HZ,
-        default_rate_hz: int = 100,
-        eeprom: Eeprom | None = None,
-        corrector: Corrector | None = None,
-        accel_range_mps2: float = 16 * 9.80665,
-        gyro_range_radps: float = math.radians(2000.0),
-        accel_resolution_mps2: float = 0.0,
-        gyro_resolution_radps: float = 0.0,
         seed: int = 0,
         tick_s: float = 0.01,
         tx_backlog_limit: int = 256 * 1024,
+        **identity: Any,
     ) -> None:
-        super().__init__(
-            SensorCore(
-                source,
-                clock,
-                serial=serial,
-                firmware=firmware,
-                rates_hz=rates_hz,
-                default_rate_hz=default_rate_hz,
-                eeprom=eeprom,
-                corrector=corrector,
-                accel_range_mps2=accel_range_mps2,
-                gyro_range_radps=gyro_range_radps,
-                accel_resolution_mps2=accel_resolution_mps2,
-                gyro_resolution_radps=gyro_resolution_radps,
-            )
-        )
+        super().__init__(SensorCore(source, clock, **identity))
         self._clock = self.core.clock
         self.bit_error_rate = 0.0
         self.drop_frame_rate = 0.0
@@ -161,7 +131,7 @@ class SimulatedSensor(SensorUnit):
             self._boot(BootReason.POWER_ON)
         self._stop = threading.Event()
         self._error: BaseException | None = None
-        self._thread = threading.Thread(target=self._run, name=f"sim-sensor-{serial}", daemon=True)
+        self._thread = threading.Thread(target=self._run, name=f"sim-sensor-{self.identity.serial}", daemon=True)
         self._thread.start()
 
     # --- public controls ------------------------------------------------------------------------
