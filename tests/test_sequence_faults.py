@@ -259,18 +259,19 @@ def test_sensor_dropped_frames(sim: SimStation) -> None:
     assert_no_eeprom_write(sim, (1,))
 
 
-def test_sensor_going_silent(fake: FakeStation) -> None:
-    peer = fake.units[1].sensor
+def test_sensor_going_silent() -> None:
+    with FakeStation(2, SCALE, seed=3, plan=PLAN) as fake:  # the wire's scale: the rest lasts 0.2 s wall
+        peer = fake.units[1].sensor
 
-    def mid_rest() -> None:  # ~5 s of rig time into the 20 s rest: silence while capturing
-        when_streaming(fake, 1, lambda: setattr(peer, "go_silent", True), delay_wall_s=5.0 / fake.scale)
+        def mid_rest() -> None:  # ~5 s of rig time into the 20 s rest: silence while capturing
+            when_streaming(fake, 1, lambda: setattr(peer, "go_silent", True), delay_wall_s=0.05)
 
-    result, _ = run(fake, at_step("rest", mid_rest))
-    # "went silent": no samples while capturing; "did not answer": the clock sync got no reply
-    assert_sensor_fault_outcome(result, "went silent", "did not answer")
-    assert "SensorTimeout" in result.units[1].message and "step 'rest'" in result.units[1].message
-    assert rig_comes_to_rest(fake, 0.5)
-    assert_no_eeprom_write(fake, (1,))
+        result, _ = run(fake, at_step("rest", mid_rest))
+        # "went silent": no samples while capturing; "did not answer": the clock sync got no reply
+        assert_sensor_fault_outcome(result, "went silent", "did not answer")
+        assert "SensorTimeout" in result.units[1].message and "step 'rest'" in result.units[1].message
+        assert rig_comes_to_rest(fake, 0.5)
+        assert_no_eeprom_write(fake, (1,))
 
 
 # --- operator abort and out-of-limits units ----------------------------------------------------------------
