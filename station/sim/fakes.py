@@ -275,7 +275,7 @@ class FakeSensor(ProtocolSensor):
             self._counts["retries"] += self.attempts - attempt - (0 if attempt else 1)
             self._pump()
             return None, self.attempts
-        if answer.due_s is not None:
+        while answer.due_s is not None and answer.due_s > self._clock.now():  # the EEPROM's write cycle
             self._clock.sleep(answer.due_s - self._clock.now())
         self._frames += 1
         self._pump()
@@ -284,6 +284,7 @@ class FakeSensor(ProtocolSensor):
     def _read(self, n: int | None, duration_s: float | None, timeout_s: float) -> SampleBlock:
         deadline = self._clock.now() + timeout_s
         while True:
+            now = self._clock.now()  # before pumping: what is due by now is in the buffer then
             self._pump()
             with self._cond:
                 self._check_fault()
@@ -291,7 +292,6 @@ class FakeSensor(ProtocolSensor):
                 if block is not None:
                     return block
                 missing_s = self._buffer.shortfall_s(n, duration_s, self._rate_hz or 10)
-            now = self._clock.now()
             if now >= deadline:
                 raise self._samples_timeout(timeout_s)
             self._clock.sleep(min(max(missing_s, 1e-6), deadline - now))
