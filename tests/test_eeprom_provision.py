@@ -1,4 +1,9 @@
-"""EEPROM provisioning through the real protocol on a pty, the simulated firmware, and verification on the rig."""
+"""EEPROM provisioning through the sensor protocol, the simulated firmware, and verification on the rig.
+
+Provisioning logic runs on the in-process fakes (:mod:`station.sim.fakes`: the same firmware and
+client code without a pty or a port); the wire itself is covered by tests/test_sensor_pty.py and by
+the device contract (tests/test_device_contract.py), which runs both.
+"""
 
 from __future__ import annotations
 
@@ -29,22 +34,20 @@ from station.eeprom.provision import (
     write_image,
 )
 from station.fit.params import ParameterSet
-from station.kernel.clock import SimClock
+from station.kernel.clock import ManualClock
 from station.kernel.errors import HardwareError, UnitRejected
 from station.kernel.sensor_class import TABLE1
 from station.physics.unit import draw_unit
 from station.rig import open_rig
-from station.sensor.client import SerialSensor, open_sensor
+from station.sensor import Sensor, open_sensor
 from station.sequence.provision import EepromProvisioner
 from station.sequence.records import Outcome
 from station.sequence.runner import UnitResult
 from station.sequence.verify import RigVerifier, VerificationLimits
 from station.sim.eeprom import Eeprom
+from station.sim.fakes import FakeSensorDevice, FakeStation, publish
 from station.sim.firmware import CalibrationFirmware, install_firmware
-from station.sim.sensor_peer import SimulatedSensor
-from station.sim.station_sim import SimStation
 
-SCALE = 20.0
 GRAVITY = 9.80665
 SERIAL = "UNIT-0001"
 F_TRUE = np.array([0.0, 0.0, GRAVITY])  # m/s^2, +z up
@@ -76,10 +79,12 @@ class ModelSource:
 
 
 @pytest.fixture()
-def unit() -> Iterator[tuple[SimulatedSensor, SerialSensor, CalibrationFirmware, ParameterSet]]:
+def unit() -> Iterator[tuple[FakeSensorDevice, Sensor, CalibrationFirmware, ParameterSet]]:
     params = _params()
-    clock = SimClock(SCALE)
-    sensor = SimulatedSensor(ModelSource(params), clock, serial=SERIAL, eeprom=Eeprom(clock=clock))
+    clock = ManualClock()
+    sensor = FakeSensorDevice(ModelSource(params), clock, url="fake-sensor://provision/0", serial=SERIAL,
+                              eeprom=Eeprom(clock=clock))
+    publish(sensor)
     fw = install_firmware(sensor, clock)
     client = open_sensor(sensor.url, clock, command_timeout_s=0.25, attempts=1)
     try:
@@ -198,7 +203,7 @@ def test_firmware_ignores_image_of_another_serial() -> None:
     assert out_a is a
 
 
-def _power_loss_round(sensor: SimulatedSensor, client: SerialSensor, fw: CalibrationFirmware,
+def _power_loss_round(sensor: FakeSensorDevice, client: Sensor, fw: CalibrationFirmware,
                       new: CalibrationImage) -> tuple[int, int]:
     """Arm a power loss at every page of one write; returns (cases, new image seen complete)."""
     before = read_slots(sensor.eeprom.image())
@@ -301,7 +306,7 @@ def test_provisioner_writes_pass_unit_and_power_cycles(unit: tuple) -> None:
 
 @pytest.mark.parametrize("good", [True, False])
 def test_verification_on_the_rig(good: bool) -> None:
-    with SimStation(1, 30.0, seed=4) as sim:
+    with FakeStation(1, 30.0, seed=4) as sim:
         su = sim.units[0]
         install_firmware(su.sensor, sim.clock)
         params = su.truth.as_parameter_set(0.01)

@@ -1,8 +1,9 @@
 """Retest policy: a unit's own failures count; over its attempts it is REFUSED before anything moves.
 
-A simulated station (real Modbus/TCP rig server, sensor on a pty, fast clock) runs one unit with a
-limits file it cannot meet, so every run FAILs: two failed attempts, then the third run refuses the
-unit before the rig moves (REFUSED, its own exit code), until a disposition is recorded.
+A simulated station (the in-process fakes: fake-rig:// and fake-sensor:// URLs, no port, no pty; a
+fast clock) runs one unit with a limits file it cannot meet, so every run FAILs: two failed attempts,
+then the third run refuses the unit before the rig moves (REFUSED, its own exit code), until a
+disposition is recorded.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ from station.kernel.limits import table1_limits
 from station.kernel.limits_file import LimitsFile, RetestPolicy, load_limits
 from station.kernel.plan import RigPlan
 from station.sequence import Outcome, RigReading, StepStarted
-from station.sim.station_sim import SimStation
+from station.sim.fakes import FakeStation
 from station.store.queries import attempt_count
 from station.store.recorder import record_disposition
 
@@ -35,7 +36,7 @@ def unmeetable_limits() -> LimitsFile:
 def test_failures_count_and_the_refusal_comes_before_any_motion(tmp_path: Path) -> None:
     url = f"sqlite:///{tmp_path / 'retest.sqlite'}"
     results = []
-    with SimStation(1, SCALE, 5, plan=PLAN) as sim:
+    with FakeStation(1, SCALE, 5, plan=PLAN) as sim:
         serial = sim.units[0].truth.serial
         config = StationConfig(sim.rig_url, tuple(sim.sensor_urls), station_id="pytest", db_url=url, out_dir=None,
                                plan=PLAN, rig_options=sim.rig_client_options(), provision=False)

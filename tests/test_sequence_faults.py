@@ -1,7 +1,11 @@
 """Injected faults during the sequence: the outcome is ERROR (never PASS), the rig ends at rest, no EEPROM write.
 
-Each test starts a fresh simulated station (Modbus/TCP rig on 127.0.0.1, two sensors
-on ptys), injects one fault when a chosen step starts (through a record subscriber,
+Each test starts a fresh simulated station with two sensors: faults of the wire (a rig that does
+not answer or answers with exceptions, a dropped connection, bit errors, dropped frames, the
+watchdog of an unsupervised link) on the real peers (Modbus/TCP rig on 127.0.0.1, sensors on
+ptys: the ``sim`` fixture); faults of the devices themselves, operator aborts, limits and
+verification on the in-process fakes (``fake``: the same simulated rig and firmware, no port, no
+pty). It injects one fault when a chosen step starts (through a record subscriber,
 the way an operator display would see the run), and runs a short sequence on a fast
 clock. A provisioner that writes the EEPROM of every PASS unit is installed, so "no
 write" is a real check: a faulted unit, or every unit when the rig faulted, must keep
@@ -24,8 +28,7 @@ from station.kernel.measurement import Measurement
 from station.kernel.plan import RigPlan
 from station.rig import open_rig
 from station.rig.registers import FaultCode, Status
-from station.sensor import open_sensor
-from station.sensor.client import SerialSensor
+from station.sensor import Sensor, open_sensor
 from station.sequence import (
     Measured,
     Outcome,
@@ -39,11 +42,11 @@ from station.sequence import (
     UnitResult,
 )
 from station.sim.eeprom import ERASED
-from station.sim.station_sim import SimStation
+from station.sim.fakes import FakeStation
+from station.sim.station_sim import SimStation, SimulatedStation
 
-pytestmark = pytest.mark.integration
-
-SCALE = 100.0
+SCALE = 100.0  # the wire peers'
+FAKE_SCALE = 400.0  # the fakes have no link to keep up with
 PLAN = RigPlan(
     sample_rate_hz=50.0,
     rest_s=20.0,
@@ -51,7 +54,7 @@ PLAN = RigPlan(
     rate_steps=(("x", 100.0), ("y", 100.0), ("z", 100.0)),
     rate_hold_s=2.0,
 )
-OPTIONS = SequenceOptions(move_timeout_s=30.0, spin_timeout_s=30.0, rest_timeout_s=60.0).for_scale(SCALE)
+OPTIONS = SequenceOptions(move_timeout_s=30.0, spin_timeout_s=30.0, rest_timeout_s=60.0)  # .for_scale(station's)
 RIG_QUERY = "&timeout=0.2&retries=1"  # fail fast when the rig does not answer (wall seconds)
 SENSOR_OPTIONS = {"command_timeout_s": 0.2, "attempts": 2}
 
@@ -62,7 +65,7 @@ class EepromWriter:
     def __init__(self) -> None:
         self.calls: list[int] = []
 
-    def provision(self, unit: UnitResult, sensor: SerialSensor, run_started_at: object = None) -> None:
+    def provision(self, unit: UnitResult, sensor: Sensor, run_started_at: object = None) -> None:
         self.calls.append(unit.slot)
         sensor.eeprom_write_page(0, b"CAL:" + unit.serial.encode())
 
@@ -85,20 +88,30 @@ def sim() -> Iterator[SimStation]:
         yield station
 
 
+@pytest.fixture
+def fake() -> Iterator[FakeStation]:
+    with FakeStation(2, FAKE_SCALE, seed=3, plan=PLAN) as station:
+        yield station
+
+
+def rig_url(sim: SimulatedStation) -> str:
+    return sim.rig_url + RIG_QUERY if isinstance(sim, SimStation) else sim.rig_url
+
+
 def run(
-    sim: SimStation,
+    sim: SimulatedStation,
     *subscribers: Callable[[Record], None],
     out_dir: Path | None = None,
     limits: object = None,
     plan: RigPlan = PLAN,
 ) -> tuple[RunResult, EepromWriter]:
     writer = EepromWriter()
-    rig = open_rig(sim.rig_url + RIG_QUERY, sim.clock, **sim.rig_client_options())
+    rig = open_rig(rig_url(sim), sim.clock, **sim.rig_client_options())
     sensors = [open_sensor(url, sim.clock, **SENSOR_OPTIONS) for url in sim.sensor_urls]  # type: ignore[arg-type]
     try:
         runner = SequenceRunner(
-            rig, sensors, sim.clock, plan=plan, options=OPTIONS, provisioner=writer, out_dir=out_dir,
-            subscribers=list(subscribers), limits=limits or table1_limits(),  # type: ignore[arg-type]
+            rig, sensors, sim.clock, plan=plan, options=OPTIONS.for_scale(sim.scale), provisioner=writer,
+            out_dir=out_dir, subscribers=list(subscribers), limits=limits or table1_limits(),  # type: ignore[arg-type]
         )
         result = runner.run()
     finally:
@@ -108,7 +121,7 @@ def run(
     return result, writer
 
 
-def rig_comes_to_rest(sim: SimStation, wall_timeout_s: float = 10.0) -> bool:
+def rig_comes_to_rest(sim: SimulatedStation, wall_timeout_s: float = 10.0) -> bool:
     """The simulated rig reports rest (all axes still) within the wall timeout (its watchdog may do it)."""
     assert sim.rig is not None
     deadline = time.monotonic() + wall_timeout_s
@@ -120,7 +133,7 @@ def rig_comes_to_rest(sim: SimStation, wall_timeout_s: float = 10.0) -> bool:
     return False
 
 
-def assert_no_eeprom_write(sim: SimStation, slots: tuple[int, ...] = (0, 1)) -> None:
+def assert_no_eeprom_write(sim: SimulatedStation, slots: tuple[int, ...] = (0, 1)) -> None:
     for k in slots:
         eeprom = sim.units[k].sensor.eeprom
         assert eeprom.page_writes == 0, f"slot {k}: {eeprom.page_writes} EEPROM page writes"
@@ -141,6 +154,7 @@ def assert_rig_fault_outcome(result: RunResult, writer: EepromWriter, *words: st
 # --- rig faults ------------------------------------------------------------------------------------
 
 
+@pytest.mark.integration
 def test_rig_no_answer_while_spinning(sim: SimStation) -> None:
     assert sim.rig is not None
     faults = sim.rig.faults
@@ -152,6 +166,7 @@ def test_rig_no_answer_while_spinning(sim: SimStation) -> None:
     assert_no_eeprom_write(sim)
 
 
+@pytest.mark.integration
 def test_rig_exception_replies(sim: SimStation) -> None:
     assert sim.rig is not None
     faults = sim.rig.faults
@@ -161,24 +176,25 @@ def test_rig_exception_replies(sim: SimStation) -> None:
     assert_no_eeprom_write(sim)
 
 
-def test_rig_stuck_in_position(sim: SimStation) -> None:
-    assert sim.rig is not None
-    faults = sim.rig.faults
-    result, writer = run(sim, at_step("pose -z", lambda: setattr(faults, "stuck_in_position", True)))
+def test_rig_stuck_in_position(fake: FakeStation) -> None:
+    assert fake.rig is not None
+    faults = fake.rig.faults
+    result, writer = run(fake, at_step("pose -z", lambda: setattr(faults, "stuck_in_position", True)))
     assert_rig_fault_outcome(result, writer, "not in position")
-    assert result.rig_at_rest and rig_comes_to_rest(sim, 0.5)
-    assert_no_eeprom_write(sim)
+    assert result.rig_at_rest and rig_comes_to_rest(fake, 0.5)
+    assert_no_eeprom_write(fake)
 
 
-def test_rig_fault_bit_during_rate_step(sim: SimStation) -> None:
-    assert sim.rig is not None
-    faults = sim.rig.faults
-    result, writer = run(sim, at_step("rate y +100", lambda: setattr(faults, "fault_code", int(FaultCode.DRIVE_YAW))))
+def test_rig_fault_bit_during_rate_step(fake: FakeStation) -> None:
+    assert fake.rig is not None
+    faults = fake.rig.faults
+    result, writer = run(fake, at_step("rate y +100", lambda: setattr(faults, "fault_code", int(FaultCode.DRIVE_YAW))))
     assert_rig_fault_outcome(result, writer, "DRIVE_YAW", "5")
-    assert result.rig_at_rest and rig_comes_to_rest(sim, 0.5)
-    assert_no_eeprom_write(sim)
+    assert result.rig_at_rest and rig_comes_to_rest(fake, 0.5)
+    assert_no_eeprom_write(fake)
 
 
+@pytest.mark.integration
 def test_rig_connection_dropped_mid_motion(sim: SimStation) -> None:
     assert sim.rig is not None
     faults = sim.rig.faults
@@ -202,7 +218,7 @@ def assert_sensor_fault_outcome(result: RunResult, *words: str) -> None:
     assert result.rig_at_rest and result.message == ""
 
 
-def when_streaming(sim: SimStation, slot: int, action: Callable[[], None], delay_wall_s: float = 0.0) -> None:
+def when_streaming(sim: SimulatedStation, slot: int, action: Callable[[], None], delay_wall_s: float = 0.0) -> None:
     """Run ``action`` from a thread once slot's sensor has sent its first sample frame (plus a delay)."""
     peer = sim.units[slot].sensor
 
@@ -215,6 +231,7 @@ def when_streaming(sim: SimStation, slot: int, action: Callable[[], None], delay
     threading.Thread(target=wait_then_act, daemon=True).start()
 
 
+@pytest.mark.integration
 def test_sensor_bit_errors_crc_storm(sim: SimStation) -> None:
     peer = sim.units[1].sensor
 
@@ -228,6 +245,7 @@ def test_sensor_bit_errors_crc_storm(sim: SimStation) -> None:
     assert_no_eeprom_write(sim, (1,))
 
 
+@pytest.mark.integration
 def test_sensor_dropped_frames(sim: SimStation) -> None:
     peer = sim.units[1].sensor
     result, _ = run(sim, at_step("pose -z", lambda: setattr(peer, "drop_frame_rate", 0.05)))
@@ -241,49 +259,51 @@ def test_sensor_dropped_frames(sim: SimStation) -> None:
     assert_no_eeprom_write(sim, (1,))
 
 
-def test_sensor_going_silent(sim: SimStation) -> None:
-    peer = sim.units[1].sensor
+def test_sensor_going_silent() -> None:
+    with FakeStation(2, SCALE, seed=3, plan=PLAN) as fake:  # the wire's scale: the rest lasts 0.2 s wall
+        peer = fake.units[1].sensor
 
-    def mid_rest() -> None:  # ~5 s of rig time into the 20 s rest: silence while capturing
-        when_streaming(sim, 1, lambda: setattr(peer, "go_silent", True), delay_wall_s=0.05)
+        def mid_rest() -> None:  # ~5 s of rig time into the 20 s rest: silence while capturing
+            when_streaming(fake, 1, lambda: setattr(peer, "go_silent", True), delay_wall_s=0.05)
 
-    result, _ = run(sim, at_step("rest", mid_rest))
-    # "went silent": no samples while capturing; "did not answer": the clock sync got no reply
-    assert_sensor_fault_outcome(result, "went silent", "did not answer")
-    assert "SensorTimeout" in result.units[1].message and "step 'rest'" in result.units[1].message
-    assert rig_comes_to_rest(sim, 0.5)
-    assert_no_eeprom_write(sim, (1,))
+        result, _ = run(fake, at_step("rest", mid_rest))
+        # "went silent": no samples while capturing; "did not answer": the clock sync got no reply
+        assert_sensor_fault_outcome(result, "went silent", "did not answer")
+        assert "SensorTimeout" in result.units[1].message and "step 'rest'" in result.units[1].message
+        assert rig_comes_to_rest(fake, 0.5)
+        assert_no_eeprom_write(fake, (1,))
 
 
 # --- operator abort and out-of-limits units ----------------------------------------------------------------
 
 
-def test_ctrl_c_aborts_brings_rig_to_rest_and_writes_nothing(sim: SimStation, tmp_path: Path) -> None:
+def test_ctrl_c_aborts_brings_rig_to_rest_and_writes_nothing(fake: FakeStation, tmp_path: Path) -> None:
     def ctrl_c() -> None:
         raise KeyboardInterrupt
 
-    result, writer = run(sim, at_step("rate x +100", ctrl_c), out_dir=tmp_path)
+    result, writer = run(fake, at_step("rate x +100", ctrl_c), out_dir=tmp_path)
     assert result.outcome == Outcome.ABORTED
     assert [u.outcome for u in result.units] == [Outcome.ABORTED, Outcome.ABORTED]
-    assert result.rig_at_rest and rig_comes_to_rest(sim, 0.5)
+    assert result.rig_at_rest and rig_comes_to_rest(fake, 0.5)
     assert writer.calls == []
-    assert_no_eeprom_write(sim)
+    assert_no_eeprom_write(fake)
     # what was captured before the abort is kept for diagnosis
     assert all(u.session_path is not None and u.session_path.exists() for u in result.units)
     assert all(u.params is None for u in result.units)
 
 
-def test_unit_out_of_limits_is_fail_and_writes_nothing(sim: SimStation) -> None:
+def test_unit_out_of_limits_is_fail_and_writes_nothing(fake: FakeStation) -> None:
     lim = table1_limits()
     tight = replace(lim, name="too-tight", gyro=replace(lim.gyro, noise_std=(0.0, 1e-9)))
-    result, writer = run(sim, limits=tight)
+    result, writer = run(fake, limits=tight)
     assert result.outcome == Outcome.FAIL
     for unit in result.units:
         assert unit.outcome == Outcome.FAIL and "gyro.noise_std" in unit.message
     assert writer.calls == [] and result.rig_at_rest
-    assert_no_eeprom_write(sim)
+    assert_no_eeprom_write(fake)
 
 
+@pytest.mark.integration
 def test_next_run_clears_the_watchdog_fault_the_last_one_left(sim: SimStation) -> None:
     """Closing the station stops the heartbeat, so the rig latches WATCHDOG; the next run resets it."""
     assert sim.rig is not None
@@ -300,7 +320,7 @@ def test_next_run_clears_the_watchdog_fault_the_last_one_left(sim: SimStation) -
         assert result.rig_at_rest and result.message == ""
 
 
-def run_with_verification(sim: SimStation, limits: object = None) -> tuple[RunResult, list[Record]]:
+def run_with_verification(sim: SimulatedStation, limits: object = None) -> tuple[RunResult, list[Record]]:
     """A run whose PASS units are written to EEPROM by the real provisioner and verified on the rig,
     with the simulated sensors running the calibration firmware (Algorithm 1 from their EEPROM)."""
     from station.sequence.provision import EepromProvisioner
@@ -310,13 +330,13 @@ def run_with_verification(sim: SimStation, limits: object = None) -> tuple[RunRe
     for u in sim.units:
         install_firmware(u.sensor, sim.clock)
     records: list[Record] = []
-    rig = open_rig(sim.rig_url + RIG_QUERY, sim.clock, **sim.rig_client_options())
+    rig = open_rig(rig_url(sim), sim.clock, **sim.rig_client_options())
     sensors = [open_sensor(url, sim.clock, **SENSOR_OPTIONS) for url in sim.sensor_urls]  # type: ignore[arg-type]
     try:
         verifier = RigVerifier(rig, sim.clock, limits, gravity_mps2=PLAN.gravity_mps2,  # type: ignore[arg-type]
-                               sample_rate_hz=int(PLAN.sample_rate_hz), options=OPTIONS)
+                               sample_rate_hz=int(PLAN.sample_rate_hz), options=OPTIONS.for_scale(sim.scale))
         runner = SequenceRunner(
-            rig, sensors, sim.clock, plan=PLAN, options=OPTIONS, limits=table1_limits(),
+            rig, sensors, sim.clock, plan=PLAN, options=OPTIONS.for_scale(sim.scale), limits=table1_limits(),
             provisioner=EepromProvisioner("test", verifier=verifier), subscribers=[records.append],
         )
         result = runner.run()
@@ -332,22 +352,22 @@ def verify_measurements(records: list[Record]) -> list[tuple[int, Measurement]]:
     return [(r.slot, r.measurement) for r in records if isinstance(r, Measured) and r.step == "verify"]
 
 
-def test_failed_verification_is_fail_with_the_residuals_recorded(sim: SimStation) -> None:
+def test_failed_verification_is_fail_with_the_residuals_recorded(fake: FakeStation) -> None:
     """The EEPROM is written and the firmware corrects, but the corrected output misses a limit: FAIL, not ERROR."""
     from station.kernel.limits_file import VerificationLimits
 
-    result, records = run_with_verification(sim, VerificationLimits(accel_mps2=1e-9))  # no residual is that small
+    result, records = run_with_verification(fake, VerificationLimits(accel_mps2=1e-9))  # no residual is that small
     assert [u.outcome for u in result.units] == [Outcome.FAIL, Outcome.FAIL]
     assert result.outcome == Outcome.FAIL and result.rig_at_rest
     verify = verify_measurements(records)
     assert {slot for slot, _ in verify} == {0, 1}
     assert any(not m.passed and "accel" in m.name for _, m in verify)
-    assert all(u.sensor.eeprom.page_writes > 0 for u in sim.units)  # written, then verified
+    assert all(u.sensor.eeprom.page_writes > 0 for u in fake.units)  # written, then verified
 
 
-def test_passed_verification_records_its_residuals(sim: SimStation) -> None:
+def test_passed_verification_records_its_residuals(fake: FakeStation) -> None:
     """A unit that passes verification gets its residuals recorded as 'verify' measurements, all passed."""
-    result, records = run_with_verification(sim)
+    result, records = run_with_verification(fake)
     assert [u.outcome for u in result.units] == [Outcome.PASS, Outcome.PASS]
     verify = verify_measurements(records)
     assert {slot for slot, _ in verify} == {0, 1} and all(m.passed for _, m in verify)

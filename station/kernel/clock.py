@@ -1,4 +1,4 @@
-"""Clocks: the wall clock a real rig lives by, and a scaled clock for simulation.
+"""Clocks: the wall clock a real rig lives by, a scaled clock for simulation, a manual one for deterministic runs.
 
 Simulated peers and the station read time through a :class:`Clock`. With
 ``SimClock(scale=60)`` a sequence whose real duration is an hour runs in a minute,
@@ -62,3 +62,30 @@ class SimClock:
     def sleep(self, seconds: float) -> None:
         if seconds > 0:
             time.sleep(seconds / self._scale)
+
+
+class ManualClock:
+    """Simulated time that moves only when someone sleeps on it (or :meth:`advance`): deterministic runs.
+
+    ``now()`` starts at ``start`` (s); ``sleep(s)`` returns at once, ``s`` later. Whoever waits on
+    it drives it, so a single thread that polls by sleeping sees the same times on every run.
+    ``scale`` is 1 (there is no wall time to relate to).
+    """
+
+    scale = 1.0
+
+    def __init__(self, start: float = 0.0) -> None:
+        self._t = float(start)
+        self._lock = threading.Lock()
+
+    def now(self) -> float:
+        return self._t
+
+    def sleep(self, seconds: float) -> None:
+        self.advance(seconds)
+
+    def advance(self, seconds: float) -> None:
+        """Move time forward by ``seconds`` (negative values are ignored)."""
+        if seconds > 0:
+            with self._lock:
+                self._t += seconds

@@ -174,7 +174,8 @@ Orientation = tuple[float, float] | str
 
 @runtime_checkable
 class Rig(Protocol):
-    """The station's view of a rig; implemented by :class:`station.rig.modbus.ModbusRig`.
+    """The station's view of a rig; implemented by :class:`station.rig.mapped.RegisterRig` on a transport
+    (:class:`station.rig.modbus.ModbusRig`, the in-process fake of :mod:`station.sim.fakes`).
 
     Commands return once the rig acknowledged them; the ``wait_*`` calls confirm
     the motion from status bits *and* readbacks within tolerance, never from the

@@ -3,6 +3,7 @@
 - :mod:`station.sensor.frames`: framing, CRC-16/CCITT-FALSE, sample encoding, :class:`FrameParser`.
 - :mod:`station.sensor.commands`: command/ACK/NAK codes and payloads.
 - :mod:`station.sensor.protocol`: the :class:`Sensor` protocol, :class:`SampleBlock`, the link faults.
+- :mod:`station.sensor.base`: :class:`~station.sensor.base.ProtocolSensor`, the protocol's semantics over any transport.
 - :mod:`station.sensor.client`: :class:`SerialSensor`, the protocol over a serial port.
 - :mod:`station.sensor.registry`: :func:`open_sensor` by URL scheme.
 - :mod:`station.sensor.url`: ``serial:///dev/...?baud=N`` parsing.

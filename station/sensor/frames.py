@@ -144,7 +144,7 @@ class Sample:
         return self.t_us * 1e-6
 
 
-def encode_sample_frames(
+def sample_records(
     seq0: int,
     t_us: np.ndarray,
     accel: np.ndarray,
@@ -152,7 +152,7 @@ def encode_sample_frames(
     temp: np.ndarray,
     flags: np.ndarray | int = 0,
 ) -> np.ndarray:
-    """Encode ``n`` consecutive samples as SAMPLE frames, vectorized.
+    """``n`` consecutive samples as SAMPLE payloads: a structured array of :data:`SAMPLE_PAYLOAD_DTYPE`.
 
     Args:
         seq0: sequence number of the first sample; the counter wraps modulo 2^16.
@@ -161,27 +161,47 @@ def encode_sample_frames(
         gyro: (n, 3) angular rate (rad/s); stored as float32.
         temp: (n,) temperature (degC), NaN for none.
         flags: (n,) or scalar :class:`SampleFlag` bits.
-
-    Returns:
-        (n, 47) uint8 array, one frame per row (``.tobytes()`` is the wire stream).
     """
     t = np.asarray(t_us, dtype=np.int64)
     n = t.shape[0]
-    frames = np.zeros(n, dtype=_SAMPLE_FRAME_DTYPE)
-    frames["sync"] = np.frombuffer(SYNC, dtype=np.uint8)
-    frames["type"] = FrameType.SAMPLE
-    frames["length"] = SAMPLE_PAYLOAD_SIZE
-    p = frames["payload"]
+    p = np.zeros(n, dtype=SAMPLE_PAYLOAD_DTYPE)
     p["seq"] = (seq0 + np.arange(n, dtype=np.int64)) % SEQ_MODULUS
     p["flags"] = flags
     p["t_us"] = t
     p["accel"] = np.asarray(accel, dtype=np.float64).reshape(n, 3)
     p["gyro"] = np.asarray(gyro, dtype=np.float64).reshape(n, 3)
     p["temp"] = np.asarray(temp, dtype=np.float64).reshape(n)
+    return p
+
+
+def frame_sample_records(records: np.ndarray) -> np.ndarray:
+    """SAMPLE frames of payload records (:func:`sample_records`): (n, 47) uint8, one frame per row."""
+    n = records.shape[0]
+    frames = np.zeros(n, dtype=_SAMPLE_FRAME_DTYPE)
+    frames["sync"] = np.frombuffer(SYNC, dtype=np.uint8)
+    frames["type"] = FrameType.SAMPLE
+    frames["length"] = SAMPLE_PAYLOAD_SIZE
+    frames["payload"] = records
     raw = frames.view(np.uint8).reshape(n, SAMPLE_FRAME_SIZE)
     crc_span = raw[:, 2:-2]
     frames["crc"] = [binascii.crc_hqx(row.tobytes(), 0xFFFF) for row in crc_span]
     return raw
+
+
+def encode_sample_frames(
+    seq0: int,
+    t_us: np.ndarray,
+    accel: np.ndarray,
+    gyro: np.ndarray,
+    temp: np.ndarray,
+    flags: np.ndarray | int = 0,
+) -> np.ndarray:
+    """Encode ``n`` consecutive samples as SAMPLE frames, vectorized (arguments of :func:`sample_records`).
+
+    Returns:
+        (n, 47) uint8 array, one frame per row (``.tobytes()`` is the wire stream).
+    """
+    return frame_sample_records(sample_records(seq0, t_us, accel, gyro, temp, flags))
 
 
 def encode_sample_payload(
@@ -224,6 +244,75 @@ def decode_sample_payloads(payloads: Sequence[bytes]) -> np.ndarray:
     if len(joined) != SAMPLE_PAYLOAD_SIZE * len(payloads):
         raise FormatError("sample payloads must be 40 bytes each")
     return np.frombuffer(joined, dtype=SAMPLE_PAYLOAD_DTYPE)
+
+
+class SequenceTracker:
+    """SAMPLE sequence accounting of one stream: gaps, lost frames, duplicates, restarts.
+
+    Fed with every sample in arrival order (:meth:`sample`) and every BOOT event (:meth:`boot`).
+    A gap of ``k`` lost frames wraps modulo 2^16, and a wrap of the 16-bit counter during a long
+    outage is recovered from the sensor timestamps when the sample period is known.
+    """
+
+    def __init__(self) -> None:
+        self.reset_counts()
+        self.forget()
+
+    def reset_counts(self) -> None:
+        """Zero the counters."""
+        self.gaps = 0
+        self.lost = 0
+        self.duplicates = 0
+        self.restarts = 0
+
+    def forget(self) -> None:
+        """Forget the last sequence number (the sensor restarted its counter)."""
+        self._last_seq: int | None = None
+        self._last_t_us = 0
+        self._period_us = 0
+
+    def boot(self) -> None:
+        """A BOOT event: the sensor restarted."""
+        self.restarts += 1
+        self.forget()
+
+    def sample(self, seq: int, flags: int, t_us: int) -> None:
+        """Account for one sample (sequence number, flags, sensor time in µs)."""
+        last = self._last_seq
+        if last is not None and seq == (last + 1) & 0xFFFF and t_us - self._last_t_us == self._period_us:
+            self._last_seq = seq  # the common case: the next frame, one period later
+            self._last_t_us = t_us
+            return
+        if last is not None and t_us < self._last_t_us:
+            # The time base went backwards: the sensor restarted and its BOOT event was lost.
+            self.restarts += 1
+            last = None
+            self._period_us = 0
+        if last is not None:
+            dt = t_us - self._last_t_us
+            delta = (seq - last) % SEQ_MODULUS
+            if delta == 0 and dt == 0:
+                self.duplicates += 1
+                return
+            missing = (delta - 1) % SEQ_MODULUS
+            if self._period_us and not flags & _NOT_CONTIGUOUS:
+                # A long outage can hide whole 2^16 wraps of the counter; the time stamps show them.
+                excess = round(dt / self._period_us) - 1 - missing
+                if excess >= SEQ_MODULUS // 2:
+                    missing += SEQ_MODULUS * round(excess / SEQ_MODULUS)
+            if missing:
+                self.gaps += 1
+                self.lost += missing
+            elif not flags & _NOT_CONTIGUOUS and dt > 0:
+                self._period_us = dt
+        self._last_seq = seq
+        self._last_t_us = t_us
+
+    def feed_records(self, records: np.ndarray) -> None:
+        """Account for decoded samples (:data:`SAMPLE_PAYLOAD_DTYPE` records) in order."""
+        for seq, flags, t_us in zip(records["seq"].tolist(), records["flags"].tolist(), records["t_us"].tolist(),
+                                    strict=True):
+            self.sample(seq, flags, t_us)
 
 
 @dataclass(frozen=True, slots=True)
@@ -275,8 +364,8 @@ class FrameParser:
         self._buf = bytearray()
         self._track = track_sequence
         self._in_sync = True
+        self._sequence = SequenceTracker()
         self.reset_stats()
-        self.reset_sequence()
 
     def reset_stats(self) -> None:
         """Zero all counters (the buffer content is kept and counted as new input)."""
@@ -287,16 +376,11 @@ class FrameParser:
         self._crc_errors = 0
         self._bad_headers = 0
         self._resyncs = 0
-        self._gaps = 0
-        self._lost = 0
-        self._duplicates = 0
-        self._restarts = 0
+        self._sequence.reset_counts()
 
     def reset_sequence(self) -> None:
         """Forget the last sequence number (the sensor restarted its counter)."""
-        self._last_seq: int | None = None
-        self._last_t_us = 0
-        self._period_us = 0
+        self._sequence.forget()
 
     @property
     def frames(self) -> int:
@@ -324,10 +408,10 @@ class FrameParser:
             crc_errors=self._crc_errors,
             bad_headers=self._bad_headers,
             resyncs=self._resyncs,
-            gaps=self._gaps,
-            lost_frames=self._lost,
-            duplicates=self._duplicates,
-            restarts=self._restarts,
+            gaps=self._sequence.gaps,
+            lost_frames=self._sequence.lost,
+            duplicates=self._sequence.duplicates,
+            restarts=self._sequence.restarts,
         )
 
     def _discard(self, n: int) -> None:
@@ -385,42 +469,9 @@ class FrameParser:
             pos = end
             if self._track:
                 if ftype == _T_SAMPLE:
-                    self._track_sample(payload)
+                    self._sequence.sample(*_SEQ_FLAGS_TIME.unpack_from(payload))
                 elif ftype == _T_EVENT and payload[:1] == b"\x01":
-                    self._restarts += 1
-                    self.reset_sequence()
+                    self._sequence.boot()
             out.append(Frame(ftype, payload))
         del buf[:pos]
         return out
-
-    def _track_sample(self, p: bytes) -> None:
-        seq, flags, t_us = _SEQ_FLAGS_TIME.unpack_from(p)
-        last = self._last_seq
-        if last is not None and seq == (last + 1) & 0xFFFF and t_us - self._last_t_us == self._period_us:
-            self._last_seq = seq  # the common case: the next frame, one period later
-            self._last_t_us = t_us
-            return
-        if last is not None and t_us < self._last_t_us:
-            # The time base went backwards: the sensor restarted and its BOOT event was lost.
-            self._restarts += 1
-            last = None
-            self._period_us = 0
-        if last is not None:
-            dt = t_us - self._last_t_us
-            delta = (seq - last) % SEQ_MODULUS
-            if delta == 0 and dt == 0:
-                self._duplicates += 1
-                return
-            missing = (delta - 1) % SEQ_MODULUS
-            if self._period_us and not flags & _NOT_CONTIGUOUS:
-                # A long outage can hide whole 2^16 wraps of the counter; the time stamps show them.
-                excess = round(dt / self._period_us) - 1 - missing
-                if excess >= SEQ_MODULUS // 2:
-                    missing += SEQ_MODULUS * round(excess / SEQ_MODULUS)
-            if missing:
-                self._gaps += 1
-                self._lost += missing
-            elif not flags & _NOT_CONTIGUOUS and dt > 0:
-                self._period_us = dt
-        self._last_seq = seq
-        self._last_t_us = t_us

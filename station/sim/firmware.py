@@ -1,8 +1,8 @@
 """The simulated unit's calibration firmware: Algorithm 1 from the EEPROM image, as the real unit runs it.
 
-:class:`CalibrationFirmware` is a :data:`~station.sim.sensor_peer.Corrector` for
-:class:`~station.sim.sensor_peer.SimulatedSensor`. At every power-on (its ``reset()``,
-which the sensor calls at boot) it reads both EEPROM slots, picks the valid image with
+:class:`CalibrationFirmware` is a :data:`~station.sim.sensor_core.Corrector` for a simulated
+sensor (a :class:`~station.sim.sensor_core.SensorUnit`: the pty peer or the in-process fake). At
+every power-on (its ``reset()``, which the sensor calls at boot) it reads both EEPROM slots, picks the valid image with
 the highest update count (:func:`station.eeprom.image.select_image`) and loads Algorithm 1
 of Kolhoff & Kemper with it. In CORRECTED output mode the sensor passes it each chunk of
 raw samples; it returns them corrected: drift ``b_drift g_i`` (eq. 3, forward Euler),
@@ -34,7 +34,7 @@ from station.eeprom.image import DEFAULT_SLOTS, CalibrationImage, SlotLayout, re
 from station.fit.params import ParameterSet
 from station.kernel.clock import Clock, WallClock
 from station.sim.eeprom import Eeprom, EepromError
-from station.sim.sensor_peer import SimulatedSensor
+from station.sim.sensor_core import SensorUnit
 
 Engine = Literal["streaming", "batch"]
 
@@ -165,7 +165,7 @@ class CalibrationFirmware:
 
 
 def install_firmware(
-    sensor: SimulatedSensor, clock: Clock | None = None, *, engine: Engine = "streaming"
+    sensor: SensorUnit, clock: Clock | None = None, *, engine: Engine = "streaming"
 ) -> CalibrationFirmware:
     """Give ``sensor`` the calibration firmware (bound to its EEPROM and serial); returns it.
 

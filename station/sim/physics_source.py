@@ -1,6 +1,6 @@
 """The sensor physics of a simulated unit mounted on the simulated rig.
 
-:class:`PhysicsSource` is a :class:`~station.sim.sensor_peer.SampleSource`: the
+:class:`PhysicsSource` is a :class:`~station.sim.sensor_core.SampleSource`: the
 simulated sensor asks it for samples at sensor times (s since power-on), it asks
 the rig what the sensor frame did at the matching rig times and renders the
 unit's raw output with :class:`~station.physics.imu.ImuModel` (eq. 1 with the

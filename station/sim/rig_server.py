@@ -408,6 +408,29 @@ class RigModel:
         return kinematics_from_angles(t, angle, rate, accel)
 
 
+class RigModelView:
+    """What simulated sensors and tests see of a simulated rig: its model's fault switches, readbacks
+    and kinematics (the Modbus server and the in-process fake rig both offer it)."""
+
+    model: RigModel
+
+    @property
+    def faults(self) -> RigFaults:
+        return self.model.faults
+
+    def readback(self) -> tuple[float, float, float, float, Status]:
+        """(roll_deg, pitch_deg, yaw_deg, table rate deg/s, status) now."""
+        return self.model.readback()
+
+    def axis_states(self, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """See :meth:`RigModel.axis_states`."""
+        return self.model.axis_states(t_s)
+
+    def kinematics(self, t_s: np.ndarray) -> Kinematics:
+        """See :meth:`RigModel.kinematics`."""
+        return self.model.kinematics(t_s)
+
+
 class _PtyBridge:
     """Two pty pairs joined master-to-master (like ``socat pty pty``) on an asyncio loop.
 
@@ -459,7 +482,7 @@ class _PtyBridge:
                 os.close(fd)
 
 
-class SimulatedRig:
+class SimulatedRig(RigModelView):
     """The rig model served over Modbus in a background thread.
 
     ``transport="tcp"`` listens on ``host:port`` (port 0 picks a free port);
@@ -515,10 +538,6 @@ class SimulatedRig:
         self._bridge: _PtyBridge | None = None
         self._start_error: BaseException | None = None
         self._swallow = 0
-
-    @property
-    def faults(self) -> RigFaults:
-        return self.model.faults
 
     @property
     def url(self) -> str:
@@ -665,17 +684,3 @@ class SimulatedRig:
 
     def __exit__(self, *exc: object) -> None:
         self.stop()
-
-    # ------------------------------------------------------------------ for simulated sensors and tests
-
-    def readback(self) -> tuple[float, float, float, float, Status]:
-        """(roll_deg, pitch_deg, yaw_deg, table rate deg/s, status) now."""
-        return self.model.readback()
-
-    def axis_states(self, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """See :meth:`RigModel.axis_states`."""
-        return self.model.axis_states(t_s)
-
-    def kinematics(self, t_s: np.ndarray) -> Kinematics:
-        """See :meth:`RigModel.kinematics`."""
-        return self.model.kinematics(t_s)

@@ -1,5 +1,7 @@
 """A whole simulated station: one simulated rig and N simulated sensors on one clock.
 
+:class:`SimulatedStation` draws the units and binds their physics to the rig; :class:`SimStation`
+serves them over the real transports, :class:`station.sim.fakes.FakeStation` in process.
 :class:`SimStation` starts a :class:`~station.sim.rig_server.SimulatedRig` (a real
 pymodbus server) and N :class:`~station.sim.sensor_peer.SimulatedSensor` (each on
 its own pty), all on one :class:`~station.kernel.clock.SimClock`. Each sensor's
@@ -17,11 +19,11 @@ power cycle.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Self
 
 import numpy as np
 
-from station.kernel.clock import SimClock
+from station.kernel.clock import Clock, SimClock
 from station.kernel.plan import RigPlan, default_plan
 from station.kernel.sensor_class import TABLE1, SensorClass
 from station.physics.effects import Effects
@@ -41,28 +43,29 @@ class SimUnit:
         slot: fixture slot (0-based).
         truth: its true parameters (SI).
         source: its physics, bound to the rig.
-        sensor: the simulated firmware on a pty (``sensor.url``, ``sensor.eeprom``, fault switches).
+        sensor: the simulated firmware (``sensor.url``, ``sensor.eeprom``, fault switches): a
+            :class:`~station.sim.sensor_peer.SimulatedSensor` on a pty, or the in-process
+            :class:`~station.sim.fakes.FakeSensorDevice`.
     """
 
     slot: int
     truth: UnitTruth
     source: PhysicsSource
-    sensor: SimulatedSensor
+    sensor: Any
 
 
-class SimStation:
-    """Simulated rig + ``units`` simulated sensors sharing one ``SimClock(scale)``.
+class SimulatedStation:
+    """A simulated rig + ``units`` simulated sensors on one clock; subclasses say how they are reached.
 
     Args:
         units: number of sensors in the fixture.
-        scale: simulated seconds per wall second.
+        scale: simulated seconds per wall second of the default clock.
         seed: seeds the units and their noise.
         plan: site values (gravity, latitude, heading) and the sensors' power-on sample rate.
         sensor_class: distribution the units are drawn from (default: the paper's Table 1).
         effects: optional physics for every unit.
-        host, port: where the rig's Modbus/TCP server listens (port 0: a free port).
-        rig_transport: 'tcp' or 'rtu' (RTU over a pty pair).
-        rig_options: extra keyword arguments of :class:`SimulatedRig` (motion limits, settle time).
+        rig_options: extra keyword arguments of the rig model (motion limits, settle time).
+        clock: the clock everything lives by (default ``SimClock(scale)``).
     """
 
     def __init__(
@@ -74,10 +77,8 @@ class SimStation:
         plan: RigPlan | None = None,
         sensor_class: SensorClass = TABLE1,
         effects: Effects | None = None,
-        host: str = "127.0.0.1",
-        port: int = 0,
-        rig_transport: str = "tcp",
         rig_options: dict[str, Any] | None = None,
+        clock: Clock | None = None,
     ) -> None:
         if units < 1:
             raise ValueError("a simulated station needs at least one unit")
@@ -86,23 +87,37 @@ class SimStation:
         self.plan = plan if plan is not None else default_plan()
         self.sensor_class = sensor_class
         self.effects = effects
-        self.clock = SimClock(scale)
-        self._host, self._port, self._transport = host, port, rig_transport
+        self.clock: Clock = clock if clock is not None else SimClock(scale)
         self._rig_options = dict(rig_options or {})
-        self.rig: SimulatedRig | None = None
+        self.rig: Any = None
         self.units: list[SimUnit] = []
 
     @property
     def scale(self) -> float:
         return self.clock.scale
 
-    def start(self) -> SimStation:
-        """Start the rig server and the sensors; returns self."""
+    # --- what a subclass provides --------------------------------------------------------------
+
+    def _start_rig(self, options: dict[str, Any]) -> Any:
+        """Start the rig (a :class:`~station.sim.rig_server.RigModelView` with a ``url``) with model ``options``."""
+        raise NotImplementedError
+
+    def _start_sensor(self, source: PhysicsSource, truth: UnitTruth, rate_hz: int, seed: int) -> Any:
+        """Start one unit's simulated sensor on ``source`` (``seed``: its fault generators)."""
+        raise NotImplementedError
+
+    def _stop_rig(self) -> None:
+        raise NotImplementedError
+
+    # --- lifetime ---------------------------------------------------------------------------------
+
+    def start(self) -> Self:
+        """Start the rig and the sensors; returns self."""
         if self.rig is not None:
             return self
         try:
             opts = {"watchdog_s": rig_client_options(self.scale)["watchdog_s"], **self._rig_options}
-            self.rig = SimulatedRig(self.clock, self._host, self._port, transport=self._transport, **opts).start()
+            self.rig = self._start_rig(opts)
             rate = int(self.plan.sample_rate_hz)
             for k in range(self.n_units):
                 unit_ss, imu_ss, fault_ss = np.random.SeedSequence(self.seed, spawn_key=(k,)).spawn(3)
@@ -118,14 +133,7 @@ class SimStation:
                     latitude_deg=self.plan.latitude_deg,
                     heading_deg=self.plan.heading_deg,
                 )
-                sensor = SimulatedSensor(
-                    source,
-                    self.clock,
-                    serial=truth.serial,
-                    default_rate_hz=rate,
-                    eeprom=Eeprom(clock=self.clock),
-                    seed=int(fault_ss.generate_state(1)[0]),
-                )
+                sensor = self._start_sensor(source, truth, rate, int(fault_ss.generate_state(1)[0]))
                 self.units.append(SimUnit(k, truth, source, sensor))
         except BaseException:
             self.stop()
@@ -133,15 +141,15 @@ class SimStation:
         return self
 
     def stop(self) -> None:
-        """Stop the sensors and the rig server (idempotent)."""
+        """Stop the sensors and the rig (idempotent)."""
         for unit in self.units:
             unit.sensor.close()
         self.units = []
         if self.rig is not None:
-            self.rig.stop()
+            self._stop_rig()
             self.rig = None
 
-    def __enter__(self) -> SimStation:
+    def __enter__(self) -> Self:
         return self.start()
 
     def __exit__(self, *exc: object) -> None:
@@ -152,7 +160,7 @@ class SimStation:
         """The rig's URL for :func:`station.rig.open_rig`."""
         if self.rig is None:
             raise RuntimeError("the simulated station is not started")
-        return self.rig.url
+        return str(self.rig.url)
 
     @property
     def sensor_urls(self) -> list[str]:
@@ -162,3 +170,42 @@ class SimStation:
     def rig_client_options(self) -> dict[str, Any]:
         """:func:`station.rig.open_rig` keyword arguments suited to this station's clock scale."""
         return rig_client_options(self.scale)
+
+
+class SimStation(SimulatedStation):
+    """Simulated rig + ``units`` simulated sensors sharing one ``SimClock(scale)``, over real transports.
+
+    The rig is a Modbus server (:class:`~station.sim.rig_server.SimulatedRig`), each sensor a
+    :class:`~station.sim.sensor_peer.SimulatedSensor` on its own pty. Arguments are those of
+    :class:`SimulatedStation`, plus:
+
+    Args:
+        host, port: where the rig's Modbus/TCP server listens (port 0: a free port).
+        rig_transport: 'tcp' or 'rtu' (RTU over a pty pair).
+        rig_options: extra keyword arguments of :class:`SimulatedRig` (motion limits, settle time).
+    """
+
+    def __init__(
+        self,
+        units: int = 4,
+        scale: float = 30.0,
+        seed: int = 0,
+        *,
+        host: str = "127.0.0.1",
+        port: int = 0,
+        rig_transport: str = "tcp",
+        **kwargs: Any,
+    ) -> None:
+        super().__init__(units, scale, seed, **kwargs)
+        self._host, self._port, self._transport = host, port, rig_transport
+
+    def _start_rig(self, options: dict[str, Any]) -> SimulatedRig:
+        return SimulatedRig(self.clock, self._host, self._port, transport=self._transport, **options).start()
+
+    def _start_sensor(self, source: PhysicsSource, truth: UnitTruth, rate_hz: int, seed: int) -> SimulatedSensor:
+        return SimulatedSensor(
+            source, self.clock, serial=truth.serial, default_rate_hz=rate_hz, eeprom=Eeprom(clock=self.clock), seed=seed
+        )
+
+    def _stop_rig(self) -> None:
+        self.rig.stop()
