@@ -45,16 +45,6 @@ def lock_dir() -> Path:
     return Path(os.environ.get("STATION_LOCK_DIR") or Path(tempfile.gettempdir()) / "station-locks")
 
 
-def _pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
 class RigLock:
     """Hold ``rig_url`` for one run (context manager).
 
@@ -110,6 +100,7 @@ class RigLock:
         from sqlalchemy.exc import IntegrityError
 
         from station.store.models import RigLock as Row
+        from station.store.recorder import process_alive
 
         assert self.db is not None
         for _ in range(2):
@@ -123,7 +114,7 @@ class RigLock:
                     row = s.scalar(select(Row).where(Row.rig_url == self.key))
                     if row is None:
                         continue
-                    stale = row.host == self.host and not _pid_alive(row.pid)
+                    stale = row.host == self.host and not process_alive(row.pid)
                     if stale or (row.host == self.host and row.pid == self.pid):
                         s.execute(delete(Row).where(Row.id == row.id))
                         continue

@@ -11,9 +11,10 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any, TypeVar
 
 import numpy as np
 import typer
@@ -23,6 +24,8 @@ from station.kernel.errors import StationError
 
 if TYPE_CHECKING:
     from station.eeprom.image import CalibrationImage
+
+T = TypeVar("T")
 
 eeprom_app = typer.Typer(no_args_is_help=True, help="Calibration images in the unit's EEPROM.")
 
@@ -42,19 +45,25 @@ def _unit_params(serial: str | None, path: Path | None, db_url: str | None) -> P
     """The unit's parameter set from ``path`` if given, else its newest PASS set in the store."""
     if path is not None:
         return _load_params(path, serial)
+    from station.store.queries import latest_parameter_set
+
+    return _from_store(db_url, serial, latest_parameter_set)
+
+
+def _from_store(db_url: str | None, serial: str | None, query: Callable[[Any, str], T | None]) -> T:
+    """``query(database, serial)`` on the existing store; refused in one line when it finds nothing."""
     if serial is None:
         raise StationError("give the unit's SERIAL or --params")
     from station.store.db import open_database
-    from station.store.queries import latest_parameter_set
 
     db = open_database(db_url, must_exist=True)
     try:
-        params = latest_parameter_set(db, serial)
+        found = query(db, serial)
     finally:
         db.close()
-    if params is None:
+    if found is None:
         raise StationError(f"no PASS parameter set of serial {serial!r} in the store {db.url}")
-    return params
+    return found
 
 
 def _unit_image(serial: str | None, path: Path | None, db_url: str | None, station_id: str) -> CalibrationImage:
@@ -63,19 +72,9 @@ def _unit_image(serial: str | None, path: Path | None, db_url: str | None, stati
 
     if path is not None:
         return CalibrationImage.from_params(_load_params(path, serial), station_id, datetime.now(UTC))
-    if serial is None:
-        raise StationError("give the unit's SERIAL or --params")
-    from station.store.db import open_database
     from station.store.queries import unit_image
 
-    db = open_database(db_url, must_exist=True)
-    try:
-        found = unit_image(db, serial)
-    finally:
-        db.close()
-    if found is None:
-        raise StationError(f"no PASS parameter set of serial {serial!r} in the store {db.url}")
-    return decode_image(found.data)
+    return decode_image(_from_store(db_url, serial, unit_image).data)
 
 
 def _load_params(path: Path, serial: str | None) -> ParameterSet:
@@ -203,7 +202,7 @@ def _record_write(db_url: str | None, report: Any) -> None:
     from station.store.db import open_database
     from station.store.recorder import record_eeprom_write
 
-    db = open_database(db_url, must_exist=True)
+    db = open_database(db_url)
     try:
         record_eeprom_write(db, report.serial, report.sha256, attempts=report.attempts, read_back_ok=True,
                             verified_on_rig=None, image=report.data or None, layout_version=1,

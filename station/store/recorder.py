@@ -364,7 +364,7 @@ def recover_unfinished(
         if station_name is not None:
             q = q.join(StationRow).where(StationRow.name == station_name)
         for run in s.scalars(q.with_for_update() if db.engine.dialect.name == "postgresql" else q):
-            if run.run_uid in skip or (run.host == host and run.pid != os.getpid() and _alive(run.pid)):
+            if run.run_uid in skip or (run.host == host and run.pid != os.getpid() and process_alive(run.pid)):
                 continue
             run.outcome = outcome.value
             run.finished_at = _now()
@@ -377,7 +377,8 @@ def recover_unfinished(
     return recovered
 
 
-def _alive(pid: int) -> bool:
+def process_alive(pid: int) -> bool:
+    """Whether a process ``pid`` runs on this host (a recorded run's or a rig lock's owner)."""
     if pid <= 0:
         return False
     try:
