@@ -114,8 +114,7 @@ class RigLock:
                     row = s.scalar(select(Row).where(Row.rig_url == self.key))
                     if row is None:
                         continue
-                    stale = row.host == self.host and not process_alive(row.pid)
-                    if stale or (row.host == self.host and row.pid == self.pid):
+                    if row.host == self.host and not process_alive(row.pid):  # left by a dead process
                         s.execute(delete(Row).where(Row.id == row.id))
                         continue
                     raise RigBusy(f"rig {self.key} is in use by station {row.station} (host {row.host}, pid {row.pid}) "
