@@ -143,3 +143,56 @@ def test_sigterm_aborts_with_the_rig_at_rest(sim: Sim, tmp_path: Path) -> None:
         assert (run.outcome, run.rig_at_rest) == ("ABORTED", True)
         assert "SIGTERM" in run.message
         assert s.scalars(select(EepromWrite)).all() == []  # nothing written to an aborted unit
+
+
+def test_a_run_started_through_the_api_provisions_and_serves_the_same_image(tmp_path: Path) -> None:
+    """`POST /api/runs` on the station `station serve` builds: written, read back, verified, one image."""
+    from dataclasses import replace
+
+    from typer.testing import CliRunner
+
+    from station.cli import app
+    from station.compose import Station, StationConfig
+    from station.kernel.limits import table1_limits
+    from station.kernel.limits_file import load_limits
+    from station.kernel.plan import RigPlan
+    from station.sequence import Outcome
+    from station.sim.firmware import install_firmware
+    from station.sim.station_sim import SimStation
+    from station.web.control import StationControl
+    from station.web.state import LiveStatus
+
+    plan = RigPlan(sample_rate_hz=50.0, rest_s=60.0, pose_hold_s=4.0,
+                   rate_steps=(("x", 100.0), ("y", 100.0), ("z", 100.0)), rate_hold_s=3.0)
+    db_url = f"sqlite:///{tmp_path / 'api.sqlite'}"
+    os.environ["STATION_LOCK_DIR"] = str(tmp_path / "locks")
+    try:
+        with SimStation(1, 100.0, 8, plan=plan) as sim:
+            for unit in sim.units:
+                install_firmware(unit.sensor, sim.clock)
+            config = StationConfig(sim.rig_url, tuple(sim.sensor_urls), station_id="api", db_url=db_url,
+                                   out_dir=None, plan=plan, provision=True, rig_options=sim.rig_client_options())
+            station = Station(config, clock=sim.clock, limits=replace(load_limits(), product=table1_limits()))
+            assert station.recorder is not None
+            live = LiveStatus(station.recorder.db)
+            station.subscribe(live)
+            control = StationControl(station.run, on_error=live.set_fault)
+            live.on_start, live.on_abort = control.start, control.abort
+            client = TestClient(create_app(database=station.recorder.db, token="t0k", live=live))
+            r = client.post("/api/runs", headers={"Authorization": "Bearer t0k"}, json={"operator": "eve"})
+            assert r.status_code == 202, r.text
+            result = control.wait(180)
+            serial = sim.units[0].truth.serial
+    finally:
+        os.environ.pop("STATION_LOCK_DIR", None)
+    assert result is not None and result.outcome == Outcome.PASS, result and result.units[0].message
+    with open_database(db_url) as db, db.transaction() as s:
+        write = s.scalars(select(EepromWrite)).one()
+        assert s.scalars(select(Run)).one().operator == "eve"
+    assert (write.written, write.read_back_ok, write.verified_on_rig) == (True, True, True)
+    assert write.image is not None and decode_image(write.image).station_id == "api"
+    assert client.get(f"/api/units/{serial}/eeprom.bin").content == write.image
+    out = tmp_path / "cli.bin"
+    done = CliRunner().invoke(app, ["eeprom", "image", serial, "-o", str(out), "--db", db_url])
+    assert done.exit_code == 0, done.output
+    assert out.read_bytes() == write.image

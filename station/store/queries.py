@@ -177,7 +177,7 @@ class UnitImage:
 
 
 def unit_image(db: Database, serial: str) -> UnitImage | None:
-    """The image of ``serial``'s newest PASS parameter set (None if there is none).
+    """The image of ``serial``'s newest PASS run (None if it has neither a written image nor a parameter set).
 
     One source for the API download and ``station eeprom image``: the image its run wrote, else the one
     :func:`~station.eeprom.image.run_image` builds from the run's parameter set, station and start.
@@ -185,20 +185,24 @@ def unit_image(db: Database, serial: str) -> UnitImage | None:
     """
     with db.transaction() as s:
         row = s.execute(
-            select(ParameterSetRecord.params_json, RunUnit.id, Run.run_uid, Run.started_at, StationRow.name)
-            .join(RunUnit, ParameterSetRecord.run_unit_id == RunUnit.id).join(Run, RunUnit.run_id == Run.id)
-            .join(StationRow, Run.station_id == StationRow.id).join(Unit, ParameterSetRecord.unit_id == Unit.id)
+            select(RunUnit.id, Run.run_uid, Run.started_at, StationRow.name)
+            .join(Run, RunUnit.run_id == Run.id).join(StationRow, Run.station_id == StationRow.id)
+            .join(Unit, RunUnit.unit_id == Unit.id)
             .where(Unit.serial == serial, Run.outcome != UNFINISHED, RunUnit.outcome == "PASS")
-            .order_by(Run.started_at.desc(), ParameterSetRecord.id.desc()).limit(1)
+            .order_by(Run.started_at.desc(), Run.id.desc()).limit(1)
         ).first()
         if row is None:
             return None
-        params_json, ru_id, run_uid, started_at, station_name = row
+        ru_id, run_uid, started_at, station_name = row
         written = s.scalar(select(EepromWrite.image).where(EepromWrite.run_unit_id == ru_id,
                                                            EepromWrite.image.is_not(None))
                            .order_by(EepromWrite.id.desc()).limit(1))
+        params_json = s.scalar(select(ParameterSetRecord.params_json).where(ParameterSetRecord.run_unit_id == ru_id)
+                               .order_by(ParameterSetRecord.id.desc()).limit(1))
     if written is not None:
         return UnitImage(serial, bytes(written), run_uid, True)
+    if params_json is None:
+        return None
     when = started_at if started_at.tzinfo is not None else started_at.replace(tzinfo=UTC)
     image = run_image(ParameterSet.from_json(params_json), station_name, when)
     return UnitImage(serial, encode_image(image), run_uid, False)
