@@ -25,7 +25,7 @@ def test_simulate_fit_correct(tmp_path: Path) -> None:
     r = runner.invoke(app, ["fit", str(a), "--json"])
     assert r.exit_code == 0, r.output
     doc = json.loads(r.stdout)
-    assert doc["format"] == "station-params/1"
+    assert doc["format"] == "station-params/2"
     params = ParameterSet.from_dict(doc)
     assert ParameterSet.from_json(params.to_json()).to_json() == params.to_json()
 

@@ -31,10 +31,12 @@ from station.fit.boundary import numerics
 from station.fit.checks import check_session
 from station.fit.consistency import check_rotations
 from station.fit.goodness import TriadResidual, goodness_of_fit
-from station.fit.params import AllanCoefficients, ParameterSet, TriadParams
+from station.fit.params import MAX_TEMP_ORDER, AllanCoefficients, ParameterSet, TriadParams
 from station.session.model import Kind, Session
 
 AXES = "xyz"
+#: Values of :attr:`FitOptions.thermal`.
+THERMAL_MODES = ("auto", "off", "require")
 
 
 @dataclass(frozen=True)
@@ -52,6 +54,18 @@ class FitOptions:
         tc_range_s: the sensor class's range of eq. 3's T_c (s) per triad (``'accel'``, ``'gyro'``), a
             prior on T_c (the limits file's ``correlation_time_s``); a triad without one is fitted
             from the record alone.
+        thermal: the temperature terms (bias and scale polynomials in ``T - T_ref`` per output axis,
+            :mod:`station.fit.thermal`): ``'auto'`` fits them when the recording's temperature course
+            separates them from the warm-up (else :class:`~station.fit.params.ThermalFit` says why not,
+            status ``'not_separable'``), ``'off'`` never, ``'require'`` refuses (FitError) a recording
+            that cannot separate them.
+        thermal_max_order: highest polynomial order tried (1..3).
+        thermal_order_wald: Wald statistic (z^2) an order's coefficient must exceed to be kept (9: 3 sigma).
+        min_temperature_span_k: the settled data's temperature must span at least this (K).
+        min_temperature_independent_k: RMS of the temperature course not explained by a warm-up shape
+            ``a + b exp(-t/tau)`` (any tau), at least this (K).
+        reference_temperature_degc: T_ref (degC); None: the unit's temperature at power-on (mean of the
+            first second of the recording).
     """
 
     max_blocks: int = 70
@@ -61,6 +75,18 @@ class FitOptions:
     drift_lr_threshold: float = 9.0
     moving_average_length: int = 40
     tc_range_s: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+    thermal: str = "auto"
+    thermal_max_order: int = 3
+    thermal_order_wald: float = 9.0
+    min_temperature_span_k: float = 5.0
+    min_temperature_independent_k: float = 1.0
+    reference_temperature_degc: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.thermal not in THERMAL_MODES:
+            raise ValueError(f"FitOptions.thermal must be one of {', '.join(THERMAL_MODES)}, got {self.thermal!r}")
+        if not 1 <= int(self.thermal_max_order) <= MAX_TEMP_ORDER:
+            raise ValueError(f"FitOptions.thermal_max_order must be 1..{MAX_TEMP_ORDER}, got {self.thermal_max_order}")
 
 
 @dataclass(frozen=True)

@@ -7,6 +7,16 @@ in s. The model per triad is the paper's eq. (1):
     dg/dt = -g / T_c + w_g                              (eq. 3)
 
 so the bias starts at ``b_stat + b_drift`` at power-on and settles to ``b_stat``.
+
+Format ``station-params/2`` adds the compensable effects beyond eq. (1) (the paper's own next
+step, "thermal effects depending on the ambient temperature"), per triad and output axis k,
+with ``dT = T - T_ref`` the unit's temperature minus :attr:`ParameterSet.reference_temperature_degc`:
+
+    x~_k = (M x)_k (1 + sum_j s_kj dT^j) + b_stat,k + sum_j c_kj dT^j + b_drift,k g(t) + n,  j = 1..3
+
+(``temp_scale_coeff`` s, ``temp_bias_coeff`` c; zeros beyond the fitted order), the symmetric scale
+nonlinearity ``u + k u|u|`` applied to ``(M x)_k (1 + s dT)``, the gyro's g-sensitivity, and the unit's
+time offset. A ``station-params/1`` file still loads, with all of them zero and no reference temperature.
 Every estimate carries a standard uncertainty (``*_std``, same unit). An estimate
 that the recording cannot resolve is NaN in memory and ``null`` in JSON.
 """
@@ -24,7 +34,13 @@ import numpy as np
 
 from station.kernel.errors import FormatError, UnsupportedVersionError
 
-FORMAT = "station-params/1"
+FORMAT = "station-params/2"
+#: Formats :meth:`ParameterSet.from_dict` reads (``/1``: no compensable effects beyond eq. 1 and g-sensitivity).
+FORMATS = ("station-params/1", FORMAT)
+#: Highest polynomial order of the temperature terms.
+MAX_TEMP_ORDER = 3
+#: What :attr:`ThermalFit.status` can say.
+THERMAL_STATUSES = ("fitted", "not_separable", "no_temperature", "disabled", "absent")
 
 
 def _arr(value: Any, shape: tuple[int, ...]) -> np.ndarray:
@@ -85,6 +101,11 @@ class TriadParams:
             zeros for the accelerometer or when not fitted.
         allan: Allan-deviation noise coefficients.
         residual_rms: RMS of the fit residual per axis (U), (3,).
+        temp_bias_coeff: c_kj, bias change per K^j of ``T - T_ref`` (U/K^j), (3, 3): row k = output
+            axis, column j - 1 = order j (1..3); zeros beyond the fitted order or when not fitted.
+        temp_scale_coeff: s_kj, relative scale change per K^j (1/K^j), (3, 3), same layout.
+        scale_nonlinearity: k of ``u + k u|u|`` per axis (1/U), (3,); zeros when not fitted.
+        (``*_std``: standard uncertainties; 0 for terms not in the model.)
     """
 
     misalignment: np.ndarray
@@ -103,8 +124,22 @@ class TriadParams:
     residual_rms: np.ndarray
     g_sensitivity: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))
     g_sensitivity_std: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))
+    temp_bias_coeff: np.ndarray = field(default_factory=lambda: np.zeros((3, MAX_TEMP_ORDER)))
+    temp_bias_coeff_std: np.ndarray = field(default_factory=lambda: np.zeros((3, MAX_TEMP_ORDER)))
+    temp_scale_coeff: np.ndarray = field(default_factory=lambda: np.zeros((3, MAX_TEMP_ORDER)))
+    temp_scale_coeff_std: np.ndarray = field(default_factory=lambda: np.zeros((3, MAX_TEMP_ORDER)))
+    scale_nonlinearity: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    scale_nonlinearity_std: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
-    _MATRIX_FIELDS = ("misalignment", "misalignment_std", "g_sensitivity", "g_sensitivity_std")
+    _MATRIX_FIELDS = (
+        "misalignment", "misalignment_std", "g_sensitivity", "g_sensitivity_std",
+        "temp_bias_coeff", "temp_bias_coeff_std", "temp_scale_coeff", "temp_scale_coeff_std",
+    )
+    #: Fields a ``station-params/1`` file does not have (they default to zero).
+    _V2_FIELDS = (
+        "temp_bias_coeff", "temp_bias_coeff_std", "temp_scale_coeff", "temp_scale_coeff_std",
+        "scale_nonlinearity", "scale_nonlinearity_std",
+    )
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -123,16 +158,91 @@ class TriadParams:
                 out[f.name] = _to_json_value(value)
         return out
 
+    @property
+    def has_temperature_terms(self) -> bool:
+        """Any non-zero temperature coefficient."""
+        return bool(np.any(self.temp_bias_coeff != 0) or np.any(self.temp_scale_coeff != 0))
+
     @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> TriadParams:
+    def from_dict(cls, d: dict[str, Any], version: int = 2) -> TriadParams:
         try:
-            kwargs = {f.name: _from_json_value(d[f.name]) for f in fields(cls) if f.name != "allan"}
+            kwargs = {f.name: _from_json_value(d[f.name]) for f in fields(cls)
+                      if f.name != "allan" and (version >= 2 or f.name not in cls._V2_FIELDS)}
             if not isinstance(d["allan"], dict):
                 raise TypeError("'allan' must be an object")
             allan = AllanCoefficients(**{k: _from_json_value(v) for k, v in d["allan"].items()})
             return cls(allan=allan, **kwargs)
         except (KeyError, TypeError, ValueError, AttributeError) as exc:
             raise FormatError(f"parameter set: triad is missing or has a bad field: {_brief(exc)}") from exc
+
+
+@dataclass(frozen=True)
+class ThermalFit:
+    """Whether and how the temperature terms were fitted (the typed note of the result).
+
+    Attributes:
+        status: ``'fitted'``; ``'not_separable'``: the recording's temperature does not move enough, or
+            moves only along a warm-up shape, to tell a temperature course from eq. 3's warm-up drift
+            (``reason`` says which and by how much); ``'no_temperature'``: the recording has no
+            temperature column; ``'disabled'``: the fit was told not to; ``'absent'``: a
+            ``station-params/1`` file or an EEPROM image without thermal terms.
+        reason: one line for people.
+        span_k: range of the block-mean temperature over the settled data (K); NaN when unknown.
+        independent_k: RMS of the temperature course left after the best warm-up shape
+            ``a + b exp(-t/tau)`` (any tau) is taken out (K): what the fit separates the terms on.
+        orders: per triad (``'accel'``, ``'gyro'``) and term (``'bias'``, ``'scale'``), the polynomial
+            order fitted per output axis (x, y, z), e.g. ``{'gyro': {'bias': [1, 2, 1], 'scale': [1, 1, 1]}}``.
+        rule: how the orders were chosen (stated in the result).
+    """
+
+    status: str = "absent"
+    reason: str = ""
+    span_k: float = math.nan
+    independent_k: float = math.nan
+    orders: dict[str, dict[str, list[int]]] = field(default_factory=dict)
+    rule: str = ""
+
+    def __post_init__(self) -> None:
+        if self.status not in THERMAL_STATUSES:
+            raise FormatError(f"thermal status must be one of {', '.join(THERMAL_STATUSES)}, got {self.status!r}")
+
+    @property
+    def fitted(self) -> bool:
+        return self.status == "fitted"
+
+    def to_dict(self) -> dict[str, Any]:
+        def num(x: float) -> float | None:
+            return float(x) if math.isfinite(x) else None
+
+        return {"status": self.status, "reason": self.reason, "span_k": num(self.span_k),
+                "independent_k": num(self.independent_k), "orders": self.orders, "rule": self.rule}
+
+    @classmethod
+    def from_dict(cls, d: Any) -> ThermalFit:
+        if not isinstance(d, dict):
+            raise TypeError("'thermal' must be an object")
+        orders = d.get("orders", {})
+        if not isinstance(orders, dict):
+            raise TypeError("'thermal.orders' must be an object")
+        clean: dict[str, dict[str, list[int]]] = {}
+        for tri, terms in orders.items():
+            if not isinstance(terms, dict):
+                raise TypeError("'thermal.orders' entries must be objects")
+            clean[str(tri)] = {}
+            for term, v in terms.items():
+                if not (isinstance(v, list) and len(v) == 3
+                        and all(isinstance(x, int) and not isinstance(x, bool) and 0 <= x <= MAX_TEMP_ORDER
+                                for x in v)):
+                    raise TypeError(f"'thermal.orders.{tri}.{term}' must be three orders 0..{MAX_TEMP_ORDER}")
+                clean[str(tri)][str(term)] = list(v)
+        span, indep = d.get("span_k"), d.get("independent_k")
+        for name, v in (("span_k", span), ("independent_k", indep)):
+            if v is not None and (isinstance(v, bool) or not isinstance(v, int | float)):
+                raise TypeError(f"'thermal.{name}' must be a number or null")
+        return cls(status=str(d.get("status", "absent")), reason=str(d.get("reason", "")),
+                   span_k=math.nan if span is None else float(span),
+                   independent_k=math.nan if indep is None else float(indep), orders=clean,
+                   rule=str(d.get("rule", "")))
 
 
 @dataclass(frozen=True, eq=False)
@@ -147,6 +257,10 @@ class ParameterSet:
         gyro: gyroscope triad (rad/s).
         quality: fit-quality figures (residual RMS per axis and per segment, ...).
         source: where the parameters came from (session hash, software version, ...).
+        reference_temperature_degc: T_ref of the temperature terms (degC); NaN when the set has none.
+        time_offset_s: the unit's sample time minus the rig's (s); 0 when not fitted. Carried for the
+            product record; Algorithm 1 does not use it (it concerns time stamps, not values).
+        thermal: whether the temperature terms were fitted, and why not (:class:`ThermalFit`).
     """
 
     serial: str
@@ -156,6 +270,20 @@ class ParameterSet:
     moving_average_length: int = 40
     quality: dict[str, Any] = field(default_factory=dict)
     source: dict[str, Any] = field(default_factory=dict)
+    reference_temperature_degc: float = math.nan
+    time_offset_s: float = 0.0
+    thermal: ThermalFit = field(default_factory=ThermalFit)
+
+    @property
+    def compensates_temperature(self) -> bool:
+        """Algorithm 1 applies temperature terms: a finite T_ref and a non-zero coefficient."""
+        return math.isfinite(self.reference_temperature_degc) and (
+            self.accel.has_temperature_terms or self.gyro.has_temperature_terms
+        )
+
+    @property
+    def has_nonlinearity(self) -> bool:
+        return bool(np.any(self.accel.scale_nonlinearity != 0) or np.any(self.gyro.scale_nonlinearity != 0))
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -163,6 +291,11 @@ class ParameterSet:
             "serial": self.serial,
             "sample_period_s": self.sample_period_s,
             "moving_average_length": self.moving_average_length,
+            "reference_temperature_degc": (
+                self.reference_temperature_degc if math.isfinite(self.reference_temperature_degc) else None
+            ),
+            "time_offset_s": self.time_offset_s,
+            "thermal": self.thermal.to_dict(),
             "accel": self.accel.to_dict(),
             "gyro": self.gyro.to_dict(),
             "quality": self.quality,
@@ -175,10 +308,11 @@ class ParameterSet:
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> ParameterSet:
         fmt = d.get("format") if isinstance(d, dict) else None
-        if fmt != FORMAT:
+        if fmt not in FORMATS:
             raise UnsupportedVersionError(
-                f"parameter set has format {fmt!r}; this station reads {FORMAT!r} only"
+                f"parameter set has format {fmt!r}; this station reads {', '.join(map(repr, FORMATS))} only"
             )
+        version = FORMATS.index(fmt) + 1
         try:
             serial, period, n = d["serial"], d["sample_period_s"], d["moving_average_length"]
             if not isinstance(serial, str) or not serial.strip():
@@ -190,16 +324,32 @@ class ParameterSet:
             for key in ("quality", "source"):
                 if not isinstance(d.get(key, {}), dict):
                     raise TypeError(f"{key!r} must be an object")
+            extra: dict[str, Any] = {}
+            if version >= 2:
+                t_ref, offset = d["reference_temperature_degc"], d["time_offset_s"]
+                if t_ref is not None and (isinstance(t_ref, bool) or not isinstance(t_ref, int | float)
+                                          or not math.isfinite(t_ref)):
+                    raise TypeError(f"'reference_temperature_degc' must be a finite number or null, got {t_ref!r}")
+                if isinstance(offset, bool) or not isinstance(offset, int | float) or not math.isfinite(offset):
+                    raise TypeError(f"'time_offset_s' must be a finite number, got {offset!r}")
+                extra = {
+                    "reference_temperature_degc": math.nan if t_ref is None else float(t_ref),
+                    "time_offset_s": float(offset),
+                    "thermal": ThermalFit.from_dict(d["thermal"]),
+                }
             return cls(
                 serial=serial,
                 sample_period_s=float(period),
                 moving_average_length=n,
-                accel=TriadParams.from_dict(d["accel"]),
-                gyro=TriadParams.from_dict(d["gyro"]),
+                accel=TriadParams.from_dict(d["accel"], version),
+                gyro=TriadParams.from_dict(d["gyro"], version),
                 quality=dict(d.get("quality", {})),
                 source=dict(d.get("source", {})),
+                **extra,
             )
-        except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        except (KeyError, TypeError, ValueError, AttributeError, FormatError) as exc:
+            if isinstance(exc, FormatError) and str(exc).startswith("parameter set"):
+                raise
             raise FormatError(f"parameter set: missing or bad field: {_brief(exc)}") from exc
 
     @classmethod
