@@ -1,0 +1,168 @@
+"""The rig-free fit against OpenAXES's published imu_tk calibration, on the real OpenAXES recording.
+
+    python benchmarks/compare_openaxes.py
+
+Reads ../shared/real/openaxes/ (never copied into the repo; $STATION_REAL overrides ../shared/real),
+imports it with the station importer (still detector with its defaults) once per accelerometer,
+fits it rig-free at the local gravity 9.8128 m/s^2 and at imu_tk's default 9.81744, and prints:
+
+1. the 36 coefficients, station (fitted at 9.81744, as the published ones) vs published, element by
+   element, with the station's standard uncertainty and the difference in sigmas;
+2. the gravity-norm RMS over the still segments at 9.81744 and at 9.8128 for raw, published and
+   station, on all still segments and held out (the station's leave-poses-out cross-validation);
+3. the gravity-direction RMS after each move (between consecutive still segments of the same
+   segmentation) for raw, published and station, fitted and held out.
+
+Conventions (shared/real/README.md): accel ``calibrated = T K raw - b`` (bias after the matrix,
+matrices column-major in the list); gyro ``calibrated = M (raw - b)``, the published one
+integrated with a fixed 0.01 s step as its script does, the station's with the recording's own
+sample period. Raw: the identity matrix and zero bias (the gyro integrated with the recording's
+period, the directions from the raw accelerometer).
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from station.fit.export import openaxes_coefficients
+from station.fit.multipos import direction_errors_deg
+from station.fit.params import ParameterSet
+from station.fit.rigfree import fit_rig_free
+from station.session.model import Kind, Session
+from station.session.multipos_import import import_openaxes
+
+REAL = Path(os.environ.get("STATION_REAL", Path(__file__).resolve().parents[2] / "shared" / "real"))
+LOG = REAL / "openaxes" / "log_imu9_2022-06-22_22-13-55.csv"
+G_TK = 9.81744  # imu_tk's default gravity, the published fit's
+G_LOCAL = 9.8128  # Hannover
+PUBLISHED = np.array([float(v) for v in """
+0.96276 0 0 0.0015751 0.96732 0 -0.00018891 0.000859 0.97079 0.064447 0.011034 0.034253
+0.95418 0 0 0.0031573 0.96061 0 0.009235 0.00049713 0.9501 -0.033224 0.080497 0.01579
+0.97288 0.0076747 -0.0063582 -0.011829 1.0062 -0.00033403 0.010087 0.00029571 1.0068
+-0.00020494 0.00063007 -0.00036962""".split()])
+PUBLISHED_STEP_S = 0.01
+
+
+def published(accel: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(accel TK, accel bias after, gyro M, gyro bias) of the published list for one accelerometer."""
+    off = 0 if accel == "adxl355" else 12
+    a = PUBLISHED[off:off + 9].reshape(3, 3, order="F")
+    return a, PUBLISHED[off + 9:off + 12], PUBLISHED[24:33].reshape(3, 3, order="F"), PUBLISHED[33:36]
+
+
+def still_and_moves(session: Session) -> tuple[list, np.ndarray, list[np.ndarray]]:
+    """The still segments, their raw accelerometer means, the raw gyro over each move (as the fit cuts them)."""
+    still = session.segments_of(Kind.REST, Kind.POSE)
+    means = np.array([session.accel_mps2[s.start:s.stop].mean(axis=0) for s in still])
+    moves = [session.gyro_radps[still[i].stop - 1:still[i + 1].start + 1] for i in range(len(still) - 1)]
+    return still, means, moves
+
+
+def rms(x: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.square(x))))
+
+
+def unit(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v, axis=1, keepdims=True)
+
+
+def direction_rms(c: np.ndarray, bias: np.ndarray, moves: list[np.ndarray], dt: float, u: np.ndarray) -> float:
+    return rms(direction_errors_deg(c, [m - bias for m in moves], dt, u[:-1], u[1:]))
+
+
+def main() -> int:
+    if not LOG.is_file():
+        print(f"skipped: {LOG} not found (set STATION_REAL to the folder holding openaxes/)")
+        return 0
+    np.set_printoptions(precision=6, suppress=True)
+    fits: dict[tuple[str, float], ParameterSet] = {}
+    sessions: dict[str, Session] = {}
+    t0 = time.perf_counter()
+    for accel in ("adxl355", "bmi160"):
+        for g in (G_TK, G_LOCAL):
+            s = import_openaxes(LOG, accel=accel, gravity_mps2=g)
+            sessions[accel] = s
+            fits[accel, g] = fit_rig_free(s)
+    elapsed = time.perf_counter() - t0
+    s = sessions["adxl355"]
+    print(f"OpenAXES {LOG.name}: {len(s)} samples at {s.sample_rate_hz:.4f} Hz, "
+          f"{len(s.segments_of(Kind.REST, Kind.POSE))} still segments ({s.metadata['still_detector']}); "
+          f"4 rig-free fits in {elapsed:.1f} s")
+
+    # --- 1. coefficients ------------------------------------------------------------------
+    values, stds = openaxes_coefficients([fits["adxl355", G_TK], fits["bmi160", G_TK]])
+    names = []
+    for sensor in ("ADXL355", "BMI160"):
+        names += [f"{sensor} TK[{i}{j}]" for j in range(3) for i in range(3)] + [f"{sensor} b_after[{k}]" for k in "xyz"]
+    names += [f"gyro M[{i}{j}]" for j in range(3) for i in range(3)] + [f"gyro b[{k}] rad/s" for k in "xyz"]
+    gyro_scale = fits["bmi160", G_TK].sample_period_s / PUBLISHED_STEP_S
+    print("\n1. Coefficients (OpenAXES order; station fitted at 9.81744 like the published; gyro from the BMI160 "
+          "poses)")
+    print(f"   gyro M also shown x {gyro_scale:.6f} = station period / published 0.01 s step (its time base)")
+    print(f"{'coefficient':<20}{'published':>12}{'station':>12}{'std':>10}{'diff':>11}{'diff/std':>9}"
+          f"{'station x tb':>13}{'diff/std':>9}")
+    for i, name in enumerate(names):
+        p, v, e = PUBLISHED[i], values[i], stds[i]
+        z = (v - p) / e if e > 0 else float("nan")
+        extra = ""
+        if name.startswith("gyro M"):
+            vt = v * gyro_scale
+            extra = f"{vt:13.6f}{(vt - p) / e if e > 0 else float('nan'):9.1f}"
+        print(f"{name:<20}{p:12.6f}{v:12.6f}{e:10.2g}{v - p:11.2e}{z:9.1f}{extra}")
+    p_b = fits["bmi160", G_TK]
+    print(f"   station gyro bias model: b_stat {p_b.gyro.bias_static.round(6)} + b_drift {p_b.gyro.bias_drift.round(6)} "
+          f"exp(-t/T_c), T_c {p_b.gyro.correlation_time_s.round(1)} s (published: the raw mean of the initial still)")
+
+    # --- 2. gravity norm --------------------------------------------------------------------
+    print("\n2. Gravity-norm RMS over the still segments (mm/s^2)")
+    print(f"{'sensor':<9}{'calibration':<34}{'@9.81744':>10}{'@9.8128':>10}{'held out @fit g':>17}")
+    targets = {"adxl355": 3.0, "bmi160": 8.0}
+    for accel in ("adxl355", "bmi160"):
+        _, means, _ = still_and_moves(sessions[accel])
+        a_pub, b_pub, _, _ = published(accel)
+        norm_raw = np.linalg.norm(means, axis=1)
+        norm_pub = np.linalg.norm(means @ a_pub.T - b_pub, axis=1)
+        print(f"{accel:<9}{'raw':<34}{1e3 * rms(norm_raw - G_TK):10.2f}{1e3 * rms(norm_raw - G_LOCAL):10.2f}")
+        print(f"{'':<9}{'published (fitted at 9.81744)':<34}{1e3 * rms(norm_pub - G_TK):10.2f}"
+              f"{1e3 * rms(norm_pub - G_LOCAL):10.2f}{'(in-sample)':>17}")
+        for g in (G_TK, G_LOCAL):
+            q = fits[accel, g].quality["rig_free"]
+            norm = np.array(q["accel_norm_error_mps2"]) + g
+            cv = q["cross_validation"]["accel_norm_rms_mps2"]
+            print(f"{'':<9}{f'station (fitted at {g:g})':<34}{1e3 * rms(norm - G_TK):10.2f}"
+                  f"{1e3 * rms(norm - G_LOCAL):10.2f}{1e3 * cv:17.2f}")
+        q = fits[accel, G_TK].quality["rig_free"]
+        ok = 1e3 * q["accel_norm_rms_mps2"] <= targets[accel]
+        print(f"{'':<9}target <= {targets[accel]:.1f} at the fit's own gravity: station "
+              f"{1e3 * q['accel_norm_rms_mps2']:.2f} -> {'met' if ok else 'MISSED'}")
+
+    # --- 3. gravity direction after each move ---------------------------------------------------
+    print("\n3. Gravity-direction RMS after each move (deg), moves between consecutive still segments")
+    print(f"{'directions from':<16}{'calibration':<44}{'fitted':>8}{'held out':>10}")
+    for accel in ("adxl355", "bmi160"):
+        s = sessions[accel]
+        _, means, moves = still_and_moves(s)
+        a_pub, b_pub, m_pub, bw_pub = published(accel)
+        u_raw, u_pub = unit(means), unit(means @ a_pub.T - b_pub)
+        ts = 1.0 / s.sample_rate_hz
+        print(f"{accel:<16}{'raw (M = I, b = 0)':<44}{direction_rms(np.eye(3), np.zeros(3), moves, ts, u_raw):8.3f}")
+        print(f"{'':<16}{'published (M, b; 0.01 s step)':<44}"
+              f"{direction_rms(m_pub, bw_pub, moves, PUBLISHED_STEP_S, u_pub):8.3f}{'(in-sample)':>10}")
+        print(f"{'':<16}{'published (M, b; recording period)':<44}"
+              f"{direction_rms(m_pub, bw_pub, moves, ts, u_pub):8.3f}")
+        q = fits[accel, G_TK].quality["rig_free"]
+        print(f"{'':<16}{'station (rig-free fit, bias model of eq. 3)':<44}{q['gyro_direction_rms_deg']:8.3f}"
+              f"{q['cross_validation']['gyro_direction_rms_deg']:10.3f}")
+    q = fits["bmi160", G_TK].quality["rig_free"]
+    print(f"target <= 0.96 deg on the fitted poses: station {q['gyro_direction_rms_deg']:.3f} -> "
+          f"{'met' if q['gyro_direction_rms_deg'] <= 0.96 else 'MISSED'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
