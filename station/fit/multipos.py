@@ -95,17 +95,19 @@ class AccelNormFit:
 
 def _ellipsoid_guess(means: np.ndarray, g: float) -> np.ndarray:
     """Axis-aligned algebraic ellipsoid ``sum c_k y_k^2 + d_k y_k = 1``: centre and semi-axes."""
-    x = np.column_stack([means**2, means])
-    coef, *_ = np.linalg.lstsq(x, np.ones(len(means)), rcond=None)
+    shift = means.mean(axis=0)  # the centroid is inside the ellipsoid: the "= 1" normalization is safe there
+    y = means - shift
+    x = np.column_stack([y**2, y])
+    coef, *_ = np.linalg.lstsq(x, np.ones(len(y)), rcond=None)
     c, d = coef[:3], coef[3:]
     if np.all(c > 0):
-        centre = -d / (2.0 * c)
+        centre = shift - d / (2.0 * c)
         r = 1.0 + float(np.sum(d * d / (4.0 * c)))
         if r > 0:
             scale = g * np.sqrt(c / r)
             return np.array([scale[0], 0, 0, scale[1], 0, scale[2], *centre])
-    s = g / float(np.median(np.linalg.norm(means, axis=1)))
-    return np.array([s, 0, 0, s, 0, s, 0, 0, 0])
+    s = g / float(np.median(np.linalg.norm(y, axis=1)))
+    return np.array([s, 0, 0, s, 0, s, *shift])
 
 
 def rough_directions(means: np.ndarray, gravity_mps2: float) -> np.ndarray:
