@@ -27,8 +27,13 @@ import numpy as np
 
 from station.fit.rigfree import RigFreeOptions, fit_rig_free
 from station.kernel.errors import StationError
+from station.kernel.sensor_class import TABLE1
 from station.session.multipos_import import import_imu_tk
 from station.sim.handheld import counts_with_offsets, simulate_handheld
+
+
+#: the sensor class's T_c ranges, the prior the station passes from its limits file (as the rig fit gets it)
+TC_PRIOR = {"accel": TABLE1.accel_correlation_time_s, "gyro": TABLE1.gyro_correlation_time_s}
 
 
 def truth_in_convention(m_a: np.ndarray, m_w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -46,7 +51,7 @@ def run_unit(seed: int, folder: Path, cv: bool) -> dict[str, np.ndarray]:
     np.savetxt(gyr_path, np.column_stack([res.t_s, g_cnt]), fmt=["%.6f", "%.0f", "%.0f", "%.0f"])
     session = import_imu_tk(acc_path, gyr_path, accel_lsb_per_mps2=a_sens, gyro_lsb_per_radps=g_sens,
                             gravity_mps2=res.plan.gravity_mps2, serial=f"sim-{seed}")
-    params = fit_rig_free(session, RigFreeOptions(cv_folds=5 if cv else 0))
+    params = fit_rig_free(session, RigFreeOptions(cv_folds=5 if cv else 0, tc_range_s=TC_PRIOR))
     m_a, m_w = truth_in_convention(res.truth.accel.misalignment, res.truth.gyro.misalignment)
     upper = np.triu_indices(3)
     z = {

@@ -37,10 +37,12 @@ from scipy.optimize import least_squares
 from station.kernel.errors import FitError
 
 __all__ = [
+    "AccelJointFit",
     "AccelNormFit",
     "GyroRotationFit",
     "accel_from_params",
     "direction_errors_deg",
+    "fit_accel_joint",
     "fit_accel_norm",
     "fit_gyro_rotations",
     "integrate_moves",
@@ -255,12 +257,16 @@ class GyroRotationFit:
         cov: covariance of C's 9 elements (row-major).
         error_deg: direction error after each move (deg), (m,).
         scale: residual scale s (unit-vector difference, ~rad).
+        jac: Jacobian of the residuals (u_after - R' u_before, (m, 3) row-major) by C's elements, (3 m, 9).
+        rotations: R of each move at the fitted C (end-body to start-body coordinates), (m, 3, 3).
     """
 
     c_matrix: np.ndarray
     cov: np.ndarray
     error_deg: np.ndarray
     scale: float
+    jac: np.ndarray
+    rotations: np.ndarray
 
     @property
     def rms_deg(self) -> float:
@@ -319,4 +325,122 @@ def fit_gyro_rotations(
     s2 = cost / dof
     cov = s2 * _inverse(jac, "gyroscope rotation fit")
     err = direction_errors_deg(c, moves, dt_s, ub, ua)
-    return GyroRotationFit(c_matrix=c, cov=cov, error_deg=err, scale=float(np.sqrt(s2)))
+    rot = integrate_moves(np.einsum("ij,knj->kni", c, padded), dt_s)
+    return GyroRotationFit(c_matrix=c, cov=cov, error_deg=err, scale=float(np.sqrt(s2)), jac=jac, rotations=rot)
+
+
+# --------------------------------------------------------------------------- accelerometer, joint with eq. (3)
+
+
+@dataclass(frozen=True, eq=False)
+class AccelJointFit:
+    """Result of :func:`fit_accel_joint`.
+
+    Attributes:
+        misalignment: M, upper-triangular (3, 3) (the convention of :class:`AccelNormFit`, ``A = M^-1``).
+        bias: b_stat (m/s^2), (3,).
+        drift: b_drift (m/s^2), (3,); tc_s: T_c (s), (3,); tc_free: whether T_c was fitted (else held fixed).
+        cov: covariance of (M00, M01, M02, M11, M12, M22, b0, b1, b2, d0, d1, d2, log T_c of the free axes).
+        directions: fitted gravity direction per pose (unit vectors, (P, 3)).
+        scale: residual scale s (chi^2 / dof)^(1/2) of the block residuals in their noise units.
+    """
+
+    misalignment: np.ndarray
+    bias: np.ndarray
+    drift: np.ndarray
+    tc_s: np.ndarray
+    tc_free: np.ndarray
+    cov: np.ndarray
+    directions: np.ndarray
+    scale: float
+
+    def std(self) -> dict[str, np.ndarray]:
+        sd = np.sqrt(np.clip(np.diag(self.cov), 0.0, None))
+        m = np.zeros((3, 3))
+        for k, (i, j) in enumerate(_UPPER):
+            m[i, j] = sd[k]
+        tc = np.full(3, np.nan)
+        tc[self.tc_free] = sd[12:12 + int(self.tc_free.sum())] * self.tc_s[self.tc_free]
+        return {"misalignment": m, "bias": sd[6:9], "drift": sd[9:12], "tc_s": tc}
+
+    def drift_at(self, t_s: np.ndarray) -> np.ndarray:
+        """``b_drift exp(-t/T_c)`` (m/s^2) at times ``t_s``, (n, 3)."""
+        return self.drift * np.exp(-np.asarray(t_s, dtype=float)[:, None] / self.tc_s)
+
+
+def _tangent_basis(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    helper = np.where(np.abs(u[:, :1]) < 0.9, np.array([[1.0, 0, 0]]), np.array([[0, 1.0, 0]]))
+    e1 = np.cross(u, helper)
+    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
+    return e1, np.cross(u, e1)
+
+
+def fit_accel_joint(
+    t_s: np.ndarray,
+    width_s: np.ndarray,
+    y: np.ndarray,
+    count: np.ndarray,
+    pose: np.ndarray,
+    sigma: np.ndarray,
+    gravity_mps2: float,
+    *,
+    initial: AccelNormFit,
+    tc_s: np.ndarray,
+    tc_free: np.ndarray,
+    drift0: np.ndarray,
+    tc_bounds_s: tuple[float, float],
+) -> AccelJointFit:
+    """Joint ML fit of eq. (1) with the drift of eq. (3) over still blocks, gravity the only reference.
+
+    Block j (centre ``t_s``, width ``width_s``, ``count`` samples, mean ``y``) of still pose ``pose[j]``:
+    ``y_j = M g u_p + b_stat + b_drift * E_j(T_c)`` (E the block mean of exp(-t/T_c)), with ``u_p`` a unit
+    vector per pose (2 parameters each, in the tangent plane of its start value), M upper-triangular.
+    Residuals in units of the block's white noise ``sigma / sqrt(count)``. ``tc_free``: axes whose T_c is
+    fitted (in ``tc_bounds_s``); the others hold ``tc_s`` fixed and fit only b_drift.
+    """
+    from station.fit.blocks import block_exp_mean
+
+    g = float(gravity_mps2)
+    poses = np.unique(pose)
+    p_index = np.searchsorted(poses, pose)
+    u0 = _unit3(initial.calibrate(np.array([y[pose == p].mean(axis=0) for p in poses])))
+    e1, e2 = _tangent_basis(u0)
+    weight = np.sqrt(count)[:, None] / np.asarray(sigma)[None, :]
+    free = np.flatnonzero(tc_free)
+    n_tc = len(free)
+    m0 = np.linalg.inv(initial.a_matrix)
+    x0 = np.concatenate([[m0[i, j] for i, j in _UPPER], initial.bias, drift0, np.log(np.asarray(tc_s)[free]),
+                         np.zeros(2 * len(poses))])
+
+    def unpack(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        m = np.zeros((3, 3))
+        for k, (i, j) in enumerate(_UPPER):
+            m[i, j] = x[k]
+        tc = np.array(tc_s, dtype=float)
+        tc[free] = np.exp(x[12:12 + n_tc])
+        ab = x[12 + n_tc:].reshape(-1, 2)
+        u = _unit3(u0 + ab[:, :1] * e1 + ab[:, 1:] * e2)
+        return m, x[6:9], x[9:12], tc, u
+
+    def residual(x: np.ndarray) -> np.ndarray:
+        m, b, d, tc, u = unpack(x)
+        model = (g * u[p_index]) @ m.T + b + d * block_exp_mean(t_s[:, None], width_s[:, None], tc[None, :])
+        return ((y - model) * weight).ravel()
+
+    lo = np.full(len(x0), -np.inf)
+    hi = np.full(len(x0), np.inf)
+    lo[12:12 + n_tc], hi[12:12 + n_tc] = np.log(tc_bounds_s[0]), np.log(tc_bounds_s[1])
+    x0[12:12 + n_tc] = np.clip(x0[12:12 + n_tc], lo[12:12 + n_tc] + 1e-9, hi[12:12 + n_tc] - 1e-9)
+    sol = least_squares(residual, x0, bounds=(lo, hi), method="trf", x_scale="jac", xtol=1e-12, ftol=1e-12,
+                        gtol=1e-12, max_nfev=200 * len(x0))
+    r = sol.fun
+    dof = max(len(r) - len(x0), 1)
+    s2 = float(r @ r) / dof
+    cov = s2 * _inverse(sol.jac, "accelerometer fit (gravity norm with eq. 3 drift)")
+    m, b, d, tc, u = unpack(sol.x)
+    return AccelJointFit(misalignment=m, bias=b, drift=d, tc_s=tc, tc_free=np.asarray(tc_free, dtype=bool),
+                         cov=cov[:12 + n_tc, :12 + n_tc], directions=u, scale=float(np.sqrt(s2)))
+
+
+def _unit3(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)

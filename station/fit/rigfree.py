@@ -29,7 +29,8 @@ terms of M are those of the stated convention, not of a rig's frame.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -42,9 +43,13 @@ from station.fit.boundary import numerics
 from station.fit.calibrate import _allan, _noise
 from station.fit.checks import check_finite, check_time
 from station.fit.multipos import (
+    _UPPER,
+    AccelJointFit,
     AccelNormFit,
     GyroRotationFit,
+    accel_from_params,
     direction_errors_deg,
+    fit_accel_joint,
     fit_accel_norm,
     fit_gyro_rotations,
     norm_residuals,
@@ -78,8 +83,11 @@ class RigFreeOptions:
         still_rotation_deg: a still segment whose gyro turns (integrated, bias removed) or whose gravity
             direction moves by more than this is refused as a move.
         cv_folds: folds of the leave-poses-out cross-validation (0: none).
+        accel_drift: fit the accelerometer's eq. (3) drift jointly (step 3); False: imu_tk's model, no drift.
         min_segment_samples: still segments shorter than this are refused.
-        outlier_sigma, drift_lr_threshold, max_blocks: as in the rig fit (:class:`~station.fit.calibrate.FitOptions`).
+        outlier_sigma, drift_lr_threshold, max_blocks, tc_range_s: as in the rig fit
+            (:class:`~station.fit.calibrate.FitOptions`): ``tc_range_s`` the sensor class's range of eq. 3's T_c
+            per triad (``'accel'``, ``'gyro'``), a prior; without it T_c comes from the record alone.
     """
 
     min_distinct_poses: int = 12
@@ -94,6 +102,8 @@ class RigFreeOptions:
     drift_lr_threshold: float = 9.0
     max_blocks: int = 70
     moving_average_length: int = 40
+    tc_range_s: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+    accel_drift: bool = True
 
 
 def _still(session: Session) -> list[Segment]:
@@ -113,12 +123,14 @@ def _runs(segments: Sequence[Segment]) -> list[tuple[int, int, int]]:
 
 
 def _fit_drift(session: Session, data: np.ndarray, runs: list[tuple[int, int, int]], keep: np.ndarray,
-               sigma: np.ndarray, options: RigFreeOptions) -> list[AxisFit]:
+               sigma: np.ndarray, options: RigFreeOptions, triad: str) -> list[AxisFit]:
     """Per-axis ``c + b_drift exp(-t/T_c)`` over ``runs`` (eq. 3), the rig fit's ML with a constant design."""
     zeros = np.zeros((len(session), 3))
     blocks = make_blocks(session.t_s, data, zeros, zeros, keep, runs, 1.0 / session.sample_rate_hz, options.max_blocks)
     design = np.ones((len(blocks), 1))
-    return [fit_axis(blocks, k, design, float(sigma[k]), lr_threshold=options.drift_lr_threshold) for k in range(3)]
+    tc_range = options.tc_range_s.get(triad)
+    return [fit_axis(blocks, k, design, float(sigma[k]), lr_threshold=options.drift_lr_threshold, tc_range_s=tc_range)
+            for k in range(3)]
 
 
 def _drift_curve(fits: list[AxisFit], t_s: np.ndarray) -> np.ndarray:
@@ -243,11 +255,11 @@ def prepare(session: Session, options: RigFreeOptions | None = None) -> tuple[Ri
         g_noise = _noise(session, session.gyro_radps, runs, options.outlier_sigma)
     rest = [s for s in still if s.kind == Kind.REST]
     with numerics("accelerometer warm-up (eq. 3) over the initial still"):
-        a_drift = (_fit_drift(session, session.accel_mps2, _runs(rest[:1]), a_noise.keep, a_noise.sigma, options)
+        a_drift = (_fit_drift(session, session.accel_mps2, _runs(rest[:1]), a_noise.keep, a_noise.sigma, options, "accel")
                    if rest and len(rest[0]) >= 10 * options.min_segment_samples else None)
     accel = session.accel_mps2 - (_drift_curve(a_drift, session.t_s) if a_drift else 0.0)
     with numerics("gyroscope bias and warm-up (eq. 3) over the still segments"):
-        g_drift = _fit_drift(session, session.gyro_radps, runs, g_noise.keep, g_noise.sigma, options)
+        g_drift = _fit_drift(session, session.gyro_radps, runs, g_noise.keep, g_noise.sigma, options, "gyro")
     g_bias = np.array([f.beta[0] for f in g_drift]) + _drift_curve(g_drift, session.t_s)
     gyro = session.gyro_radps - g_bias
     _check_still(session, still, gyro, accel, options)
@@ -279,27 +291,39 @@ def _fit_gyro(prep: RigFreeData, accel: AccelNormFit, pairs: Sequence[int] | Non
     return fit_gyro_rotations([prep.moves[j] for j in sel], prep.ts, ub, ua, initial=initial)
 
 
-def cross_validate(prep: RigFreeData, gravity_mps2: float, folds: int, full_gyro: np.ndarray) -> dict[str, Any]:
-    """k-fold leave-poses-out: every k-th still segment held out; the accelerometer is fitted to the others
-    and its gravity-norm error on the held-out ones recorded; the gyro is fitted to the moves between two
-    kept segments and its direction error on the moves touching a held-out segment recorded."""
+def cross_validate(session: Session, prep: RigFreeData, extra: dict[str, Any], options: RigFreeOptions,
+                   full_gyro: np.ndarray) -> dict[str, Any]:
+    """k-fold leave-poses-out: every k-th pose (the rest is never held out) is held out; the accelerometer is
+    fitted to the other still segments as in the full fit (drift of eq. 3 included) and its gravity-norm error
+    on the held-out poses recorded; the gyro is fitted to the moves between two kept segments, with that fold's
+    gravity directions, and its direction error on the moves touching a held-out pose recorded. (The still
+    labels and the gyro bias model come from the whole recording.)"""
+    folds = options.cv_folds
+    g = session.gravity_mps2
+    keep = extra["a_noise"].keep
     n = len(prep.still)
+    order = np.cumsum([s.kind == Kind.POSE for s in prep.still]) - 1
+    is_pose = np.array([s.kind == Kind.POSE for s in prep.still])
     norm_err = np.full(n, np.nan)
     dir_err = np.full(len(prep.moves), np.nan)
     for f in range(folds):
-        held = np.arange(n) % folds == f
-        acc = fit_accel_norm(prep.accel_means[~held], gravity_mps2)
-        norm_err[held] = norm_residuals(acc.a_matrix, acc.bias, prep.accel_means[held], gravity_mps2)
+        held = is_pose & (order % folds == f)
+        fold = _fit_accel(session, [s for s, h in zip(prep.still, held, strict=True) if not h], extra, options)
+        means = _means(session.accel_mps2 - fold.drift, keep, prep.still)
+        norm_err[held] = norm_residuals(fold.norm.a_matrix, fold.norm.bias, means[held], g)
+        u = _unit(fold.norm.calibrate(means))
         train = [j for j, (i0, i1) in enumerate(prep.move_pairs) if not (held[i0] or held[i1])]
         test = [j for j, (i0, i1) in enumerate(prep.move_pairs) if held[i0] or held[i1]]
-        gyr = _fit_gyro(prep, acc, train, initial=full_gyro)
-        u = _directions(acc, prep.accel_means)
-        ub = np.array([u[prep.move_pairs[j][0]] for j in test])
-        ua = np.array([u[prep.move_pairs[j][1]] for j in test])
-        dir_err[test] = direction_errors_deg(gyr.c_matrix, [prep.moves[j] for j in test], prep.ts, ub, ua)
+        gyr = fit_gyro_rotations([prep.moves[j] for j in train], prep.ts,
+                                 np.array([u[prep.move_pairs[j][0]] for j in train]),
+                                 np.array([u[prep.move_pairs[j][1]] for j in train]), initial=full_gyro)
+        dir_err[test] = direction_errors_deg(gyr.c_matrix, [prep.moves[j] for j in test], prep.ts,
+                                             np.array([u[prep.move_pairs[j][0]] for j in test]),
+                                             np.array([u[prep.move_pairs[j][1]] for j in test]))
+    norm_err, dir_err = norm_err[is_pose], dir_err[np.isfinite(dir_err)]
     return {
         "folds": folds,
-        "scheme": "every k-th still segment held out (k = folds); moves touching a held-out segment held out",
+        "scheme": "every k-th pose held out (k = folds), the rest never; moves touching a held-out pose held out",
         "accel_norm_rms_mps2": float(np.sqrt(np.mean(norm_err**2))),
         "gyro_direction_rms_deg": float(np.sqrt(np.mean(dir_err**2))),
         "accel_norm_error_mps2": [round(float(v), 7) for v in norm_err],
@@ -340,15 +364,110 @@ def fit_rig_free(session: Session, options: RigFreeOptions | None = None) -> Par
         return _fit(session, options or RigFreeOptions())
 
 
-def _fit(session: Session, options: RigFreeOptions) -> ParameterSet:
-    prep, extra = prepare(session, options)
-    g = session.gravity_mps2
+def _a_param_cov(m: np.ndarray, b: np.ndarray, cov9: np.ndarray) -> np.ndarray:
+    """Covariance of (A00, A01, A02, A11, A12, A22, b) with A = M^-1 from that of (M00, ..., M22, b): linear."""
+    def f(x: np.ndarray) -> np.ndarray:
+        mm = np.zeros((3, 3))
+        for k, (i, j) in enumerate(_UPPER):
+            mm[i, j] = x[k]
+        a = np.linalg.inv(mm)
+        return np.array([a[i, j] for i, j in _UPPER] + list(x[6:9]))
+
+    x0 = np.array([m[i, j] for i, j in _UPPER] + list(b))
+    jac = np.empty((9, 9))
+    for k in range(9):
+        h = 1e-7 * max(1.0, abs(x0[k]))
+        e = np.zeros(9)
+        e[k] = h
+        jac[:, k] = (f(x0 + e) - f(x0 - e)) / (2 * h)
+    return jac @ cov9 @ jac.T
+
+
+def _joint_accel(session: Session, still: list[Segment], extra: dict[str, Any], initial: AccelNormFit,
+                 options: RigFreeOptions) -> AccelJointFit:
+    """Step 3 with the drift of eq. (3) fitted jointly over every still block (rest and poses)."""
+    a_noise, a_drift = extra["a_noise"], extra["a_drift"]
+    zeros = np.zeros((len(session), 3))
+    ts = 1.0 / session.sample_rate_hz
+    blocks = make_blocks(session.t_s, session.accel_mps2, zeros, zeros, a_noise.keep, _runs(still), ts,
+                         options.max_blocks)
+    rest = [s for s in still if s.kind == Kind.REST]
+    t_fix = float(session.t_s[rest[0].stop - 1] - session.t_s[rest[0].start]) if rest else session.duration_s / 3
+    tc, free, d0 = np.full(3, max(t_fix, 2.0)), np.zeros(3, dtype=bool), np.zeros(3)
+    for k in range(3):
+        f = a_drift[k] if a_drift else None
+        if f is not None and f.drift_resolved and np.isfinite(f.tc_s):
+            tc[k], free[k], d0[k] = f.tc_s, True, f.beta[-1]
+    span = float(session.t_s[-1]) + ts
+    bounds = options.tc_range_s.get("accel", (2.0, 50.0 * span))
+    tc = np.clip(tc, bounds[0] * 1.0001, bounds[1] * 0.9999)
+    return fit_accel_joint(blocks.t_s, blocks.width_s, blocks.y, blocks.count, blocks.segment, a_noise.sigma,
+                           session.gravity_mps2, initial=initial, tc_s=tc, tc_free=free, drift0=d0,
+                           tc_bounds_s=(float(bounds[0]), float(bounds[1])))
+
+
+@dataclass(frozen=True, eq=False)
+class _AccelResult:
+    norm: AccelNormFit  # A, b and their covariance; residuals over the segments fitted
+    joint: AccelJointFit | None  # with the drift of eq. (3), None for imu_tk's model
+    drift: np.ndarray  # (n, 3) the drift subtracted from the accelerometer (m/s^2)
+
+
+def _fit_accel(session: Session, still: list[Segment], extra: dict[str, Any], options: RigFreeOptions) -> _AccelResult:
+    """Step 3 on the still segments ``still``: the gravity-norm fit, then (``accel_drift``) the joint fit with eq. 3."""
+    keep, g = extra["a_noise"].keep, session.gravity_mps2
+    rest_drift = extra["a_drift"] if options.accel_drift else None
+    pre = _drift_curve(rest_drift, session.t_s) if rest_drift else np.zeros((len(session), 3))
     with numerics("accelerometer gravity-norm fit"):
-        acc = fit_accel_norm(prep.accel_means, g)
-    diag = np.diag(acc.a_matrix)
+        acc0 = fit_accel_norm(_means(session.accel_mps2 - pre, keep, still), g)
+    diag = np.diag(acc0.a_matrix)
     if np.any(diag < 0.5) or np.any(diag > 2.0):
         raise FitError(f"accelerometer scale {1 / diag.max():.3g}..{1 / diag.min():.3g} of nominal: not m/s^2 "
                        "(g, counts?); give the sensitivity when importing")
+    if not options.accel_drift:
+        return _AccelResult(acc0, None, pre)
+    with numerics("accelerometer fit with the drift of eq. (3)"):
+        joint = _joint_accel(session, still, extra, acc0, options)
+    drift = joint.drift_at(session.t_s)
+    means = _means(session.accel_mps2 - drift, keep, still)
+    a_matrix = np.linalg.inv(joint.misalignment)
+    resid = norm_residuals(a_matrix, joint.bias, means, g)
+    norm = AccelNormFit(a_matrix=a_matrix, bias=joint.bias,
+                        params=np.array([a_matrix[i, j] for i, j in _UPPER] + list(joint.bias)),
+                        cov=_a_param_cov(joint.misalignment, joint.bias, joint.cov[:9, :9]), residual_mps2=resid,
+                        scale_mps2=float(np.sqrt(np.sum(resid**2) / max(len(resid) - 9, 1))), gravity_mps2=g)
+    return _AccelResult(norm, joint, drift)
+
+
+def _gyro_cov_with_frame(gyr: GyroRotationFit, prep: RigFreeData, acc: AccelNormFit) -> np.ndarray:
+    """C's covariance plus that of the accelerometer's frame: the gravity directions the rotations are matched to
+    come from the fitted A, b, whose errors turn every direction alike (linear propagation, implicit function)."""
+    i0 = np.array([i for i, _ in prep.move_pairs])
+    i1 = np.array([j for _, j in prep.move_pairs])
+
+    def residual(p: np.ndarray) -> np.ndarray:
+        a, b = accel_from_params(p)
+        u = _unit((prep.accel_means - b) @ a.T)
+        return (u[i1] - np.einsum("nji,nj->ni", gyr.rotations, u[i0])).ravel()
+
+    d = np.empty((3 * len(i0), 9))
+    for k in range(9):
+        h = 1e-7 * max(1.0, abs(acc.params[k]))
+        e = np.zeros(9)
+        e[k] = h
+        d[:, k] = (residual(acc.params + e) - residual(acc.params - e)) / (2 * h)
+    sens = -np.linalg.solve(gyr.jac.T @ gyr.jac, gyr.jac.T @ d)
+    return gyr.cov + sens @ acc.cov @ sens.T
+
+
+def _fit(session: Session, options: RigFreeOptions) -> ParameterSet:
+    prep, extra = prepare(session, options)
+    g = session.gravity_mps2
+    accel_fit = _fit_accel(session, prep.still, extra, options)
+    acc, joint = accel_fit.norm, accel_fit.joint
+    a_noise, g_noise = extra["a_noise"], extra["g_noise"]
+    accel_data = session.accel_mps2 - accel_fit.drift
+    prep = replace(prep, accel_means=_means(accel_data, a_noise.keep, prep.still))
     u = _directions(acc, prep.accel_means)
     ub = np.array([u[i] for i, _ in prep.move_pairs])
     ua = np.array([u[j] for _, j in prep.move_pairs])
@@ -358,13 +477,11 @@ def _fit(session: Session, options: RigFreeOptions) -> ParameterSet:
     cv: dict[str, Any] = {}
     if options.cv_folds >= 2 and len(prep.still) >= 2 * options.cv_folds:
         with numerics("cross-validation"):
-            cv = cross_validate(prep, g, options.cv_folds, gyr.c_matrix)
+            cv = cross_validate(session, prep, extra, options, gyr.c_matrix)
 
-    a_noise, g_noise = extra["a_noise"], extra["g_noise"]
-    m_a = np.linalg.inv(acc.a_matrix)
-    m_a_std = _inverse_std(acc.a_matrix, acc.cov[:6, :6], ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)))
+    gyro_cov = _gyro_cov_with_frame(gyr, prep, acc)
     m_w = np.linalg.inv(gyr.c_matrix)
-    m_w_std = _inverse_std(gyr.c_matrix, gyr.cov, [(i, j) for i in range(3) for j in range(3)])
+    m_w_std = _inverse_std(gyr.c_matrix, gyro_cov, [(i, j) for i in range(3) for j in range(3)])
     g_drift = extra["g_drift"]
 
     def residual(data: np.ndarray) -> np.ndarray:
@@ -373,15 +490,31 @@ def _fit(session: Session, options: RigFreeOptions) -> ParameterSet:
             res[s.start:s.stop] = data[s.start:s.stop] - data[s.start:s.stop].mean(axis=0)
         return res
 
-    a_res, g_res = residual(extra["accel"]), residual(extra["gyro"])
+    a_res, g_res = residual(accel_data), residual(extra["gyro"])
     mask = np.zeros(len(session), dtype=bool)
     for s in prep.still:
         mask[s.start:s.stop] = True
 
+    rest_fit = extra["a_drift"]
+    if joint is not None:
+        a_std = joint.std()
+        accel_terms = {
+            "misalignment": joint.misalignment, "misalignment_std": a_std["misalignment"],
+            "bias_static": joint.bias, "bias_static_std": a_std["bias"],
+            "bias_drift": joint.drift, "bias_drift_std": a_std["drift"],
+            "correlation_time_s": joint.tc_s, "correlation_time_s_std": a_std["tc_s"],
+            "drift_noise": np.array([f.drift_noise for f in rest_fit]) if rest_fit else np.zeros(3),
+            "drift_noise_std": np.array([f.drift_noise_std for f in rest_fit]) if rest_fit else np.zeros(3),
+        }
+    else:
+        accel_terms = {
+            "misalignment": np.linalg.inv(acc.a_matrix),
+            "misalignment_std": _inverse_std(acc.a_matrix, acc.cov[:6, :6], _UPPER),
+            "bias_static": acc.bias, "bias_static_std": np.sqrt(np.diag(acc.cov)[6:9]),
+            **_drift_params(None),
+        }
     accel = TriadParams(
-        misalignment=m_a, misalignment_std=m_a_std,
-        bias_static=acc.bias, bias_static_std=np.sqrt(np.diag(acc.cov)[6:9]),
-        **_drift_params(extra["a_drift"]),
+        **accel_terms,
         noise_std=a_noise.sigma, noise_std_std=a_noise.sigma_std,
         allan=_allan(session, a_res, a_noise.keep),
         residual_rms=np.sqrt(np.mean(a_res[mask & a_noise.keep] ** 2, axis=0)),
@@ -409,7 +542,11 @@ def _fit(session: Session, options: RigFreeOptions) -> ParameterSet:
         "gyro_direction_error_deg": [round(float(v), 5) for v in gyr.error_deg],
         "accel_tk": {"matrix": acc.a_matrix.tolist(), "bias_after_matrix": (acc.a_matrix @ acc.bias).tolist()},
         "accel_param_cov": acc.cov.tolist(),
-        "gyro_param_cov": gyr.cov.tolist(),
+        "accel_param_order": "A00 A01 A02 A11 A12 A22 b0 b1 b2 (A = M^-1, calibrated = A (y - b))",
+        "accel_model": "eq. (1) with the drift of eq. (3)" if joint is not None else "imu_tk (no drift)",
+        "accel_tc_fitted": joint.tc_free.tolist() if joint is not None else [],
+        "accel_block_scale": joint.scale if joint is not None else None,
+        "gyro_param_cov": gyro_cov.tolist(),
         "cross_validation": cv,
     }
     verdict_ok = bool(cv) and cv["accel_norm_rms_mps2"] <= 3.0 * max(acc.rms_mps2, 1e-6) and \

@@ -60,7 +60,7 @@ def _build(
         raise FormatError(f"{source}: gyroscope reaches {peak:.4g} rad/s ({np.degrees(peak):.4g} deg/s): not rad/s "
                           "(deg/s or counts? give the sensitivity)")
     opt = still or StillOptions()
-    intervals = detect_still(accel, sample_rate_hz, opt)
+    intervals = detect_still(accel, sample_rate_hz, opt, gyro)
     segment, kind = label_segments(len(t_s), intervals)
     n = len(t_s)
     metadata = {

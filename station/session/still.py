@@ -12,7 +12,12 @@ accelerometer alone, as imu_tk does:
    level at rest, the reference of the threshold.
 3. **threshold** (``threshold``, default 3): a sample is still when its activity is below
    ``threshold`` times the reference (and below ``max_activity_mps2`` in any case).
-4. **minimum length** (``min_still_s``, default 1.5 s): runs of still samples shorter than this
+4. **gyroscope** (when the recording has one): a turn about the vertical leaves the accelerometer
+   unchanged, so a sample is also not still when the gyro's rate over the window (its windowed mean
+   minus the initial still's mean, plus its windowed standard deviation, norms over the axes) exceeds
+   ``threshold`` times its initial-still level or ``still_rate_dps`` (default 1 deg/s), whichever is
+   larger (the floor keeps a slowly drifting gyro bias from ending a still interval).
+5. **minimum length** (``min_still_s``, default 1.5 s): runs of still samples shorter than this
    belong to the move around them.
 
 The first still run, when it starts within one window of the recording's start and is at least
@@ -46,16 +51,18 @@ class StillOptions:
     min_still_s: float = 1.5
     initial_still_s: float = 10.0
     max_activity_mps2: float = 0.5
+    still_rate_dps: float = 1.0
 
     def __post_init__(self) -> None:
-        for name in ("window_s", "threshold", "min_still_s", "initial_still_s", "max_activity_mps2"):
+        for name in ("window_s", "threshold", "min_still_s", "initial_still_s", "max_activity_mps2", "still_rate_dps"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):
                 raise FormatError(f"still detector: {name} must be a positive number, got {value!r}")
 
     def describe(self) -> str:
         return (f"window {self.window_s:g} s, threshold {self.threshold:g} x initial-still activity, "
-                f"min still {self.min_still_s:g} s, initial still {self.initial_still_s:g} s")
+                f"min still {self.min_still_s:g} s, initial still {self.initial_still_s:g} s, gyro floor "
+                f"{self.still_rate_dps:g} deg/s")
 
 
 @dataclass(frozen=True, eq=False)
@@ -85,8 +92,11 @@ def _activity(accel: np.ndarray, window: int) -> np.ndarray:
     return np.sqrt(np.clip(mean_sq - mean * mean, 0.0, None).sum(axis=1))
 
 
-def detect_still(accel_mps2: np.ndarray, sample_rate_hz: float, options: StillOptions | None = None) -> StillIntervals:
-    """Find the still intervals of a recording from its accelerometer (m/s^2, (n, 3))."""
+def detect_still(
+    accel_mps2: np.ndarray, sample_rate_hz: float, options: StillOptions | None = None,
+    gyro_radps: np.ndarray | None = None,
+) -> StillIntervals:
+    """Find the still intervals of a recording from its accelerometer (m/s^2, (n, 3)) and gyroscope (rad/s)."""
     opt = options or StillOptions()
     accel = np.asarray(accel_mps2, dtype=np.float64)
     n = accel.shape[0]
@@ -104,6 +114,12 @@ def detect_still(accel_mps2: np.ndarray, sample_rate_hz: float, options: StillOp
                           f"accelerometer's activity reaches {np.quantile(activity[:n_init], 0.9):.3g} m/s^2 "
                           f"(threshold {level:.3g}); give --initial-still for a shorter initial still")
     still = activity < level
+    if gyro_radps is not None:
+        gyro = np.asarray(gyro_radps, dtype=np.float64)
+        g_mean = uniform_filter1d(gyro, window, axis=0, mode="nearest")
+        g_act = np.linalg.norm(g_mean - np.median(gyro[:n_init], axis=0), axis=1) + _activity(gyro, window)
+        g_level = max(opt.threshold * float(np.median(g_act[:n_init])), np.radians(opt.still_rate_dps))
+        still &= g_act < g_level
     edges = np.diff(np.concatenate(([0], still.astype(np.int8), [0])))
     starts = np.flatnonzero(edges == 1)
     stops = np.flatnonzero(edges == -1)
