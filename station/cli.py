@@ -26,11 +26,15 @@ app.add_typer(import_app, name="import")
 def _add_subapps() -> None:
     from station.commands.diagnose import diagnose as diagnose_command
     from station.commands.eeprom import eeprom_app
+    from station.commands.rigfree import export_command, import_imu_tk_command, import_openaxes_command
     from station.commands.units import units_app
 
     app.add_typer(eeprom_app, name="eeprom")
     app.add_typer(units_app, name="units")
     app.command(name="diagnose")(diagnose_command)
+    app.command(name="export")(export_command)
+    import_app.command("openaxes")(import_openaxes_command)
+    import_app.command("imu-tk")(import_imu_tk_command)
 
 
 DbOption = Annotated[
@@ -100,29 +104,52 @@ def fit(
     session_path: Annotated[Path, typer.Argument(metavar="SESSION.csv", help="session CSV v1 recording")],
     as_json: Annotated[bool, typer.Option("--json", help="print the parameter set as JSON")] = False,
     g_sensitivity: Annotated[bool, typer.Option(help="also fit gyro g-sensitivity")] = False,
+    rig_free: Annotated[bool, typer.Option(
+        "--rig-free", help="fit without rig references (gravity norm and move rotations); chosen automatically "
+                           "when the poses carry no reference")] = False,
 ) -> None:
     """Fit the parameter set of eq. (1) to a session and print it.
 
     Exit code: 0 a calibration; 2 the recording is refused (one line on stderr); 3 the fit ran but
-    contradicts its own recording (goodness-of-fit test, ``quality.goodness_of_fit``): the parameters
-    are printed, and stderr names the segment kind that failed.
+    contradicts its own recording (goodness-of-fit test, ``quality.goodness_of_fit``; for a rig-free fit
+    the leave-poses-out cross-validation): the parameters are printed, and stderr names what failed.
     """
     from station.fit.calibrate import FitOptions, fit_session
     from station.fit.goodness import EXIT_GOODNESS, summary
+    from station.fit.rigfree import fit_rig_free, is_rig_free
     from station.session import read_session
 
     try:
-        params = fit_session(read_session(session_path), FitOptions(g_sensitivity=g_sensitivity))
+        session = read_session(session_path)
+        free = rig_free or is_rig_free(session)
+        if free and g_sensitivity:
+            raise StationError("--g-sensitivity needs rig references; the rig-free fit does not fit it")
+        params = fit_rig_free(session) if free else fit_session(session, FitOptions(g_sensitivity=g_sensitivity))
     except StationError as exc:
         raise fail(exc) from None
     if as_json:
         sys.stdout.write(params.to_json() + "\n")
     else:
         _print_params(params)
+        if free:
+            _print_rig_free(params.quality["rig_free"])
     verdict = params.quality["goodness_of_fit"]
     if not verdict["passed"]:
-        typer.echo(f"error: not a calibration: the fit fails its goodness-of-fit test: {summary(verdict)}", err=True)
+        reason = verdict.get("note", "") if free else summary(verdict)
+        typer.echo(f"error: not a calibration: the fit fails its goodness-of-fit test: {reason}", err=True)
         raise typer.Exit(EXIT_GOODNESS)
+
+
+def _print_rig_free(q: dict[str, object]) -> None:
+    cv = q.get("cross_validation") or {}
+    typer.echo(f"rig-free fit ({q['convention']})")
+    typer.echo(f"  {q['still_segments']} still segments ({q['distinct_poses']} distinct orientations), "
+               f"{q['moves']} moves; gravity {q['gravity_mps2']} m/s^2")
+    typer.echo(f"  gravity-norm RMS {1e3 * float(q['accel_norm_rms_mps2']):.2f} mm/s^2 fitted"  # type: ignore[arg-type]
+               + (f", {1e3 * cv['accel_norm_rms_mps2']:.2f} held out" if cv else ""))  # type: ignore[index]
+    typer.echo(f"  move gravity-direction RMS {float(q['gyro_direction_rms_deg']):.3f} deg fitted"  # type: ignore[arg-type]
+               + (f", {cv['gyro_direction_rms_deg']:.3f} held out ({cv['folds']}-fold leave-poses-out)"  # type: ignore[index]
+                  if cv else ""))
 
 
 @app.command()

@@ -198,7 +198,7 @@ def _check_still(session: Session, segments: Sequence[Segment], gyro_unbiased: n
 def _check_moves(session: Session, moves: list[np.ndarray], raw_moves: list[np.ndarray], options: RigFreeOptions,
                  move_index: list[int]) -> None:
     ts = 1.0 / session.sample_rate_hz
-    for j, (w, raw) in enumerate(zip(moves, raw_moves, strict=True)):
+    for j, w in enumerate(moves):
         step = float(np.degrees(np.linalg.norm(w, axis=1).max() * ts))
         if step > options.max_step_deg:
             raise FitError(f"move {move_index[j]} turns {step:.1f} deg in one sample at {session.sample_rate_hz:g} Hz: "
@@ -262,7 +262,6 @@ def prepare(session: Session, options: RigFreeOptions | None = None) -> tuple[Ri
         g_drift = _fit_drift(session, session.gyro_radps, runs, g_noise.keep, g_noise.sigma, options, "gyro")
     g_bias = np.array([f.beta[0] for f in g_drift]) + _drift_curve(g_drift, session.t_s)
     gyro = session.gyro_radps - g_bias
-    _check_still(session, still, gyro, accel, options)
     means = _means(accel, a_noise.keep, still)
     n_distinct = _check_poses(still, means, session.gravity_mps2, options)
     ts = 1.0 / session.sample_rate_hz
@@ -272,9 +271,8 @@ def prepare(session: Session, options: RigFreeOptions | None = None) -> tuple[Ri
         moves.append(gyro[a:b])
         raw_moves.append(session.gyro_radps[a:b])
         pairs.append((i, i + 1))
-    _check_moves(session, moves, raw_moves, options, [still[i].index + 1 for i, _ in pairs])
     extra = {"a_noise": a_noise, "g_noise": g_noise, "a_drift": a_drift, "g_drift": g_drift,
-             "n_distinct": n_distinct, "accel": accel, "gyro": gyro}
+             "n_distinct": n_distinct, "accel": accel, "gyro": gyro, "raw_moves": raw_moves}
     return RigFreeData(still, means, moves, pairs, ts), extra
 
 
@@ -439,25 +437,50 @@ def _fit_accel(session: Session, still: list[Segment], extra: dict[str, Any], op
     return _AccelResult(norm, joint, drift)
 
 
-def _gyro_cov_with_frame(gyr: GyroRotationFit, prep: RigFreeData, acc: AccelNormFit) -> np.ndarray:
+def _gyro_cov_with_frame(gyr: GyroRotationFit, prep: RigFreeData, accel_fit: _AccelResult, session: Session,
+                         keep: np.ndarray) -> np.ndarray:
     """C's covariance plus that of the accelerometer's frame: the gravity directions the rotations are matched to
-    come from the fitted A, b, whose errors turn every direction alike (linear propagation, implicit function)."""
+    come from the fitted accelerometer, whose errors turn every direction alike (linear propagation through the
+    implicit function of the gyro fit). With the drift of eq. (3) the directions depend on (M, b, b_drift, T_c)
+    jointly, and their joint covariance is used (b and b_drift are strongly correlated)."""
     i0 = np.array([i for i, _ in prep.move_pairs])
     i1 = np.array([j for _, j in prep.move_pairs])
+    joint = accel_fit.joint
+    raw_means = _means(session.accel_mps2, keep, prep.still)
+    if joint is not None:
+        free = np.flatnonzero(joint.tc_free)
+        t_seg = [session.t_s[s.start:s.stop][keep[s.start:s.stop]] for s in prep.still]
+        x0 = np.concatenate([[joint.misalignment[i, j] for i, j in _UPPER], joint.bias, joint.drift,
+                             np.log(joint.tc_s[free])])
+        cov = joint.cov
 
-    def residual(p: np.ndarray) -> np.ndarray:
-        a, b = accel_from_params(p)
-        u = _unit((prep.accel_means - b) @ a.T)
+        def directions(x: np.ndarray) -> np.ndarray:
+            m = np.zeros((3, 3))
+            for k, (i, j) in enumerate(_UPPER):
+                m[i, j] = x[k]
+            tc = joint.tc_s.copy()
+            tc[free] = np.exp(x[12:])
+            e = np.array([np.exp(-t[:, None] / tc).mean(axis=0) for t in t_seg])
+            return _unit((raw_means - x[9:12] * e - x[6:9]) @ np.linalg.inv(m).T)
+    else:
+        x0, cov = accel_fit.norm.params, accel_fit.norm.cov
+
+        def directions(x: np.ndarray) -> np.ndarray:
+            a, b = accel_from_params(x)
+            return _unit((prep.accel_means - b) @ a.T)
+
+    def residual(x: np.ndarray) -> np.ndarray:
+        u = directions(x)
         return (u[i1] - np.einsum("nji,nj->ni", gyr.rotations, u[i0])).ravel()
 
-    d = np.empty((3 * len(i0), 9))
-    for k in range(9):
-        h = 1e-7 * max(1.0, abs(acc.params[k]))
-        e = np.zeros(9)
+    d = np.empty((3 * len(i0), len(x0)))
+    for k in range(len(x0)):
+        h = 1e-7 * max(1.0, abs(x0[k]))
+        e = np.zeros(len(x0))
         e[k] = h
-        d[:, k] = (residual(acc.params + e) - residual(acc.params - e)) / (2 * h)
+        d[:, k] = (residual(x0 + e) - residual(x0 - e)) / (2 * h)
     sens = -np.linalg.solve(gyr.jac.T @ gyr.jac, gyr.jac.T @ d)
-    return gyr.cov + sens @ acc.cov @ sens.T
+    return gyr.cov + sens @ cov @ sens.T
 
 
 def _fit(session: Session, options: RigFreeOptions) -> ParameterSet:
@@ -472,6 +495,8 @@ def _fit(session: Session, options: RigFreeOptions) -> ParameterSet:
     ub = np.array([u[i] for i, _ in prep.move_pairs])
     ua = np.array([u[j] for _, j in prep.move_pairs])
     _check_gyro_units(prep.moves, prep.ts, ub, ua)
+    _check_still(session, prep.still, extra["gyro"], extra["accel"], options)
+    _check_moves(session, prep.moves, extra["raw_moves"], options, [prep.still[i].index + 1 for i, _ in prep.move_pairs])
     with numerics("gyroscope rotation fit"):
         gyr = fit_gyro_rotations(prep.moves, prep.ts, ub, ua)
     cv: dict[str, Any] = {}
@@ -479,7 +504,7 @@ def _fit(session: Session, options: RigFreeOptions) -> ParameterSet:
         with numerics("cross-validation"):
             cv = cross_validate(session, prep, extra, options, gyr.c_matrix)
 
-    gyro_cov = _gyro_cov_with_frame(gyr, prep, acc)
+    gyro_cov = _gyro_cov_with_frame(gyr, prep, accel_fit, session, a_noise.keep)
     m_w = np.linalg.inv(gyr.c_matrix)
     m_w_std = _inverse_std(gyr.c_matrix, gyro_cov, [(i, j) for i in range(3) for j in range(3)])
     g_drift = extra["g_drift"]

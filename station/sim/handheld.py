@@ -83,18 +83,25 @@ def simulate_handheld(
     sensor_class: SensorClass = TABLE1,
     unit: UnitTruth | None = None,
     effects: Effects | None = None,
+    attitudes: np.ndarray | None = None,
 ) -> HandheldResult:
-    """Simulate one hand-held multi-position recording (see the module docstring)."""
+    """Simulate one hand-held multi-position recording (see the module docstring).
+
+    ``attitudes``: the rest's and the poses' sensor-to-world rotations, (P + 1, 3, 3), instead of random ones
+    (e.g. every pose a turn about one axis).
+    """
     plan = plan or HandheldPlan()
     unit_seq, imu_seq, hand_seq = np.random.SeedSequence(seed).spawn(3)
     if unit is None:
         unit = draw_unit(sensor_class, np.random.default_rng(unit_seq))
     rng = np.random.default_rng(hand_seq)
     n_poses = int(plan.poses if plan.poses is not None else rng.integers(20, 41))
+    if attitudes is None:
+        attitudes = Rotation.random(n_poses + 1, random_state=rng).as_matrix()  # sensor-to-world
+    else:
+        attitudes = np.asarray(attitudes, dtype=float)
+        n_poses = len(attitudes) - 1
     fs = plan.sample_rate_hz
-    attitudes = Rotation.random(n_poses + 1, random_state=rng).as_matrix()  # sensor-to-world
-    # pieces: (t0, t1, kind, data)
-    t_parts, rot_parts, w_parts, a_parts = [], [], [], []
     still: list[tuple[float, float]] = []
     t = 0.0
 

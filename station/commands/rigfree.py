@@ -1,0 +1,171 @@
+"""Commands of rig-free calibration: ``station import openaxes|imu-tk`` and ``station export``.
+
+The importers label rest, pose and move segments with the still detector
+(:mod:`station.session.still`, its knobs as options) and write session CSV v1 whose poses carry no
+reference, which ``station fit`` then fits rig-free. ``station export`` writes a parameter set in
+imu_tk's convention (``station-imutk/1`` JSON) or as OpenAXES's coefficient list.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from station.kernel.errors import StationError
+
+WindowOption = Annotated[float, typer.Option("--still-window", help="still detector: moving window (s)")]
+ThresholdOption = Annotated[float, typer.Option(
+    "--still-threshold", help="still detector: still below this many times the initial still's activity")]
+MinStillOption = Annotated[float, typer.Option("--min-still", help="still detector: shortest still interval (s)")]
+InitialOption = Annotated[float, typer.Option(
+    "--initial-still", help="still detector: the recording starts still for at least this long (s)")]
+RateOption = Annotated[float, typer.Option(
+    "--still-rate", help="still detector: gyro rate (deg/s) above which a sample is never still")]
+
+
+def _fail(exc: StationError) -> typer.Exit:
+    typer.echo(f"error: {exc}", err=True)
+    return typer.Exit(2)
+
+
+def _still_options(window: float, threshold: float, min_still: float, initial: float, rate: float) -> object:
+    from station.session.still import StillOptions
+
+    return StillOptions(window_s=window, threshold=threshold, min_still_s=min_still, initial_still_s=initial,
+                        still_rate_dps=rate)
+
+
+def _report(session: object, output: Path) -> None:
+    from station.session.model import Kind, Session
+
+    assert isinstance(session, Session)
+    poses = len(session.segments_of(Kind.POSE))
+    rest = session.segments_of(Kind.REST)
+    rest_text = f"initial still {session.t_s[rest[0].stop - 1] - session.t_s[rest[0].start]:.1f} s" if rest \
+        else "no initial still found"
+    typer.echo(f"wrote {output} ({len(session)} samples at {session.sample_rate_hz:.4f} Hz; {rest_text}, "
+               f"{poses} still poses)")
+
+
+def import_openaxes_command(
+    log: Annotated[Path, typer.Argument(metavar="LOG.csv", help="OpenAXES log (semicolon-separated)")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="session CSV v1 to write")],
+    accel: Annotated[str, typer.Option("--accel", help="which accelerometer: adxl355 or bmi160")] = "adxl355",
+    gravity: Annotated[float, typer.Option("--gravity", help="local gravity (m/s^2), written as gravity_mps2; "
+                                                             "OpenAXES's site Hannover: 9.8128")] = 9.8128,
+    serial: Annotated[str | None, typer.Option(help="serial number (default: from the IMU name and MAC)")] = None,
+    still_window: WindowOption = 1.0,
+    still_threshold: ThresholdOption = 3.0,
+    min_still: MinStillOption = 1.5,
+    initial_still: InitialOption = 10.0,
+    still_rate: RateOption = 1.0,
+) -> None:
+    """Convert an OpenAXES hand-held calibration log (one accelerometer and the gyroscope) to session CSV v1."""
+    from station.commands.output import check_output
+    from station.session import write_session
+    from station.session.multipos_import import import_openaxes
+
+    try:
+        check_output(output, inputs=[log])
+        session = import_openaxes(log, accel=accel.lower(), gravity_mps2=gravity, serial=serial,
+                                  still=_still_options(still_window, still_threshold, min_still, initial_still,
+                                                       still_rate))  # type: ignore[arg-type]
+        write_session(session, output)
+    except StationError as exc:
+        raise _fail(exc) from None
+    except OSError as exc:
+        raise _fail(StationError(f"cannot write {output}: {exc.strerror or exc}")) from None
+    _report(session, output)
+
+
+def _offsets(text: str, name: str) -> float | tuple[float, float, float]:
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        raise StationError(f"{name} {text!r}: give one number or three separated by commas (x,y,z)") from None
+    if len(values) == 1:
+        return values[0]
+    if len(values) == 3:
+        return (values[0], values[1], values[2])
+    raise StationError(f"{name} {text!r}: give one number or three separated by commas (x,y,z)")
+
+
+def import_imu_tk_command(
+    accel_file: Annotated[Path, typer.Argument(metavar="ACC", help="imu_tk accelerometer file: rows 'time x y z'")],
+    gyro_file: Annotated[Path, typer.Argument(metavar="GYRO", help="imu_tk gyroscope file, same times")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="session CSV v1 to write")],
+    accel_lsb_per_mps2: Annotated[float, typer.Option(
+        "--accel-lsb-per-mps2", help="nominal accelerometer sensitivity (counts per m/s^2; 1 if already m/s^2)")] = 1.0,
+    gyro_lsb_per_radps: Annotated[float, typer.Option(
+        "--gyro-lsb-per-radps", help="nominal gyro sensitivity (counts per rad/s; 1 if already rad/s)")] = 1.0,
+    offset_lsb: Annotated[str, typer.Option(
+        "--offset-lsb", help="nominal offset subtracted from the raw counts, one number or x,y,z "
+                             "(both sensors unless --gyro-offset-lsb)")] = "0",
+    gyro_offset_lsb: Annotated[str | None, typer.Option(
+        "--gyro-offset-lsb", help="the gyro's nominal offset, if not --offset-lsb")] = None,
+    gravity: Annotated[float, typer.Option("--gravity", help="local gravity (m/s^2)")] = 9.80665,
+    serial: Annotated[str, typer.Option(help="serial number to record")] = "imu-tk",
+    still_window: WindowOption = 1.0,
+    still_threshold: ThresholdOption = 3.0,
+    min_still: MinStillOption = 1.5,
+    initial_still: InitialOption = 10.0,
+    still_rate: RateOption = 1.0,
+) -> None:
+    """Convert imu_tk's text files (accelerometer and gyroscope, raw counts) to session CSV v1."""
+    from station.commands.output import check_output
+    from station.session import write_session
+    from station.session.multipos_import import import_imu_tk
+
+    try:
+        check_output(output, inputs=[accel_file, gyro_file])
+        a_off = _offsets(offset_lsb, "--offset-lsb")
+        g_off = a_off if gyro_offset_lsb is None else _offsets(gyro_offset_lsb, "--gyro-offset-lsb")
+        session = import_imu_tk(accel_file, gyro_file, accel_lsb_per_mps2=accel_lsb_per_mps2,
+                                gyro_lsb_per_radps=gyro_lsb_per_radps, accel_offset_lsb=a_off, gyro_offset_lsb=g_off,
+                                gravity_mps2=gravity, serial=serial,
+                                still=_still_options(still_window, still_threshold, min_still, initial_still,
+                                                     still_rate))  # type: ignore[arg-type]
+        write_session(session, output)
+    except StationError as exc:
+        raise _fail(exc) from None
+    except OSError as exc:
+        raise _fail(StationError(f"cannot write {output}: {exc.strerror or exc}")) from None
+    _report(session, output)
+
+
+def export_command(
+    params: Annotated[list[Path], typer.Argument(
+        metavar="PARAMS.json...", help="parameter set(s) (station-params/1); for openaxes: one per accelerometer, "
+                                       "the gyro from the last")],
+    fmt: Annotated[str, typer.Option("--format", help="imu-tk (station-imutk/1 JSON) or openaxes (coefficient list)")],
+    output: Annotated[Path | None, typer.Option("-o", "--output", help="file to write (default: stdout)")] = None,
+) -> None:
+    """Write a parameter set in imu_tk's convention or as OpenAXES's coefficient list."""
+    from station.commands.output import check_output
+    from station.fit.export import imu_tk_document, openaxes_text
+    from station.fit.params import ParameterSet
+
+    try:
+        if fmt not in ("imu-tk", "openaxes"):
+            raise StationError(f"--format {fmt!r}: imu-tk or openaxes")
+        if output is not None:
+            check_output(output, inputs=params)
+        sets = [ParameterSet.read(p) for p in params]
+        if fmt == "imu-tk":
+            if len(sets) != 1:
+                raise StationError("--format imu-tk exports one parameter set")
+            text = imu_tk_document(sets[0])
+        else:
+            text = openaxes_text(sets)
+        if output is None:
+            sys.stdout.write(text)
+        else:
+            output.write_text(text, encoding="utf-8")
+            typer.echo(f"wrote {output}")
+    except StationError as exc:
+        raise _fail(exc) from None
+    except OSError as exc:
+        raise _fail(StationError(f"cannot write {output}: {exc.strerror or exc}")) from None
