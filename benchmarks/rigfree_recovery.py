@@ -55,7 +55,7 @@ def run_unit(seed: int, folder: Path, cv: bool) -> dict[str, np.ndarray]:
     m_a, m_w = truth_in_convention(res.truth.accel.misalignment, res.truth.gyro.misalignment)
     upper = np.triu_indices(3)
     z = {
-        "accel M (upper 6)": ((params.accel.misalignment - m_a)[upper] / params.accel.misalignment_std[upper]),
+        "accel M (upper 6)": (params.accel.misalignment - m_a)[upper] / params.accel.misalignment_std[upper],
         "accel b_stat": (params.accel.bias_static - (res.truth.accel.bias_static + a_off / a_sens))
         / params.accel.bias_static_std,
         "gyro M (9)": ((params.gyro.misalignment - m_w) / params.gyro.misalignment_std).ravel(),
@@ -94,7 +94,7 @@ def main() -> int:
           f"{len(refused)} refused, {took:.0f} s")
     for line in refused:
         print("  refused", line)
-    print(f"{'parameter':<20}{'estimates':>10}{'within 3 sigma':>16}{'std of z':>10}{'max |z|':>9}")
+    print(f"{'parameter':<20}{'estimates':>10}{'within 3 sigma':>16}{'std of z':>10}{'MAD spread':>11}{'max |z|':>9}")
     ok = True
     for k, v in out.items():
         if k.startswith("_"):
@@ -102,7 +102,8 @@ def main() -> int:
         z = np.concatenate(v)
         within = float(np.mean(np.abs(z) <= 3.0))
         ok &= within >= 0.95
-        print(f"{k:<20}{len(z):>10}{within:>15.1%}{np.std(z):>10.2f}{np.max(np.abs(z)):>9.1f}")
+        mad = 1.4826 * float(np.median(np.abs(z - np.median(z))))
+        print(f"{k:<20}{len(z):>10}{within:>15.1%}{np.std(z):>10.2f}{mad:>11.2f}{np.max(np.abs(z)):>9.1f}")
     rms = np.array(out["_rms"])
     print(f"median fitted RMS: gravity norm {1e3 * np.median(rms[:, 0]):.2f} mm/s^2, move direction "
           f"{np.median(rms[:, 1]):.4f} deg; still segments {int(rms[:, 2].min())}..{int(rms[:, 2].max())}")

@@ -431,8 +431,21 @@ def fit_accel_joint(
     hi = np.full(len(x0), np.inf)
     lo[12:12 + n_tc], hi[12:12 + n_tc] = np.log(tc_bounds_s[0]), np.log(tc_bounds_s[1])
     x0[12:12 + n_tc] = np.clip(x0[12:12 + n_tc], lo[12:12 + n_tc] + 1e-9, hi[12:12 + n_tc] - 1e-9)
-    sol = least_squares(residual, x0, bounds=(lo, hi), method="trf", x_scale="jac", xtol=1e-12, ftol=1e-12,
-                        gtol=1e-12, max_nfev=200 * len(x0))
+    # multi-start in T_c (the likelihood in T_c can have a second minimum at a bound): the given values, and
+    # every free T_c at the geometric middle and at the upper quarter of its range (log scale)
+    starts = [x0]
+    for frac in (0.5, 0.75):
+        if n_tc:
+            x = x0.copy()
+            x[12:12 + n_tc] = lo[12:12 + n_tc] + frac * (hi[12:12 + n_tc] - lo[12:12 + n_tc])
+            starts.append(x)
+    sol = None
+    for x in starts:
+        trial = least_squares(residual, x, bounds=(lo, hi), method="trf", x_scale="jac", xtol=1e-12, ftol=1e-12,
+                              gtol=1e-12, max_nfev=200 * len(x0))
+        if sol is None or trial.cost < sol.cost - 1e-9 * max(sol.cost, 1.0):
+            sol = trial
+    assert sol is not None
     r = sol.fun
     dof = max(len(r) - len(x0), 1)
     s2 = float(r @ r) / dof
