@@ -102,7 +102,8 @@ def main() -> int:
     # --- 1. coefficients ------------------------------------------------------------------
     names = []
     for sensor in ("ADXL355", "BMI160"):
-        names += [f"{sensor} TK[{i}{j}]" for j in range(3) for i in range(3)] + [f"{sensor} b_after[{k}]" for k in "xyz"]
+        names += [f"{sensor} TK[{i}{j}]" for j in range(3) for i in range(3)]
+        names += [f"{sensor} b_after[{k}]" for k in "xyz"]
     names += [f"gyro M[{i}{j}]" for j in range(3) for i in range(3)] + [f"gyro b[{k}] rad/s" for k in "xyz"]
     columns = {
         "imu_tk model": openaxes_coefficients([tk_model["adxl355"], tk_model["bmi160"]]),

@@ -31,7 +31,6 @@ from station.kernel.sensor_class import TABLE1
 from station.session.multipos_import import import_imu_tk
 from station.sim.handheld import counts_with_offsets, simulate_handheld
 
-
 #: the sensor class's T_c ranges, the prior the station passes from its limits file (as the rig fit gets it)
 TC_PRIOR = {"accel": TABLE1.accel_correlation_time_s, "gyro": TABLE1.gyro_correlation_time_s}
 

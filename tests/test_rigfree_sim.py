@@ -88,7 +88,7 @@ def test_still_detector_finds_every_true_still_interval() -> None:
 
 
 def test_import_fit_export_on_the_command_line(tmp_path: Path) -> None:
-    acc, gyr, res, a_off, g_off, a_sens, g_sens = _write_imu_tk(tmp_path, 311)
+    acc, gyr, res, a_off, _, a_sens, g_sens = _write_imu_tk(tmp_path, 311)
     out = tmp_path / "s.csv"
     r = RUN.invoke(app, ["import", "imu-tk", str(acc), str(gyr), "-o", str(out), "--accel-lsb-per-mps2", str(a_sens),
                          "--gyro-lsb-per-radps", str(g_sens), "--gravity", "9.8128"])

@@ -191,7 +191,7 @@ def _qmul(p: np.ndarray, q: np.ndarray) -> np.ndarray:
 
 def _qdot(q: np.ndarray, w: np.ndarray) -> np.ndarray:
     """dq/dt = q (0, w) / 2 for the body rate w (body frame)."""
-    return 0.5 * _qmul(q, np.concatenate([np.zeros(w.shape[:-1] + (1,)), w], axis=-1))
+    return 0.5 * _qmul(q, np.concatenate([np.zeros((*w.shape[:-1], 1)), w], axis=-1))
 
 
 def integrate_moves(rates: np.ndarray, dt_s: float) -> np.ndarray:

@@ -28,8 +28,7 @@ terms of M are those of the stated convention, not of a rig's frame.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -191,7 +190,8 @@ def _check_still(session: Session, segments: Sequence[Segment], gyro_unbiased: n
         tilt = float(np.degrees(np.arccos(np.clip(_unit(a0) @ _unit(a1), -1.0, 1.0))))
         if max(turn, tilt) > options.still_rotation_deg:
             raise FitError(f"segment {s.index} is labelled {s.kind.label} but the unit moves in it (gyro turns "
-                           f"{turn:.1f} deg, gravity direction {tilt:.1f} deg; at most {options.still_rotation_deg:g}); "
+                           f"{turn:.1f} deg, gravity direction {tilt:.1f} deg; "
+                           f"at most {options.still_rotation_deg:g}); "
                            "relabel it or re-run the still detector")
 
 
@@ -220,7 +220,8 @@ def _check_gyro_units(moves: list[np.ndarray], ts: float, ub: np.ndarray, ua: np
     if err[1.0] > 10.0:
         for k, name, given in ((deg, "deg/s", "rad/s"), (1.0 / deg, "rad/s", "deg/s")):
             if err[k] < err[1.0] / 3.0:
-                raise FitError(f"the gyro rates look like {name} given as {given}: integrated as {given} the moves miss "
+                raise FitError(f"the gyro rates look like {name} given as {given}: integrated as {given} "
+                               "the moves miss "
                                f"the gravity direction by {err[1.0]:.0f} deg RMS, as {name} by {err[k]:.1f} deg; "
                                "fix the unit (or the sensitivity) of the import")
 
@@ -255,7 +256,8 @@ def prepare(session: Session, options: RigFreeOptions | None = None) -> tuple[Ri
         g_noise = _noise(session, session.gyro_radps, runs, options.outlier_sigma)
     rest = [s for s in still if s.kind == Kind.REST]
     with numerics("accelerometer warm-up (eq. 3) over the initial still"):
-        a_drift = (_fit_drift(session, session.accel_mps2, _runs(rest[:1]), a_noise.keep, a_noise.sigma, options, "accel")
+        a_drift = (_fit_drift(session, session.accel_mps2, _runs(rest[:1]), a_noise.keep, a_noise.sigma, options,
+                              "accel")
                    if rest and len(rest[0]) >= 10 * options.min_segment_samples else None)
     accel = session.accel_mps2 - (_drift_curve(a_drift, session.t_s) if a_drift else 0.0)
     with numerics("gyroscope bias and warm-up (eq. 3) over the still segments"):
@@ -496,7 +498,8 @@ def _fit(session: Session, options: RigFreeOptions) -> ParameterSet:
     ua = np.array([u[j] for _, j in prep.move_pairs])
     _check_gyro_units(prep.moves, prep.ts, ub, ua)
     _check_still(session, prep.still, extra["gyro"], extra["accel"], options)
-    _check_moves(session, prep.moves, extra["raw_moves"], options, [prep.still[i].index + 1 for i, _ in prep.move_pairs])
+    _check_moves(session, prep.moves, extra["raw_moves"], options,
+                 [prep.still[i].index + 1 for i, _ in prep.move_pairs])
     with numerics("gyroscope rotation fit"):
         gyr = fit_gyro_rotations(prep.moves, prep.ts, ub, ua)
     cv: dict[str, Any] = {}

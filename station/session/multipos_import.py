@@ -139,7 +139,8 @@ def _read_imu_tk(path: str) -> np.ndarray:
     if not np.isfinite(data).all():
         raise FormatError(f"{path}: non-finite values")
     if (np.diff(data[:, 0]) <= 0).any():
-        raise FormatError(f"{path}: time does not increase at row {int(np.flatnonzero(np.diff(data[:, 0]) <= 0)[0]) + 2}")
+        row = int(np.flatnonzero(np.diff(data[:, 0]) <= 0)[0]) + 2
+        raise FormatError(f"{path}: time does not increase at row {row}")
     return data
 
 

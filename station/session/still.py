@@ -101,8 +101,8 @@ def detect_still(
     accel = np.asarray(accel_mps2, dtype=np.float64)
     n = accel.shape[0]
     fs = float(sample_rate_hz)
-    window = max(3, int(round(opt.window_s * fs)) | 1)
-    n_init = int(round(opt.initial_still_s * fs))
+    window = max(3, round(opt.window_s * fs) | 1)
+    n_init = round(opt.initial_still_s * fs)
     if n < n_init + window:
         raise FormatError(f"recording of {n / fs:.1f} s is shorter than the initial still ({opt.initial_still_s:g} s) "
                           "and one window")
@@ -123,7 +123,7 @@ def detect_still(
     edges = np.diff(np.concatenate(([0], still.astype(np.int8), [0])))
     starts = np.flatnonzero(edges == 1)
     stops = np.flatnonzero(edges == -1)
-    keep = (stops - starts) >= max(2, int(round(opt.min_still_s * fs)))
+    keep = (stops - starts) >= max(2, round(opt.min_still_s * fs))
     starts, stops = starts[keep], stops[keep]
     rest = bool(len(starts) and starts[0] <= window and stops[0] - starts[0] >= n_init)
     return StillIntervals(starts=starts, stops=stops, rest=rest, reference_mps2=reference, activity_mps2=activity)
