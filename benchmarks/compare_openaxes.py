@@ -171,7 +171,7 @@ def main() -> int:
         ts = 1.0 / s.sample_rate_hz
         print(f"{accel:<16}{'raw (M = I, b = 0)':<44}{direction_rms(np.eye(3), np.zeros(3), moves, ts, u_raw):8.3f}")
         print(f"{'':<16}{'published (M, b; 0.01 s step)':<44}"
-              f"{direction_rms(m_pub, bw_pub, moves, PUBLISHED_STEP_S, u_pub):8.3f}{'(in-sample)':>10}")
+              f"{direction_rms(m_pub, bw_pub, moves, PUBLISHED_STEP_S, u_pub):8.3f}{'(in-sample)':>12}")
         print(f"{'':<16}{'published (M, b; recording period)':<44}"
               f"{direction_rms(m_pub, bw_pub, moves, ts, u_pub):8.3f}")
         q = fits[accel, G_TK].quality["rig_free"]
