@@ -4,14 +4,18 @@ Chosen automatically (:func:`is_rig_free`) when the recording's poses carry no r
 asked for with ``station fit --rig-free``. Steps (numerics in :mod:`station.fit.multipos`):
 
 1. Noise and outliers per triad from sample differences within the still segments (as the rig fit).
-2. Accelerometer warm-up, eq. (3): ``b_drift exp(-t/T_c)`` per axis from the initial still (the
-   ``rest`` segment: there the specific force is constant, so only the drift moves the output),
-   with the rig fit's per-axis ML (:func:`station.fit.axis_ml.fit_axis`, design = a constant);
-   subtracted before the pose means are taken. Unresolved (Wald test) drift is 0, T_c NaN.
-3. Accelerometer M and b_stat from the gravity norm over all still segments (rest and poses), in the
-   stated convention (M upper-triangular: the accelerometer's own axes are the frame).
+2. Accelerometer warm-up, eq. (3), a first look: ``b_drift exp(-t/T_c)`` per axis from the initial still
+   (the ``rest`` segment: there the specific force is constant, so only the drift moves the output),
+   with the rig fit's per-axis ML (:func:`station.fit.axis_ml.fit_axis`, design = a constant); it says
+   which axes resolve T_c and gives the start values of step 3.
+3. Accelerometer M, b_stat, b_drift (and T_c where step 2 resolved it; elsewhere held at the initial
+   still's length) jointly over the block means of all still segments, gravity's norm the reference
+   (:func:`station.fit.multipos.fit_accel_joint`, started from imu_tk's gravity-norm fit), in the stated
+   convention (M upper-triangular: the accelerometer's own axes are the frame). ``accel_drift=False``:
+   imu_tk's model, the gravity-norm fit alone.
 4. Gyroscope bias b_stat, b_drift, T_c from all still segments (rest and poses; the rate there is
-   zero up to Earth rate, which the model leaves in the bias), again with ``fit_axis``.
+   zero up to Earth rate, which the model leaves in the bias), again with ``fit_axis``: the poses spread
+   over the whole recording see the warm-up better than the initial still alone.
 5. Gyroscope M from the rotations between consecutive still segments (RK4 of the calibrated rate
    over each move, matched to the accelerometer's gravity direction before and after).
 6. Held-out validation (:func:`cross_validate`): k-fold leave-poses-out of the gravity norm and of
