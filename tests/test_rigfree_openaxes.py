@@ -98,3 +98,21 @@ def test_cross_validation_is_reported(fits: dict[str, ParameterSet]) -> None:
     assert cv["folds"] == 5 and len(cv["accel_norm_error_mps2"]) == q["still_segments"] - 1
     assert q["accel_norm_rms_mps2"] < cv["accel_norm_rms_mps2"] < 2 * q["accel_norm_rms_mps2"]
     assert q["gyro_direction_rms_deg"] < cv["gyro_direction_rms_deg"] < 2 * q["gyro_direction_rms_deg"]
+
+
+def test_command_line_import_with_gravity_from_latitude(tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from station.cli import app
+    from station.session import read_session
+
+    out = tmp_path / "s.csv"
+    r = CliRunner().invoke(app, ["import", "openaxes", str(LOG), "--accel", "bmi160", "--latitude", "52.3759",
+                                 "--height", "55", "-o", str(out)])
+    assert r.exit_code == 0, r.output
+    s = read_session(out)
+    assert s.gravity_mps2 == pytest.approx(9.81263, abs=1e-5) and s.metadata["latitude_deg"] == "52.3759"
+    assert s.metadata["source_accel"] == "bmi160" and is_rig_free(s)
+    r = CliRunner().invoke(app, ["import", "openaxes", str(LOG), "--gravity", "9.81", "--latitude", "52",
+                                 "-o", str(tmp_path / "t.csv")])
+    assert r.exit_code == 2 and "not both" in r.stderr

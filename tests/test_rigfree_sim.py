@@ -162,3 +162,12 @@ def test_not_rig_free_when_poses_have_references() -> None:
     session = simulate_session(1).session
     assert not is_rig_free(session)
     assert session.segments_of(Kind.POSE)
+
+
+def test_normal_gravity_from_latitude() -> None:
+    from station.session.multipos_import import normal_gravity_mps2
+
+    # WGS 84: 9.7803253359 at the equator, 9.8321849378 at the poles; free air -3.086e-6 per m
+    assert normal_gravity_mps2(0.0) == pytest.approx(9.7803253359, abs=1e-9)
+    assert normal_gravity_mps2(-90.0) == pytest.approx(9.8321849378, abs=1e-9)
+    assert normal_gravity_mps2(45.0, 1000.0) == pytest.approx(9.8061977694 - 3.086e-3, abs=1e-8)

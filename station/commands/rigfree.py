@@ -22,8 +22,23 @@ ThresholdOption = Annotated[float, typer.Option(
 MinStillOption = Annotated[float, typer.Option("--min-still", help="still detector: shortest still interval (s)")]
 InitialOption = Annotated[float, typer.Option(
     "--initial-still", help="still detector: the recording starts still for at least this long (s)")]
+LatitudeOption = Annotated[float | None, typer.Option(
+    "--latitude", help="site latitude (deg): local gravity from WGS 84 normal gravity when --gravity is not given")]
+HeightOption = Annotated[float, typer.Option("--height", help="site height above the ellipsoid (m), with --latitude")]
 RateOption = Annotated[float, typer.Option(
     "--still-rate", help="still detector: gyro rate (deg/s) above which a sample is never still")]
+
+
+def _gravity(gravity: float | None, latitude: float | None, height: float, default: float) -> tuple[float, dict]:
+    """The local gravity and the metadata that says where it came from."""
+    from station.session.multipos_import import normal_gravity_mps2
+
+    if gravity is not None and latitude is not None:
+        raise StationError("give --gravity or --latitude, not both")
+    if latitude is not None:
+        return normal_gravity_mps2(latitude, height), {"latitude_deg": f"{latitude:g}",
+                                                      "gravity_source": f"WGS 84 normal gravity at {height:g} m"}
+    return (default if gravity is None else gravity), {}
 
 
 def _fail(exc: StationError) -> typer.Exit:
@@ -54,8 +69,11 @@ def import_openaxes_command(
     log: Annotated[Path, typer.Argument(metavar="LOG.csv", help="OpenAXES log (semicolon-separated)")],
     output: Annotated[Path, typer.Option("-o", "--output", help="session CSV v1 to write")],
     accel: Annotated[str, typer.Option("--accel", help="which accelerometer: adxl355 or bmi160")] = "adxl355",
-    gravity: Annotated[float, typer.Option("--gravity", help="local gravity (m/s^2), written as gravity_mps2; "
-                                                             "OpenAXES's site Hannover: 9.8128")] = 9.8128,
+    gravity: Annotated[float | None, typer.Option(
+        "--gravity", help="local gravity (m/s^2), written as gravity_mps2 [default: 9.8128, OpenAXES's site "
+                          "Hannover, or from --latitude]")] = None,
+    latitude: LatitudeOption = None,
+    height: HeightOption = 0.0,
     serial: Annotated[str | None, typer.Option(help="serial number (default: from the IMU name and MAC)")] = None,
     still_window: WindowOption = 1.0,
     still_threshold: ThresholdOption = 3.0,
@@ -70,9 +88,11 @@ def import_openaxes_command(
 
     try:
         check_output(output, inputs=[log])
-        session = import_openaxes(log, accel=accel.lower(), gravity_mps2=gravity, serial=serial,
+        g, extra = _gravity(gravity, latitude, height, 9.8128)
+        session = import_openaxes(log, accel=accel.lower(), gravity_mps2=g, serial=serial,
                                   still=_still_options(still_window, still_threshold, min_still, initial_still,
                                                        still_rate))  # type: ignore[arg-type]
+        session = session.replace(metadata={**session.metadata, **extra})
         write_session(session, output)
     except StationError as exc:
         raise _fail(exc) from None
@@ -106,7 +126,10 @@ def import_imu_tk_command(
                              "(both sensors unless --gyro-offset-lsb)")] = "0",
     gyro_offset_lsb: Annotated[str | None, typer.Option(
         "--gyro-offset-lsb", help="the gyro's nominal offset, if not --offset-lsb")] = None,
-    gravity: Annotated[float, typer.Option("--gravity", help="local gravity (m/s^2)")] = 9.80665,
+    gravity: Annotated[float | None, typer.Option(
+        "--gravity", help="local gravity (m/s^2) [default: 9.80665, or from --latitude]")] = None,
+    latitude: LatitudeOption = None,
+    height: HeightOption = 0.0,
     serial: Annotated[str, typer.Option(help="serial number to record")] = "imu-tk",
     still_window: WindowOption = 1.0,
     still_threshold: ThresholdOption = 3.0,
@@ -123,11 +146,13 @@ def import_imu_tk_command(
         check_output(output, inputs=[accel_file, gyro_file])
         a_off = _offsets(offset_lsb, "--offset-lsb")
         g_off = a_off if gyro_offset_lsb is None else _offsets(gyro_offset_lsb, "--gyro-offset-lsb")
+        g, extra = _gravity(gravity, latitude, height, 9.80665)
         session = import_imu_tk(accel_file, gyro_file, accel_lsb_per_mps2=accel_lsb_per_mps2,
                                 gyro_lsb_per_radps=gyro_lsb_per_radps, accel_offset_lsb=a_off, gyro_offset_lsb=g_off,
-                                gravity_mps2=gravity, serial=serial,
+                                gravity_mps2=g, serial=serial,
                                 still=_still_options(still_window, still_threshold, min_still, initial_still,
                                                      still_rate))  # type: ignore[arg-type]
+        session = session.replace(metadata={**session.metadata, **extra})
         write_session(session, output)
     except StationError as exc:
         raise _fail(exc) from None

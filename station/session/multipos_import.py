@@ -28,7 +28,7 @@ from station.kernel.errors import FormatError
 from station.session.model import Session
 from station.session.still import StillOptions, detect_still, label_segments
 
-__all__ = ["OPENAXES_ACCELS", "OPENAXES_GRAVITY_MPS2", "import_imu_tk", "import_openaxes"]
+__all__ = ["OPENAXES_ACCELS", "OPENAXES_GRAVITY_MPS2", "import_imu_tk", "import_openaxes", "normal_gravity_mps2"]
 
 #: local gravity where the OpenAXES recordings were made (Hannover), m/s^2
 OPENAXES_GRAVITY_MPS2 = 9.8128
@@ -36,6 +36,19 @@ OPENAXES_ACCELS = ("adxl355", "bmi160")
 _OPENAXES_COLUMNS = ("TIME", "INDEX", "GYRO_0", "GYRO_1", "GYRO_2")
 #: plausible magnitudes: a gyroscope beyond this (rad/s) is in other units (deg/s, counts)
 MAX_PLAUSIBLE_RATE_RADPS = 70.0  # ~4000 deg/s, twice the largest common full scale
+
+
+def normal_gravity_mps2(latitude_deg: float, height_m: float = 0.0) -> float:
+    """Local gravity (m/s^2) from the site: WGS 84 normal gravity on the ellipsoid (Somigliana's closed formula)
+    with the free-air correction -3.086e-6 m/s^2 per metre of height. Within about 1e-3 m/s^2 of a measured
+    value in open country; a gravimeter or a national gravity model is better where that matters."""
+    if not (np.isfinite(latitude_deg) and -90.0 <= latitude_deg <= 90.0):
+        raise FormatError(f"latitude {latitude_deg!r} deg is outside -90..90")
+    if not (np.isfinite(height_m) and -500.0 <= height_m <= 9000.0):
+        raise FormatError(f"height {height_m!r} m is outside -500..9000")
+    s2 = np.sin(np.radians(latitude_deg)) ** 2
+    gamma = 9.7803253359 * (1 + 0.00193185265241 * s2) / np.sqrt(1 - 0.00669437999013 * s2)
+    return float(gamma - 3.086e-6 * height_m)
 
 
 def _positive(name: str, value: float) -> float:
