@@ -42,7 +42,7 @@ def truth_in_convention(m_a: np.ndarray, m_w: np.ndarray) -> tuple[np.ndarray, n
     return np.linalg.inv(r), m_w @ q
 
 
-def run_unit(seed: int, folder: Path, cv: bool) -> dict[str, np.ndarray]:
+def run_unit(seed: int, folder: Path, cv: bool, prior: bool = True) -> dict[str, np.ndarray]:
     res = simulate_handheld(seed)
     a_cnt, g_cnt, a_off, g_off, a_sens, g_sens = counts_with_offsets(res, np.random.default_rng(seed + 10**6))
     acc_path, gyr_path = folder / f"acc_{seed}.txt", folder / f"gyro_{seed}.txt"
@@ -50,7 +50,7 @@ def run_unit(seed: int, folder: Path, cv: bool) -> dict[str, np.ndarray]:
     np.savetxt(gyr_path, np.column_stack([res.t_s, g_cnt]), fmt=["%.6f", "%.0f", "%.0f", "%.0f"])
     session = import_imu_tk(acc_path, gyr_path, accel_lsb_per_mps2=a_sens, gyro_lsb_per_radps=g_sens,
                             gravity_mps2=res.plan.gravity_mps2, serial=f"sim-{seed}")
-    params = fit_rig_free(session, RigFreeOptions(cv_folds=5 if cv else 0, tc_range_s=TC_PRIOR))
+    params = fit_rig_free(session, RigFreeOptions(cv_folds=5 if cv else 0, tc_range_s=TC_PRIOR if prior else {}))
     m_a, m_w = truth_in_convention(res.truth.accel.misalignment, res.truth.gyro.misalignment)
     upper = np.triu_indices(3)
     z = {
@@ -74,6 +74,7 @@ def main() -> int:
     ap.add_argument("--units", type=int, default=40)
     ap.add_argument("--seed0", type=int, default=5000)
     ap.add_argument("--cv", action="store_true", help="also run the cross-validation (slower)")
+    ap.add_argument("--no-prior", action="store_true", help="no T_c prior: T_c from the recording alone")
     args = ap.parse_args()
     seeds = range(args.seed0, args.seed0 + args.units)
     out: dict[str, list[np.ndarray]] = {}
@@ -82,14 +83,15 @@ def main() -> int:
     with tempfile.TemporaryDirectory() as tmp:
         for seed in seeds:
             try:
-                z = run_unit(seed, Path(tmp), args.cv)
+                z = run_unit(seed, Path(tmp), args.cv, prior=not args.no_prior)
             except StationError as exc:
                 refused.append(f"seed {seed}: {exc}")
                 continue
             for k, v in z.items():
                 out.setdefault(k, []).append(v)
     took = time.perf_counter() - t0
-    print(f"rig-free recovery: {len(seeds)} units (seeds {seeds.start}..{seeds.stop - 1}), "
+    print(f"rig-free recovery{' without T_c prior' if args.no_prior else ''}: {len(seeds)} units "
+          f"(seeds {seeds.start}..{seeds.stop - 1}), "
           f"{len(refused)} refused, {took:.0f} s")
     for line in refused:
         print("  refused", line)

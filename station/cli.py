@@ -107,6 +107,9 @@ def fit(
     rig_free: Annotated[bool, typer.Option(
         "--rig-free", help="fit without rig references (gravity norm and move rotations); chosen automatically "
                            "when the poses carry no reference")] = False,
+    limits: Annotated[Path | None, typer.Option(
+        "--limits", help="limits file whose correlation_time_s ranges are eq. 3's T_c prior (as the station's run "
+                         "uses them); without it T_c comes from the recording alone")] = None,
 ) -> None:
     """Fit the parameter set of eq. (1) to a session and print it.
 
@@ -116,15 +119,18 @@ def fit(
     """
     from station.fit.calibrate import FitOptions, fit_session
     from station.fit.goodness import EXIT_GOODNESS, summary
-    from station.fit.rigfree import fit_rig_free, is_rig_free
+    from station.fit.rigfree import RigFreeOptions, fit_rig_free, is_rig_free
+    from station.kernel.limits_file import load_limits
     from station.session import read_session
 
     try:
+        tc_range = dict(load_limits(limits).correlation_time_s) if limits is not None else {}
         session = read_session(session_path)
         free = rig_free or is_rig_free(session)
         if free and g_sensitivity:
             raise StationError("--g-sensitivity needs rig references; the rig-free fit does not fit it")
-        params = fit_rig_free(session) if free else fit_session(session, FitOptions(g_sensitivity=g_sensitivity))
+        params = (fit_rig_free(session, RigFreeOptions(tc_range_s=tc_range)) if free
+                  else fit_session(session, FitOptions(g_sensitivity=g_sensitivity, tc_range_s=tc_range)))
     except StationError as exc:
         raise fail(exc) from None
     if as_json:
