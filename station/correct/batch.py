@@ -47,12 +47,13 @@ benchmarks/bench_correct.py, where a sample is one six-channel time step):
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from functools import lru_cache
 
 import numpy as np
 from scipy.linalg.blas import dgemm
 
-from station.correct.streaming import CorrectionConstants
+from station.correct.streaming import CorrectionConstants, compensate_extended
 from station.fit.params import ParameterSet
 
 DEFAULT_CHUNK_ROWS = 16384
@@ -329,6 +330,7 @@ def correct_batch(
     *,
     chunk_rows: int = DEFAULT_CHUNK_ROWS,
     out: tuple[np.ndarray, np.ndarray] | None = None,
+    temp_degc: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Algorithm 1 over a whole record.
 
@@ -343,6 +345,8 @@ def correct_batch(
             multiple of 64, at most 16384).
         out: optional preallocated (accel, gyro) outputs, float64 C-contiguous (n, 3);
             they must not overlap the inputs. Saves the page faults of fresh arrays.
+        temp_degc: the unit's temperature per sample (n,), degC; required when the set compensates
+            temperature (line 6' of :mod:`station.correct.streaming`), ignored otherwise.
 
     Returns:
         (corrected specific force (n, 3) in m/s^2, corrected angular rate (n, 3) in rad/s),
@@ -358,6 +362,20 @@ def correct_batch(
     start_index = int(start_index)
     c = CorrectionConstants.from_params(params)
     total = a.shape[0]
+    if c.extended:
+        # line 6' is per sample and not linear: lines 4-6' directly (g_i = rho^i by pow, within rounding of the
+        # streaming product), then lines 7-8 by the pipeline below with zero bias and no drift
+        if c.uses_temperature:
+            if temp_degc is None:
+                raise ValueError("the parameter set compensates temperature: correct_batch needs temp_degc")
+            if np.shape(temp_degc) != (total,):
+                raise ValueError(f"temp_degc must have shape ({total},), got {np.shape(temp_degc)}")
+        expo = (start_index + np.arange(total, dtype=np.float64))[:, None]
+        g = np.where(c.bias_drift != 0, c.rho ** expo, 0.0)
+        v = np.hstack([a, w]) - g * c.bias_drift - c.bias_static
+        x = compensate_extended(c, v, temp_degc)
+        a, w = np.ascontiguousarray(x[:, :3]), np.ascontiguousarray(x[:, 3:])
+        c = replace(c, rho=np.ones(6), bias_drift=np.zeros(6), bias_static=np.zeros(6))
     if out is None:
         block = np.empty((2, total, 3))
         outputs = (block[0], block[1])

@@ -11,7 +11,7 @@ import math
 import numpy as np
 
 from station.correct.batch import correct_batch
-from station.correct.streaming import CorrectionConstants
+from station.correct.streaming import CorrectionConstants, compensate_extended
 from station.fit.params import ParameterSet
 from station.kernel.errors import FormatError
 from station.session.model import Session
@@ -28,6 +28,18 @@ def _check_rate(session: Session, params: ParameterSet) -> None:
             f"session {session.serial} is sampled at {rate:g} Hz but parameter set {params.serial} "
             f"has T_sampl = {params.sample_period_s:g} s ({expected:g} Hz)"
         )
+
+
+def _temperature(session: Session, params: ParameterSet) -> np.ndarray | None:
+    """The session's temperature column when the set compensates temperature (refused if it has none)."""
+    if not params.compensates_temperature:
+        return None
+    if not session.has_temperature or not np.all(np.isfinite(session.temp_degc)):
+        raise FormatError(
+            f"parameter set {params.serial} compensates temperature, but session {session.serial} has no "
+            "temperature in every sample"
+        )
+    return session.temp_degc
 
 
 def start_index_of(session: Session, params: ParameterSet) -> int:
@@ -49,12 +61,18 @@ def correct_session(session: Session, params: ParameterSet) -> Session:
     The corrector is taken to have run since power-on: it starts at sample index
     round(t_s[0] / T_sampl) with an empty moving-average buffer.
 
+    A ``station-params/2`` set with temperature terms corrects each sample at the session's
+    temperature column (line 6' of :mod:`station.correct.streaming`).
+
     Raises:
-        FormatError: the parameter set cannot be used (singular M, non-finite b_stat, ...)
-            or its sample period does not match the session's sample rate.
+        FormatError: the parameter set cannot be used (singular M, non-finite b_stat, ...),
+            its sample period does not match the session's sample rate, or it compensates
+            temperature and the session has no temperature in every sample.
     """
     _check_rate(session, params)
-    accel, gyro = correct_batch(session.accel_mps2, session.gyro_radps, params, start_index_of(session, params))
+    temp = _temperature(session, params)
+    accel, gyro = correct_batch(session.accel_mps2, session.gyro_radps, params, start_index_of(session, params),
+                                temp_degc=temp)
     metadata = {**session.metadata, "corrected": "algorithm1", "params_serial": params.serial}
     return session.replace(metadata=metadata, accel_mps2=accel, gyro_radps=gyro)
 
@@ -75,7 +93,8 @@ def _centred_moving_average(x: np.ndarray, n: int) -> np.ndarray:
 
 
 def two_sided_reference(
-    accel_mps2: np.ndarray, gyro_radps: np.ndarray, t_s: np.ndarray, params: ParameterSet
+    accel_mps2: np.ndarray, gyro_radps: np.ndarray, t_s: np.ndarray, params: ParameterSet,
+    temp_degc: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Post-processed counterpart of Algorithm 1 over a whole record.
 
@@ -103,6 +122,8 @@ def two_sided_reference(
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         g = np.exp(-t[:, None] / np.where(active, tc, np.inf))  # exact solution of eq. (3), w_g = 0
     x_temp = raw - c.bias_static - c.bias_drift * g
+    if c.extended:
+        x_temp = compensate_extended(c, x_temp, temp_degc)
     x_ma = _centred_moving_average(x_temp, c.ma_length)
     return x_ma[:, :3] @ c.accel_inverse.T, x_ma[:, 3:] @ c.gyro_inverse.T
 
@@ -110,7 +131,8 @@ def two_sided_reference(
 def reference_session(session: Session, params: ParameterSet) -> Session:
     """:func:`two_sided_reference` over a session (metadata ``corrected: two_sided_reference``)."""
     _check_rate(session, params)
-    accel, gyro = two_sided_reference(session.accel_mps2, session.gyro_radps, session.t_s, params)
+    accel, gyro = two_sided_reference(session.accel_mps2, session.gyro_radps, session.t_s, params,
+                                      _temperature(session, params))
     metadata = {**session.metadata, "corrected": "two_sided_reference", "params_serial": params.serial}
     return session.replace(metadata=metadata, accel_mps2=accel, gyro_radps=gyro)
 

@@ -8,6 +8,16 @@ Per time step i and per channel j of six (ax, ay, az in m/s^2, gx, gy, gz in rad
     line 7:  x_MA,j = one-sided moving average of the last n values of x_temp,j, eq. (6)
     line 8:  solve M x_i = x_MA per triad (accelerometer, gyroscope)
 
+With a ``station-params/2`` set that carries them, line 6 also removes the compensable effects beyond
+eq. (1), per channel, with dT = T_i - T_ref the unit's temperature at the sample minus the set's
+reference (see :mod:`station.fit.params`):
+
+    line 6':  v = x~_ij - x_drift,ij - b_stat,j - (c_1 dT + c_2 dT^2 + c_3 dT^3)     temperature bias
+              u = 2 v / (1 + sqrt(1 + 4 k |v|))                                       inverse of u + k u|u|
+              x_temp,j = u / (1 + s_1 dT + s_2 dT^2 + s_3 dT^3)                       temperature scale
+
+A set without them (every coefficient zero) runs the plain lines 4-8, bit for bit as before.
+
 Conventions (shared with :mod:`station.correct.batch`):
 
 * Sample index i counts samples since power-on; the power-on sample i = 0 has g = 1, so
@@ -25,7 +35,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -75,6 +85,10 @@ class CorrectionConstants:
         bias_static: b_stat per channel (same units), shape (6,).
         accel_inverse: M_a^-1, shape (3, 3).
         gyro_inverse: M_w^-1, shape (3, 3).
+        reference_temperature_degc: T_ref (degC) of the temperature terms; NaN without them.
+        temp_bias: c_1..c_3 per channel, (6, 3) (m/s^2/K^j, rad/s/K^j); temp_scale: s_1..s_3 (1/K^j), (6, 3).
+        nonlinearity: k of ``u + k u|u|`` per channel (1/U), (6,).
+        extended: line 6' is active (a temperature term or a nonlinearity is non-zero).
     """
 
     sample_period_s: float
@@ -84,6 +98,20 @@ class CorrectionConstants:
     bias_static: np.ndarray
     accel_inverse: np.ndarray
     gyro_inverse: np.ndarray
+    reference_temperature_degc: float = math.nan
+    temp_bias: np.ndarray = field(default_factory=lambda: np.zeros((6, 3)))
+    temp_scale: np.ndarray = field(default_factory=lambda: np.zeros((6, 3)))
+    nonlinearity: np.ndarray = field(default_factory=lambda: np.zeros(6))
+
+    @property
+    def extended(self) -> bool:
+        return self.uses_temperature or bool(np.any(self.nonlinearity != 0))
+
+    @property
+    def uses_temperature(self) -> bool:
+        return math.isfinite(self.reference_temperature_degc) and bool(
+            np.any(self.temp_bias != 0) or np.any(self.temp_scale != 0)
+        )
 
     @classmethod
     def from_params(cls, params: ParameterSet) -> CorrectionConstants:
@@ -98,6 +126,15 @@ class CorrectionConstants:
             raise FormatError("parameter set: static bias has non-finite entries; cannot correct")
         rho_a, bd_a = _channel_drift(params.accel, ts, "accel")
         rho_g, bd_g = _channel_drift(params.gyro, ts, "gyro")
+        t_ref = float(params.reference_temperature_degc)
+        temp_bias = np.vstack([params.accel.temp_bias_coeff, params.gyro.temp_bias_coeff]).astype(np.float64)
+        temp_scale = np.vstack([params.accel.temp_scale_coeff, params.gyro.temp_scale_coeff]).astype(np.float64)
+        nonlin = np.concatenate([params.accel.scale_nonlinearity, params.gyro.scale_nonlinearity]).astype(np.float64)
+        if not (np.isfinite(temp_bias).all() and np.isfinite(temp_scale).all() and np.isfinite(nonlin).all()):
+            raise FormatError("parameter set: temperature or nonlinearity terms have non-finite entries; "
+                              "cannot correct")
+        if (np.any(temp_bias != 0) or np.any(temp_scale != 0)) and not math.isfinite(t_ref):
+            raise FormatError("parameter set: temperature terms without a reference temperature; cannot correct")
         out = cls(
             sample_period_s=ts,
             ma_length=n,
@@ -106,10 +143,37 @@ class CorrectionConstants:
             bias_static=bias,
             accel_inverse=_triad_inverse(params.accel, "accel"),
             gyro_inverse=_triad_inverse(params.gyro, "gyro"),
+            reference_temperature_degc=t_ref,
+            temp_bias=temp_bias,
+            temp_scale=temp_scale,
+            nonlinearity=nonlin,
         )
-        for name in ("rho", "bias_drift", "bias_static", "accel_inverse", "gyro_inverse"):
+        for name in ("rho", "bias_drift", "bias_static", "accel_inverse", "gyro_inverse", "temp_bias", "temp_scale",
+                     "nonlinearity"):
             getattr(out, name).flags.writeable = False
         return out
+
+
+def compensate_extended(c: CorrectionConstants, v: np.ndarray, temp_degc: np.ndarray | None) -> np.ndarray:
+    """Line 6' over a block: ``v`` (n, 6) = x~ - x_drift - b_stat; returns x_temp (n, 6) (a new array).
+
+    ``temp_degc`` (n,) is the unit's temperature per sample (degC); required when ``c`` has temperature terms.
+    """
+    out = np.array(v, dtype=np.float64)
+    dt = None
+    if c.uses_temperature:
+        if temp_degc is None:
+            raise ValueError("the parameter set compensates temperature: a temperature per sample is needed")
+        dt = (np.asarray(temp_degc, dtype=np.float64) - c.reference_temperature_degc)[:, None]
+        b = c.temp_bias
+        out -= ((b[:, 2] * dt + b[:, 1]) * dt + b[:, 0]) * dt
+    k = c.nonlinearity
+    if np.any(k != 0):
+        out = 2.0 * out / (1.0 + np.sqrt(np.maximum(1.0 + 4.0 * k * np.abs(out), 0.0)))
+    if dt is not None:
+        sc = c.temp_scale
+        out /= 1.0 + ((sc[:, 2] * dt + sc[:, 1]) * dt + sc[:, 0]) * dt
+    return out
 
 
 Vec3 = tuple[float, float, float]
@@ -133,6 +197,12 @@ class StreamingCorrector:
         self._b_stat = [float(v) for v in c.bias_static]
         self._ainv = [float(v) for v in c.accel_inverse.ravel()]
         self._ginv = [float(v) for v in c.gyro_inverse.ravel()]
+        self._extended = c.extended
+        self.uses_temperature = c.uses_temperature
+        self._t_ref = float(c.reference_temperature_degc)
+        self._tb = [[float(x) for x in row] for row in c.temp_bias]
+        self._ts = [[float(x) for x in row] for row in c.temp_scale]
+        self._k = [float(v) for v in c.nonlinearity]
         self.reset(start_index)
 
     def reset(self, start_index: int = 0) -> None:
@@ -151,12 +221,16 @@ class StreamingCorrector:
         """Samples since power-on of the next sample :meth:`step` will process."""
         return self._index
 
-    def step(self, accel_mps2: Sequence[float], gyro_radps: Sequence[float]) -> tuple[Vec3, Vec3]:
+    def step(
+        self, accel_mps2: Sequence[float], gyro_radps: Sequence[float], temp_degc: float | None = None
+    ) -> tuple[Vec3, Vec3]:
         """Correct one sample.
 
         Args:
             accel_mps2: raw specific force (ax, ay, az) in m/s^2.
             gyro_radps: raw angular rate (gx, gy, gz) in rad/s.
+            temp_degc: the unit's temperature at the sample (degC); required when the set compensates
+                temperature (:attr:`uses_temperature`), ignored otherwise.
 
         Returns:
             (corrected specific force in m/s^2, corrected angular rate in rad/s), each a 3-tuple.
@@ -167,10 +241,21 @@ class StreamingCorrector:
         slot = self._slot
         count = self._count + 1 if self._count < self._n else self._n
         x_ma = [0.0] * 6
+        dt = 0.0
+        if self.uses_temperature:
+            if temp_degc is None:
+                raise ValueError("the parameter set compensates temperature: step() needs temp_degc")
+            dt = float(temp_degc) - self._t_ref
         for j in range(6):
             g = self._g[j]  # line 4 (g of this sample)
             x_drift = g * self._b_drift[j]  # line 5
             x_temp = raw[j] - x_drift - self._b_stat[j]  # line 6
+            if self._extended:  # line 6': temperature bias, nonlinearity, temperature scale
+                b, sc, k = self._tb[j], self._ts[j], self._k[j]
+                x_temp -= ((b[2] * dt + b[1]) * dt + b[0]) * dt
+                if k != 0.0:
+                    x_temp = 2.0 * x_temp / (1.0 + math.sqrt(max(1.0 + 4.0 * k * abs(x_temp), 0.0)))
+                x_temp /= 1.0 + ((sc[2] * dt + sc[1]) * dt + sc[0]) * dt
             buf = self._buf[j]
             buf[slot] = x_temp  # line 7: drop the oldest value, add the new one, eq. (6)
             x_ma[j] = sum(buf) / count  # unfilled slots hold 0 during the first n - 1 samples
@@ -193,15 +278,25 @@ class StreamingCorrector:
         )
         return accel, gyro
 
-    def run(self, accel_mps2: np.ndarray, gyro_radps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Feed a whole record through :meth:`step`; arrays (n, 3) in m/s^2 and rad/s."""
+    def run(
+        self, accel_mps2: np.ndarray, gyro_radps: np.ndarray, temp_degc: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Feed a whole record through :meth:`step`; arrays (n, 3) in m/s^2 and rad/s, temperature (n,) degC."""
         a = np.asarray(accel_mps2, dtype=np.float64)
         w = np.asarray(gyro_radps, dtype=np.float64)
         if a.ndim != 2 or a.shape[1] != 3 or w.shape != a.shape:
             raise ValueError(f"expected two (n, 3) arrays, got {a.shape} and {w.shape}")
+        temps: list[float | None]
+        if temp_degc is None:
+            temps = [None] * a.shape[0]
+        else:
+            t = np.asarray(temp_degc, dtype=np.float64)
+            if t.shape != (a.shape[0],):
+                raise ValueError(f"temp_degc must have shape ({a.shape[0]},), got {t.shape}")
+            temps = t.tolist()
         out_a = np.empty_like(a)
         out_w = np.empty_like(w)
         step = self.step
-        for i, (ra, rw) in enumerate(zip(a.tolist(), w.tolist(), strict=True)):
-            out_a[i], out_w[i] = step(ra, rw)
+        for i, (ra, rw, tt) in enumerate(zip(a.tolist(), w.tolist(), temps, strict=True)):
+            out_a[i], out_w[i] = step(ra, rw, tt)
         return out_a, out_w

@@ -29,6 +29,8 @@ class Blocks:
         ref: mean rig reference (sensor unit), (m, 3).
         force: mean rig specific-force reference (m/s^2), (m, 3); for g-sensitivity.
         segment: segment index the block belongs to, (m,).
+        extra: block means of the ``extra`` per-sample columns given to :func:`make_blocks`, (m, k);
+            None when none were given (e.g. powers of the temperature for the thermal terms).
     """
 
     t_s: np.ndarray
@@ -38,6 +40,7 @@ class Blocks:
     ref: np.ndarray
     force: np.ndarray
     segment: np.ndarray
+    extra: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.t_s.shape[0])
@@ -52,6 +55,7 @@ def make_blocks(
     runs: list[tuple[int, int, int]],
     sample_period_s: float,
     max_blocks: int,
+    extra: np.ndarray | None = None,
 ) -> Blocks:
     """Cut each run ``(segment, start, stop)`` into blocks and average the kept samples.
 
@@ -98,6 +102,7 @@ def make_blocks(
         ref=mean(ref),
         force=mean(force),
         segment=np.array([seg for seg, _, _ in bounds]),
+        extra=None if extra is None else mean(np.asarray(extra, dtype=np.float64).reshape(len(t_s), -1)),
     )
 
 

@@ -15,7 +15,7 @@ pose order, rate list, duration or sample rate is assumed.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -31,7 +31,9 @@ from station.fit.boundary import numerics
 from station.fit.checks import check_session
 from station.fit.consistency import check_rotations
 from station.fit.goodness import TriadResidual, goodness_of_fit
-from station.fit.params import MAX_TEMP_ORDER, AllanCoefficients, ParameterSet, TriadParams
+from station.fit.params import MAX_TEMP_ORDER, AllanCoefficients, ParameterSet, ThermalFit, TriadParams
+from station.fit.thermal import assess_temperature, axis_regressors, select_orders, temperature_columns
+from station.kernel.errors import FitError
 from station.session.model import Kind, Session
 
 AXES = "xyz"
@@ -179,6 +181,98 @@ def _fit_triad(
     return _TriadLinear(fits=fits, n_ref=3 if with_ref else 0, extra=3 if g_sens else 0), blocks
 
 
+def _fit_triad_thermal(
+    session: Session,
+    data: np.ndarray,
+    ref: np.ndarray,
+    runs: list[tuple[int, int, int]],
+    noise: _Noise,
+    options: FitOptions,
+    *,
+    with_ref: bool,
+    g_sens: bool,
+    triad: str,
+    dt: np.ndarray,
+    m_hat: np.ndarray | None,
+    orders: tuple[list[int], list[int]] | None = None,
+) -> tuple[_TriadLinear, Blocks, dict[str, np.ndarray], tuple[list[int], list[int]]]:
+    """The triad fit with the temperature terms (:mod:`station.fit.thermal`), orders chosen or given.
+
+    Returns the fits, the blocks, the temperature coefficients with their stds (``temp_bias_coeff``,
+    ``temp_scale_coeff``, ``*_std``, each (3, 3)) and the (bias, scale) orders per axis.
+    """
+    force = np.nan_to_num(session.ref_accel_mps2)
+    blocks = make_blocks(
+        session.t_s, data, np.nan_to_num(ref), force, noise.keep, runs, 1.0 / session.sample_rate_hz,
+        options.max_blocks, extra=temperature_columns(dt, ref if with_ref else None),
+    )
+    base = _design(blocks, with_ref, g_sens)
+    tc_range = options.tc_range_s.get(triad)
+    top = int(options.thermal_max_order)
+    coeff = {k: np.zeros((3, MAX_TEMP_ORDER)) for k in (
+        "temp_bias_coeff", "temp_bias_coeff_std", "temp_scale_coeff", "temp_scale_coeff_std")}
+    fits: list[AxisFit] = []
+    n_bias: list[int] = []
+    n_scale: list[int] = []
+    for k in range(3):
+        m_row = None if (m_hat is None or not with_ref) else m_hat[k]
+        if orders is not None:
+            nb, ns = orders[0][k], orders[1][k]
+        else:
+            nb, ns = top, (top if m_row is not None else 0)
+        design = np.column_stack([base, axis_regressors(blocks, m_row, nb, ns)])
+        fit = fit_axis(blocks, k, design, float(noise.sigma[k]), lr_threshold=options.drift_lr_threshold,
+                       tc_range_s=tc_range)
+        if orders is None:
+            nb2, ns2 = select_orders(blocks, k, base, m_row, float(noise.sigma[k]), fit, top,
+                                     options.thermal_order_wald)
+            if (nb2, ns2) != (nb, ns):
+                nb, ns = nb2, ns2
+                design = np.column_stack([base, axis_regressors(blocks, m_row, nb, ns)])
+                fit = fit_axis(blocks, k, design, float(noise.sigma[k]), lr_threshold=options.drift_lr_threshold,
+                               tc_range_s=tc_range)
+        std = np.sqrt(np.clip(np.diag(fit.beta_cov), 0.0, None))
+        off = base.shape[1]
+        coeff["temp_bias_coeff"][k, :nb] = fit.beta[off:off + nb]
+        coeff["temp_bias_coeff_std"][k, :nb] = std[off:off + nb]
+        off += nb
+        coeff["temp_scale_coeff"][k, :ns] = fit.beta[off:off + ns]
+        coeff["temp_scale_coeff_std"][k, :ns] = std[off:off + ns]
+        fits.append(fit)
+        n_bias.append(nb)
+        n_scale.append(ns)
+    tri = _TriadLinear(fits=fits, n_ref=3 if with_ref else 0, extra=3 if g_sens else 0)
+    return tri, blocks, coeff, (n_bias, n_scale)
+
+
+def _thermal_triad(
+    session: Session, data: np.ndarray, ref: np.ndarray, runs: list[tuple[int, int, int]], noise: _Noise,
+    options: FitOptions, first: _TriadLinear, *, with_ref: bool, g_sens: bool, triad: str, dt: np.ndarray,
+) -> tuple[_TriadLinear, Blocks, dict[str, np.ndarray], tuple[list[int], list[int]]]:
+    """Two passes: orders chosen with M^ from the fit without temperature terms, then refitted with M^ from
+    the first pass (the scale regressor ``(M^_k . ref) dT^j``)."""
+    m_hat = _unpack(first)["misalignment"] if with_ref else None
+    tri, blocks, coeff, orders = _fit_triad_thermal(session, data, ref, runs, noise, options, with_ref=with_ref,
+                                                    g_sens=g_sens, triad=triad, dt=dt, m_hat=m_hat)
+    if with_ref:
+        m_hat = _unpack(tri)["misalignment"]
+        tri, blocks, coeff, orders = _fit_triad_thermal(session, data, ref, runs, noise, options, with_ref=with_ref,
+                                                        g_sens=g_sens, triad=triad, dt=dt, m_hat=m_hat, orders=orders)
+    return tri, blocks, coeff, orders
+
+
+def _temperature_terms(p: dict[str, np.ndarray], dt: np.ndarray, ref: np.ndarray | None) -> np.ndarray:
+    """Per-sample temperature bias and scale terms of a triad, (n, 3) (zeros without coefficients)."""
+    out = np.zeros((dt.shape[0], 3))
+    cb, cs = p.get("temp_bias_coeff"), p.get("temp_scale_coeff")
+    powers = np.column_stack([dt**j for j in range(1, MAX_TEMP_ORDER + 1)])
+    if cb is not None:
+        out += powers @ cb.T
+    if cs is not None and ref is not None and np.any(cs):
+        out += (np.nan_to_num(ref) @ p["misalignment"].T) * (powers @ cs.T)
+    return out
+
+
 def _unpack(tri: _TriadLinear) -> dict[str, np.ndarray]:
     """Arrange per-axis results into M, b_stat, b_drift, T_c, ... with uncertainties."""
     m = np.full((3, 3), np.nan)
@@ -204,8 +298,11 @@ def _unpack(tri: _TriadLinear) -> dict[str, np.ndarray]:
     return out
 
 
-def mean_model(p: dict[str, np.ndarray], t_s: np.ndarray, ref: np.ndarray, force: np.ndarray) -> np.ndarray:
-    """The fitted eq. (1) without noise: M ref + b_stat + b_drift exp(-t/T_c) (+ G force)."""
+def mean_model(
+    p: dict[str, np.ndarray], t_s: np.ndarray, ref: np.ndarray, force: np.ndarray, dt: np.ndarray | None = None
+) -> np.ndarray:
+    """The fitted eq. (1) without noise: M ref + b_stat + b_drift exp(-t/T_c) (+ G force), and with ``dt``
+    (T - T_ref per sample, K) the temperature terms of :mod:`station.fit.thermal`."""
     out = np.nan_to_num(ref) @ p["misalignment"].T + p["bias_static"]
     tc = p["correlation_time_s"]
     for k in range(3):
@@ -213,6 +310,8 @@ def mean_model(p: dict[str, np.ndarray], t_s: np.ndarray, ref: np.ndarray, force
             out[:, k] += p["bias_drift"][k] * np.exp(-t_s / tc[k])
     if np.any(p["g_sensitivity"]):
         out += np.nan_to_num(force) @ p["g_sensitivity"].T
+    if dt is not None:
+        out += _temperature_terms(p, dt, ref)
     return out
 
 
@@ -281,6 +380,12 @@ def fit_session(session: Session, options: FitOptions | None = None) -> Paramete
         return _fit_session(session, options or FitOptions())
 
 
+def _top(note: ThermalFit, triad: str) -> int:
+    """The highest order fitted in a triad (bias or scale, any axis), at least 1."""
+    o = note.orders.get(triad, {})
+    return max([1, *o.get("bias", []), *o.get("scale", [])])
+
+
 def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
     gyro_method = check_session(session, min_pose_samples=options.min_pose_samples)
     ts = 1.0 / session.sample_rate_hz
@@ -306,9 +411,37 @@ def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
         g_tri, g_blocks = _fit_triad(session, session.gyro_radps, g_ref, g_runs, g_noise, options,
                               with_ref=gyro_method == "rate", g_sens=options.g_sensitivity, triad="gyro")
     g = _unpack(g_tri)
+
+    # --- temperature terms, when the recording's temperature course separates them from the warm-up ---
+    course = assess_temperature(
+        session, sorted(set(a_runs) | set(g_runs), key=lambda r: r[1]), mode=options.thermal,
+        min_span_k=options.min_temperature_span_k, min_independent_k=options.min_temperature_independent_k,
+        reference_degc=options.reference_temperature_degc,
+    )
+    if options.thermal == "require" and not course.fit:
+        raise FitError(f"temperature terms required: {course.note.reason}")
+    dt = course.dt
+    thermal_note = course.note
+    if dt is not None:
+        with numerics("accelerometer fit with temperature terms"):
+            a_tri, a_blocks, a_coeff, a_orders = _thermal_triad(
+                session, session.accel_mps2, session.ref_accel_mps2, a_runs, a_noise, options, a_tri,
+                with_ref=True, g_sens=False, triad="accel", dt=dt)
+        with numerics("gyroscope fit with temperature terms"):
+            g_tri, g_blocks, g_coeff, g_orders = _thermal_triad(
+                session, session.gyro_radps, g_ref, g_runs, g_noise, options, g_tri,
+                with_ref=gyro_method == "rate", g_sens=options.g_sensitivity, triad="gyro", dt=dt)
+        a = {**_unpack(a_tri), **a_coeff}
+        g = {**_unpack(g_tri), **g_coeff}
+        thermal_note = replace(thermal_note, orders={
+            "accel": {"bias": a_orders[0], "scale": a_orders[1]},
+            "gyro": {"bias": g_orders[0], "scale": g_orders[1]},
+        })
     angle_report: dict[str, Any] = {}
     if gyro_method == "angle":
         bias_t = g["bias_static"] + np.zeros((len(session), 3))
+        if dt is not None:
+            bias_t += _temperature_terms(g, dt, None)
         for k in range(3):
             if np.isfinite(g["correlation_time_s"][k]) and g["bias_drift"][k] != 0:
                 bias_t[:, k] += g["bias_drift"][k] * np.exp(-session.t_s / g["correlation_time_s"][k])
@@ -321,8 +454,8 @@ def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
         angle_report = angle_fit.report
 
     # --- residuals, noise figures and quality ----------------------------------
-    a_res = session.accel_mps2 - mean_model(a, session.t_s, session.ref_accel_mps2, session.ref_accel_mps2)
-    g_res = session.gyro_radps - mean_model(g, session.t_s, g_ref, session.ref_accel_mps2)
+    a_res = session.accel_mps2 - mean_model(a, session.t_s, session.ref_accel_mps2, session.ref_accel_mps2, dt)
+    g_res = session.gyro_radps - mean_model(g, session.t_s, g_ref, session.ref_accel_mps2, dt)
     quality = {
         "accel": _quality(session, "accel", a_res, a_runs, a_noise.keep),
         "gyro": _quality(session, "gyro", g_res, g_runs, g_noise.keep),
@@ -340,6 +473,11 @@ def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
     a_design = _sample_design(n, session.ref_accel_mps2, None)
     g_design = _sample_design(n, g_ref if gyro_method == "rate" else None,
                               session.ref_accel_mps2 if options.g_sensitivity else None)
+    if dt is not None:  # the temperature regressors the fit used (a superset for the scale: every ref_i dT^j)
+        a_design = np.column_stack([a_design, temperature_columns(
+            dt, session.ref_accel_mps2, _top(thermal_note, "accel"))])
+        g_design = np.column_stack([g_design, temperature_columns(
+            dt, g_ref if gyro_method == "rate" else None, _top(thermal_note, "gyro"))])
     quality["goodness_of_fit"] = goodness_of_fit(session, [
         _triad_residual("accel", a_res, a_design, a_runs, a_noise, a_tri, a_blocks, 1.0, "m/s^2",
                         (0.5 * (session.meta_float("reference_tolerance_mps2") or 0.0)) ** 2),
@@ -368,6 +506,8 @@ def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
         accel=triad(a, a_noise, a_res, a_runs),
         gyro=triad(g, g_noise, g_res, g_runs),
         quality=quality,
+        reference_temperature_degc=course.reference_degc if dt is not None else float("nan"),
+        thermal=thermal_note,
         source={
             "software": f"station {__version__}",
             "samples": len(session),

@@ -212,10 +212,11 @@ class _Builder:
         self._sync(self.t + duration + self.plan.settle_s)
 
 
-def build_trajectory(plan: RigPlan) -> RigTrajectory:
-    """The trajectory and segment table of ``plan`` (see the module docstring)."""
-    b = _Builder(plan)
-    b.hold(Kind.REST, plan.rest_s, up=plan.rest_pose)
+def _plan_block(b: _Builder, plan: RigPlan, rest_s: float) -> None:
+    """The rest (``rest_s``, in the rest pose), the poses and the rate steps of ``plan``."""
+    b.ramp(0.0)
+    b.tumble(plan.rest_pose)
+    b.hold(Kind.REST, rest_s, up=plan.rest_pose)
     for pose in plan.poses:
         b.tumble(pose)
         b.hold(Kind.POSE, plan.pose_hold_s, up=pose)
@@ -228,8 +229,33 @@ def build_trajectory(plan: RigPlan) -> RigTrajectory:
             current_axis = axis
         b.ramp(sign * rate_dps * _DEG)
         b.hold(Kind.RATE, plan.rate_hold_s, up=b.pose, rate_axis=axis, rate_dps=rate_dps)
+
+
+def build_trajectory(plan: RigPlan) -> RigTrajectory:
+    """The trajectory and segment table of ``plan`` (see the module docstring)."""
+    return build_plateau_trajectory(plan, 1, 0.0)[0]
+
+
+def build_plateau_trajectory(plan: RigPlan, plateaus: int, soak_s: float) -> tuple[RigTrajectory, tuple[float, ...]]:
+    """``plan`` run ``plateaus`` times in a row, as at the temperature plateaus of a climate chamber.
+
+    Block 0 is ``plan`` itself (its power-on rest of ``rest_s``); every later block first returns the
+    rig to ``rest_pose`` and holds a still ``rest`` segment of ``soak_s`` (the soak while the unit
+    settles at the next temperature), then the poses and rate steps again. Returns the trajectory
+    and the rig time (s) at which each block starts (its soak; 0 for block 0). ``plateaus`` = 1 is
+    :func:`build_trajectory`, segment for segment.
+    """
+    if plateaus < 1:
+        raise PlanError(f"plateaus must be >= 1, got {plateaus}")
+    if not soak_s >= 0:
+        raise PlanError(f"soak_s must be >= 0, got {soak_s!r}")
+    b = _Builder(plan)
+    starts = []
+    for k in range(plateaus):
+        starts.append(b.t)
+        _plan_block(b, plan, plan.rest_s if k == 0 else soak_s)
     b.ramp(0.0)
     b._end_move()
     if not b.segments:
         raise PlanError("plan: nothing to do (all durations are zero)")
-    return RigTrajectory(plan, b.axes[0], b.axes[1], b.axes[2], tuple(b.segments), b.t)
+    return RigTrajectory(plan, b.axes[0], b.axes[1], b.axes[2], tuple(b.segments), b.t), tuple(starts)

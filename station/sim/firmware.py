@@ -7,7 +7,10 @@ the highest update count (:func:`station.eeprom.image.select_image`) and loads A
 of Kolhoff & Kemper with it. In CORRECTED output mode the sensor passes it each chunk of
 raw samples; it returns them corrected: drift ``b_drift g_i`` (eq. 3, forward Euler),
 static bias, one-sided moving average (eq. 6), ``M^-1`` (eq. 1), and, if the image has a
-non-zero gyro g-sensitivity G, ``w -= M_w^-1 G a`` with the corrected specific force a.
+non-zero gyro g-sensitivity G, ``w -= M_w^-1 G a`` with the corrected specific force a. A
+layout-2 image's temperature terms and scale nonlinearity enter line 6' of Algorithm 1
+(:mod:`station.correct.streaming`) at the unit's own temperature reading of each sample (the
+sensor passes its temperature column: :attr:`CalibrationFirmware.takes_temperature`).
 Without a valid image (or with one for another serial) the output stays raw.
 
 Two engines give the same output to rounding: ``"streaming"``
@@ -80,6 +83,7 @@ class CalibrationFirmware:
         self._stream: StreamingCorrector | None = None
         self._hist_a = np.zeros((0, 3))
         self._hist_w = np.zeros((0, 3))
+        self._hist_t = np.zeros(0)
         self.reset()
 
     # --- power-on -------------------------------------------------------------------------------
@@ -130,9 +134,15 @@ class CalibrationFirmware:
         self._stream = StreamingCorrector(self._params, start_index=index) if self.engine == "streaming" else None
         self._hist_a = np.zeros((0, 3))
         self._hist_w = np.zeros((0, 3))
+        self._hist_t = np.zeros(0)
 
-    def __call__(self, accel: np.ndarray, gyro: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Correct one chunk of consecutive raw samples (n, 3) in m/s^2 and rad/s."""
+    #: The sensor passes each chunk's temperature column (degC) as a third argument.
+    takes_temperature = True
+
+    def __call__(
+        self, accel: np.ndarray, gyro: np.ndarray, temp_degc: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Correct one chunk of consecutive raw samples (n, 3) in m/s^2 and rad/s (temperature (n,) degC)."""
         if self._params is None:
             return accel, gyro
         a = np.asarray(accel, dtype=np.float64)
@@ -140,6 +150,11 @@ class CalibrationFirmware:
         n = a.shape[0]
         if n == 0:
             return a, w
+        temp = None
+        if self._params.compensates_temperature:
+            if temp_degc is None:  # a caller without a temperature column: no temperature terms
+                raise ValueError("the loaded image compensates temperature: the chunk's temperature is needed")
+            temp = np.asarray(temp_degc, dtype=np.float64)
         ts = self._params.sample_period_s
         last = math.floor((self._clock.now() - self._t_boot) / ts + 1e-9)  # index of the newest sample
         first = max(0, last - n + 1)
@@ -148,16 +163,19 @@ class CalibrationFirmware:
         assert self._index is not None
         if self.engine == "streaming":
             assert self._stream is not None
-            out_a, out_w = self._stream.run(a, w)
+            out_a, out_w = self._stream.run(a, w, temp)
         else:
             k = self._hist_a.shape[0]
             all_a = np.concatenate([self._hist_a, a])
             all_w = np.concatenate([self._hist_w, w])
-            ca, cw = correct_batch(all_a, all_w, self._params, start_index=self._index - k)
+            all_t = None if temp is None else np.concatenate([self._hist_t, temp])
+            ca, cw = correct_batch(all_a, all_w, self._params, start_index=self._index - k, temp_degc=all_t)
             out_a, out_w = ca[k:], cw[k:]
             keep = self._params.moving_average_length - 1
             self._hist_a = all_a[all_a.shape[0] - keep :] if keep else np.zeros((0, 3))
             self._hist_w = all_w[all_w.shape[0] - keep :] if keep else np.zeros((0, 3))
+            if all_t is not None:
+                self._hist_t = all_t[all_t.shape[0] - keep :] if keep else np.zeros(0)
         self._index += n
         if self._g_sens is not None:
             out_w = out_w - out_a @ self._g_sens.T

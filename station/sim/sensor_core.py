@@ -232,7 +232,11 @@ class SensorCore:
         accel, gyro, temp = self.source.render(t_us * 1e-6)
         base = 0
         if self.output == OutputMode.CORRECTED:
-            accel, gyro = self.corrector(np.asarray(accel, dtype=np.float64), np.asarray(gyro, dtype=np.float64))
+            a64, w64 = np.asarray(accel, dtype=np.float64), np.asarray(gyro, dtype=np.float64)
+            if getattr(self.corrector, "takes_temperature", False):  # e.g. a layout-2 image's temperature terms
+                accel, gyro = self.corrector(a64, w64, np.asarray(temp, dtype=np.float64))  # type: ignore[call-arg]
+            else:
+                accel, gyro = self.corrector(a64, w64)
             base = int(SampleFlag.CORRECTED)
         flags = np.full(n, base, dtype=np.uint8)
         flags[0] = base | int(self.pending_flags)

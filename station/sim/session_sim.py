@@ -8,6 +8,7 @@ same CSV bytes.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -16,7 +17,8 @@ from station.kernel.plan import RigPlan, default_plan
 from station.kernel.sensor_class import TABLE1, SensorClass
 from station.physics.effects import Effects, EffectTruth
 from station.physics.imu import Environment, ImuModel
-from station.physics.trajectory import RigTrajectory, build_trajectory
+from station.physics.thermal import PlateauCourse
+from station.physics.trajectory import RigTrajectory, build_plateau_trajectory, build_trajectory
 from station.physics.unit import UnitTruth, draw_unit
 from station.session.model import Session
 
@@ -32,6 +34,8 @@ class SimResult:
         effects: the effect magnitudes; effect_truth: their SI coefficients for this unit.
         environment: the room (ambient temperature at power-on = ``T_ref``, ambient drift).
         trajectory: the rig trajectory and segment table.
+        temperature: the unit's true temperature course when the session ran at temperature
+            plateaus (:class:`~station.physics.thermal.PlateauCourse`), else None.
     """
 
     session: Session
@@ -41,6 +45,7 @@ class SimResult:
     effect_truth: EffectTruth
     environment: Environment
     trajectory: RigTrajectory
+    temperature: PlateauCourse | None = None
 
 
 def _num(x: float) -> str:
@@ -56,22 +61,43 @@ def simulate_session(
     sensor_class: SensorClass = TABLE1,
     effects: Effects | None = None,
     unit: UnitTruth | None = None,
+    temperature_plateaus_degc: Sequence[float] | None = None,
+    soak_s: float = 600.0,
+    thermal_lag_s: float = 150.0,
 ) -> SimResult:
     """Simulate one session of a unit (drawn from ``sensor_class`` with ``seed`` unless given).
 
     The seed's first spawned stream draws the unit, the second seeds the IMU model (noise,
     drift, outliers, temperature, environment). ``t`` starts at 0 (power-on); samples are
     at ``k / sample_rate_hz``.
+
+    ``temperature_plateaus_degc`` (e.g. ``(25, 45, 5, 25)``): a climate-chamber session instead. The
+    plan's rest, poses and rate steps run once per plateau (:func:`build_plateau_trajectory`; every
+    plateau after the first begins with a ``soak_s`` rest while the chamber moves), and the unit's
+    temperature follows the setpoints with a first-order lag ``thermal_lag_s`` plus its own
+    self-heating (:class:`~station.physics.thermal.PlateauCourse`). The unit is powered on soaked at
+    the first plateau, which is therefore the temperature effects' ``T_ref``. Without it, nothing
+    changes (same seed, same bytes).
     """
     plan = plan if plan is not None else default_plan()
     effects = effects if effects is not None else Effects()
     unit_seq, imu_seq = np.random.SeedSequence(seed).spawn(2)
     if unit is None:
         unit = draw_unit(sensor_class, np.random.default_rng(unit_seq), serial=plan.serial)
-    model = ImuModel(
-        unit, sensor_class, effects, imu_seq, latitude_deg=plan.latitude_deg, heading_deg=plan.heading_deg
-    )
-    traj = build_trajectory(plan)
+    course: PlateauCourse | None = None
+    if temperature_plateaus_degc is None:
+        model = ImuModel(
+            unit, sensor_class, effects, imu_seq, latitude_deg=plan.latitude_deg, heading_deg=plan.heading_deg
+        )
+        traj = build_trajectory(plan)
+    else:
+        plateaus = tuple(float(p) for p in temperature_plateaus_degc)
+        traj, starts = build_plateau_trajectory(plan, len(plateaus), soak_s)
+        course = PlateauCourse(plateaus, starts, thermal_lag_s, unit.self_heating_k, unit.self_heating_tau_s)
+        model = ImuModel(
+            unit, sensor_class, effects, imu_seq, latitude_deg=plan.latitude_deg, heading_deg=plan.heading_deg,
+            environment=Environment(ambient_degc=plateaus[0]), temperature_degc=course,
+        )
     t = traj.sample_times()
     kin = traj.kinematics(t, time_offset_s=model.time_offset_s, pose_tilt_rad=model.effect_truth.pose_tilts())
     raw = model.render(kin, plan.gravity_mps2)
@@ -89,6 +115,9 @@ def simulate_session(
         "sim_class": sensor_class.name,
         "sim_effects": effects.describe(),
     }
+    if course is not None:
+        metadata["sim_temperature_plateaus_degc"] = " ".join(_num(p) for p in course.plateaus_degc)
+        metadata["sim_soak_s"] = _num(soak_s)
     session = Session(
         metadata=metadata,
         t_s=t,
@@ -100,4 +129,4 @@ def simulate_session(
         ref_accel_mps2=ref_f,
         ref_gyro_radps=ref_w,
     )
-    return SimResult(session, unit, plan, effects, model.effect_truth, model.environment, traj)
+    return SimResult(session, unit, plan, effects, model.effect_truth, model.environment, traj, course)
