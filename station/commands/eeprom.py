@@ -99,7 +99,17 @@ def image_summary(img: Any) -> dict[str, Any]:
             "noise_std": arr(t.noise_std),
         }
 
+    fx = img.effects
+    effects = {} if fx is None else {"effects": {
+        "reference_temperature_degc": None if not math.isfinite(fx.reference_temperature_degc)
+        else fx.reference_temperature_degc,
+        "time_offset_s": fx.time_offset_s,
+        "accel_temp_bias_mps2_per_k_j": arr(fx.temp_bias[0]), "gyro_temp_bias_radps_per_k_j": arr(fx.temp_bias[1]),
+        "accel_temp_scale_per_k_j": arr(fx.temp_scale[0]), "gyro_temp_scale_per_k_j": arr(fx.temp_scale[1]),
+        "accel_nonlinearity_per_mps2": arr(fx.nonlinearity[0]), "gyro_nonlinearity_per_radps": arr(fx.nonlinearity[1]),
+    }}
     return {
+        "layout_version": img.layout_version,
         "serial": img.serial,
         "params_id": img.params_id.hex(),
         "station_id": img.station_id,
@@ -110,6 +120,7 @@ def image_summary(img: Any) -> dict[str, Any]:
         "accel_mps2": triad(img.accel),
         "gyro_radps": triad(img.gyro),
         "g_sensitivity_radps_per_mps2": arr(img.g_sensitivity),
+        **effects,
     }
 
 
@@ -149,7 +160,7 @@ def decode_cmd(
     dump: Annotated[bool, typer.Option("--dump", help="the file is a whole EEPROM: decode both slots")] = False,
 ) -> None:
     """Decode and check an image (magic, version, length, CRC-32); print its content as JSON."""
-    from station.eeprom.image import decode_image, read_slots, select_image
+    from station.eeprom.image import decode_image, read_all_slots, select_image
 
     try:
         raw = path.read_bytes()
@@ -157,7 +168,7 @@ def decode_cmd(
         raise _fail(f"cannot read {path}: {exc.strerror or exc}") from None
     try:
         if dump:
-            slots = read_slots(raw)
+            slots = read_all_slots(raw)
             current = select_image(slots)
             out: dict[str, Any] = {
                 "current": current.name if current is not None else None,
@@ -205,7 +216,8 @@ def _record_write(db_url: str | None, report: Any) -> None:
     db = open_database(db_url)
     try:
         record_eeprom_write(db, report.serial, report.sha256, attempts=report.attempts, read_back_ok=True,
-                            verified_on_rig=None, image=report.data or None, layout_version=1,
+                            verified_on_rig=None, image=report.data or None,
+                            layout_version=report.image.layout_version,
                             message=f"written by `station eeprom write` to slot {report.slot}; read back, "
                                     "not verified on the rig")
     finally:

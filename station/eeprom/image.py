@@ -29,14 +29,17 @@ import struct
 import zlib
 from dataclasses import dataclass, replace
 from datetime import UTC, datetime
+from typing import ClassVar
 
 import numpy as np
 
-from station.fit.params import AllanCoefficients, ParameterSet, TriadParams
+from station.fit.params import AllanCoefficients, ParameterSet, ThermalFit, TriadParams
 from station.kernel.errors import FormatError, UnsupportedVersionError
 
 MAGIC = b"SCAL"
-LAYOUT_VERSION = 1
+LAYOUT_VERSION = 1  # the layout of an image without the effects of layout 2 (byte for byte as before)
+LAYOUT_VERSION_2 = 2  # adds the compensable effects (temperature terms, nonlinearity, time offset)
+LAYOUT_VERSIONS = (LAYOUT_VERSION, LAYOUT_VERSION_2)
 TEXT_FIELD = 16  # bytes of serial / station id, ASCII, NUL padded
 ID_FIELD = 16  # bytes of the parameter-set id
 
@@ -46,6 +49,13 @@ _GSENS = struct.Struct("<9d")  # gyro g-sensitivity (3, 3) row-major: 72 bytes
 _CRC = struct.Struct("<I")
 BODY_SIZE = _HEADER.size + 2 * _TRIAD.size + _GSENS.size
 IMAGE_SIZE = BODY_SIZE + _CRC.size  # 492 bytes for layout version 1
+# layout 2 appends T_ref, the time offset and per triad: temperature bias (3x3), temperature scale (3x3),
+# nonlinearity (3), all float64
+_EFFECTS_HEAD = struct.Struct("<2d")  # reference temperature (degC; NaN = none), time offset (s): 16 bytes
+_EFFECTS_TRIAD = struct.Struct("<21d")  # c (3x3 axis-major, orders 1..3), s (3x3), k (3): 168 bytes
+BODY_SIZE_2 = BODY_SIZE + _EFFECTS_HEAD.size + 2 * _EFFECTS_TRIAD.size
+IMAGE_SIZE_2 = BODY_SIZE_2 + _CRC.size  # 844 bytes for layout version 2
+_SIZES = {LAYOUT_VERSION: IMAGE_SIZE, LAYOUT_VERSION_2: IMAGE_SIZE_2}
 MIN_HEADER = 8  # magic, version, length: enough to know what the rest must be
 
 
@@ -125,6 +135,76 @@ class TriadImage:
         )
 
 
+@dataclass(frozen=True, eq=False)
+class EffectsImage:
+    """What layout 2 adds: the compensable effects beyond eq. (1) (see :mod:`station.fit.params`).
+
+    Attributes:
+        reference_temperature_degc: T_ref of the temperature terms (degC); NaN when they are all zero.
+        time_offset_s: the unit's sample time minus the rig's (s); carried, not used by Algorithm 1.
+        temp_bias: c per triad (accel, gyro), output axis and order 1..3, (2, 3, 3) (U/K^j).
+        temp_scale: s likewise, (2, 3, 3) (1/K^j).
+        nonlinearity: k of ``u + k u|u|`` per triad and axis, (2, 3) (1/U).
+    """
+
+    reference_temperature_degc: float
+    time_offset_s: float
+    temp_bias: np.ndarray
+    temp_scale: np.ndarray
+    nonlinearity: np.ndarray
+
+    _SHAPES: ClassVar[dict[str, tuple[int, ...]]] = {"temp_bias": (2, 3, 3), "temp_scale": (2, 3, 3),
+                                                     "nonlinearity": (2, 3)}
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "reference_temperature_degc", float(self.reference_temperature_degc))
+        object.__setattr__(self, "time_offset_s", float(self.time_offset_s))
+        for name, shape in self._SHAPES.items():
+            a = np.array(getattr(self, name), dtype=np.float64)
+            if a.shape != shape:
+                raise ImageContentError(f"effects field {name} must have shape {shape}, got {a.shape}")
+            a.flags.writeable = False
+            object.__setattr__(self, name, a)
+
+    @classmethod
+    def from_params(cls, params: ParameterSet) -> EffectsImage | None:
+        """The effects of ``params``, or None when it has none (its image is then layout 1)."""
+        if not (params.compensates_temperature or params.has_nonlinearity or params.time_offset_s != 0.0):
+            return None
+        return cls(
+            reference_temperature_degc=(
+                params.reference_temperature_degc if params.compensates_temperature else math.nan),
+            time_offset_s=params.time_offset_s,
+            temp_bias=np.stack([params.accel.temp_bias_coeff, params.gyro.temp_bias_coeff]),
+            temp_scale=np.stack([params.accel.temp_scale_coeff, params.gyro.temp_scale_coeff]),
+            nonlinearity=np.stack([params.accel.scale_nonlinearity, params.gyro.scale_nonlinearity]),
+        )
+
+    def triad_values(self, t: int) -> list[float]:
+        return [*self.temp_bias[t].ravel().tolist(), *self.temp_scale[t].ravel().tolist(),
+                *self.nonlinearity[t].tolist()]
+
+    def problems(self) -> list[str]:
+        out = []
+        for name in ("temp_bias", "temp_scale", "nonlinearity"):
+            if not np.isfinite(getattr(self, name)).all():
+                out.append(f"effects {name} has non-finite entries")
+        if not math.isfinite(self.time_offset_s):
+            out.append("time offset is not finite")
+        has_temp = bool(np.any(self.temp_bias != 0) or np.any(self.temp_scale != 0))
+        t_ref = self.reference_temperature_degc
+        if has_temp and not (math.isfinite(t_ref) and -100.0 <= t_ref <= 200.0):
+            out.append(f"reference temperature {t_ref!r} degC: temperature terms need one in -100..200 degC")
+        if not has_temp and not (math.isnan(t_ref) or math.isfinite(t_ref)):
+            out.append(f"reference temperature {t_ref!r} must be finite or NaN")
+        return out
+
+    def same_as(self, other: EffectsImage | None) -> bool:
+        return other is not None and _same_float(self.reference_temperature_degc, other.reference_temperature_degc) \
+            and _same_float(self.time_offset_s, other.time_offset_s) and all(
+                np.array_equal(getattr(self, n), getattr(other, n), equal_nan=True) for n in self._SHAPES)
+
+
 def _text(value: str, what: str) -> bytes:
     try:
         raw = value.encode("ascii")
@@ -169,6 +249,7 @@ class CalibrationImage:
         accel: accelerometer triad (m/s^2).
         gyro: gyroscope triad (rad/s).
         g_sensitivity: gyro output per unit specific force (rad/s per m/s^2), (3, 3).
+        effects: the layout-2 additions (temperature terms, nonlinearity, time offset); None: a layout-1 image.
     """
 
     serial: str
@@ -181,6 +262,16 @@ class CalibrationImage:
     accel: TriadImage
     gyro: TriadImage
     g_sensitivity: np.ndarray
+    effects: EffectsImage | None = None
+
+    @property
+    def layout_version(self) -> int:
+        """1 without effects (the bytes of a layout-1 image, as before), 2 with."""
+        return LAYOUT_VERSION if self.effects is None else LAYOUT_VERSION_2
+
+    @property
+    def size(self) -> int:
+        return _SIZES[self.layout_version]
 
     def __post_init__(self) -> None:
         g = np.array(self.g_sensitivity, dtype=np.float64)
@@ -216,6 +307,7 @@ class CalibrationImage:
             accel=TriadImage.from_triad(params.accel),
             gyro=TriadImage.from_triad(params.gyro),
             g_sensitivity=params.gyro.g_sensitivity,
+            effects=EffectsImage.from_params(params),
         )
 
     @property
@@ -235,7 +327,15 @@ class CalibrationImage:
         """A :class:`ParameterSet` with what the image holds (uncertainties and Allan figures NaN)."""
         nan3, nan33 = np.full(3, np.nan), np.full((3, 3), np.nan)
 
+        fx = self.effects
+
         def triad(t: TriadImage, g: np.ndarray | None) -> TriadParams:
+            i = 0 if g is None else 1
+            more = {} if fx is None else {
+                "temp_bias_coeff": fx.temp_bias[i], "temp_scale_coeff": fx.temp_scale[i],
+                "scale_nonlinearity": fx.nonlinearity[i], "temp_bias_coeff_std": np.full((3, 3), np.nan),
+                "temp_scale_coeff_std": np.full((3, 3), np.nan), "scale_nonlinearity_std": nan3,
+            }
             return TriadParams(
                 misalignment=t.misalignment, misalignment_std=nan33,
                 bias_static=t.bias_static, bias_static_std=nan3,
@@ -247,6 +347,7 @@ class CalibrationImage:
                 residual_rms=nan3,
                 g_sensitivity=np.zeros((3, 3)) if g is None else g,
                 g_sensitivity_std=nan33,
+                **more,
             )
 
         return ParameterSet(
@@ -256,7 +357,12 @@ class CalibrationImage:
             accel=triad(self.accel, None),
             gyro=triad(self.gyro, self.g_sensitivity),
             source={"kind": "eeprom image", "params_id": self.params_id.hex(), "station": self.station_id,
-                    "update_count": self.update_count},
+                    "update_count": self.update_count, "layout_version": self.layout_version},
+            **({} if fx is None else {
+                "reference_temperature_degc": fx.reference_temperature_degc, "time_offset_s": fx.time_offset_s,
+                "thermal": ThermalFit("fitted" if np.any(fx.temp_bias != 0) or np.any(fx.temp_scale != 0)
+                                      else "absent", "from the EEPROM image"),
+            }),
         )
 
     def same_as(self, other: CalibrationImage) -> bool:
@@ -272,6 +378,7 @@ class CalibrationImage:
             and self.accel.same_as(other.accel)
             and self.gyro.same_as(other.gyro)
             and np.array_equal(self.g_sensitivity, other.g_sensitivity, equal_nan=True)
+            and (self.effects.same_as(other.effects) if self.effects is not None else other.effects is None)
         )
 
 
@@ -311,6 +418,10 @@ def _check_content(img: CalibrationImage) -> None:
             raise ImageContentError(f"{name} correlation time must be positive or NaN, got {tc.tolist()}")
     if not np.isfinite(img.g_sensitivity).all():
         raise ImageContentError("g_sensitivity has non-finite entries")
+    if img.effects is not None:
+        problems = img.effects.problems()
+        if problems:
+            raise ImageContentError(problems[0])
 
 
 #: What the unit's firmware holds and accepts (station/eeprom/layout.md, "Usable content").
@@ -368,6 +479,17 @@ def image_problems(img: CalibrationImage, rates_hz: tuple[int, ...] | None = Non
             out.append(f"{name} noise_std {noise.tolist()} must be finite and >= 0")
     if not np.isfinite(img.g_sensitivity).all():
         out.append("g_sensitivity has non-finite entries")
+    if img.effects is not None:
+        out.extend(img.effects.problems())
+        fx = img.effects
+        if not np.any(np.isnan(fx.temp_scale)):
+            # the firmware divides by 1 + s(dT): it must stay well away from 0 over the operating range
+            for dt in np.linspace(-100.0, 100.0, 201):
+                den = 1.0 + ((fx.temp_scale[..., 2] * dt + fx.temp_scale[..., 1]) * dt + fx.temp_scale[..., 0]) * dt
+                if np.any(np.abs(den - 1.0) > MAX_SCALE_DEVIATION):
+                    out.append(f"temperature scale terms change the scale by more than {MAX_SCALE_DEVIATION:g} "
+                               f"within 100 K of T_ref (at dT = {dt:g} K)")
+                    break
     return out
 
 
@@ -379,12 +501,13 @@ def check_writable(img: CalibrationImage, rates_hz: tuple[int, ...] | None = Non
 
 
 def encode_image(img: CalibrationImage) -> bytes:
-    """The image's bytes (layout version 1, :data:`IMAGE_SIZE` bytes, CRC-32 last)."""
+    """The image's bytes, CRC-32 last: layout version 1 (:data:`IMAGE_SIZE` bytes) without effects, 2
+    (:data:`IMAGE_SIZE_2`) with."""
     _check_content(img)
     header = _HEADER.pack(
         MAGIC,
-        LAYOUT_VERSION,
-        IMAGE_SIZE,
+        img.layout_version,
+        img.size,
         img.update_count,
         _text(img.serial, "serial"),
         img.params_id,
@@ -396,6 +519,10 @@ def encode_image(img: CalibrationImage) -> bytes:
     )
     body = header + _TRIAD.pack(*img.accel.values()) + _TRIAD.pack(*img.gyro.values())
     body += _GSENS.pack(*img.g_sensitivity.ravel().tolist())
+    fx = img.effects
+    if fx is not None:
+        body += _EFFECTS_HEAD.pack(fx.reference_temperature_degc, fx.time_offset_s)
+        body += _EFFECTS_TRIAD.pack(*fx.triad_values(0)) + _EFFECTS_TRIAD.pack(*fx.triad_values(1))
     return body + _CRC.pack(zlib.crc32(body))
 
 
@@ -406,10 +533,11 @@ def image_length(data: bytes) -> int:
     magic, version, length = struct.unpack_from("<4sHH", data)
     if magic != MAGIC:
         raise ImageMagicError(f"no calibration image: magic {magic!r}, expected {MAGIC!r}")
-    if version != LAYOUT_VERSION:
-        raise ImageVersionError(f"image layout version {version}; this station reads version {LAYOUT_VERSION} only")
-    if length != IMAGE_SIZE:
-        raise ImageLengthError(f"image length field says {length} bytes; layout {version} has {IMAGE_SIZE}")
+    if version not in LAYOUT_VERSIONS:
+        raise ImageVersionError(f"image layout version {version}; this station reads versions "
+                                f"{', '.join(map(str, LAYOUT_VERSIONS))} only")
+    if length != _SIZES[version]:
+        raise ImageLengthError(f"image length field says {length} bytes; layout {version} has {_SIZES[version]}")
     return length
 
 
@@ -419,8 +547,9 @@ def decode_image(data: bytes) -> CalibrationImage:
     length = image_length(data)
     if len(data) != length:
         raise ImageLengthError(f"image has {len(data)} bytes; its length field says {length}")
-    (crc,) = _CRC.unpack_from(data, BODY_SIZE)
-    if zlib.crc32(data[:BODY_SIZE]) != crc:
+    body_size = length - _CRC.size
+    (crc,) = _CRC.unpack_from(data, body_size)
+    if zlib.crc32(data[:body_size]) != crc:
         raise ImageCrcError("image CRC-32 mismatch: the image is corrupted or was not completely written")
     (_, _, _, count, serial, pid, station, t_us, period, n, reserved) = _HEADER.unpack_from(data)
     if reserved != 0:
@@ -429,6 +558,18 @@ def decode_image(data: bytes) -> CalibrationImage:
     accel = TriadImage.from_values(_TRIAD.unpack_from(data, off))
     gyro = TriadImage.from_values(_TRIAD.unpack_from(data, off + _TRIAD.size))
     g = np.reshape(_GSENS.unpack_from(data, off + 2 * _TRIAD.size), (3, 3))
+    effects = None
+    if length == IMAGE_SIZE_2:
+        at = BODY_SIZE
+        t_ref, offset = _EFFECTS_HEAD.unpack_from(data, at)
+        at += _EFFECTS_HEAD.size
+        tri = [np.array(_EFFECTS_TRIAD.unpack_from(data, at + k * _EFFECTS_TRIAD.size)) for k in (0, 1)]
+        effects = EffectsImage(
+            reference_temperature_degc=t_ref, time_offset_s=offset,
+            temp_bias=np.stack([v[0:9].reshape(3, 3) for v in tri]),
+            temp_scale=np.stack([v[9:18].reshape(3, 3) for v in tri]),
+            nonlinearity=np.stack([v[18:21] for v in tri]),
+        )
     img = CalibrationImage(
         serial=_untext(serial, "serial"),
         params_id=pid,
@@ -440,6 +581,7 @@ def decode_image(data: bytes) -> CalibrationImage:
         accel=accel,
         gyro=gyro,
         g_sensitivity=g,
+        effects=effects,
     )
     _check_content(img)
     return img
@@ -480,7 +622,17 @@ class SlotLayout:
 
 
 DEFAULT_SLOTS = SlotLayout()
+#: The slots of layout-2 images (844 bytes): two of 1024 bytes in the upper half of a 4 KiB EEPROM, apart
+#: from the layout-1 slots, so that a write in one region never touches an image of the other.
+WIDE_SLOTS = SlotLayout(base=0x800, slot_size=1024)
+#: Every slot region, in the order they are read.
+REGIONS = (DEFAULT_SLOTS, WIDE_SLOTS)
 SLOT_NAMES = ("A", "B")
+
+
+def slots_for(img: CalibrationImage, layout: SlotLayout = DEFAULT_SLOTS) -> SlotLayout:
+    """Where ``img`` is written: ``layout`` (the layout-1 slots) for a layout-1 image, :data:`WIDE_SLOTS` for 2."""
+    return layout if img.layout_version == LAYOUT_VERSION else WIDE_SLOTS
 
 
 @dataclass(frozen=True, eq=False)
@@ -490,21 +642,27 @@ class SlotState:
     slot: int
     image: CalibrationImage | None
     error: str = ""
+    layout: SlotLayout = DEFAULT_SLOTS
 
     @property
     def name(self) -> str:
-        return SLOT_NAMES[self.slot]
+        """'A' or 'B' (layout-1 slots), 'A2' or 'B2' (:data:`WIDE_SLOTS`)."""
+        return SLOT_NAMES[self.slot] + ("2" if self.layout == WIDE_SLOTS else "")
+
+    @property
+    def address(self) -> int:
+        return self.layout.address(self.slot)
 
 
-def decode_slot(slot: int, raw: bytes) -> SlotState:
+def decode_slot(slot: int, raw: bytes, layout: SlotLayout = DEFAULT_SLOTS) -> SlotState:
     """Decode the image at the start of a slot's bytes (the rest of the slot is ignored)."""
     try:
         length = image_length(raw)
         if len(raw) < length:
             raise ImageLengthError(f"slot has {len(raw)} bytes, the image claims {length}")
-        return SlotState(slot, decode_image(raw[:length]))
+        return SlotState(slot, decode_image(raw[:length]), layout=layout)
     except ImageError as exc:
-        return SlotState(slot, None, str(exc))
+        return SlotState(slot, None, str(exc), layout)
 
 
 def select_image(slots: list[SlotState], serial: str | None = None) -> SlotState | None:
@@ -512,7 +670,7 @@ def select_image(slots: list[SlotState], serial: str | None = None) -> SlotState
     valid = [s for s in slots if s.image is not None and (serial is None or s.image.serial == serial)]
     if not valid:
         return None
-    return max(valid, key=lambda s: (s.image.update_count, -s.slot))  # type: ignore[union-attr]
+    return max(valid, key=lambda s: (s.image.update_count, -s.layout.base, -s.slot))  # type: ignore[union-attr]
 
 
 def next_write(slots: list[SlotState]) -> tuple[int, int]:
@@ -528,4 +686,21 @@ def read_slots(raw: bytes, layout: SlotLayout = DEFAULT_SLOTS) -> list[SlotState
     """Decode both slots from a whole EEPROM dump (or at least ``layout.end`` bytes of it)."""
     if len(raw) < layout.end:
         raise ImageLengthError(f"EEPROM dump of {len(raw)} bytes does not cover both slots ({layout.end})")
-    return [decode_slot(k, raw[layout.address(k) : layout.address(k) + layout.slot_size]) for k in (0, 1)]
+    return [decode_slot(k, raw[layout.address(k) : layout.address(k) + layout.slot_size], layout) for k in (0, 1)]
+
+
+def read_all_slots(raw: bytes, layout: SlotLayout = DEFAULT_SLOTS) -> list[SlotState]:
+    """The slots of every region a whole EEPROM dump covers: ``layout`` (layout 1), then :data:`WIDE_SLOTS`
+    (layout 2) when the dump reaches its end. :func:`select_image` over them gives the current image."""
+    out = read_slots(raw, layout)
+    if len(raw) >= WIDE_SLOTS.end and layout != WIDE_SLOTS:
+        out += read_slots(raw, WIDE_SLOTS)
+    return out
+
+
+def next_write_in(region: SlotLayout, slots: list[SlotState]) -> tuple[int, int]:
+    """(slot of ``region`` to write, update count) given every region's ``slots``: the region's slot not holding
+    its newest image, and a count above every valid image of any region (so the new one becomes current)."""
+    slot, _ = next_write([s for s in slots if s.layout == region])
+    counts = [s.image.update_count for s in slots if s.image is not None]
+    return slot, max(counts, default=0) + 1

@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 
 from station.eeprom.image import (
     DEFAULT_SLOTS,
-    SLOT_NAMES,
+    WIDE_SLOTS,
     CalibrationImage,
     ImageError,
     SlotLayout,
@@ -38,9 +38,10 @@ from station.eeprom.image import (
     decode_image,
     encode_image,
     image_sha256,
-    next_write,
+    next_write_in,
     read_slots,
     select_image,
+    slots_for,
 )
 from station.kernel.errors import HardwareError
 from station.sensor.protocol import Sensor
@@ -88,13 +89,22 @@ class WriteReport:
     data: bytes = field(default=b"", repr=False, compare=False)
 
 
-def read_unit_slots(sensor: Sensor, layout: SlotLayout = DEFAULT_SLOTS) -> list[SlotState]:
-    """Read and decode both image slots of the unit (EEPROM_READ)."""
-    return read_slots(sensor.eeprom_read(layout.base, 2 * layout.slot_size), layout)
+def read_unit_slots(
+    sensor: Sensor, layout: SlotLayout = DEFAULT_SLOTS, *, eeprom_size: int | None = None
+) -> list[SlotState]:
+    """Read and decode the unit's image slots (EEPROM_READ): both of ``layout`` (layout 1) and, when the
+    EEPROM holds them (``eeprom_size``, asked with EEPROM_INFO when not given), both :data:`WIDE_SLOTS` (layout 2)."""
+    slots = read_slots(sensor.eeprom_read(layout.base, 2 * layout.slot_size), layout)
+    if layout != WIDE_SLOTS:
+        size = eeprom_size if eeprom_size is not None else sensor.eeprom_info().size
+        if size >= WIDE_SLOTS.end:
+            slots += read_slots(bytes(WIDE_SLOTS.base) + sensor.eeprom_read(WIDE_SLOTS.base, 2 * WIDE_SLOTS.slot_size),
+                                WIDE_SLOTS)
+    return slots
 
 
 def read_current_image(sensor: Sensor, layout: SlotLayout = DEFAULT_SLOTS) -> CalibrationImage | None:
-    """The unit's current image (valid, highest update count), or None."""
+    """The unit's current image (valid, highest update count, either region), or None."""
     current = select_image(read_unit_slots(sensor, layout))
     return current.image if current is not None else None
 
@@ -136,15 +146,18 @@ def write_image(
     info = sensor.eeprom_info()
     if info.write_protect:
         raise EepromUnusableError(f"EEPROM of {ident.serial} is write protected (WP pin asserted)")
-    if info.size < layout.end:
-        raise EepromUnusableError(f"EEPROM of {ident.serial} has {info.size} bytes; the two slots need {layout.end}")
-    slots = read_unit_slots(sensor, layout)
-    target, count = next_write(slots)
+    region = slots_for(image, layout)
+    if info.size < region.end:
+        raise EepromUnusableError(f"EEPROM of {ident.serial} has {info.size} bytes; the two slots of a layout-"
+                                  f"{image.layout_version} image need {region.end}")
+    slots = read_unit_slots(sensor, layout, eeprom_size=info.size)
+    target, count = next_write_in(region, slots)
     current = select_image(slots)
     previous = current.image.update_count if current is not None and current.image is not None else 0
     new = image.with_update_count(count)
     data = encode_image(new)
-    addr = layout.address(target)
+    addr = region.address(target)
+    name = SlotState(target, None, layout=region).name
     pages = _pages(addr, data, info.page_size)
     pages = pages[1:] + pages[:1]  # the header page last: the slot has no valid magic + CRC until the end
     for attempt in range(1, max_attempts + 1):
@@ -156,15 +169,14 @@ def write_image(
                 decode_image(back)
             except ImageError as exc:  # cannot happen for bytes equal to what encode produced
                 raise ProvisionError(f"image read back from {ident.serial} does not decode: {exc}") from exc
-            log.info("%s: image #%d written to slot %s in %d attempt(s)", ident.serial, count, SLOT_NAMES[target],
-                     attempt)
-            return WriteReport(ident.serial, SLOT_NAMES[target], addr, count, previous, attempt, len(data),
+            log.info("%s: image #%d written to slot %s in %d attempt(s)", ident.serial, count, name, attempt)
+            return WriteReport(ident.serial, name, addr, count, previous, attempt, len(data),
                                image_sha256(data), new, back)
         bad = sum(1 for x, y in zip(back, data, strict=True) if x != y)
         log.warning("%s: read-back of slot %s differs in %d of %d bytes (attempt %d of %d)", ident.serial,
-                    SLOT_NAMES[target], bad, len(data), attempt, max_attempts)
+                    name, bad, len(data), attempt, max_attempts)
     raise ReadbackMismatchError(
-        f"EEPROM of {ident.serial}: slot {SLOT_NAMES[target]} read back different bytes after {max_attempts} "
+        f"EEPROM of {ident.serial}: slot {name} read back different bytes after {max_attempts} "
         f"write attempts; the previous image (count {previous}) is still current"
     )
 

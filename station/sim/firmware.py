@@ -2,7 +2,8 @@
 
 :class:`CalibrationFirmware` is a :data:`~station.sim.sensor_core.Corrector` for a simulated
 sensor (a :class:`~station.sim.sensor_core.SensorUnit`: the pty peer or the in-process fake). At
-every power-on (its ``reset()``, which the sensor calls at boot) it reads both EEPROM slots, picks the valid image with
+every power-on (its ``reset()``, which the sensor calls at boot) it reads both EEPROM slots (and both
+layout-2 slots, :data:`~station.eeprom.image.WIDE_SLOTS`), picks the valid image with
 the highest update count (:func:`station.eeprom.image.select_image`) and loads Algorithm 1
 of Kolhoff & Kemper with it. In CORRECTED output mode the sensor passes it each chunk of
 raw samples; it returns them corrected: drift ``b_drift g_i`` (eq. 3, forward Euler),
@@ -33,7 +34,15 @@ from typing import Literal
 import numpy as np
 
 from station.correct import StreamingCorrector, correct_batch
-from station.eeprom.image import DEFAULT_SLOTS, CalibrationImage, SlotLayout, read_slots, select_image
+from station.eeprom.image import (
+    DEFAULT_SLOTS,
+    WIDE_SLOTS,
+    CalibrationImage,
+    SlotLayout,
+    SlotState,
+    read_slots,
+    select_image,
+)
 from station.fit.params import ParameterSet
 from station.kernel.clock import Clock, WallClock
 from station.sim.eeprom import Eeprom, EepromError
@@ -88,12 +97,20 @@ class CalibrationFirmware:
 
     # --- power-on -------------------------------------------------------------------------------
 
-    def _read_eeprom(self) -> bytes:
+    def _read_region(self, layout: SlotLayout) -> list[SlotState]:
         try:
-            return self._eeprom.read(self.layout.base, 2 * self.layout.slot_size)
+            raw = self._eeprom.read(layout.base, 2 * layout.slot_size)
         except EepromError:
             self._eeprom.power_reset()  # at power-on no write cycle can still be running
-            return self._eeprom.read(self.layout.base, 2 * self.layout.slot_size)
+            raw = self._eeprom.read(layout.base, 2 * layout.slot_size)
+        return read_slots(bytes(layout.base) + raw, layout)
+
+    def _read_slots(self) -> list[SlotState]:
+        """Both slots of the layout-1 region and, when the EEPROM holds it, of the layout-2 region."""
+        slots = self._read_region(self.layout)
+        if self.layout != WIDE_SLOTS and self._eeprom.size >= WIDE_SLOTS.end:
+            slots += self._read_region(WIDE_SLOTS)
+        return slots
 
     def reset(self) -> None:
         """Power-on: read the EEPROM, load the current image (or none), restart Algorithm 1 (g = 1)."""
@@ -102,7 +119,7 @@ class CalibrationFirmware:
         self._index = None
         self.image, self._params, self._g_sens, self.load_error = None, None, None, ""
         try:
-            slots = read_slots(self._read_eeprom(), self.layout)
+            slots = self._read_slots()
         except EepromError as exc:
             self.load_error = f"EEPROM unreadable: {exc}"
             return
