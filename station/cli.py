@@ -96,7 +96,20 @@ def _print_params(params: object) -> None:
         row("T_c (s)", tri.correlation_time_s, tri.correlation_time_s_std, 1.0, "{:.1f}")
         row("noise std", tri.noise_std, tri.noise_std_std)
         row("residual rms", tri.residual_rms, np.zeros(3))
+        for j in range(tri.temp_bias_coeff.shape[1]):  # the temperature terms (station-params/2), where fitted
+            if np.any(tri.temp_bias_coeff[:, j]):
+                row(f"T bias /K^{j + 1}", tri.temp_bias_coeff[:, j], tri.temp_bias_coeff_std[:, j], fmt="{:.3e}")
+        for j in range(tri.temp_scale_coeff.shape[1]):
+            if np.any(tri.temp_scale_coeff[:, j]):
+                row(f"T scale ppm/K^{j + 1}", tri.temp_scale_coeff[:, j], tri.temp_scale_coeff_std[:, j], 1e6,
+                    "{:.3f}")
         console.print(table)
+    note = params.thermal
+    if note.fitted:
+        console.print(f"temperature terms fitted about T_ref = {params.reference_temperature_degc:.2f} degC "
+                      f"(temperature span {note.span_k:.1f} K); orders {note.orders}")
+    elif note.status != "absent":
+        console.print(f"temperature terms: {note.status}: {note.reason}")
 
 
 @app.command()
@@ -110,6 +123,9 @@ def fit(
     limits: Annotated[Path | None, typer.Option(
         "--limits", help="limits file whose correlation_time_s ranges are eq. 3's T_c prior (as the station's run "
                          "uses them); without it T_c comes from the recording alone")] = None,
+    thermal: Annotated[str, typer.Option(
+        help="temperature terms: auto (when the recording's temperature course separates them from the warm-up), "
+             "off, require (not for a rig-free fit)")] = "auto",
 ) -> None:
     """Fit the parameter set of eq. (1) to a session and print it.
 
@@ -124,13 +140,18 @@ def fit(
     from station.session import read_session
 
     try:
+        if thermal not in ("auto", "off", "require"):
+            raise StationError(f"--thermal {thermal!r}: expected auto, off or require")
         tc_range = dict(load_limits(limits).correlation_time_s) if limits is not None else {}
         session = read_session(session_path)
         free = rig_free or is_rig_free(session)
         if free and g_sensitivity:
             raise StationError("--g-sensitivity needs rig references; the rig-free fit does not fit it")
+        if free and thermal == "require":
+            raise StationError("--thermal require needs rig references; the rig-free fit has no temperature terms")
         params = (fit_rig_free(session, RigFreeOptions(tc_range_s=tc_range)) if free
-                  else fit_session(session, FitOptions(g_sensitivity=g_sensitivity, tc_range_s=tc_range)))
+                  else fit_session(session, FitOptions(g_sensitivity=g_sensitivity, tc_range_s=tc_range,
+                                                       thermal=thermal)))
     except StationError as exc:
         raise fail(exc) from None
     if as_json:

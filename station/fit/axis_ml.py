@@ -25,6 +25,7 @@ settled data of the session, not only the power-on rest.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -526,7 +527,9 @@ def _inverse(info: np.ndarray) -> np.ndarray:
     d = np.sqrt(np.clip(np.diag(info), 1e-300, None))
     scaled = info / np.outer(d, d)
     try:
-        inv = linalg.inv(scaled, check_finite=False)
+        with warnings.catch_warnings():  # nearly collinear columns (a slow drift and a temperature course): expected
+            warnings.simplefilter("ignore", linalg.LinAlgWarning)
+            inv = linalg.inv(scaled, check_finite=False)
     except linalg.LinAlgError:
         inv = linalg.pinv(scaled)
     return inv / np.outer(d, d)

@@ -51,6 +51,28 @@ class FitQualityLimits:
     gyro_bias_static_std_radps: float | None = None
 
 
+@dataclass(frozen=True)
+class ThermalLimits:
+    """Limits of the temperature terms (issue 18), checked only where the fit fitted them (SI).
+
+    Attributes:
+        accel_temp_bias_mps2_per_k, gyro_temp_bias_radps_per_k: range of the first-order temperature
+            coefficient of the bias, per axis (m/s^2/K, rad/s/K).
+        accel_temp_scale_per_k, gyro_temp_scale_per_k: range of the first-order temperature coefficient of
+            the scale factor (1/K).
+        *_std_*: largest standard uncertainty of each (same units); None: not checked.
+    """
+
+    accel_temp_bias_mps2_per_k: Range
+    gyro_temp_bias_radps_per_k: Range
+    accel_temp_scale_per_k: Range
+    gyro_temp_scale_per_k: Range
+    accel_temp_bias_std_mps2_per_k: float | None = None
+    gyro_temp_bias_std_radps_per_k: float | None = None
+    accel_temp_scale_std_per_k: float | None = None
+    gyro_temp_scale_std_per_k: float | None = None
+
+
 #: Conformance rules for a value with a stated standard uncertainty u (see :class:`ProductLimits`).
 WIDEN = "widen"
 GUARD_BAND = "guard-band"
@@ -74,6 +96,7 @@ class ProductLimits:
         inconclusive: what an inconclusive verdict makes the unit: ``'fail'`` or ``'retest'``.
         marginal_fraction: a pass closer to a limit than this fraction of the range width is
             flagged MARGINAL; a one-sided limit at zero (``[0, max]``) is flagged near ``max`` only.
+        thermal: limits of the temperature terms (checked where the fit fitted them); None: none.
         plausibility: parameter families (``'bias_drift'``, ``'noise_std'``, ``'correlation_time_s'``)
             whose range describes the sensor class rather than the calibrated product: they are
             judged with the ``widen`` rule at ``plausibility_k`` (is the estimate consistent with the
@@ -90,6 +113,7 @@ class ProductLimits:
     marginal_fraction: float = 0.0
     plausibility: frozenset[str] = frozenset()
     plausibility_k: float = 3.0
+    thermal: ThermalLimits | None = None
 
     def __post_init__(self) -> None:
         if self.rule not in RULES:

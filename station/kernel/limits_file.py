@@ -10,7 +10,10 @@ A limits file (``fixtures/limits/default.toml`` is the default) holds:
 * ``[marginal]``: ``fraction`` of the range width at each edge that makes a PASS MARGINAL;
 * ``[fit_quality]``: largest residual RMS per axis and largest standard uncertainties;
 * ``[verification]``: residual limits and the short plan of the post-calibration check;
-* ``[retest]``: ``max_attempts`` runs per unit before a disposition is required.
+* ``[retest]``: ``max_attempts`` runs per unit before a disposition is required;
+* ``[thermal]`` (optional, ``/2`` files): ranges and largest uncertainties of the first-order temperature
+  coefficients of bias and scale (:class:`~station.kernel.limits.ThermalLimits`), checked where the fit
+  fitted temperature terms. A file without it checks none.
 
 Units are in the key names (``_mps2`` m/s^2, ``_dps`` deg/s, ``_s`` s); everything is
 converted to SI on load. Validation is strict: a missing key, an unknown key (a typo),
@@ -37,6 +40,7 @@ from station.kernel.limits import (
     WIDEN,
     FitQualityLimits,
     ProductLimits,
+    ThermalLimits,
     TriadLimits,
 )
 
@@ -216,6 +220,27 @@ def _triad(t: _Table, gyro: bool, check_tc: bool) -> tuple[TriadLimits, tuple[fl
     return out, tc
 
 
+def _thermal(t: _Table) -> ThermalLimits:
+    """The ``[thermal]`` table: ranges (``_per_k``) and largest standard uncertainties (``_std_``), SI on return."""
+
+    def std(key: str, scale: float = 1.0) -> float | None:
+        v = t.number(key, positive=True, required=False)
+        return None if v is None else v * scale
+
+    out = ThermalLimits(
+        accel_temp_bias_mps2_per_k=t.range("accel_temp_bias_mps2_per_k"),
+        gyro_temp_bias_radps_per_k=t.range("gyro_temp_bias_dps_per_k", _DEG),
+        accel_temp_scale_per_k=t.range("accel_temp_scale_ppm_per_k", 1e-6),
+        gyro_temp_scale_per_k=t.range("gyro_temp_scale_ppm_per_k", 1e-6),
+        accel_temp_bias_std_mps2_per_k=std("accel_temp_bias_std_mps2_per_k"),
+        gyro_temp_bias_std_radps_per_k=std("gyro_temp_bias_std_dps_per_k", _DEG),
+        accel_temp_scale_std_per_k=std("accel_temp_scale_std_ppm_per_k", 1e-6),
+        gyro_temp_scale_std_per_k=std("gyro_temp_scale_std_ppm_per_k", 1e-6),
+    )
+    t.done()
+    return out
+
+
 def parse_limits(text: str | bytes, source: str = "<limits>", path: Path | None = None) -> LimitsFile:
     """Parse and validate limits-file text; raises :class:`LimitsFileError` naming ``source`` and the key."""
     raw = text.encode("utf-8") if isinstance(text, str) else bytes(text)
@@ -281,9 +306,11 @@ def parse_limits(text: str | bytes, source: str = "<limits>", path: Path | None 
         gyro_bias_static_std_radps=opt("gyro_bias_static_std_dps", _DEG),
     )
     fq.done()
+    thermal = _thermal(top.table("thermal")) if fmt == LIMITS_FORMAT and top.has("thermal") else None
     product = ProductLimits(name=f"{name}@{version}", accel=accel, gyro=gyro, k_sigma=k_sigma, fit_quality=fit_quality,
                             rule=rule, inconclusive=inconclusive, marginal_fraction=fraction,
-                            plausibility=frozenset(plaus), plausibility_k=3.0 if plaus_k is None else plaus_k)
+                            plausibility=frozenset(plaus), plausibility_k=3.0 if plaus_k is None else plaus_k,
+                            thermal=thermal)
 
     ver = top.table("verification")
     try:

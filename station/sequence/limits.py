@@ -32,7 +32,7 @@ from dataclasses import replace
 import numpy as np
 
 from station.fit.params import ParameterSet, TriadParams
-from station.kernel.limits import GUARD_BAND, WIDEN, FitQualityLimits, ProductLimits, TriadLimits
+from station.kernel.limits import GUARD_BAND, WIDEN, FitQualityLimits, ProductLimits, ThermalLimits, TriadLimits
 from station.kernel.measurement import Measurement
 from station.kernel.sensor_class import Range
 
@@ -135,6 +135,35 @@ def check_limits(params: ParameterSet, limits: ProductLimits) -> list[Measuremen
     )
     if limits.fit_quality is not None:
         out += check_fit_quality(params, limits.fit_quality, limits.marginal_fraction)
+    if limits.thermal is not None and params.thermal.fitted:
+        out += check_thermal(params, limits.thermal, limits)
+    return out
+
+
+def check_thermal(params: ParameterSet, thermal: ThermalLimits, limits: ProductLimits) -> list[Measurement]:
+    """The first-order temperature coefficients of ``params`` (issue 18) against ``thermal``: each value by
+    the product's rule (:func:`conformance`), each standard uncertainty as a one-sided limit ``[0, max]``.
+    Names ``accel.temp_bias_coeff.x``, ``fit.gyro.temp_scale_coeff_std.z``, ...; call only for a fitted set."""
+    t = thermal
+    families = (
+        ("accel", "temp_bias_coeff", t.accel_temp_bias_mps2_per_k, t.accel_temp_bias_std_mps2_per_k, "m/s^2/K"),
+        ("accel", "temp_scale_coeff", t.accel_temp_scale_per_k, t.accel_temp_scale_std_per_k, "1/K"),
+        ("gyro", "temp_bias_coeff", t.gyro_temp_bias_radps_per_k, t.gyro_temp_bias_std_radps_per_k, "rad/s/K"),
+        ("gyro", "temp_scale_coeff", t.gyro_temp_scale_per_k, t.gyro_temp_scale_std_per_k, "1/K"),
+    )
+    out: list[Measurement] = []
+    for tri_name, field, rng, max_std, unit in families:
+        tri = getattr(params, tri_name)
+        v, s = getattr(tri, field)[:, 0], getattr(tri, f"{field}_std")[:, 0]
+        for i in range(3):
+            m = conformance(f"{tri_name}.{field}.{AXES[i]}", float(v[i]), float(s[i]), rng, unit, limits, field)
+            if m is not None:
+                out.append(m)
+            if max_std is not None and math.isfinite(float(s[i])):
+                q = Measurement.in_range(f"fit.{tri_name}.{field}_std.{AXES[i]}", float(s[i]), 0.0, max_std, unit)
+                if q.passed and _near_edge(q.value, 0.0, max_std, limits.marginal_fraction):
+                    q = replace(q, marginal=True)
+                out.append(q)
     return out
 
 

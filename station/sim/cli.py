@@ -26,6 +26,10 @@ def simulate(
     sample_rate: Annotated[float | None, typer.Option(min=1.0, max=10000.0,
                                                       help="sample rate (Hz); default from the plan")] = None,
     random_plan: Annotated[bool, typer.Option(help="draw a random rig plan from the seed")] = False,
+    temperature_plateaus: Annotated[str | None, typer.Option(
+        help="climate-chamber plateaus in degC, e.g. '25,45,5,25': the plan runs once per plateau after a soak",
+    )] = None,
+    soak: Annotated[float, typer.Option(min=0.0, help="soak before each later plateau (s)")] = 600.0,
 ) -> None:
     """Simulate one unit on the rig and write its session recording."""
     from dataclasses import replace
@@ -43,7 +47,17 @@ def simulate(
         plan = draw_plan(np.random.default_rng(seed)) if random_plan else default_plan()
         if sample_rate is not None:
             plan = replace(plan, sample_rate_hz=sample_rate)
-        result = simulate_session(seed, plan=plan, effects=effects)
+        plateaus = None
+        if temperature_plateaus is not None:
+            try:
+                plateaus = tuple(float(v) for v in temperature_plateaus.split(",") if v.strip())
+            except ValueError:
+                raise StationError(f"--temperature-plateaus {temperature_plateaus!r}: expected numbers like "
+                                   "25,45,5,25") from None
+            if not plateaus or not all(np.isfinite(plateaus)) or not all(-60.0 <= p <= 150.0 for p in plateaus):
+                raise StationError("--temperature-plateaus: one or more plateaus in -60..150 degC")
+        result = simulate_session(seed, plan=plan, effects=effects, temperature_plateaus_degc=plateaus,
+                                  soak_s=soak)
         write_session(result.session, output)
     except StationError as exc:
         raise fail(exc) from None
