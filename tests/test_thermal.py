@@ -359,3 +359,50 @@ def test_compensation_mapping_names_parameter_fields() -> None:
     assert compensated_by(p, "temperature_bias") and compensated_by(p, "temperature_scale")
     assert compensated_by(p, "scale_nonlinearity") and not compensated_by(p, "g_sensitivity")
     assert not compensated_by(p, "lever_arm") and not compensated_by(p, "no_such_effect")
+
+
+def test_sensor_streams_layout2_corrected_output_at_its_temperature(unit: tuple) -> None:
+    """The sensor core hands the firmware each chunk's temperature column (CORRECTED output of a layout-2 unit)."""
+    sensor, client, fw = unit
+    p = _thermal_params(seed=8)
+    write_image(client, _image(p, "ST-01"))
+    client.power_cycle()
+    assert fw.loaded and fw.image is not None and fw.image.layout_version == 2
+    client.set_output("corrected")
+    client.start_stream()
+    block = client.read_samples(200)
+    client.stop_stream()
+    assert len(block) == 200 and block.corrected.all()
+    n = len(block)
+    raw_a, raw_w = np.tile([0.0, 0.0, 9.81], (n, 1)), np.zeros((n, 3))
+    k0 = round(float(block.t_s[0]) / p.sample_period_s)
+    exp_a, exp_w = correct_batch(raw_a, raw_w, p, k0, temp_degc=np.full(n, 30.0))
+    # float32 on the wire; the moving average restarts at the first corrected chunk, so compare its full windows
+    np.testing.assert_allclose(block.accel_mps2[40:], exp_a[40:], atol=2e-5)
+    np.testing.assert_allclose(block.gyro_radps[40:], exp_w[40:], atol=2e-6)
+    plain = ParameterSet.from_json(p.to_json().replace('"reference_temperature_degc": 25.0',
+                                                       '"reference_temperature_degc": null'))
+    with pytest.raises(Exception, match="reference temperature"):
+        correct_batch(raw_a, raw_w, plain)
+
+
+def test_thermal_limits_in_the_limits_file(plateau_fit: tuple) -> None:
+    from station.kernel.limits_file import load_limits, parse_limits
+    from station.sequence.limits import check_limits
+
+    lim = load_limits()
+    t = lim.product.thermal
+    assert t is not None and t.gyro_temp_bias_radps_per_k[1] == pytest.approx(np.radians(0.075))
+    assert t.accel_temp_scale_per_k == pytest.approx((-450e-6, 450e-6))
+    text = lim.path.read_text()  # type: ignore[union-attr]
+    without = text[:text.index("[thermal]")] + text[text.index("# Post-calibration verification"):]
+    assert parse_limits(without).product.thermal is None  # a /2 file without the table: nothing checked
+    with pytest.raises(Exception, match="unknown key"):
+        parse_limits(text.replace("[thermal]\n", "[thermal]\nsurprise = 1\n"))
+    _, p = plateau_fit
+    checks = {m.name: m for m in check_limits(p, lim.product)}
+    assert checks["gyro.temp_bias_coeff.x"].passed and checks["fit.accel.temp_scale_coeff_std.z"].passed
+    assert len([n for n in checks if "temp_" in n]) == 24  # 2 triads x 2 terms x 3 axes, value and std
+    res = simulate_session(3, plan=PLAN)
+    plain = fit_session(res.session)
+    assert not [m for m in check_limits(plain, lim.product) if "temp_" in m.name]  # not fitted: not checked
