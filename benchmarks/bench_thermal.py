@@ -31,7 +31,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from station.fit.calibrate import fit_session
+from station.fit.calibrate import FitOptions, fit_session
 from station.physics.effects import Effects
 from station.session import read_session
 from station.session.model import Kind, Session
@@ -51,7 +51,7 @@ def recovery(units: int, seed: int, effect: str = EFFECT) -> None:
     for i in range(units):
         res = simulate_session(seed + i, effects=Effects.parse(effect), temperature_plateaus_degc=PLATEAUS)
         t0 = time.perf_counter()
-        p = fit_session(res.session)
+        p = fit_session(res.session, FitOptions(thermal="auto"))  # what `station fit` does
         times.append(time.perf_counter() - t0)
         status[p.thermal.status] = status.get(p.thermal.status, 0) + 1
         if not p.thermal.fitted:

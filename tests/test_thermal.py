@@ -45,6 +45,7 @@ T0 = datetime(2026, 1, 2, 3, 4, 5, tzinfo=UTC)
 PLAN = RigPlan(rest_s=120.0, pose_hold_s=20.0, rate_hold_s=8.0,
                rate_steps=tuple((a, s * 150.0) for a in "xyz" for s in (1.0, -1.0)))
 PLATEAUS = (25.0, 45.0, 5.0, 25.0)
+AUTO = FitOptions(thermal="auto")
 EFFECTS = Effects(temperature_bias=0.004, temperature_scale=200.0)  # 0.2-0.4 mg/K, 0.01-0.02 deg/s/K, 100-200 ppm/K
 
 
@@ -294,7 +295,7 @@ def test_plateau_session_is_deterministic_and_moves_the_temperature() -> None:
 @pytest.fixture(scope="module")
 def plateau_fit() -> tuple:
     res = simulate_session(21, plan=PLAN, effects=EFFECTS, temperature_plateaus_degc=PLATEAUS, soak_s=300.0)
-    return res, fit_session(res.session)
+    return res, fit_session(res.session, AUTO)
 
 
 def test_fit_recovers_temperature_coefficients(plateau_fit: tuple) -> None:
@@ -343,10 +344,10 @@ def _worst_errors(raw: object, corrected: object) -> tuple[float, float]:
 
 def test_no_thermal_fit_without_a_temperature_course() -> None:
     res = simulate_session(3, plan=PLAN, effects=EFFECTS)  # self-heating only: warm-up shaped
-    p = fit_session(res.session)
+    p = fit_session(res.session, AUTO)
     assert p.thermal.status == "not_separable" and "warm-up" in p.thermal.reason
     assert not p.compensates_temperature and not np.any(p.gyro.temp_bias_coeff)
-    base = fit_session(res.session, FitOptions(thermal="off"))
+    base = fit_session(res.session)  # the library default: off
     assert base.thermal.status == "disabled"
     np.testing.assert_array_equal(base.gyro.misalignment, p.gyro.misalignment)  # the same fit as before
     with pytest.raises(FitError, match="temperature terms required"):
@@ -404,5 +405,5 @@ def test_thermal_limits_in_the_limits_file(plateau_fit: tuple) -> None:
     assert checks["gyro.temp_bias_coeff.x"].passed and checks["fit.accel.temp_scale_coeff_std.z"].passed
     assert len([n for n in checks if "temp_" in n]) == 24  # 2 triads x 2 terms x 3 axes, value and std
     res = simulate_session(3, plan=PLAN)
-    plain = fit_session(res.session)
+    plain = fit_session(res.session, AUTO)
     assert not [m for m in check_limits(plain, lim.product) if "temp_" in m.name]  # not fitted: not checked

@@ -59,8 +59,9 @@ class FitOptions:
         thermal: the temperature terms (bias and scale polynomials in ``T - T_ref`` per output axis,
             :mod:`station.fit.thermal`): ``'auto'`` fits them when the recording's temperature course
             separates them from the warm-up (else :class:`~station.fit.params.ThermalFit` says why not,
-            status ``'not_separable'``), ``'off'`` never, ``'require'`` refuses (FitError) a recording
-            that cannot separate them.
+            status ``'not_separable'``), ``'require'`` refuses (FitError) a recording that cannot separate
+            them, ``'off'`` (the default: eq. 1 alone, as every caller before issue 18 expects, e.g. the
+            diagnosis's base model) never. ``station fit`` uses ``'auto'``.
         thermal_max_order: highest polynomial order tried (1..3).
         thermal_order_wald: Wald statistic (z^2) an order's coefficient must exceed to be kept (9: 3 sigma).
         min_temperature_span_k: the settled data's temperature must span at least this (K).
@@ -77,7 +78,7 @@ class FitOptions:
     drift_lr_threshold: float = 9.0
     moving_average_length: int = 40
     tc_range_s: Mapping[str, tuple[float, float]] = field(default_factory=dict)
-    thermal: str = "auto"
+    thermal: str = "off"
     thermal_max_order: int = 3
     thermal_order_wald: float = 9.0
     min_temperature_span_k: float = 5.0
