@@ -364,7 +364,7 @@ def test_compensation_mapping_names_parameter_fields() -> None:
 
 def test_sensor_streams_layout2_corrected_output_at_its_temperature(unit: tuple) -> None:
     """The sensor core hands the firmware each chunk's temperature column (CORRECTED output of a layout-2 unit)."""
-    sensor, client, fw = unit
+    _sensor, client, fw = unit
     p = _thermal_params(seed=8)
     write_image(client, _image(p, "ST-01"))
     client.power_cycle()

@@ -42,6 +42,15 @@ def _temperature(session: Session, params: ParameterSet) -> np.ndarray | None:
     return session.temp_degc
 
 
+def remove_g_sensitivity(accel: np.ndarray, gyro: np.ndarray, params: ParameterSet) -> np.ndarray:
+    """The gyro's g-sensitivity G out of Algorithm 1's output, as the firmware does: ``w - M_w^-1 G a`` with the
+    corrected specific force ``a``; ``gyro`` itself when G is zero."""
+    g = np.asarray(params.gyro.g_sensitivity, dtype=np.float64)
+    if not np.any(g != 0):
+        return gyro
+    return gyro - accel @ np.linalg.solve(np.asarray(params.gyro.misalignment, dtype=np.float64), g).T
+
+
 def start_index_of(session: Session, params: ParameterSet) -> int:
     """Samples since power-on of the session's first row: round(t_s[0] / T_sampl)."""
     if len(session) == 0:
@@ -62,7 +71,8 @@ def correct_session(session: Session, params: ParameterSet) -> Session:
     round(t_s[0] / T_sampl) with an empty moving-average buffer.
 
     A ``station-params/2`` set with temperature terms corrects each sample at the session's
-    temperature column (line 6' of :mod:`station.correct.streaming`).
+    temperature column (line 6' of :mod:`station.correct.streaming`); a fitted g-sensitivity is
+    removed from the rate as the firmware does (:func:`remove_g_sensitivity`).
 
     Raises:
         FormatError: the parameter set cannot be used (singular M, non-finite b_stat, ...),
@@ -73,6 +83,7 @@ def correct_session(session: Session, params: ParameterSet) -> Session:
     temp = _temperature(session, params)
     accel, gyro = correct_batch(session.accel_mps2, session.gyro_radps, params, start_index_of(session, params),
                                 temp_degc=temp)
+    gyro = remove_g_sensitivity(accel, gyro, params)
     metadata = {**session.metadata, "corrected": "algorithm1", "params_serial": params.serial}
     return session.replace(metadata=metadata, accel_mps2=accel, gyro_radps=gyro)
 
