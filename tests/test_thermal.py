@@ -34,6 +34,7 @@ from station.physics.effects import Effects
 from station.physics.unit import draw_unit
 from station.sensor import Sensor, open_sensor
 from station.session.csv_v1 import format_session
+from station.session.model import Kind
 from station.sim.eeprom import Eeprom
 from station.sim.fakes import FakeSensorDevice, publish
 from station.sim.firmware import CalibrationFirmware, install_firmware
@@ -407,3 +408,19 @@ def test_thermal_limits_in_the_limits_file(plateau_fit: tuple) -> None:
     res = simulate_session(3, plan=PLAN)
     plain = fit_session(res.session, AUTO)
     assert not [m for m in check_limits(plain, lim.product) if "temp_" in m.name]  # not fitted: not checked
+
+
+def test_station_correct_removes_g_sensitivity_like_the_firmware() -> None:
+    res = simulate_session(9, plan=PLAN, effects=Effects(g_sensitivity=0.05))  # 0.025-0.05 deg/s per g
+    p = fit_session(res.session, FitOptions(g_sensitivity=True))
+    assert np.any(p.gyro.g_sensitivity != 0)
+    out = correct_session(res.session, p)
+    a, w = correct_batch(res.session.accel_mps2, res.session.gyro_radps, p)
+    np.testing.assert_allclose(out.gyro_radps, w - a @ np.linalg.solve(p.gyro.misalignment, p.gyro.g_sensitivity).T,
+                               rtol=0, atol=1e-15)
+    poses = res.session.segments_of(Kind.POSE)  # true rate 0 (no Earth rate simulated), +-g along each axis
+
+    def worst(x: np.ndarray) -> float:
+        return max(float(np.abs(x[s.start + (s.stop - s.start) // 2:s.stop].mean(0)).max()) for s in poses)
+
+    assert worst(out.gyro_radps) < 0.5 * worst(w)
