@@ -424,3 +424,21 @@ def test_station_correct_removes_g_sensitivity_like_the_firmware() -> None:
         return max(float(np.abs(x[s.start + (s.stop - s.start) // 2:s.stop].mean(0)).max()) for s in poses)
 
     assert worst(out.gyro_radps) < 0.5 * worst(w)
+
+
+def test_order_chosen_by_the_data(plateau_fit: tuple) -> None:
+    """A quadratic temperature bias added to one gyro axis (and a cubic to one accel axis) is found at its order."""
+    res, _ = plateau_fit
+    s = res.session
+    dt = s.temp_degc - 25.0
+    c2 = np.radians(4e-4)  # deg/s/K^2: 0.16 deg/s at 20 K
+    c3 = 2e-6  # m/s^2/K^3: 0.016 m/s^2 at 20 K
+    gyro = s.gyro_radps.copy()
+    gyro[:, 1] += c2 * dt**2
+    accel = s.accel_mps2.copy()
+    accel[:, 2] += c3 * dt**3
+    p = fit_session(s.replace(gyro_radps=gyro, accel_mps2=accel), AUTO)
+    assert p.thermal.orders["gyro"]["bias"][1] == 2 and p.thermal.orders["accel"]["bias"][2] == 3
+    assert abs(p.gyro.temp_bias_coeff[1, 1] - c2) < 4 * p.gyro.temp_bias_coeff_std[1, 1]
+    assert abs(p.accel.temp_bias_coeff[2, 2] - c3) < 4 * p.accel.temp_bias_coeff_std[2, 2]
+    assert "Wald" in p.thermal.rule
