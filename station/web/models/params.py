@@ -1,4 +1,4 @@
-"""A fitted parameter set (``station-params/1``, see :mod:`station.fit.params`) in the JSON API.
+"""A fitted parameter set (``station-params/2``, see :mod:`station.fit.params`) in the JSON API.
 
 SI units: accelerometer quantities in m/s^2, gyroscope quantities in rad/s, times in s. An
 estimate the recording could not resolve is null. Vectors are per axis (x, y, z); matrices
@@ -55,15 +55,38 @@ class TriadCalibration(BaseModel):
     g_sensitivity: Matrix3 = Field(description="gyro output per unit specific force (rad/s per m/s^2); zeros for "
                                                "the accelerometer or when not fitted")
     g_sensitivity_std: Matrix3 = _std("g_sensitivity")
+    temp_bias_coeff: Matrix3 = Field(description="temperature coefficients of the bias, row = axis, column = order "
+                                                 "1..3 (unit/K^order)" + _U + "; zeros where not fitted")
+    temp_bias_coeff_std: Matrix3 = _std("temp_bias_coeff")
+    temp_scale_coeff: Matrix3 = Field(description="temperature coefficients of the scale factor, row = axis, column = "
+                                                  "order 1..3 (1/K^order); zeros where not fitted")
+    temp_scale_coeff_std: Matrix3 = _std("temp_scale_coeff")
+    scale_nonlinearity: Vector3 = Field(description="k of u + k u|u| per axis (1/unit); zeros where not fitted")
+    scale_nonlinearity_std: Vector3 = _std("scale_nonlinearity")
+
+
+class ThermalNote(BaseModel):
+    """Whether and how the temperature terms were fitted."""
+
+    status: str = Field(description="fitted, not_separable, no_temperature, disabled or absent")
+    reason: str = Field(description="why not, for people")
+    span_k: float | None = Field(description="temperature span of the settled data (K)")
+    independent_k: float | None = Field(description="RMS of the temperature course not explained by a warm-up "
+                                                    "shape (K)")
+    orders: dict[str, dict[str, list[int]]] = Field(description="per triad and term (bias, scale), the order per axis")
+    rule: str = Field(description="how the orders were chosen")
 
 
 class CalibrationParameters(BaseModel):
-    """Everything Algorithm 1 and the station need about one calibrated unit (format ``station-params/1``)."""
+    """Everything Algorithm 1 and the station need about one calibrated unit (format ``station-params/2``)."""
 
-    format: str = Field(description="the parameter set's format, 'station-params/1'")
+    format: str = Field(description="the parameter set's format, 'station-params/2'")
     serial: str = Field(description="the unit's serial number")
     sample_period_s: float = Field(description="T_sampl of Algorithm 1 (s)")
     moving_average_length: int = Field(description="n of the one-sided moving average, eq. (6) (samples)")
+    reference_temperature_degc: float | None = Field(description="T_ref of the temperature terms (degC); null: none")
+    time_offset_s: float = Field(description="the unit's sample time minus the rig's (s); 0 when not fitted")
+    thermal: ThermalNote = Field(description="whether the temperature terms were fitted, and why not")
     accel: TriadCalibration = Field(description="accelerometer triad (m/s^2)")
     gyro: TriadCalibration = Field(description="gyroscope triad (rad/s)")
     quality: dict[str, Any] = Field(description="fit-quality figures (residual RMS per axis and per segment, ...); "
@@ -71,4 +94,4 @@ class CalibrationParameters(BaseModel):
     source: dict[str, Any] = Field(description="where the parameters came from (software version, samples, ...)")
 
 
-__all__ = ["AllanNoise", "CalibrationParameters", "Matrix3", "TriadCalibration", "Vector3"]
+__all__ = ["AllanNoise", "CalibrationParameters", "Matrix3", "ThermalNote", "TriadCalibration", "Vector3"]
