@@ -204,7 +204,8 @@ class Recorder:
         message = "" if verification is None else verification.describe()
         record_eeprom_write(
             self.db, write.serial, write.sha256, attempts=write.attempts, read_back_ok=True, verified_on_rig=on_rig,
-            image=write.data or None, run_id=run_id, slot=record.slot, layout_version=1,  # type: ignore[attr-defined]
+            image=write.data or None, run_id=run_id, slot=record.slot,  # type: ignore[attr-defined]
+            layout_version=write.image.layout_version,
             message=message,
         )
 
