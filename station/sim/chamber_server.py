@@ -222,12 +222,12 @@ class ChamberModel:
                 return ExcCodes.ILLEGAL_VALUE
             sp = reg.regs_to_float32(image[HR.SETPOINT : HR.SETPOINT + 2])
             ramp = reg.regs_to_float32(image[HR.RAMP_RATE : HR.RAMP_RATE + 2])
-            if HR.SETPOINT in written or HR.SETPOINT + 1 in written:
-                if not (math.isfinite(sp) and self.min_temp_degc <= sp <= self.max_temp_degc):
-                    return ExcCodes.ILLEGAL_VALUE
-            if HR.RAMP_RATE in written or HR.RAMP_RATE + 1 in written:
-                if not (math.isfinite(ramp) and ramp >= 0):
-                    return ExcCodes.ILLEGAL_VALUE
+            sp_written = HR.SETPOINT in written or HR.SETPOINT + 1 in written
+            if sp_written and not (math.isfinite(sp) and self.min_temp_degc <= sp <= self.max_temp_degc):
+                return ExcCodes.ILLEGAL_VALUE
+            ramp_written = HR.RAMP_RATE in written or HR.RAMP_RATE + 1 in written
+            if ramp_written and not (math.isfinite(ramp) and ramp >= 0):
+                return ExcCodes.ILLEGAL_VALUE
             self.holding = image
             if sp != self.setpoint_degc or ramp != self.ramp_k_per_min:
                 if self.ramp_k_per_min == 0 and ramp > 0:
