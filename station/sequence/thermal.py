@@ -31,7 +31,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from station.chamber.protocol import Chamber, ChamberError
+from station.chamber.protocol import Chamber, ChamberError, ChamberSetpointTimeout
 from station.chamber.registers import AlarmCode
 from station.kernel.errors import HardwareError, StationError, UnitRejected
 from station.kernel.measurement import Measurement
@@ -350,9 +350,8 @@ class ThermalRunner(SequenceRunner):
                                                                                          "setpoint_tol_k", 0.5):
                 return report
             if self.clock.now() > deadline:
-                # the chamber's own wait raises the right error (ChamberSetpointTimeout) with its state
-                self.chamber.wait_at_setpoint(0.0)
-                return report
+                raise ChamberSetpointTimeout(f"chamber did not reach {item.degc:g} degC within "
+                                             f"{self.thermal.setpoint_timeout_s:g} s: {st.describe()}", st)
             if fx.abort.is_set():
                 raise KeyboardInterrupt
             _check_rig(fx.rig)
@@ -404,15 +403,16 @@ class ThermalRunner(SequenceRunner):
         self.chamber.set_setpoint(item.to_degc, item.k_per_min)
         self.chamber.run()
         ramp_s = abs(item.to_degc - item.from_degc) / item.k_per_min * 60.0
-        deadline = self.clock.now() + ramp_s + self.thermal.setpoint_timeout_s
+        t_ramp0 = self.clock.now()
+        deadline = t_ramp0 + ramp_s + self.thermal.setpoint_timeout_s
         k = 0
         while fx.active:
             st = self.chamber.check()
             if st.at_setpoint and st.running:
                 return
             if self.clock.now() > deadline:
-                self.chamber.wait_at_setpoint(0.0)  # raises ChamberSetpointTimeout
-                return
+                raise ChamberSetpointTimeout(f"chamber ramp did not reach {item.to_degc:g} degC within "
+                                             f"{deadline - t_ramp0:.0f} s: {st.describe()}", st)
             if not item.cycle:
                 self.clock.sleep(self.thermal.soak_poll_s)
                 continue

@@ -53,22 +53,34 @@ def simulate(
 
 def demo(
     units: Annotated[int, typer.Option(min=1, max=64, help="units in the fixture")] = 4,
-    scale: Annotated[float, typer.Option(min=0.1, help="simulated seconds per wall second")] = 30.0,
+    scale: Annotated[float | None, typer.Option(min=0.1, help="simulated seconds per wall second "
+                                                "(default 30, with --thermal 120)")] = None,
     seed: Annotated[int, typer.Option(min=0, max=2**63 - 1, help="seed: the same seed gives the same units")] = 0,
     out: Annotated[Path, typer.Option(help="directory for session CSVs and parameter JSONs")] = Path("demo-out"),
     db: DbOption = None,
     limits: Annotated[Path | None, typer.Option("--limits", help="limits file (default: fixtures/limits/default.toml)")]
     = None,
+    thermal: Annotated[bool, typer.Option("--thermal", help="thermal calibration in a simulated climate chamber: "
+                                          "plateaus at 5/25/45 degC, verification at 35 degC; the last unit has "
+                                          "no temperature effects (the reference)")] = False,
 ) -> None:
     """Simulated rig + N sensors, the whole sequence, fit, limits, summary: the station end to end.
+
+    With ``--thermal`` a simulated climate chamber (Modbus/TCP) joins: the units carry temperature bias and
+    scale coefficients, are calibrated at three temperatures and verified at a fourth, and a table compares
+    the corrected errors there with and without the thermal model.
 
     Exit code: 0 all PASS, 1 a unit FAILed, 2 ERROR (station fault), 3 a unit REFUSED by the retest
     policy, 4 a unit to RETEST (inconclusive verdict), 130 ABORTED (Ctrl-C, SIGTERM, SIGHUP).
     """
-    from station.sim.demo import run_demo
+    from station.sim.demo import DEMO_SCALE, THERMAL_SCALE, run_demo, run_thermal_demo
 
     try:
-        result = run_demo(units, scale, seed, out, db_url=db, record=True, limits_path=limits)
+        if thermal:
+            result, _ = run_thermal_demo(units, scale or THERMAL_SCALE, seed, out, db_url=db, record=True,
+                                         limits_path=limits)
+        else:
+            result = run_demo(units, scale or DEMO_SCALE, seed, out, db_url=db, record=True, limits_path=limits)
     except StationError as exc:
         raise fail(exc) from None
     raise typer.Exit(result.outcome.exit_code)

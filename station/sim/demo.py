@@ -26,7 +26,6 @@ from typing import Any
 
 import numpy as np
 from rich.console import Console
-from rich.table import Table
 
 from station.compose import Station, StationConfig
 from station.fit.calibrate import FitOptions
@@ -169,6 +168,29 @@ def check_errors(session: Any, params: Any, skip_s: float = 1.5) -> CheckErrors:
     return CheckErrors(acc, gyr, rel)
 
 
+def target_lines(errors: dict[tuple[int, str], CheckErrors]) -> list[str]:
+    """The issue's targets per unit with temperature effects: corrected errors with the thermal model within
+    2x of the reference unit's (no temperature effects) and at least 10x better than without the model."""
+    refs = [e for (_, label), e in errors.items() if label == "reference"]
+    if not refs:
+        return ["no reference unit: the targets cannot be judged"]
+    ref = refs[0]
+    out = []
+    for slot in sorted({s for s, label in errors if label != "reference"}):
+        wo, th = errors.get((slot, "without")), errors.get((slot, "thermal model"))
+        parts = []
+        for name, attr in (("pose accel", "pose_accel_mps2"), ("pose gyro", "pose_gyro_radps"),
+                           ("rate step", "rate_rel")):
+            r0 = getattr(ref, attr)
+            text = f"{name}: without/reference {getattr(wo, attr) / r0:.1f}x" if wo is not None else name
+            if th is not None:
+                text += (f", thermal/reference {getattr(th, attr) / r0:.2f}x (target <= 2), without/thermal "
+                         f"{getattr(wo, attr) / getattr(th, attr):.1f}x (target >= 10)" if wo is not None else "")
+            parts.append(text)
+        out.append(f"slot {slot}: " + "; ".join(parts))
+    return out
+
+
 def _without_thermal(options: FitOptions) -> FitOptions | None:
     """The fit's options with its thermal model switched off, if the fit has such a switch."""
     names = {f.name for f in fields(FitOptions)}
@@ -233,42 +255,48 @@ def run_thermal_demo(
             f"cycle time per batch of {t.units}: {t.cycle_s / 60:.1f} min (sequence incl. soaks "
             f"{t.sequence_s / 60:.1f} min, fits {t.fit_wall_s:.1f} s, verification at {runner.verify_degc:g} degC "
             f"{t.verify_s / 60:.1f} min, chamber back to ambient {t.ambient_s / 60:.1f} min); "
-            f"{t.per_unit_s / 60:.1f} min per unit"
+            f"{t.per_unit_s / 60:.1f} min per unit", soft_wrap=True
         )
-    table = Table(title=f"corrected errors at {runner.verify_degc:g} degC (a temperature the fit did not use)")
-    for col in ("slot", "serial", "temp. coefficients", "model", "pose accel (mg)", "pose gyro (deg/s)",
-                "rate step (% of rate)", "on-rig verify"):
-        table.add_column(col)
+    header = (f"{'slot':>4}  {'serial':<11} {'tempco: accel mg/K, gyro deg/s/K, scale ppm/K':<46} {'model':<14}"
+              f"{'pose accel mg':>14} {'pose gyro deg/s':>16} {'rate step % of rate':>20}  on-rig verify")
+    lines = [f"corrected errors at {runner.verify_degc:g} degC, a temperature the fit did not use (Algorithm 1 "
+             f"over the raw check recording; on-rig verify: the unit's own corrected output after writing)", header,
+             "-" * len(header)]
+    errors: dict[tuple[int, str], CheckErrors] = {}
     off = _without_thermal(station.fit_options)
     for r in result.units:
         session = runner.check_sessions.get(r.slot)
         eff, truth = shapes[r.slot]
         realized = eff.realize(truth.shapes)
-        coeff = (f"{np.max(np.abs(realized.accel_temp_bias)) / 9.80665e-3:.2f} mg/K, "
-                 f"{np.degrees(np.max(np.abs(realized.gyro_temp_bias))):.4f} deg/s/K, "
-                 f"{1e6 * np.max(np.abs(realized.gyro_temp_scale)):.0f} ppm/K") if eff.temperature_bias else "none"
+        coeff = (f"{np.max(np.abs(realized.accel_temp_bias)) / 9.80665e-3:.2f}, "
+                 f"{np.degrees(np.max(np.abs(realized.gyro_temp_bias))):.4f}, "
+                 f"{1e6 * np.max(np.abs(realized.gyro_temp_scale)):.0f} (largest axis)") if eff.temperature_bias \
+            else "none (reference unit)"
         verify = runner.verification.get(r.slot)
-        verdict = ("PASS" if verify.passed else "FAIL") if verify is not None else r.outcome.value
-        rows: list[tuple[str, Any]] = []
+        verdict = (("PASS" if verify.passed else "FAIL") + f" ({r.outcome.value})") if verify is not None \
+            else f"not written ({r.outcome.value})"
+        rows: list[tuple[str, Any]] = [("-", None)]
         if session is not None and r.params is not None:
             if off is None:
                 rows = [("thermal model", None), ("without", r.params)]
             else:
                 without = fit_session(r.session, off) if r.session is not None else None
                 rows = [("thermal model", r.params), ("without", without)]
-        else:
-            rows = [("-", None)]
         for k, (label, params) in enumerate(rows):
             if params is None:
-                cells = ["n/a (awaits the thermal fit)" if label == "thermal model" else "-", "", ""]
+                cells = f"{'awaits the thermal fit' if label == 'thermal model' else '-':>52}"
             else:
                 e = check_errors(session, params)
-                cells = [f"{e.pose_accel_mps2 / 9.80665e-3:.3f}", f"{np.degrees(e.pose_gyro_radps):.4f}",
-                         f"{100 * e.rate_rel:.4f}"]
+                errors[(r.slot, label if eff.temperature_bias else "reference")] = e
+                cells = (f"{e.pose_accel_mps2 / 9.80665e-3:>14.3f} {np.degrees(e.pose_gyro_radps):>16.4f} "
+                         f"{100 * e.rate_rel:>20.4f}")
             first = k == 0
-            table.add_row(str(r.slot) if first else "", r.serial if first else "", coeff if first else "", label,
-                          *cells, verdict if first else "")
-    console.print(table)
+            lines.append(f"{r.slot if first else '':>4}  {r.serial if first else '':<11} {coeff if first else '':<46} "
+                         f"{label:<14}{cells}  {verdict if first else ''}")
+    for line in lines:
+        console.print(line, markup=False, highlight=False, soft_wrap=True)
+    for line in target_lines(errors):
+        console.print(line, markup=False, highlight=False, soft_wrap=True)
     console.print(f"demo finished in {time.monotonic() - wall0:.1f} s wall time")
     return result, runner
 
