@@ -192,12 +192,17 @@ def target_lines(errors: dict[tuple[int, str], CheckErrors]) -> list[str]:
 
 
 def _without_thermal(options: FitOptions) -> FitOptions | None:
-    """The fit's options with its thermal model switched off, if the fit has such a switch."""
+    """The fit's options with its thermal model switched off (None: the fit has no thermal model)."""
     names = {f.name for f in fields(FitOptions)}
-    for name, off in (("thermal", False), ("temperature_model", "off"), ("thermal_model", False)):
-        if name in names:
-            return replace(options, **{name: off})
-    return None
+    return replace(options, thermal="off") if "thermal" in names else None  # type: ignore[call-arg]
+
+
+def _thermal_note(params: Any) -> tuple[bool, str]:
+    """(the parameter set carries fitted temperature terms, why not)."""
+    note = getattr(params, "thermal", None)
+    if note is None:
+        return False, "the fit has no thermal model"
+    return bool(getattr(note, "fitted", False)), f"{note.status}: {note.reason}"
 
 
 def run_thermal_demo(
@@ -276,15 +281,17 @@ def run_thermal_demo(
         verdict = (("PASS" if verify.passed else "FAIL") + f" ({r.outcome.value})") if verify is not None \
             else f"not written ({r.outcome.value})"
         rows: list[tuple[str, Any]] = [("-", None)]
+        why = "awaits the thermal fit"
         if session is not None and r.params is not None:
-            if off is None:
+            fitted, why = _thermal_note(r.params)
+            if off is None or not fitted:
                 rows = [("thermal model", None), ("without", r.params)]
             else:
                 without = fit_session(r.session, off) if r.session is not None else None
                 rows = [("thermal model", r.params), ("without", without)]
         for k, (label, params) in enumerate(rows):
             if params is None:
-                cells = f"{'awaits the thermal fit' if label == 'thermal model' else '-':>52}"
+                cells = "  " + (f"not fitted ({why})"[:60] if label == "thermal model" else "-")
             else:
                 e = check_errors(session, params)
                 errors[(r.slot, label if eff.temperature_bias else "reference")] = e
