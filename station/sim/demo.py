@@ -202,7 +202,9 @@ def _thermal_note(params: Any) -> tuple[bool, str]:
     note = getattr(params, "thermal", None)
     if note is None:
         return False, "the fit has no thermal model"
-    return bool(getattr(note, "fitted", False)), f"{note.status}: {note.reason}"
+    if note.reason:
+        return bool(getattr(note, "fitted", False)), f"{note.status}: {note.reason}"
+    return bool(getattr(note, "fitted", False)), f"status {note.status}; awaits the thermal fit"
 
 
 def run_thermal_demo(
