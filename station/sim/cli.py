@@ -91,6 +91,8 @@ def sim(
     scale: Annotated[float, typer.Option(min=0.1, help="simulated seconds per wall second")] = 1.0,
     seed: Annotated[int, typer.Option(min=0, max=2**63 - 1, help="seed: the same seed gives the same units")] = 0,
     port: Annotated[int, typer.Option(min=0, max=65535, help="Modbus/TCP port of the rig (0: a free port)")] = 0,
+    chamber: Annotated[bool, typer.Option("--chamber", help="also serve a simulated climate chamber (Modbus/TCP "
+                                          "on a free port); the units' temperature follows it")] = False,
 ) -> None:
     """Start a simulated rig and sensors, print their URLs, run until Ctrl-C (or SIGTERM).
 
@@ -106,11 +108,13 @@ def sim(
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
 
-    with SimStation(units, scale, seed, port=port) as station:
+    with SimStation(units, scale, seed, port=port, chamber={} if chamber else None) as station:
         for unit in station.units:
             install_firmware(unit.sensor, station.clock)
         sys.stdout.flush()
         typer.echo(f"rig: {station.rig_url}")
+        if station.chamber is not None:
+            typer.echo(f"chamber: {station.chamber_url}")
         for unit in station.units:
             typer.echo(f"sensor {unit.slot}: {unit.sensor.url} (serial {unit.truth.serial})")
         args = " ".join(f"--sensor {u}" for u in station.sensor_urls)
