@@ -283,7 +283,7 @@ def run_station(
     db: DbOption = None,
     operator: Annotated[str | None, typer.Option(help="operator name for the records")] = None,
     chamber: Annotated[str | None, typer.Option("--chamber", help="climate chamber URL (modbus-tcp://HOST:PORT): "
-                                                "run the thermal plan (plateaus 5/25/45 degC, verification at "
+                                                "run the thermal plan (plateaus 5/15/25/45 degC, verification at "
                                                 "35 degC) instead of the room-temperature sequence")] = None,
 ) -> None:
     """Run the calibration sequence against any rig and sensors (real ones, or `station sim`).

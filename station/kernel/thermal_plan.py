@@ -135,10 +135,11 @@ class ThermalPlan:
 
 
 def default_thermal_plan() -> ThermalPlan:
-    """Three plateaus (5, 25, 45 degC), all poses and +-100 deg/s about each axis, verified at 35 degC."""
+    """Four plateaus (5, 15, 25, 45 degC: a cubic in the temperature stays checked), all poses and +-100 deg/s
+    about each axis, verified at 35 degC."""
     steps = tuple((axis, sign * 100.0) for axis in "xyz" for sign in (1.0, -1.0))
     return ThermalPlan(base=RigPlan(sample_rate_hz=50.0, rest_s=300.0, pose_hold_s=20.0, rate_hold_s=10.0),
-                       rate_steps=steps)
+                       plateaus_degc=(5.0, 15.0, 25.0, 45.0), rate_steps=steps)
 
 
 __all__ = ["THERMAL_MODES", "ThermalPlan", "default_thermal_plan"]

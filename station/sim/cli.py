@@ -61,13 +61,13 @@ def demo(
     limits: Annotated[Path | None, typer.Option("--limits", help="limits file (default: fixtures/limits/default.toml)")]
     = None,
     thermal: Annotated[bool, typer.Option("--thermal", help="thermal calibration in a simulated climate chamber: "
-                                          "plateaus at 5/25/45 degC, verification at 35 degC; the last unit has "
+                                          "plateaus at 5/15/25/45 degC, verification at 35 degC; the last unit has "
                                           "no temperature effects (the reference)")] = False,
 ) -> None:
     """Simulated rig + N sensors, the whole sequence, fit, limits, summary: the station end to end.
 
     With ``--thermal`` a simulated climate chamber (Modbus/TCP) joins: the units carry temperature bias and
-    scale coefficients, are calibrated at three temperatures and verified at a fourth, and a table compares
+    scale coefficients, are calibrated at four temperatures and verified at a fifth, and a table compares
     the corrected errors there with and without the thermal model.
 
     Exit code: 0 all PASS, 1 a unit FAILed, 2 ERROR (station fault), 3 a unit REFUSED by the retest

@@ -125,11 +125,12 @@ THERMAL_EFFECTS = Effects(temperature_bias=0.005, temperature_scale=200.0)
 
 
 def thermal_demo_plan() -> ThermalPlan:
-    """Plateaus at 5, 25, 45 degC (six poses, +-100 deg/s about each axis), a raw check and the verification
-    at 35 degC, 50 Hz."""
+    """Plateaus at 5, 15, 25, 45 degC (six poses, +-100 deg/s about each axis), a raw check and the
+    verification at 35 degC, 50 Hz. Four temperatures: the fit chooses polynomial orders up to 3 per axis, which
+    three plateaus leave no freedom to check."""
     base = RigPlan(sample_rate_hz=50.0, rest_s=300.0, pose_hold_s=20.0, rate_hold_s=10.0, settle_s=1.0)
     steps = tuple((axis, sign * 100.0) for axis in "xyz" for sign in (1.0, -1.0))
-    return ThermalPlan(base=base, plateaus_degc=(5.0, 25.0, 45.0), rate_steps=steps, verify_degc=35.0,
+    return ThermalPlan(base=base, plateaus_degc=(5.0, 15.0, 25.0, 45.0), rate_steps=steps, verify_degc=35.0,
                        raw_check=True, soak_rate_k_per_min=0.1, soak_window_s=120.0, soak_poll_s=20.0)
 
 
