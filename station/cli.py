@@ -303,8 +303,15 @@ def run_station(
     name: Annotated[str | None, typer.Option("--station", help="station id for the records and images")] = None,
     db: DbOption = None,
     operator: Annotated[str | None, typer.Option(help="operator name for the records")] = None,
+    chamber: Annotated[str | None, typer.Option("--chamber", help="climate chamber URL (modbus-tcp://HOST:PORT): "
+                                                "run the thermal plan (plateaus 5/15/25/45 degC, verification at "
+                                                "35 degC) instead of the room-temperature sequence")] = None,
 ) -> None:
     """Run the calibration sequence against any rig and sensors (real ones, or `station sim`).
+
+    With ``--chamber`` the thermal plan runs in that climate chamber (``station sim --chamber`` serves one):
+    soaks gated on the units' own temperatures, the poses and rate steps at every plateau, the corrected
+    output verified at a temperature the fit did not use, the chamber back to ambient at the end.
 
     Every passing unit is provisioned: its image is written, read back, and its corrected output
     verified on the rig. One run per rig: a second run on a held rig is refused before it touches
@@ -319,19 +326,24 @@ def run_station(
 
     from station.compose import Station, abort_on_signals
     from station.kernel.plan import default_plan
+    from station.kernel.thermal_plan import default_thermal_plan
     from station.sequence.runner import SequenceRunner
     from station.terminal import ProgressDisplay, summary_table
 
-    plan = default_plan()
+    thermal = default_thermal_plan() if chamber else None
+    plan = thermal.base if thermal is not None else default_plan()
     if gravity is not None:
         plan = replace(plan, gravity_mps2=gravity)
     if latitude is not None:
         plan = replace(plan, latitude_deg=latitude)
+    if thermal is not None:
+        thermal = replace(thermal, base=plan)
     runners: list[SequenceRunner] = []
     console = Console()
     try:
         cfg = station_config(config, rig, sensor, station_id=name, db_url=db, out_dir=out, clock_scale=scale,
-                             plan=plan, operator=operator, limits_path=limits, provision=True)
+                             plan=plan, operator=operator, limits_path=limits, provision=True,
+                             chamber_url=chamber, thermal=thermal)
         display = ProgressDisplay(console, list(cfg.sensor_urls), cfg.clock_scale)
         with abort_on_signals(lambda: runners[-1] if runners else None):
             station = Station(cfg, subscribers=[display])
@@ -349,6 +361,12 @@ def run_station(
         from station.terminal import provisioning_table
 
         console.print(provisioning_table(station.provisioner))
+    timing = getattr(runners[-1], "timing", None) if runners else None
+    if timing is not None:
+        console.print(f"cycle time per batch of {timing.units}: {timing.cycle_s / 60:.1f} min (sequence incl. soaks "
+                      f"{timing.sequence_s / 60:.1f} min, fits {timing.fit_wall_s:.1f} s, verification "
+                      f"{timing.verify_s / 60:.1f} min, chamber back to ambient {timing.ambient_s / 60:.1f} min)",
+                      soft_wrap=True)
     raise typer.Exit(result.outcome.exit_code)
 
 

@@ -25,11 +25,13 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from station.chamber import chamber_client_options, open_chamber
 from station.fit.calibrate import FitOptions
 from station.kernel.clock import Clock, SimClock, WallClock
 from station.kernel.errors import StationError
 from station.kernel.limits_file import LimitsFile, load_limits
 from station.kernel.plan import RigPlan, default_plan
+from station.kernel.thermal_plan import ThermalPlan
 from station.rig import open_rig, rig_client_options
 from station.rig.protocol import Rig, RigIdentity
 from station.rig_lock import RigLock
@@ -40,6 +42,7 @@ from station.sequence.provision import EepromProvisioner, ProvisionRecord
 from station.sequence.records import Record
 from station.sequence.runner import RunResult, SequenceRunner
 from station.sequence.steps import plan_steps
+from station.sequence.thermal import ThermalRunner
 from station.sequence.verify import RigVerifier
 
 if TYPE_CHECKING:  # the database code loads only when a station records
@@ -74,6 +77,11 @@ class StationConfig:
         provision: write each PASS unit's image, read it back, verify the corrected output on the rig.
         rig_options: keyword arguments of the rig's opener (None: :func:`~station.rig.rig_client_options`
             for ``clock_scale``); sensor_options: of the sensor's opener.
+        chamber_url: the climate chamber (``modbus-tcp://HOST:PORT``, any scheme of ``CHAMBERS``); needed
+            by a thermal plan. chamber_options: keyword arguments of its opener (None:
+            :func:`~station.chamber.chamber_client_options` for ``clock_scale``).
+        thermal: run this thermal plan (its ``base`` becomes ``plan``) in the chamber instead of the plain
+            sequence; with ``provision`` the corrected output is verified at its ``verify_degc``.
     """
 
     rig_url: str
@@ -89,9 +97,16 @@ class StationConfig:
     provision: bool = False
     rig_options: Mapping[str, Any] | None = None
     sensor_options: Mapping[str, Any] | None = None
+    chamber_url: str | None = None
+    chamber_options: Mapping[str, Any] | None = None
+    thermal: ThermalPlan | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "sensor_urls", tuple(self.sensor_urls))
+        if self.thermal is not None:
+            object.__setattr__(self, "plan", self.thermal.base)
+            if not self.chamber_url:
+                raise ConfigError("a thermal plan needs a chamber URL")
         sid = self.station_id
         if not (isinstance(sid, str) and 1 <= len(sid) <= 16 and sid.isascii() and sid.isprintable()):
             raise ConfigError(f"station id {sid!r}: 1 to 16 printable ASCII characters (it is written into images)")
@@ -361,6 +376,22 @@ class Station:
                                sample_rate_hz=int(plan.sample_rate_hz), options=self.options)
         return EepromProvisioner(self.config.station_id, verifier=verifier, on_record=self.on_provision)
 
+    def _verifier(self, hw: Hardware) -> RigVerifier:
+        plan = self.config.plan
+        return RigVerifier(hw.rig, self.clock, self.limits.verification, gravity_mps2=plan.gravity_mps2,
+                           sample_rate_hz=int(plan.sample_rate_hz), options=self.options)
+
+    def _thermal_runner(self, hw: Hardware, chamber: Any) -> ThermalRunner:
+        c = self.config
+        assert c.thermal is not None
+        self.provisioner = (EepromProvisioner(c.station_id, on_record=self.on_provision) if c.provision else None)
+        return ThermalRunner(
+            hw.rig, hw.sensors, self.clock, chamber, c.thermal, verifier=self._verifier(hw) if c.provision else None,
+            options=self.options, limits=self.limits.product, out_dir=c.out_dir, station=c.station_id,
+            rig_name=hw.rig_name, sensor_urls=list(c.sensor_urls), subscribers=self.subscribers,
+            provisioner=self.provisioner, admit=self.admit, fit_options=self.fit_options,
+        )
+
     def run(self, on_runner: Callable[[SequenceRunner], None] | None = None, operator: str | None = None) -> RunResult:
         """Take the rig, open the hardware, run the sequence once, close everything; the run's result.
 
@@ -377,6 +408,18 @@ class Station:
         with RigLock(c.rig_url, c.station_id, db), open_hardware(
             c.rig_url, c.sensor_urls, self.clock, rig_options=self._rig_options(), sensor_options=c.sensor_options
         ) as hw:
+            if c.thermal is not None:
+                assert c.chamber_url is not None
+                options = c.chamber_options if c.chamber_options is not None else chamber_client_options(
+                    self.clock.scale)
+                chamber = open_chamber(c.chamber_url, self.clock, **dict(options))
+                try:
+                    runner: SequenceRunner = self._thermal_runner(hw, chamber)
+                    if on_runner is not None:
+                        on_runner(runner)
+                    return runner.run()
+                finally:
+                    chamber.close()
             self.provisioner = self._provisioner(hw)
             runner = SequenceRunner(
                 hw.rig, hw.sensors, self.clock, plan=c.plan, options=self.options, limits=self.limits.product,

@@ -31,22 +31,23 @@ ALLOWED: dict[str, set[str]] = {
     "diagnose": {"kernel", "session", "fit", "correct", "physics"},
     # hardware behind protocols, selected by URL scheme
     "rig": {"kernel"},
+    "chamber": {"kernel"},
     "sensor": {"kernel"},
     "eeprom": {"kernel", "fit", "sensor"},
     # the sequence: steps, runner, records, limits, gates, provisioning, on-rig verification
-    "sequence": {"kernel", "session", "fit", "correct", "rig", "sensor", "eeprom"},
+    "sequence": {"kernel", "session", "fit", "correct", "rig", "chamber", "sensor", "eeprom"},
     # subscribers to the records
     "store": {"kernel", "fit", "eeprom", "sequence"},
     "terminal": {"kernel", "fit", "sequence"},
     "web": NUMERICS | {"eeprom", "sequence", "store"},
     # the composition root, its one-run-per-rig lock, and the command line
     "rig_lock": {"kernel", "store"},
-    "compose": {"kernel", "session", "fit", "rig", "sensor", "sequence", "store", "rig_lock"},
-    "commands": NUMERICS | {"rig", "sensor", "eeprom", "sequence", "store", "compose", "rig_lock"},
-    "cli": NUMERICS | {"rig", "sensor", "eeprom", "sequence", "store", "terminal", "web", "compose", "commands",
-                       "rig_lock"},
+    "compose": {"kernel", "session", "fit", "rig", "chamber", "sensor", "sequence", "store", "rig_lock"},
+    "commands": NUMERICS | {"rig", "chamber", "sensor", "eeprom", "sequence", "store", "compose", "rig_lock"},
+    "cli": NUMERICS | {"rig", "chamber", "sensor", "eeprom", "sequence", "store", "terminal", "web", "compose",
+                       "commands", "rig_lock"},
     # simulated peers: the kernel, the physics and the wire formats they speak; never the station above
-    "sim": NUMERICS | {"rig", "sensor", "eeprom"},
+    "sim": NUMERICS | {"rig", "chamber", "sensor", "eeprom"},
     "__init__": set(),
 }
 # the simulator's own applications (the demo and its commands) sit on top of everything

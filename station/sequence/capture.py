@@ -201,6 +201,24 @@ class UnitChannel:
         assert self._t_first is not None
         return self._t_first
 
+    def recent_temperature(self, span_s: float) -> tuple[np.ndarray, np.ndarray]:
+        """(sensor time s, temperature degC) of the samples received in the last ``span_s`` (s) of the
+        stream, without assembling the whole record (for soak gates polled over hours)."""
+        if self._t_first is None:
+            return np.zeros(0), np.zeros(0)
+        start = self._t_last - span_s
+        parts: list[SampleBlock] = []
+        for block in reversed(self._blocks):
+            parts.append(block)
+            if len(block) and block.t_s[0] <= start:
+                break
+        else:
+            parts.append(self._all)
+        t = np.concatenate([b.t_s for b in reversed(parts)]) if parts else np.zeros(0)
+        temp = np.concatenate([b.temp_degc for b in reversed(parts)]) if parts else np.zeros(0)
+        keep = t >= start
+        return t[keep], temp[keep]
+
     def samples(self) -> SampleBlock:
         """Every sample received so far, in order."""
         if self._blocks:

@@ -101,19 +101,20 @@ class EepromProvisioner:
         when = run_started_at if run_started_at is not None else self._now()
         return run_image(unit.params, self.station_id, when)
 
-    def provision(
-        self, unit: UnitResult, sensor: Sensor, run_started_at: datetime | None = None
-    ) -> tuple[Measurement, ...] | None:
-        """Write, power-cycle, verify one PASS unit; returns the verification checks (None without verifier).
-
-        Raises a HardwareError subclass when the writing fails (station ERROR) and
-        VerificationFailed (a UnitRejected) when the corrected output misses its limits (unit FAIL).
-        """
+    def write(self, unit: UnitResult, sensor: Sensor, run_started_at: datetime | None = None) -> WriteReport:
+        """Write one PASS unit's image (A/B slots, read back) and power-cycle it so its firmware loads it;
+        raises a HardwareError subclass when the writing fails."""
         image = self.image_for(unit, run_started_at)
         report = write_image(sensor, image, layout=self.layout, max_attempts=self.max_attempts)
         if self.power_cycle:
             sensor.power_cycle(self.boot_timeout_s)
-        result = self.verifier.verify(sensor, report.image) if self.verifier is not None else None
+        return report
+
+    def finish(
+        self, unit: UnitResult, report: WriteReport, result: VerificationResult | None
+    ) -> tuple[Measurement, ...] | None:
+        """Record a written unit's verification (``result``, None: not verified); returns its checks or
+        raises :class:`VerificationFailed` when they are missed."""
         record = ProvisionRecord(report.serial, unit.slot, report, result)
         self.records[report.serial] = record
         if self._on_record is not None:
@@ -124,6 +125,17 @@ class EepromProvisioner:
             return None
         return result.checks
 
+    def provision(
+        self, unit: UnitResult, sensor: Sensor, run_started_at: datetime | None = None
+    ) -> tuple[Measurement, ...] | None:
+        """Write, power-cycle, verify one PASS unit; returns the verification checks (None without verifier).
+
+        Raises a HardwareError subclass when the writing fails (station ERROR) and
+        VerificationFailed (a UnitRejected) when the corrected output misses its limits (unit FAIL).
+        """
+        report = self.write(unit, sensor, run_started_at)
+        result = self.verifier.verify(sensor, report.image) if self.verifier is not None else None
+        return self.finish(unit, report, result)
 
 
 __all__ = ["EepromProvisioner", "ProvisionRecord", "VerificationFailed", "Verifier"]

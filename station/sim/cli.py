@@ -67,22 +67,34 @@ def simulate(
 
 def demo(
     units: Annotated[int, typer.Option(min=1, max=64, help="units in the fixture")] = 4,
-    scale: Annotated[float, typer.Option(min=0.1, help="simulated seconds per wall second")] = 30.0,
+    scale: Annotated[float | None, typer.Option(min=0.1, help="simulated seconds per wall second "
+                                                "(default 30, with --thermal 120)")] = None,
     seed: Annotated[int, typer.Option(min=0, max=2**63 - 1, help="seed: the same seed gives the same units")] = 0,
     out: Annotated[Path, typer.Option(help="directory for session CSVs and parameter JSONs")] = Path("demo-out"),
     db: DbOption = None,
     limits: Annotated[Path | None, typer.Option("--limits", help="limits file (default: fixtures/limits/default.toml)")]
     = None,
+    thermal: Annotated[bool, typer.Option("--thermal", help="thermal calibration in a simulated climate chamber: "
+                                          "plateaus at 5/15/25/45 degC, verification at 35 degC; the last unit has "
+                                          "no temperature effects (the reference)")] = False,
 ) -> None:
     """Simulated rig + N sensors, the whole sequence, fit, limits, summary: the station end to end.
+
+    With ``--thermal`` a simulated climate chamber (Modbus/TCP) joins: the units carry temperature bias and
+    scale coefficients, are calibrated at four temperatures and verified at a fifth, and a table compares
+    the corrected errors there with and without the thermal model.
 
     Exit code: 0 all PASS, 1 a unit FAILed, 2 ERROR (station fault), 3 a unit REFUSED by the retest
     policy, 4 a unit to RETEST (inconclusive verdict), 130 ABORTED (Ctrl-C, SIGTERM, SIGHUP).
     """
-    from station.sim.demo import run_demo
+    from station.sim.demo import DEMO_SCALE, THERMAL_SCALE, run_demo, run_thermal_demo
 
     try:
-        result = run_demo(units, scale, seed, out, db_url=db, record=True, limits_path=limits)
+        if thermal:
+            result, _ = run_thermal_demo(units, scale or THERMAL_SCALE, seed, out, db_url=db, record=True,
+                                         limits_path=limits)
+        else:
+            result = run_demo(units, scale or DEMO_SCALE, seed, out, db_url=db, record=True, limits_path=limits)
     except StationError as exc:
         raise fail(exc) from None
     raise typer.Exit(result.outcome.exit_code)
@@ -93,6 +105,8 @@ def sim(
     scale: Annotated[float, typer.Option(min=0.1, help="simulated seconds per wall second")] = 1.0,
     seed: Annotated[int, typer.Option(min=0, max=2**63 - 1, help="seed: the same seed gives the same units")] = 0,
     port: Annotated[int, typer.Option(min=0, max=65535, help="Modbus/TCP port of the rig (0: a free port)")] = 0,
+    chamber: Annotated[bool, typer.Option("--chamber", help="also serve a simulated climate chamber (Modbus/TCP "
+                                          "on a free port); the units' temperature follows it")] = False,
 ) -> None:
     """Start a simulated rig and sensors, print their URLs, run until Ctrl-C (or SIGTERM).
 
@@ -108,11 +122,13 @@ def sim(
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
 
-    with SimStation(units, scale, seed, port=port) as station:
+    with SimStation(units, scale, seed, port=port, chamber={} if chamber else None) as station:
         for unit in station.units:
             install_firmware(unit.sensor, station.clock)
         sys.stdout.flush()
         typer.echo(f"rig: {station.rig_url}")
+        if station.chamber is not None:
+            typer.echo(f"chamber: {station.chamber_url}")
         for unit in station.units:
             typer.echo(f"sensor {unit.slot}: {unit.sensor.url} (serial {unit.truth.serial})")
         args = " ".join(f"--sensor {u}" for u in station.sensor_urls)

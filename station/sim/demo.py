@@ -20,12 +20,17 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass, fields, replace
 from pathlib import Path
+from typing import Any
 
+import numpy as np
 from rich.console import Console
 
 from station.compose import Station, StationConfig
+from station.fit.calibrate import FitOptions
 from station.kernel.plan import RigPlan, default_plan
+from station.kernel.thermal_plan import ThermalPlan
 from station.physics.effects import Effects
 from station.sequence.options import SequenceOptions
 from station.sequence.provision import ProvisionRecord
@@ -109,4 +114,201 @@ def run_demo(
     return result
 
 
-__all__ = ["DEMO_OUT", "DEMO_SCALE", "DEMO_UNITS", "run_demo"]
+
+
+# --- the thermal demo ---------------------------------------------------------------------------------
+
+THERMAL_SCALE = 120.0
+#: Temperature effects of the demo's units: bias 0.005 m/s^2/K times the unit's shape (0.25-0.5 mg/K; gyro
+#: 5 x that in deg/s/K: 0.0125-0.025 deg/s/K), scale 200 ppm/K times the shape (100-200 ppm/K).
+THERMAL_EFFECTS = Effects(temperature_bias=0.005, temperature_scale=200.0)
+
+
+def thermal_demo_plan() -> ThermalPlan:
+    """Plateaus at 5, 15, 25, 45 degC (six poses, +-100 deg/s about each axis), a raw check and the
+    verification at 35 degC, 50 Hz. Four temperatures: the fit chooses polynomial orders up to 3 per axis, which
+    three plateaus leave no freedom to check."""
+    base = RigPlan(sample_rate_hz=50.0, rest_s=300.0, pose_hold_s=20.0, rate_hold_s=10.0, settle_s=1.0)
+    steps = tuple((axis, sign * 100.0) for axis in "xyz" for sign in (1.0, -1.0))
+    return ThermalPlan(base=base, plateaus_degc=(5.0, 15.0, 25.0, 45.0), rate_steps=steps, verify_degc=35.0,
+                       raw_check=True, soak_rate_k_per_min=0.1, soak_window_s=120.0, soak_poll_s=20.0)
+
+
+@dataclass(frozen=True)
+class CheckErrors:
+    """Corrected errors over a check recording's windows: worst pose specific-force error (m/s^2), worst
+    static rate (rad/s), worst rate-step error relative to the rate (1)."""
+
+    pose_accel_mps2: float
+    pose_gyro_radps: float
+    rate_rel: float
+
+
+def check_errors(session: Any, params: Any, skip_s: float = 1.5) -> CheckErrors:
+    """Run Algorithm 1 (``station correct``) with ``params`` over a check recording and measure the window
+    means against the rig's references (the first ``skip_s`` of a window, the moving average's span, skipped)."""
+    from station.correct.session_correct import correct_session
+    from station.session.model import Kind
+
+    corrected = correct_session(session, params)
+    skip = round(skip_s * session.sample_rate_hz)
+    acc, gyr, rel = 0.0, 0.0, 0.0
+    for seg in corrected.segments_of(Kind.POSE, Kind.RATE):
+        sl = slice(seg.start + skip, seg.stop)
+        if sl.stop - sl.start < 10:
+            continue
+        a = corrected.accel_mps2[sl].mean(axis=0) - corrected.ref_accel_mps2[seg.start]
+        w = corrected.gyro_radps[sl].mean(axis=0) - corrected.ref_gyro_radps[seg.start]
+        if seg.kind == Kind.POSE:
+            acc = max(acc, float(np.max(np.abs(a))))
+            gyr = max(gyr, float(np.max(np.abs(w))))
+        else:
+            ref = corrected.ref_gyro_radps[seg.start]
+            k = int(np.argmax(np.abs(ref)))
+            rel = max(rel, abs(float(w[k])) / abs(float(ref[k])))
+    return CheckErrors(acc, gyr, rel)
+
+
+def target_lines(errors: dict[tuple[int, str], CheckErrors]) -> list[str]:
+    """The issue's targets per unit with temperature effects: corrected errors with the thermal model within
+    2x of the reference unit's (no temperature effects) and at least 10x better than without the model."""
+    refs = [e for (_, label), e in errors.items() if label == "reference"]
+    if not refs:
+        return ["no reference unit: the targets cannot be judged"]
+    ref = refs[0]
+    out = []
+    for slot in sorted({s for s, label in errors if label != "reference"}):
+        wo, th = errors.get((slot, "without")), errors.get((slot, "thermal model"))
+        parts = []
+        for name, attr in (("pose accel", "pose_accel_mps2"), ("pose gyro", "pose_gyro_radps"),
+                           ("rate step", "rate_rel")):
+            r0 = getattr(ref, attr)
+            text = f"{name}: without/reference {getattr(wo, attr) / r0:.1f}x" if wo is not None else name
+            if th is not None:
+                text += (f", thermal/reference {getattr(th, attr) / r0:.2f}x (target <= 2), without/thermal "
+                         f"{getattr(wo, attr) / getattr(th, attr):.1f}x (target >= 10)" if wo is not None else "")
+            parts.append(text)
+        out.append(f"slot {slot}: " + "; ".join(parts))
+    return out
+
+
+def _without_thermal(options: FitOptions) -> FitOptions | None:
+    """The fit's options with its thermal model switched off (None: the fit has no thermal model)."""
+    names = {f.name for f in fields(FitOptions)}
+    return replace(options, thermal="off") if "thermal" in names else None  # type: ignore[call-arg]
+
+
+def _thermal_note(params: Any) -> tuple[bool, str]:
+    """(the parameter set carries fitted temperature terms, why not)."""
+    note = getattr(params, "thermal", None)
+    if note is None:
+        return False, "the fit has no thermal model"
+    if note.reason:
+        return bool(getattr(note, "fitted", False)), f"{note.status}: {note.reason}"
+    return bool(getattr(note, "fitted", False)), f"status {note.status}; awaits the thermal fit"
+
+
+def run_thermal_demo(
+    units: int = DEMO_UNITS,
+    scale: float = THERMAL_SCALE,
+    seed: int = 0,
+    out_dir: Path | None = DEMO_OUT,
+    *,
+    thermal: ThermalPlan | None = None,
+    effects: Effects = THERMAL_EFFECTS,
+    reference_unit: bool = True,
+    console: Console | None = None,
+    limits_path: Path | None = None,
+    db_url: str | None = None,
+    record: bool = False,
+) -> tuple[RunResult, Any]:
+    """``station demo --thermal``: a simulated rig, chamber and ``units`` sensors; the thermal plan
+    (:func:`thermal_demo_plan`), fit, EEPROM write, verification at the verification temperature; prints the
+    run, the cycle time and, per unit, the corrected errors at the verification temperature with the thermal
+    model and without, next to a unit without temperature effects (the last slot when ``reference_unit``).
+
+    Returns the run's result and the runner (its check recordings, verification results and timing).
+    """
+    from station.fit.calibrate import fit_session
+
+    console = console if console is not None else Console()
+    thermal = thermal if thermal is not None else thermal_demo_plan()
+    plan = thermal.base
+    unit_effects: list[Effects | None] = [None] * units
+    if reference_unit and units > 1:
+        unit_effects[-1] = Effects()
+    wall0 = time.monotonic()
+    holder: list[Any] = []
+    with SimStation(units, scale, seed, plan=plan, effects=effects, chamber={"ambient_degc": thermal.ambient_degc},
+                    unit_effects=unit_effects) as sim:
+        for u in sim.units:
+            install_firmware(u.sensor, sim.clock)
+        console.print(f"simulated rig at {sim.rig_url}; chamber at {sim.chamber_url}; {units} sensor(s); "
+                      f"clock x{scale:g}")
+        config = StationConfig(
+            sim.rig_url, tuple(sim.sensor_urls), station_id="demo-thermal", db_url=db_url, record=record,
+            limits_path=limits_path, out_dir=out_dir, clock_scale=scale, provision=True,
+            rig_options=sim.rig_client_options(), chamber_url=sim.chamber_url, thermal=thermal,
+        )
+        display = ProgressDisplay(console, [u.truth.serial for u in sim.units], scale)
+        station = Station(config, clock=sim.clock, subscribers=[display])
+        with display:
+            result = station.run(on_runner=holder.append)
+        shapes = [(u.source.effects, u.truth) for u in sim.units]
+    runner = holder[0]
+    console.print(summary_table(result))
+    t = runner.timing
+    if t is not None:
+        console.print(
+            f"cycle time per batch of {t.units}: {t.cycle_s / 60:.1f} min (sequence incl. soaks "
+            f"{t.sequence_s / 60:.1f} min, fits {t.fit_wall_s:.1f} s, verification at {runner.verify_degc:g} degC "
+            f"{t.verify_s / 60:.1f} min, chamber back to ambient {t.ambient_s / 60:.1f} min); "
+            f"{t.per_unit_s / 60:.1f} min per unit", soft_wrap=True
+        )
+    header = (f"{'slot':>4}  {'serial':<11} {'tempco: accel mg/K, gyro deg/s/K, scale ppm/K':<46} {'model':<14}"
+              f"{'pose accel mg':>14} {'pose gyro deg/s':>16} {'rate step % of rate':>20}  on-rig verify")
+    lines = [f"corrected errors at {runner.verify_degc:g} degC, a temperature the fit did not use (Algorithm 1 "
+             f"over the raw check recording; on-rig verify: the unit's own corrected output after writing)", header,
+             "-" * len(header)]
+    errors: dict[tuple[int, str], CheckErrors] = {}
+    off = _without_thermal(station.fit_options)
+    for r in result.units:
+        session = runner.check_sessions.get(r.slot)
+        eff, truth = shapes[r.slot]
+        realized = eff.realize(truth.shapes)
+        coeff = (f"{np.max(np.abs(realized.accel_temp_bias)) / 9.80665e-3:.2f}, "
+                 f"{np.degrees(np.max(np.abs(realized.gyro_temp_bias))):.4f}, "
+                 f"{1e6 * np.max(np.abs(realized.gyro_temp_scale)):.0f} (largest axis)") if eff.temperature_bias \
+            else "none (reference unit)"
+        verify = runner.verification.get(r.slot)
+        verdict = (("PASS" if verify.passed else "FAIL") + f" ({r.outcome.value})") if verify is not None \
+            else f"not written ({r.outcome.value})"
+        rows: list[tuple[str, Any]] = [("-", None)]
+        why = "awaits the thermal fit"
+        if session is not None and r.params is not None:
+            fitted, why = _thermal_note(r.params)
+            if off is None or not fitted:
+                rows = [("thermal model", None), ("without", r.params)]
+            else:
+                without = fit_session(r.session, off) if r.session is not None else None
+                rows = [("thermal model", r.params), ("without", without)]
+        for k, (label, params) in enumerate(rows):
+            if params is None:
+                cells = "  " + (f"not fitted ({why})"[:60] if label == "thermal model" else "-")
+            else:
+                e = check_errors(session, params)
+                errors[(r.slot, label if eff.temperature_bias else "reference")] = e
+                cells = (f"{e.pose_accel_mps2 / 9.80665e-3:>14.3f} {np.degrees(e.pose_gyro_radps):>16.4f} "
+                         f"{100 * e.rate_rel:>20.4f}")
+            first = k == 0
+            lines.append(f"{r.slot if first else '':>4}  {r.serial if first else '':<11} {coeff if first else '':<46} "
+                         f"{label:<14}{cells}  {verdict if first else ''}")
+    for line in lines:
+        console.print(line, markup=False, highlight=False, soft_wrap=True)
+    for line in target_lines(errors):
+        console.print(line, markup=False, highlight=False, soft_wrap=True)
+    console.print(f"demo finished in {time.monotonic() - wall0:.1f} s wall time")
+    return result, runner
+
+
+__all__ = ["DEMO_OUT", "DEMO_SCALE", "DEMO_UNITS", "THERMAL_SCALE", "run_demo", "run_thermal_demo", "thermal_demo_plan"]

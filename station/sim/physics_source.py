@@ -18,7 +18,9 @@ boot count. Units: m/s^2, rad/s, degC, s.
 
 from __future__ import annotations
 
+import math
 import threading
+from collections.abc import Callable
 from dataclasses import replace
 from typing import Protocol
 
@@ -51,6 +53,11 @@ class PhysicsSource:
         gravity_mps2: local gravity (m/s^2).
         latitude_deg, heading_deg: the site, for the ``earth_rotation`` effect (deg).
         environment: the room; drawn per power cycle from the seed when None.
+        temperature_degc: the temperature of the unit's case (degC) at clock times (s), e.g. the load
+            of a simulated climate chamber; the sensor's self-heating (the unit's ``self_heating_k``,
+            ``self_heating_tau_s``, counted from its first power-on: a quick power cycle does not cool
+            it) is added on top. The temperature effects then act about ``reference_degc``.
+        reference_degc: the temperature at which the unit's temperature effects are zero (degC).
     """
 
     def __init__(
@@ -66,6 +73,8 @@ class PhysicsSource:
         latitude_deg: float = 0.0,
         heading_deg: float = 0.0,
         environment: Environment | None = None,
+        temperature_degc: Callable[[np.ndarray], np.ndarray] | None = None,
+        reference_degc: float = 25.0,
     ) -> None:
         self.rig = rig
         self.clock = clock
@@ -77,13 +86,35 @@ class PhysicsSource:
         self.latitude_deg = float(latitude_deg)
         self.heading_deg = float(heading_deg)
         self.environment = environment
+        self.temperature_degc = temperature_degc
+        self.reference_degc = float(reference_degc)
+        self.t_first_power_on_s: float | None = None
         self.boots = 0
         self.t_power_on_s = 0.0
         self.model: ImuModel | None = None
         self._lock = threading.Lock()
 
+    def unit_temperature(self, t_clock_s: np.ndarray) -> np.ndarray:
+        """True sensor temperature (degC) at clock times ``t_clock_s`` when a case temperature is given:
+        the case plus the self-heating since the first power-on."""
+        if self.temperature_degc is None:
+            raise RuntimeError("no case temperature course given")
+        t = np.asarray(t_clock_s, dtype=float)
+        first = self.t_first_power_on_s if self.t_first_power_on_s is not None else math.inf
+        on = np.maximum(t - first, 0.0)
+        heat = self.truth.self_heating_k * -np.expm1(-on / self.truth.self_heating_tau_s)
+        return np.asarray(self.temperature_degc(t), dtype=float) + heat
+
     def _new_model(self) -> ImuModel:
         ss = np.random.SeedSequence(self.seed, spawn_key=(self.boots,))
+        if self.temperature_degc is not None:
+            t_on = self.t_power_on_s
+            env = Environment(ambient_degc=self.reference_degc)
+            return ImuModel(
+                self.truth, self.sensor_class, self.effects, ss, latitude_deg=self.latitude_deg,
+                heading_deg=self.heading_deg, environment=env,
+                temperature_degc=lambda t: self.unit_temperature(t_on + np.asarray(t, dtype=float)),
+            )
         return ImuModel(
             self.truth,
             self.sensor_class,
@@ -99,6 +130,8 @@ class PhysicsSource:
         with self._lock:
             self.boots += 1
             self.t_power_on_s = self.clock.now()
+            if self.t_first_power_on_s is None:
+                self.t_first_power_on_s = self.t_power_on_s
             self.model = self._new_model()
 
     def rig_time(self, t_s: np.ndarray) -> np.ndarray:

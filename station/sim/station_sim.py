@@ -18,6 +18,7 @@ power cycle.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Self
 
@@ -29,6 +30,7 @@ from station.kernel.sensor_class import TABLE1, SensorClass
 from station.physics.effects import Effects
 from station.physics.unit import UnitTruth, draw_unit
 from station.rig import rig_client_options
+from station.sim.chamber_server import SimulatedChamber
 from station.sim.eeprom import Eeprom
 from station.sim.physics_source import PhysicsSource
 from station.sim.rig_server import SimulatedRig
@@ -66,6 +68,12 @@ class SimulatedStation:
         effects: optional physics for every unit.
         rig_options: extra keyword arguments of the rig model (motion limits, settle time).
         clock: the clock everything lives by (default ``SimClock(scale)``).
+        chamber: start a simulated climate chamber (:class:`~station.sim.chamber_server.SimulatedChamber`,
+            a Modbus/TCP server on 127.0.0.1) with these model options (``{}``: the defaults); the units'
+            temperature then follows its load, their self-heating on top. None: no chamber.
+        unit_effects: per slot, effects replacing ``effects`` (None entries keep ``effects``), e.g. a
+            reference unit without temperature effects next to units with them.
+        reference_degc: with a chamber, the temperature at which the units' temperature effects vanish.
     """
 
     def __init__(
@@ -79,6 +87,9 @@ class SimulatedStation:
         effects: Effects | None = None,
         rig_options: dict[str, Any] | None = None,
         clock: Clock | None = None,
+        chamber: dict[str, Any] | None = None,
+        unit_effects: Sequence[Effects | None] | None = None,
+        reference_degc: float = 25.0,
     ) -> None:
         if units < 1:
             raise ValueError("a simulated station needs at least one unit")
@@ -91,6 +102,10 @@ class SimulatedStation:
         self._rig_options = dict(rig_options or {})
         self.rig: Any = None
         self.units: list[SimUnit] = []
+        self._chamber_options = dict(chamber) if chamber is not None else None
+        self.chamber: SimulatedChamber | None = None
+        self.unit_effects = list(unit_effects or [])
+        self.reference_degc = float(reference_degc)
 
     @property
     def scale(self) -> float:
@@ -118,20 +133,27 @@ class SimulatedStation:
         try:
             opts = {"watchdog_s": rig_client_options(self.scale)["watchdog_s"], **self._rig_options}
             self.rig = self._start_rig(opts)
+            if self._chamber_options is not None:
+                self.chamber = SimulatedChamber(self.clock, **self._chamber_options).start()
             rate = int(self.plan.sample_rate_hz)
             for k in range(self.n_units):
                 unit_ss, imu_ss, fault_ss = np.random.SeedSequence(self.seed, spawn_key=(k,)).spawn(3)
                 truth = draw_unit(self.sensor_class, np.random.default_rng(unit_ss))
+                effects = self.effects
+                if k < len(self.unit_effects) and self.unit_effects[k] is not None:
+                    effects = self.unit_effects[k]
                 source = PhysicsSource(
                     self.rig,
                     self.clock,
                     truth,
                     sensor_class=self.sensor_class,
-                    effects=self.effects,
+                    effects=effects,
                     seed=int(imu_ss.generate_state(1)[0]),
                     gravity_mps2=self.plan.gravity_mps2,
                     latitude_deg=self.plan.latitude_deg,
                     heading_deg=self.plan.heading_deg,
+                    temperature_degc=self.chamber.load_temperature if self.chamber is not None else None,
+                    reference_degc=self.reference_degc,
                 )
                 sensor = self._start_sensor(source, truth, rate, int(fault_ss.generate_state(1)[0]))
                 self.units.append(SimUnit(k, truth, source, sensor))
@@ -148,6 +170,9 @@ class SimulatedStation:
         if self.rig is not None:
             self._stop_rig()
             self.rig = None
+        if self.chamber is not None:
+            self.chamber.stop()
+            self.chamber = None
 
     def __enter__(self) -> Self:
         return self.start()
@@ -161,6 +186,13 @@ class SimulatedStation:
         if self.rig is None:
             raise RuntimeError("the simulated station is not started")
         return str(self.rig.url)
+
+    @property
+    def chamber_url(self) -> str:
+        """The simulated chamber's URL for :func:`station.chamber.open_chamber`."""
+        if self.chamber is None:
+            raise RuntimeError("the simulated station has no chamber")
+        return self.chamber.url
 
     @property
     def sensor_urls(self) -> list[str]:
