@@ -342,7 +342,11 @@ class Station:
         self.limits = limits if limits is not None else load_limits(config.limits_path)
         self.options = (options if options is not None else SequenceOptions()).for_scale(self.clock.scale)
         # the sensor class's T_c range (the limits file's correlation_time_s) is the fit's prior on T_c
-        self.fit_options = FitOptions(tc_range_s=dict(self.limits.correlation_time_s))
+        # a thermal plan moves the temperature on purpose: the fit adds the temperature polynomials where the
+        # recording separates them from the eq. 3 warm-up ("auto"); a plain plan holds it constant ("off")
+        self.fit_options = FitOptions(
+            tc_range_s=dict(self.limits.correlation_time_s), thermal="auto" if config.thermal is not None else "off"
+        )
         self.subscribers: list[Subscriber] = list(subscribers)
         self.recorder: Recorder | None = None
         if config.record:

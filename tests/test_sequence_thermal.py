@@ -166,6 +166,9 @@ def test_plateaus_soak_fit_write_and_verify_at_another_temperature(sim: SimStati
         # the fit's recording spans both plateaus; the check recording holds the raw check at 30 degC only
         session = result.units[slot].session
         assert session is not None and session.temp_degc.min() < 15.0 and session.temp_degc.max() > 40.0
+        # a thermal plan fits the temperature polynomials (the plan moves the temperature far enough)
+        params = result.units[slot].params
+        assert params is not None and params.thermal.status == "fitted", params and params.thermal.reason
         check = runner.check_sessions[slot]
         windows = check.segments_of(Kind.POSE, Kind.RATE)
         assert len(windows) == len(BASE.poses) + len(BASE.rate_steps)

@@ -33,6 +33,7 @@ import numpy as np
 
 from station.chamber.protocol import Chamber, ChamberError, ChamberSetpointTimeout
 from station.chamber.registers import AlarmCode
+from station.fit.calibrate import FitOptions
 from station.kernel.errors import HardwareError, StationError, UnitRejected
 from station.kernel.measurement import Measurement
 from station.kernel.plan import RigPlan
@@ -208,6 +209,9 @@ class ThermalRunner(SequenceRunner):
         **kwargs,
     ) -> None:
         kwargs.pop("plan", None)
+        if kwargs.get("fit_options") is None:
+            # the plan moves the temperature on purpose: fit the temperature polynomials where they separate
+            kwargs["fit_options"] = FitOptions(thermal="auto")
         super().__init__(rig, sensors, clock, plan=thermal.base, **kwargs)
         self.chamber = chamber
         self.thermal = thermal
