@@ -48,6 +48,7 @@ pytestmark = pytest.mark.integration
 TABLES = {
     "stations", "fixture_slots", "units", "runs", "run_units", "step_timings", "limit_checks",
     "parameter_sets", "session_recordings", "eeprom_writes", "dispositions", "rig_locks",
+    "quality_parameters", "quality_results", "quality_values", "quality_daily",
 }
 RUNS_PER_STATION = 100
 
@@ -127,7 +128,7 @@ def test_upgrade_from_empty_and_round_trip(pg_url: str) -> None:
     assert engine.dialect.name == "postgresql"
     assert current_revision(engine) is None and inspect(engine).get_table_names() == []
     upgrade(engine)
-    assert current_revision(engine) == "0002"
+    assert current_revision(engine) == "0003"
     assert set(inspect(engine).get_table_names()) == TABLES | {"alembic_version"}
     with engine.connect() as conn:
         assert compare_metadata(MigrationContext.configure(conn), Base.metadata) == []
@@ -135,7 +136,7 @@ def test_upgrade_from_empty_and_round_trip(pg_url: str) -> None:
     assert current_revision(engine) is None
     assert set(inspect(engine).get_table_names()) <= {"alembic_version"}
     upgrade(engine)
-    assert current_revision(engine) == "0002"
+    assert current_revision(engine) == "0003"
     assert set(inspect(engine).get_table_names()) == TABLES | {"alembic_version"}
     engine.dispose()
 

@@ -15,8 +15,12 @@ A run is written UNFINISHED when it starts and gets its outcome only in the
 transaction that records its end, so a killed process can never leave a PASS
 behind; :func:`station.store.recorder.recover_unfinished` closes such runs.
 The schema is created by the Alembic migrations in ``migrations/``, never by
-``create_all`` in production code; ``migrations/versions/0001_initial.py`` must
-match these classes (a test compares them).
+``create_all`` in production code; the migrations in ``migrations/versions/`` must
+build exactly these classes (a test compares them).
+
+The ``quality_*`` tables (migration 0003) are the narrow, indexed copy of every finished unit result and its
+product-limit values that the quality statistics aggregate in SQL (see :mod:`station.store.quality`); they
+are written in the same transaction as a run's end and rebuilt from the records by the migration.
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ from sqlalchemy import (
     DateTime,
     Float,
     ForeignKey,
+    Index,
     Integer,
     LargeBinary,
     MetaData,
@@ -118,6 +123,7 @@ class Run(Base):
     limits_version: Mapped[str] = mapped_column(String(100), default="")
     limits_hash: Mapped[str] = mapped_column(String(64), default="")
     operator: Mapped[str] = mapped_column(String(100), default="")
+    lot: Mapped[str] = mapped_column(String(100), default="", server_default="")  # production lot of the units
     rig: Mapped[str] = mapped_column(String(200), default="")
     host: Mapped[str] = mapped_column(String(200), default="")
     pid: Mapped[int] = mapped_column(Integer, default=0)
@@ -287,3 +293,97 @@ class Disposition(Base):
     decided_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
 
     unit: Mapped[Unit] = relationship(back_populates="dispositions")
+
+
+class QualityParameter(Base):
+    """A product-limit-checked parameter by name (e.g. 'accel.M.xx') with its SI unit.
+
+    ``ref`` (in ``unit``) is subtracted before the sums of :class:`QualityDaily` are formed, so the sums of
+    squares of values far from zero (scale factors near 1) keep their precision.
+    """
+
+    __tablename__ = "quality_parameters"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    name: Mapped[str] = mapped_column(String(100), unique=True)
+    unit: Mapped[str] = mapped_column(String(20), default="")
+    ref: Mapped[float] = mapped_column(Float, default=0.0)
+
+
+class QualityResult(Base):
+    """One unit's result in one finished run, as the quality statistics count it.
+
+    ``tested``: the run reached a verdict on the unit (outcome PASS, FAIL or RETEST); ERROR, ABORTED,
+    REFUSED and UNFINISHED results are kept (counted as not tested) but never consume a first pass.
+    ``attempt``: 1 for the unit's first tested result, 2 for its second, ...; 0 when not tested.
+    ``final_outcome``: the outcome of the unit's newest tested result (kept up to date on all its rows).
+    ``latest``: this is the unit's newest result of any kind. ``day`` (YYYY-MM-DD) and ``minute``
+    (0-1439) are the UTC date and minute of day of the run's start, for grouping by day and shift.
+    """
+
+    __tablename__ = "quality_results"
+    __table_args__ = (
+        Index("ix_quality_results_day_station", "day", "station_id"),
+        Index("ix_quality_results_unit_latest", "unit_id", "latest"),
+        Index("ix_quality_results_groups", "day", "minute", "station_id", "lot", "limits_version", "attempt",
+              "outcome", "final_outcome", "unit_id"),
+    )
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    run_unit_id: Mapped[int] = mapped_column(ForeignKey("run_units.id"), unique=True)
+    unit_id: Mapped[int] = mapped_column(ForeignKey("units.id"))
+    station_id: Mapped[int] = mapped_column(ForeignKey("stations.id"))
+    lot: Mapped[str] = mapped_column(String(100), default="", index=True)
+    limits_version: Mapped[str] = mapped_column(String(100), default="")
+    started_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), index=True)
+    day: Mapped[str] = mapped_column(String(10))
+    minute: Mapped[int] = mapped_column(Integer)
+    outcome: Mapped[str] = mapped_column(String(16))
+    tested: Mapped[bool] = mapped_column(Boolean)
+    attempt: Mapped[int] = mapped_column(Integer)
+    final_outcome: Mapped[str] = mapped_column(String(16), default="")
+    latest: Mapped[bool] = mapped_column(Boolean)
+
+
+class QualityValue(Base):
+    """One product-limit-checked value (in the parameter's unit) of one tested result: the narrow table."""
+
+    __tablename__ = "quality_values"
+    __table_args__ = (Index("ix_quality_values_param_day", "param_id", "day", "value"),)
+
+    result_id: Mapped[int] = mapped_column(ForeignKey("quality_results.id"), primary_key=True)
+    param_id: Mapped[int] = mapped_column(ForeignKey("quality_parameters.id"), primary_key=True)
+    day: Mapped[str] = mapped_column(String(10))
+    value: Mapped[float] = mapped_column(Float)
+
+
+class QualityDaily(Base):
+    """Sums of one parameter's values per day, station, lot and limits version (a rational subgroup).
+
+    ``n`` values; ``s1`` = sum(value - ref), ``s2`` = sum((value - ref)^2) (``ref`` of the parameter);
+    ``vmin``/``vmax`` the extremes; ``low``/``high`` the limits in force (null: none on that side);
+    ``n_below``/``n_above``: values outside them. Units: the parameter's.
+    """
+
+    __tablename__ = "quality_daily"
+    __table_args__ = (
+        UniqueConstraint("param_id", "day", "station_id", "lot", "limits_version",
+                         name="uq_quality_daily_group"),
+        Index("ix_quality_daily_day", "day"),
+    )
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    param_id: Mapped[int] = mapped_column(ForeignKey("quality_parameters.id"))
+    day: Mapped[str] = mapped_column(String(10))
+    station_id: Mapped[int] = mapped_column(ForeignKey("stations.id"))
+    lot: Mapped[str] = mapped_column(String(100), default="")
+    limits_version: Mapped[str] = mapped_column(String(100), default="")
+    n: Mapped[int] = mapped_column(Integer)
+    s1: Mapped[float] = mapped_column(Float)
+    s2: Mapped[float] = mapped_column(Float)
+    vmin: Mapped[float] = mapped_column(Float)
+    vmax: Mapped[float] = mapped_column(Float)
+    low: Mapped[float | None] = mapped_column(Float)
+    high: Mapped[float | None] = mapped_column(Float)
+    n_below: Mapped[int] = mapped_column(Integer)
+    n_above: Mapped[int] = mapped_column(Integer)

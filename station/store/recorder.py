@@ -65,6 +65,7 @@ from station.store.models import (
 from station.store.models import (
     Station as StationRow,
 )
+from station.store.quality_index import index_run
 
 log = logging.getLogger(__name__)
 
@@ -96,7 +97,8 @@ def digest_of(obj: object) -> str:
 class RunContext:
     """What the records do not carry but every run row needs: who ran it, with which versions.
 
-    Hashes are hex SHA-256 (see :func:`digest_of`); empty strings mean unknown.
+    Hashes are hex SHA-256 (see :func:`digest_of`); empty strings mean unknown. ``lot``: the production lot
+    of the units the station calibrates (from the station configuration; '' when not configured).
     """
 
     operator: str = ""
@@ -105,6 +107,7 @@ class RunContext:
     sequence_hash: str = ""
     limits_version: str = ""
     limits_hash: str = ""
+    lot: str = ""
 
 
 def _now() -> datetime:
@@ -268,7 +271,7 @@ class Recorder:
                 run_uid=r.run_id, station_id=st.id, outcome=UNFINISHED, started_at=_parse_time(r.at),
                 software_version=c.software_version, sequence_version=c.sequence_version,
                 sequence_hash=c.sequence_hash, limits_version=c.limits_version, limits_hash=c.limits_hash,
-                operator=c.operator, rig=r.rig, host=socket.gethostname(), pid=os.getpid(), message="",
+                operator=c.operator, lot=c.lot, rig=r.rig, host=socket.gethostname(), pid=os.getpid(), message="",
             )
             s.add(run)
             s.flush()
@@ -337,6 +340,8 @@ class Recorder:
         run.finished_at = _now()
         run.duration_s, run.wall_s = _num(r.duration_s), _num(r.wall_s)
         run.message, run.rig_at_rest = r.message, r.rig_at_rest
+        s.flush()
+        index_run(s, run.id)  # the quality tables learn of the run in the transaction that ends it
 
 
 def recover_unfinished(
@@ -374,6 +379,8 @@ def recover_unfinished(
                 if ru.outcome in (UNFINISHED, Outcome.PASS.value):
                     ru.outcome = outcome.value
                     ru.message = f"{ru.message}; {note}" if ru.message else note
+            s.flush()
+            index_run(s, run.id)
             recovered.append(run.run_uid)
     return recovered
 
