@@ -53,7 +53,8 @@ def upgrade() -> None:
     op.create_index('ix_quality_results_day_station', 'quality_results', ['day', 'station_id'], unique=False)
     op.create_index('ix_quality_results_unit_latest', 'quality_results', ['unit_id', 'latest'], unique=False)
     op.create_index('ix_quality_results_groups', 'quality_results',
-                    ['day', 'minute', 'station_id', 'lot', 'limits_version', 'attempt', 'outcome', 'final_outcome',
+                    ['day', 'minute', 'station_id', 'lot', 'limits_version', 'tested', 'attempt', 'outcome',
+                     'final_outcome',
                      'unit_id'], unique=False)
     op.create_index(op.f('ix_quality_results_lot'), 'quality_results', ['lot'], unique=False)
     op.create_index(op.f('ix_quality_results_started_at'), 'quality_results', ['started_at'], unique=False)

@@ -325,8 +325,8 @@ class QualityResult(Base):
     __table_args__ = (
         Index("ix_quality_results_day_station", "day", "station_id"),
         Index("ix_quality_results_unit_latest", "unit_id", "latest"),
-        Index("ix_quality_results_groups", "day", "minute", "station_id", "lot", "limits_version", "attempt",
-              "outcome", "final_outcome", "unit_id"),
+        Index("ix_quality_results_groups", "day", "minute", "station_id", "lot", "limits_version", "tested",
+              "attempt", "outcome", "final_outcome", "unit_id"),
     )
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True)

@@ -11,11 +11,14 @@ Pages (server-rendered Jinja2 templates in ``templates/``, no front-end build st
   history and plots (``/units/{serial}/plots/{name}.svg``, see :mod:`station.web.plots`), and the
   diagnosis of each run's recording (loaded by the page from the API, figure at
   ``/units/{serial}/diagnosis.svg``; computed in the background, see :mod:`station.web.diagnosis`);
-* ``/population``: a histogram per limit-checked parameter over all units, with limits.
+* ``/population``: a histogram per limit-checked parameter over all units, with limits;
+* ``/quality``: yield (first pass, final; by station, shift, day, lot) and its trend, parameters ranked by Cpk,
+  control charts with run rules, histograms, CSV exports; filters by date, station, lot, limits version.
 
 JSON API (documented in ``/openapi.json``, every answer a typed model of :mod:`station.web.models`):
 ``GET /api/units``, ``GET /api/units/{serial}``, ``GET /api/units/{serial}/eeprom.bin``,
-``GET /api/units/{serial}/diagnosis``, ``GET /api/runs``, ``GET /api/status``. The write
+``GET /api/units/{serial}/diagnosis``, ``GET /api/runs``, ``GET /api/status``, ``GET /api/quality/yield``,
+``/api/quality/capability``, ``/api/quality/control-charts``, ``/api/quality/histogram/{name}``. The write
 actions ``POST /api/runs`` and ``POST /api/runs/{run_id}/abort`` need ``Authorization:
 Bearer <token>`` with the token configured on the station; without a configured token
 they always answer 401 (read-only by default).
@@ -24,6 +27,7 @@ they always answer 401 (read-only by default).
 from __future__ import annotations
 
 import asyncio
+import os
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from pathlib import Path
@@ -32,13 +36,14 @@ from fastapi import FastAPI
 
 from station.kernel.limits_file import load_limits
 from station.store.db import Database, open_database
+from station.store.quality import ShiftCalendar
 from station.web.context import WebContext
 from station.web.diagnosis import DiagnosisService
 from station.web.openapi import StationAPI
-from station.web.routes import diagnosis, population, runs, status, units
+from station.web.routes import diagnosis, population, quality, runs, status, units
 from station.web.state import LiveStatus
 
-ROUTERS = (status.router, runs.router, units.router, diagnosis.router, population.router)
+ROUTERS = (status.router, runs.router, units.router, diagnosis.router, population.router, quality.router)
 
 
 @asynccontextmanager
@@ -56,7 +61,7 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
 
 def create_app(db_url: str | None = None, *, token: str | None = None, live: LiveStatus | None = None,
                limits_path: Path | None = None, database: Database | None = None,
-               diagnosis: DiagnosisService | None = None) -> FastAPI:
+               diagnosis: DiagnosisService | None = None, shifts: ShiftCalendar | str | None = None) -> FastAPI:
     """The web application on the station database at ``db_url`` (see :func:`station.store.open_database`).
 
     Args:
@@ -69,6 +74,8 @@ def create_app(db_url: str | None = None, *, token: str | None = None, live: Liv
         database: an already open database (instead of ``db_url``).
         diagnosis: the background diagnosis of recordings (default: one worker thread, results kept next to
             the recordings, the limits file's T_c range); started and stopped with the application.
+        shifts: the shift calendar (a :class:`~station.store.quality.ShiftCalendar` or its text form
+            ``"A=06:00,B=14:00,C=22:00"``; None: ``$STATION_SHIFTS`` or that default).
     """
     db = database if database is not None else open_database(db_url)
     live = live if live is not None else LiveStatus(db)
@@ -77,8 +84,12 @@ def create_app(db_url: str | None = None, *, token: str | None = None, live: Liv
     limits = load_limits(limits_path)
     # the unit page's diagnoses keep eq. 3's warm-up inside the sensor class's T_c range of the station's limits
     diagnoses = diagnosis if diagnosis is not None else DiagnosisService(warmup_tc_s=limits.correlation_time_s)
+    if shifts is None:
+        shifts = os.environ.get("STATION_SHIFTS") or ShiftCalendar()
+    calendar = ShiftCalendar.parse(shifts) if isinstance(shifts, str) else shifts
+    live.shifts = calendar
     web = WebContext(db=db, live=live, diagnoses=diagnoses, marginal_fraction=limits.marginal_fraction, token=token,
-                     owns_db=database is None)
+                     owns_db=database is None, shifts=calendar)
     app = StationAPI(title="station", version="1", lifespan=lifespan,
                      description="End-of-line MEMS IMU calibration station: live status, units, runs, EEPROM images.")
     app.state.web = web

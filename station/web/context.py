@@ -11,6 +11,7 @@ from fastapi import Depends, HTTPException, Request
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 
 from station.store.db import Database
+from station.store.quality import ShiftCalendar
 from station.web.cache import SvgCache
 from station.web.diagnosis import DiagnosisService
 from station.web.state import LiveStatus
@@ -29,6 +30,7 @@ class WebContext:
         token: the bearer token of the write actions (None: they always answer 401).
         owns_db: the application opened ``db`` and closes it when it stops.
         svgs: rendered plots of the last few units.
+        shifts: the shift calendar of the status page and the quality statistics (UTC starts).
     """
 
     db: Database
@@ -38,6 +40,7 @@ class WebContext:
     token: str | None = None
     owns_db: bool = False
     svgs: SvgCache = field(default_factory=SvgCache)
+    shifts: ShiftCalendar = field(default_factory=ShiftCalendar)
 
 
 async def web_context(request: Request) -> WebContext:

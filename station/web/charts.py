@@ -1,0 +1,156 @@
+"""Small server-rendered SVG charts for the quality page (plain strings; no plotting library, a few ms each):
+an X-bar control chart with its limits and the points that complete a run rule, a histogram with the limits
+and the fitted normal, and a yield trend. Values are drawn in the parameter's unit."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from html import escape
+
+from station.store.quality import Histogram, ParameterChart
+
+W, H = 460, 200
+ML, MR, MT, MB = 64, 12, 24, 34
+FONT = 'font-family="system-ui,sans-serif"'
+
+
+def _fmt(x: float) -> str:
+    if x == 0 or not math.isfinite(x):
+        return "0" if x == 0 else "-"
+    return f"{x:.4g}"
+
+
+def _scale(lo: float, hi: float, a: float, b: float) -> tuple[float, float, callable]:  # type: ignore[valid-type]
+    if not hi > lo:
+        pad = abs(lo) * 0.01 or 1e-9
+        lo, hi = lo - pad, hi + pad
+    return lo, hi, (lambda v: a + (v - lo) / (hi - lo) * (b - a))
+
+
+def _frame(title: str, width: int = W, height: int = H) -> list[str]:
+    return [f'<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {width} {height}" width="100%" '
+            f'style="max-width:{width}px;height:auto" role="img" aria-label="{escape(title)}">',
+            f'<rect width="{width}" height="{height}" fill="#fff"/>',
+            f'<text x="{ML}" y="15" {FONT} font-size="12" font-weight="600">{escape(title)}</text>']
+
+
+def _yticks(lo: float, hi: float, y: callable, width: int = W) -> list[str]:  # type: ignore[valid-type]
+    out = []
+    for k in range(5):
+        v = lo + (hi - lo) * k / 4
+        out.append(f'<line x1="{ML}" x2="{width - MR}" y1="{y(v):.1f}" y2="{y(v):.1f}" stroke="#eee"/>'
+                   f'<text x="{ML - 4}" y="{y(v) + 4:.1f}" {FONT} font-size="10" text-anchor="end">{_fmt(v)}</text>')
+    return out
+
+
+def control_chart_svg(pc: ParameterChart) -> str:
+    """X-bar chart per day: points, centre line, per-day control limits, points completing a run rule in red."""
+    ch = pc.chart
+    pts = ch.points
+    title = f"{pc.name} ({pc.unit}) daily mean"
+    if not pts:
+        return "".join([*_frame(title), f'<text x="{ML}" y="100" {FONT} font-size="12">no data</text></svg>'])
+    vals = [p.mean for p in pts] + [p.lcl for p in pts if p.lcl is not None] + \
+        [p.ucl for p in pts if p.ucl is not None] + [ch.center]
+    lo, hi, y = _scale(min(vals), max(vals), H - MB, MT)
+    n = len(pts)
+
+    def x(i: int) -> float:
+        return ML + (i + 0.5) * (W - ML - MR) / n
+
+    out = _frame(title) + _yticks(lo, hi, y)
+    out.append(f'<line x1="{ML}" x2="{W - MR}" y1="{y(ch.center):.1f}" y2="{y(ch.center):.1f}" stroke="#2e7d32" '
+               'stroke-width="1.5"/>')
+    for attr in ("ucl", "lcl"):
+        seg = " ".join(f"{x(i):.1f},{y(getattr(p, attr)):.1f}" for i, p in enumerate(pts)
+                       if getattr(p, attr) is not None)
+        if seg:
+            out.append(f'<polyline points="{seg}" fill="none" stroke="#c62828" stroke-dasharray="4 3"/>')
+    out.append('<polyline points="' + " ".join(f"{x(i):.1f},{y(p.mean):.1f}" for i, p in enumerate(pts))
+               + '" fill="none" stroke="#1565c0" stroke-width="1.2"/>')
+    for i, p in enumerate(pts):
+        bad = bool(p.rules)
+        tip = f"{p.label}: mean {_fmt(p.mean)} n={p.n}" + (f" rules {','.join(map(str, p.rules))}" if bad else "")
+        out.append(f'<circle cx="{x(i):.1f}" cy="{y(p.mean):.1f}" r="{3.2 if bad else 2.2}" '
+                   f'fill="{"#c62828" if bad else "#1565c0"}"><title>{escape(tip)}</title></circle>')
+    for i in sorted({0, n // 2, n - 1}):
+        anchor = "start" if i == 0 and n > 1 else "end" if i == n - 1 and n > 1 else "middle"
+        out.append(f'<text x="{x(i):.1f}" y="{H - MB + 14}" {FONT} font-size="10" text-anchor="{anchor}">'
+                   f'{escape(pts[i].label)}</text>')
+    legend = "UCL/LCL dashed, centre green" + (f"; rules violated: {', '.join(map(str, ch.violations))}"
+                                              if ch.violations else "; no rule violated")
+    out.append(f'<text x="{ML}" y="{H - 6}" {FONT} font-size="10" fill="#444">{escape(legend)}</text></svg>')
+    return "".join(out)
+
+
+def histogram_svg(h: Histogram) -> str:
+    """Bars of the counts, the limits as red lines, the normal of the same n, mean and sigma as a curve."""
+    title = f"{h.name} ({h.unit}) n={h.n}"
+    _lo, _hi, x = _scale(h.lo, h.hi, ML, W - MR)
+    nb = len(h.counts)
+    width = (h.hi - h.lo) / nb
+    peak = max(h.counts) if h.counts else 1
+    normal = []
+    if h.sigma and h.sigma > 0:
+        for k in range(121):
+            v = h.lo + (h.hi - h.lo) * k / 120
+            normal.append((v, h.n * width / (h.sigma * math.sqrt(2 * math.pi))
+                           * math.exp(-0.5 * ((v - h.mean) / h.sigma) ** 2)))
+    top = max([peak] + [c for _, c in normal]) or 1
+    _, _, y = _scale(0, top * 1.08, H - MB, MT)
+    out = _frame(title)
+    for k in range(5):
+        c = top * 1.08 * k / 4
+        out.append(f'<line x1="{ML}" x2="{W - MR}" y1="{y(c):.1f}" y2="{y(c):.1f}" stroke="#eee"/>'
+                   f'<text x="{ML - 4}" y="{y(c) + 4:.1f}" {FONT} font-size="10" text-anchor="end">{round(c)}</text>')
+    for k, c in enumerate(h.counts):
+        if c:
+            x0, x1 = x(h.lo + k * width), x(h.lo + (k + 1) * width)
+            out.append(f'<rect x="{x0:.1f}" y="{y(c):.1f}" width="{max(x1 - x0 - 0.5, 0.5):.1f}" '
+                       f'height="{y(0) - y(c):.1f}" fill="#90caf9"><title>{c}</title></rect>')
+    if normal:
+        out.append('<polyline points="' + " ".join(f"{x(v):.1f},{y(c):.1f}" for v, c in normal)
+                   + '" fill="none" stroke="#0d47a1" stroke-width="1.4"/>')
+    for lim, name in ((h.low, "LSL"), (h.high, "USL")):
+        if lim is not None:
+            out.append(f'<line x1="{x(lim):.1f}" x2="{x(lim):.1f}" y1="{MT}" y2="{H - MB}" stroke="#c62828" '
+                       f'stroke-width="1.6"/><text x="{x(lim):.1f}" y="{MT + 10}" {FONT} font-size="10" '
+                       f'fill="#c62828" text-anchor="middle">{name}</text>')
+    for v in (h.lo, (h.lo + h.hi) / 2, h.hi):
+        out.append(f'<text x="{x(v):.1f}" y="{H - MB + 14}" {FONT} font-size="10" text-anchor="middle">{_fmt(v)}'
+                   '</text>')
+    sig = f", sigma {_fmt(h.sigma)}" if h.sigma else ""
+    out.append(f'<text x="{ML}" y="{H - 6}" {FONT} font-size="10" fill="#444">normal fit: mean {_fmt(h.mean)}{sig}'
+               '</text></svg>')
+    return "".join(out)
+
+
+def yield_trend_svg(labels: Sequence[str], fpy: Sequence[float | None], final: Sequence[float | None]) -> str:
+    """First-pass (blue) and final (green) yield per day, %."""
+    w = 1400
+    title = "yield per day (%): first pass blue, final green"
+    vals = [v for v in list(fpy) + list(final) if v is not None]
+    out = _frame(title, w)
+    if not vals:
+        return "".join([*out, f'<text x="{ML}" y="100" {FONT} font-size="12">no tested units</text></svg>'])
+    lo = min(min(vals) * 100 - 1, 95.0)
+    _, _, y = _scale(lo, 100.5, H - MB, MT)
+    out += _yticks(lo, 100.5, y, w)
+    n = len(labels)
+
+    def x(i: int) -> float:
+        return ML + (i + 0.5) * (w - ML - MR) / max(n, 1)
+
+    for series, colour in ((fpy, "#1565c0"), (final, "#2e7d32")):
+        seg = " ".join(f"{x(i):.1f},{y(v * 100):.1f}" for i, v in enumerate(series) if v is not None)
+        out.append(f'<polyline points="{seg}" fill="none" stroke="{colour}" stroke-width="1.6"/>')
+    for i in sorted({0, n // 2, n - 1}):
+        anchor = "start" if i == 0 else "end" if i == n - 1 else "middle"
+        out.append(f'<text x="{x(i):.1f}" y="{H - MB + 14}" {FONT} font-size="10" text-anchor="{anchor}">'
+                   f'{escape(labels[i])}</text>')
+    out.append("</svg>")
+    return "".join(out)
+
+
+__all__ = ["control_chart_svg", "histogram_svg", "yield_trend_svg"]

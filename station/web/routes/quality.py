@@ -1,0 +1,195 @@
+"""Quality analytics: the quality page (``/quality``), its CSV exports, its histograms, and the same
+statistics as JSON under ``/api/quality/...``.
+
+Every statistic is aggregated by the database over the quality tables (:mod:`station.store.quality`);
+filters (UTC date range, station, lot, limits version, shift calendar) are validated: a bad one answers 422.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+from typing import Annotated
+
+from fastapi import APIRouter, HTTPException, Query, Request
+from fastapi.responses import HTMLResponse, Response
+from sqlalchemy import select
+
+from station.store import quality as q
+from station.store.models import QualityDaily, QualityResult
+from station.store.models import Station as StationRow
+from station.store.spc import RULES
+from station.web import charts
+from station.web.context import Web
+from station.web.labels import parameter_label, unit_label
+from station.web.models.quality import (
+    DEFINITIONS,
+    CapabilityEntry,
+    ChartPointEntry,
+    ControlChartEntry,
+    ControlCharts,
+    GroupBy,
+    HistogramEntry,
+    QualityQuery,
+    RuleEntry,
+    YieldEntry,
+    YieldTable,
+)
+from station.web.templating import templates
+
+router = APIRouter()
+Filters = Annotated[QualityQuery, Query()]
+CPK_TARGET = 1.33
+"""Capability below this is flagged on the page (the usual customer requirement)."""
+
+
+def _yield_tables(web: Web, query: QualityQuery) -> dict[str, YieldTable]:
+    cal = query.calendar(web.shifts)
+    return {by: YieldTable(by=by, shifts=cal.text(), definitions=DEFINITIONS, rows=[
+        YieldEntry(group=r.group, results=r.results, not_tested=r.not_tested, tested=r.tested,
+                   units_tested=r.units_tested, first_tested=r.first_tested, first_pass=r.first_pass,
+                   final_pass=r.final_pass, retests=r.retests, first_pass_yield=r.first_pass_yield,
+                   final_yield=r.final_yield) for r in rows])
+        for by, rows in q.yield_tables(web.db, query.filter(), cal).items()}
+
+
+def _yield_table(web: Web, by: str, query: QualityQuery) -> YieldTable:
+    return _yield_tables(web, query)[by]
+
+
+def _capability(web: Web, query: QualityQuery,
+                rules: dict[str, tuple[int, ...]] | None = None) -> list[CapabilityEntry]:
+    out = []
+    for c in q.capabilities(web.db, query.filter()):
+        k = c.cap
+        out.append(CapabilityEntry(name=c.name, label=parameter_label(c.name), unit=c.unit,
+                                   limits_versions=c.limits_versions, n=k.n, mean=k.mean,
+                                   sigma_within=k.sigma_within, sigma_overall=k.sigma_overall, low=k.low, high=k.high,
+                                   cp=k.cp, cpk=k.cpk, pp=k.pp, ppk=k.ppk, n_below=c.n_below, n_above=c.n_above,
+                                   min=c.vmin, max=c.vmax, rules=list((rules or {}).get(c.name, ()))))
+    return out
+
+
+def _charts(web: Web, query: QualityQuery, names: list[str] | None = None) -> list[q.ParameterChart]:
+    return q.control_charts(web.db, query.filter(), names)
+
+
+def _chart_entry(pc: q.ParameterChart) -> ControlChartEntry:
+    ch = pc.chart
+    return ControlChartEntry(name=pc.name, unit=pc.unit, center=ch.center, sigma_within=ch.sigma_within, low=pc.low,
+                             high=pc.high, violations=list(ch.violations), points=[
+                                 ChartPointEntry(day=p.label, n=p.n, mean=p.mean, s=p.s, lcl=p.lcl, ucl=p.ucl,
+                                                 s_lcl=p.s_lcl, s_ucl=p.s_ucl, z=p.z, rules=list(p.rules))
+                                 for p in ch.points])
+
+
+def _choices(web: Web) -> dict[str, list[str]]:
+    with web.db.transaction() as s:
+        return {
+            "stations": list(s.scalars(select(StationRow.name).order_by(StationRow.name))),
+            "lots": [x for x in s.scalars(select(QualityResult.lot).distinct().order_by(QualityResult.lot)) if x],
+            "limits": [x for x in s.scalars(select(QualityDaily.limits_version).distinct()
+                                            .order_by(QualityDaily.limits_version)) if x],
+        }
+
+
+@router.get("/quality", response_class=HTMLResponse, include_in_schema=False)
+def quality_page(request: Request, web: Web, query: Filters) -> HTMLResponse:
+    cal = query.calendar(web.shifts)
+    tables = _yield_tables(web, query)
+    chart_list = _charts(web, query)
+    rules = {c.name: c.chart.violations for c in chart_list}
+    caps = _capability(web, query, rules)
+    flagged = [c for c in caps if c.rules or (c.cpk is not None and c.cpk < CPK_TARGET)]
+    shown = {c.name for c in flagged}
+    svgs = {c.name: charts.control_chart_svg(c) for c in chart_list if c.name in shown}
+    days = tables["day"].rows
+    trend = charts.yield_trend_svg([r.group for r in days], [r.first_pass_yield for r in days],
+                                   [r.final_yield for r in days])
+    params = request.query_params
+    qs = "&".join(f"{k}={v}" for k, v in params.multi_items() if v)
+    return templates.TemplateResponse(request, "quality.html", {
+        "query": query, "qs": qs, "tables": tables, "caps": caps, "svgs": svgs, "trend": trend,
+        "rules": RULES, "cpk_target": CPK_TARGET, "shifts": cal.text(), "definitions": DEFINITIONS,
+        "choices": _choices(web), "unit_label": unit_label,
+        "flagged": flagged,
+    })
+
+
+@router.get("/quality/histogram/{name}.svg", include_in_schema=False)
+def quality_histogram_svg(web: Web, name: str, query: Filters) -> Response:
+    h = q.histogram(web.db, name, query.filter())
+    if h is None:
+        raise HTTPException(404, f"no values of {name} in the selection")
+    return Response(charts.histogram_svg(h), media_type="image/svg+xml", headers={"Cache-Control": "max-age=30"})
+
+
+@router.get("/quality/control/{name}.svg", include_in_schema=False)
+def quality_control_svg(web: Web, name: str, query: Filters) -> Response:
+    found = q.control_charts(web.db, query.filter(), [name])
+    if not found:
+        raise HTTPException(404, f"no values of {name} in the selection")
+    return Response(charts.control_chart_svg(found[0]), media_type="image/svg+xml",
+                    headers={"Cache-Control": "max-age=30"})
+
+
+def _csv(name: str, header: list[str], rows: list[list[object]]) -> Response:
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(header)
+    w.writerows(rows)
+    return Response(buf.getvalue(), media_type="text/csv; charset=utf-8",
+                    headers={"Content-Disposition": f'attachment; filename="{name}.csv"'})
+
+
+@router.get("/quality/yield.csv", include_in_schema=False)
+def quality_yield_csv(web: Web, query: Filters, by: GroupBy = "station") -> Response:
+    t = _yield_table(web, by, query)
+    fields = list(YieldEntry.model_fields)
+    return _csv(f"yield-by-{by}", fields, [[getattr(r, f) for f in fields] for r in t.rows])
+
+
+@router.get("/quality/capability.csv", include_in_schema=False)
+def quality_capability_csv(web: Web, query: Filters) -> Response:
+    caps = _capability(web, query)
+    fields = [f for f in CapabilityEntry.model_fields if f != "rules"]
+    return _csv("capability", fields, [[getattr(c, f) for f in fields] for c in caps])
+
+
+@router.get("/api/quality/yield", tags=["quality"], response_model=YieldTable)
+def api_quality_yield(web: Web, query: Filters, by: GroupBy = "station") -> YieldTable:
+    """First-pass and final yield grouped by station, shift, day, lot or in total (see ``definitions``)."""
+    return _yield_table(web, by, query)
+
+
+@router.get("/api/quality/capability", tags=["quality"], response_model=list[CapabilityEntry])
+def api_quality_capability(web: Web, query: Filters) -> list[CapabilityEntry]:
+    """Population statistics: per parameter n, mean, sigma within/overall, Cp/Cpk, Pp/Ppk against its limits,
+    worst Cpk first, with the run rules violated on its daily X-bar chart."""
+    rules = {c.name: c.chart.violations for c in _charts(web, query)}
+    return _capability(web, query, rules)
+
+
+@router.get("/api/quality/control-charts", tags=["quality"], response_model=ControlCharts)
+def api_quality_control_charts(web: Web, query: Filters,
+                               name: Annotated[list[str] | None, Query(description="parameters (default: all)")]
+                               = None) -> ControlCharts:
+    """Daily X-bar/S charts with control limits and the run rules each day completes."""
+    return ControlCharts(rules=[RuleEntry(number=k, text=v) for k, v in RULES.items()],
+                         charts=[_chart_entry(c) for c in _charts(web, query, name)])
+
+
+@router.get("/api/quality/histogram/{name}", tags=["quality"], response_model=HistogramEntry,
+            responses={404: {"description": "no values of this parameter in the selection"}})
+def api_quality_histogram(web: Web, name: str, query: Filters,
+                          bins: Annotated[int, Query(ge=5, le=200, description="number of bins")] = 40
+                          ) -> HistogramEntry:
+    """One parameter's values in equal bins (counted by the database) with the fitted normal."""
+    h = q.histogram(web.db, name, query.filter(), bins)
+    if h is None:
+        raise HTTPException(404, f"no values of {name} in the selection")
+    return HistogramEntry(name=h.name, unit=h.unit, lo=h.lo, hi=h.hi, counts=list(h.counts), n=h.n, mean=h.mean,
+                          sigma=h.sigma, low=h.low, high=h.high)
+
+
+__all__ = ["CPK_TARGET", "router"]
