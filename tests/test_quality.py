@@ -29,8 +29,15 @@ from station.sequence.records import (
 )
 from station.store import Database, Recorder, RunContext, open_database, recover_unfinished
 from station.store.models import QualityResult
-from station.store.quality import QualityFilter, QualityFilterError, ShiftCalendar, capabilities, control_charts, \
-    histogram, yield_tables
+from station.store.quality import (
+    QualityFilter,
+    QualityFilterError,
+    ShiftCalendar,
+    capabilities,
+    control_charts,
+    histogram,
+    yield_tables,
+)
 from station.store.quality_index import rebuild
 from station.store.spc import c4, capability, control_chart, run_rules
 from station.store.synthetic import DRIFTING, SHIFTED, SHIFTED_LOT, fill
@@ -330,3 +337,35 @@ def test_quality_api_and_page(client: TestClient) -> None:
     assert svg.status_code == 200 and svg.text.startswith("<svg") and "USL" in svg.text
     assert client.get("/quality/histogram/nope.svg").status_code == 404
     assert client.get(f"/quality/control/{DRIFTING}.svg").text.count("<circle") >= DAYS
+
+
+def test_unit_list_search_and_cursor_pages(client: TestClient) -> None:
+    seen: list[str] = []
+    params: dict[str, str | int] = {"q": "imu-00001", "limit": 4}
+    while True:
+        r = client.get("/api/units", params=params)
+        assert r.status_code == 200
+        seen += [u["serial"] for u in r.json()]
+        if "X-Next-Cursor" not in r.headers:
+            assert "Link" not in r.headers
+            break
+        assert 'rel="next"' in r.headers["Link"]
+        params = {**params, "cursor": r.headers["X-Next-Cursor"]}
+    assert seen == [f"IMU-{i:07d}" for i in range(100, 200)]  # 'IMU-00001' + two digits, in 25 pages
+    one = client.get("/api/units", params={"q": "IMU-0000042"}).json()
+    assert [u["serial"] for u in one] == ["IMU-0000042"] and one[0]["last_started_at"].endswith("+00:00")
+    fails = client.get("/api/units", params={"outcome": "FAIL", "limit": 1000}).json()
+    assert fails and all(u["last_outcome"] == "FAIL" for u in fails)
+    for bad in ({"outcome": "BOGUS"}, {"cursor": "%%%"}, {"limit": 0}):
+        assert client.get("/api/units", params=bad).status_code == 422, bad
+    page = client.get("/units", params={"q": "IMU-000004", "limit": 5})
+    assert page.status_code == 200 and "IMU-0000040" in page.text and 'id="next"' in page.text
+    runs, cursor, pages = [], None, 0
+    while pages < 3:
+        r = client.get("/api/runs", params={"limit": 50, **({"cursor": cursor} if cursor else {})})
+        runs += [x["run_id"] for x in r.json()]
+        cursor, pages = r.headers.get("X-Next-Cursor"), pages + 1
+    starts = [x["started_at"] for x in client.get("/api/runs", params={"limit": 150}).json()]
+    assert runs == [x["run_id"] for x in client.get("/api/runs", params={"limit": 150}).json()]
+    assert starts == sorted(starts, reverse=True) and all(t.endswith("+00:00") for t in starts)
+    assert client.get("/api/runs", params={"cursor": "bm9wZQ"}).status_code == 422

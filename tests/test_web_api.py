@@ -40,6 +40,7 @@ from station.sequence.records import (
 from station.session.csv_v1 import write_session
 from station.sim.session_sim import simulate_session
 from station.store import Recorder, open_database
+from station.store.quality import ShiftCalendar
 from station.store.queries import show_unit
 from station.web.app import create_app
 from station.web.listing import is_marginal, latest_checks
@@ -230,13 +231,18 @@ def test_wait_change_is_woken_from_another_thread() -> None:
 
 
 def test_shift_stats(store: dict[str, Any]) -> None:
-    assert shift_start(datetime(2026, 11, 21, 5, 0, tzinfo=UTC)) == datetime(2026, 11, 20, 22, 0, tzinfo=UTC)
-    assert shift_start(datetime(2026, 11, 21, 13, 59, tzinfo=UTC)) == datetime(2026, 11, 21, 6, 0, tzinfo=UTC)
+    assert shift_start(datetime(2026, 11, 21, 5, 0, tzinfo=UTC)) == (datetime(2026, 11, 20, 22, 0, tzinfo=UTC), "C")
+    assert shift_start(datetime(2026, 11, 21, 13, 59, tzinfo=UTC)) == (datetime(2026, 11, 21, 6, 0, tzinfo=UTC), "A")
+    night = ShiftCalendar.parse("day=07:30,night=19:30")
+    assert shift_start(datetime(2026, 11, 21, 7, 0, tzinfo=UTC), night) == (datetime(2026, 11, 20, 19, 30,
+                                                                                      tzinfo=UTC), "night")
     st = shift_stats(store["db"], datetime(2026, 11, 21, 12, 0, tzinfo=UTC))  # 6 h into the shift, one PASS unit
     assert (st.units_tested, st.first_pass_units, st.first_pass_yield) == (1, 1, 1.0)
     assert st.units_per_hour == pytest.approx(1 / 6.0)
-    prev = shift_stats(store["db"], datetime(2026, 11, 20, 12, 0, tzinfo=UTC))  # FAIL and ERROR, both first tests
-    assert (prev.units_tested, prev.first_pass_units, prev.first_pass_yield) == (2, 2, 0.0)
+    prev = shift_stats(store["db"], datetime(2026, 11, 20, 12, 0, tzinfo=UTC))  # a FAIL and an ERROR
+    # the ERROR result is not tested: it is no unit tested and uses up no first pass
+    assert (prev.results, prev.not_tested, prev.units_tested, prev.first_pass_units, prev.first_pass_yield) == \
+        (2, 1, 1, 1, 0.0)
     assert is_marginal(0.095, -0.1, 0.1, 0.1) and not is_marginal(0.0, -0.1, 0.1, 0.1)
     assert not is_marginal(0.2, -0.1, 0.1, 0.1)
 

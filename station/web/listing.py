@@ -9,12 +9,14 @@ Values are SI as stored (see the ``unit`` field).
 
 from __future__ import annotations
 
+import base64
 import math
 from dataclasses import dataclass
 from datetime import UTC, date, datetime, time
 from typing import Any
 
-from sqlalchemy import select
+from fastapi import Request, Response
+from sqlalchemy import and_, func, or_, select
 
 from station.store.db import Database
 from station.store.models import UNFINISHED, LimitCheck, Run, RunUnit, Unit
@@ -28,56 +30,145 @@ def _iso(t: datetime | None) -> str | None:
     return (t if t.tzinfo is not None else t.replace(tzinfo=UTC)).isoformat()
 
 
+class CursorError(ValueError):
+    """A pagination cursor this listing did not hand out."""
+
+
+def _encode(text: str) -> str:
+    return base64.urlsafe_b64encode(text.encode("utf-8")).decode("ascii").rstrip("=")
+
+
+def _decode(cursor: str, kind: str) -> str:
+    """The text of a cursor this listing (``kind``: 'units' or 'runs') handed out."""
+    try:
+        text = base64.b64decode(cursor + "=" * (-len(cursor) % 4), altchars=b"-_", validate=True).decode("utf-8")
+    except (ValueError, UnicodeDecodeError):
+        text = ""
+    head, sep, rest = text.partition("|")
+    if head != kind or not sep:
+        raise CursorError("not a cursor of this listing")
+    return rest
+
+
 def list_runs(db: Database, *, limit: int = 50, station: str | None = None, outcome: str | None = None,
-              ) -> list[RunSummary]:
-    """The newest ``limit`` runs with every slot's unit and outcome."""
+              cursor: str | None = None) -> tuple[list[RunSummary], str | None]:
+    """The newest ``limit`` runs (after ``cursor``) with every slot's unit and outcome, and the next page's cursor
+    (None: no more). The cursor is opaque: the start time and id of the page's last run."""
     with db.transaction() as s:
         q = select(Run, StationRow.name).join(StationRow, Run.station_id == StationRow.id)
         if station:
             q = q.where(StationRow.name == station)
         if outcome:
             q = q.where(Run.outcome == outcome)
+        if cursor:
+            at, _, pk = _decode(cursor, "runs").rpartition("|")
+            try:
+                t, run_pk = datetime.fromisoformat(at), int(pk)
+            except ValueError:
+                raise CursorError("not a cursor of this listing") from None
+            t = t.astimezone(UTC) if s.get_bind().dialect.name == "postgresql" else t.replace(tzinfo=None)
+            q = q.where(or_(Run.started_at < t, and_(Run.started_at == t, Run.id < run_pk)))
+        rows = s.execute(q.order_by(Run.started_at.desc(), Run.id.desc()).limit(limit + 1)).all()
+        more = len(rows) > limit
+        rows = rows[:limit]
         out = []
-        for run, station_name in s.execute(q.order_by(Run.started_at.desc(), Run.id.desc()).limit(limit)).all():
+        for run, station_name in rows:
             units = [RunUnitOutcome(slot=ru.slot, serial=ru.unit.serial if ru.unit else "", outcome=ru.outcome,
                                     message=ru.message) for ru in run.units]
             out.append(RunSummary(run_id=run.run_uid, station=station_name, outcome=run.outcome,
                                   started_at=_iso(run.started_at), finished_at=_iso(run.finished_at),
                                   duration_s=run.duration_s, wall_s=run.wall_s, message=run.message,
                                   operator=run.operator, units=units))
-    return out
+        nxt = None
+        if more and rows:
+            last = rows[-1][0]
+            nxt = _encode(f"runs|{_iso(last.started_at)}|{last.id}")
+    return out, nxt
+
+
+PAGED: dict[int | str, dict[str, Any]] = {
+    200: {"headers": {"X-Next-Cursor": {"description": "cursor of the next page (absent on the last page)",
+                                        "schema": {"type": "string"}},
+                      "Link": {"description": "<URL of the next page>; rel=\"next\" (absent on the last page)",
+                               "schema": {"type": "string"}}}},
+}
+"""OpenAPI ``responses`` of a paged listing."""
+
+
+def next_page(request: Request, response: Response, cursor: str | None) -> None:
+    """Set the ``X-Next-Cursor`` and ``Link: <...>; rel="next"`` headers of a page (none on the last page)."""
+    if cursor is None:
+        return
+    response.headers["X-Next-Cursor"] = cursor
+    response.headers["Link"] = f'<{request.url.include_query_params(cursor=cursor)}>; rel="next"'
+
+
+def _like(text: str) -> str:
+    return "%" + text.replace("\\", "\\\\").replace("%", "\\%").replace("_", "\\_") + "%"
 
 
 def list_unit_results(
     db: Database, *, day_from: date | None = None, day_to: date | None = None, outcome: str | None = None,
-    station: str | None = None,
-) -> list[UnitOverview]:
-    """Units with their latest result among the runs matching the filters.
+    station: str | None = None, search: str | None = None, limit: int | None = None, cursor: str | None = None,
+) -> tuple[list[UnitOverview], str | None]:
+    """Units by serial with their latest result among the runs matching the filters, and the next page's cursor.
 
     ``day_from``/``day_to``: inclusive UTC dates of the run start; ``outcome``: the unit's outcome in that run;
-    ``station``: the station name.
+    ``station``: the station name; ``search``: part of the serial (case-insensitive); ``limit``: units per page
+    (None: all); ``cursor``: from the previous page (opaque: its last serial).
     """
+    conds: list[Any] = []
+    if day_from is not None:
+        conds.append(Run.started_at >= datetime.combine(day_from, time(0), UTC))
+    if day_to is not None:  # the end of that day (the last representable day has no next day)
+        conds.append(Run.started_at <= datetime.combine(day_to, time.max, UTC))
+    unit_conds: list[Any] = []
+    if search:
+        unit_conds.append(Unit.serial.ilike(_like(search), escape="\\"))
+    if cursor:
+        unit_conds.append(Unit.serial > _decode(cursor, "units"))
     with db.transaction() as s:
-        q = (select(Unit.serial, RunUnit.outcome, Run.run_uid, Run.started_at, StationRow.name)
-             .join(RunUnit, RunUnit.unit_id == Unit.id).join(Run, RunUnit.run_id == Run.id)
-             .join(StationRow, Run.station_id == StationRow.id))
-        if day_from is not None:
-            q = q.where(Run.started_at >= datetime.combine(day_from, time(0), UTC))
-        if day_to is not None:  # the end of that day (the last representable day has no next day)
-            end = datetime.combine(day_to, time.max, UTC)
-            q = q.where(Run.started_at <= end)
         if station:
-            q = q.where(StationRow.name == station)
-        rows = s.execute(q.order_by(Unit.serial, Run.started_at.desc(), Run.id.desc())).all()
-    latest: dict[str, tuple[Any, ...]] = {}
-    runs: dict[str, int] = {}
-    for row in rows:  # newest run of each unit first
-        latest.setdefault(row[0], row)
-        runs[row[0]] = runs.get(row[0], 0) + 1
-    result = [UnitOverview(serial=serial, runs=runs[serial], last_outcome=unit_outcome, last_run_id=run_uid,
-                           last_started_at=_iso(started), station=station_name)
-              for serial, unit_outcome, run_uid, started, station_name in latest.values()]
-    return [r for r in result if r.last_outcome == outcome] if outcome else result
+            sid = s.scalar(select(StationRow.id).where(StationRow.name == station))
+            conds.append(Run.station_id == (sid if sid is not None else -1))
+        take = None if limit is None else limit + 1
+        if outcome is None:  # page the units first, then their results
+            matching = select(RunUnit.id).join(Run, RunUnit.run_id == Run.id).where(RunUnit.unit_id == Unit.id,
+                                                                                    *conds)
+            uq = select(Unit.id, Unit.serial).where(*unit_conds, matching.exists()).order_by(Unit.serial)
+            page = s.execute(uq.limit(take) if take else uq).all()
+            ids = [u[0] for u in page]
+            rows = []
+            for i in range(0, len(ids), 500):
+                rows += s.execute(
+                    select(RunUnit.unit_id, RunUnit.outcome, Run.run_uid, Run.started_at, Run.station_id)
+                    .join(Run, RunUnit.run_id == Run.id).where(RunUnit.unit_id.in_(ids[i:i + 500]), *conds)
+                    .order_by(RunUnit.unit_id, Run.started_at.desc(), Run.id.desc())).all()
+            serial_of = dict(page)
+            latest: dict[int, Any] = {}
+            runs: dict[int, int] = {}
+            for row in rows:
+                latest.setdefault(row[0], row)
+                runs[row[0]] = runs.get(row[0], 0) + 1
+            found = [(serial_of[u], runs[u], *latest[u][1:]) for u in ids if u in latest]
+        else:  # the outcome of the latest matching result: rank each unit's matching results in the database
+            rn = func.row_number().over(partition_by=RunUnit.unit_id,
+                                        order_by=(Run.started_at.desc(), Run.id.desc())).label("rn")
+            n = func.count().over(partition_by=RunUnit.unit_id).label("n")
+            inner = (select(Unit.serial, RunUnit.outcome, Run.run_uid, Run.started_at, Run.station_id, rn, n)
+                     .join(RunUnit, RunUnit.unit_id == Unit.id).join(Run, RunUnit.run_id == Run.id)
+                     .where(*conds, *unit_conds).subquery())
+            oq = (select(inner.c.serial, inner.c.n, inner.c.outcome, inner.c.run_uid, inner.c.started_at,
+                         inner.c.station_id).where(inner.c.rn == 1, inner.c.outcome == outcome)
+                  .order_by(inner.c.serial))
+            found = [tuple(r) for r in s.execute(oq.limit(take) if take else oq).all()]
+        names = {int(i): str(nm) for i, nm in s.execute(select(StationRow.id, StationRow.name))}
+    more = limit is not None and len(found) > limit
+    found = found[:limit] if limit is not None else found
+    result = [UnitOverview(serial=serial, runs=int(nruns), last_outcome=unit_outcome, last_run_id=run_uid,
+                           last_started_at=_iso(started), station=names.get(st, ""))
+              for serial, nruns, unit_outcome, run_uid, started, st in found]
+    return result, (_encode(f"units|{result[-1].serial}") if more and result else None)
 
 
 def _num(x: float | None) -> float | None:

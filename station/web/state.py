@@ -14,9 +14,10 @@ step plus, for each step still to come, the hold time of the last step of its ki
 (rest, pose, rate; the current step's hold for a kind not seen yet) and the mean rig
 overhead (step duration minus hold: motion and settling) of the steps finished so far.
 
-First-pass yield and units per hour for the shift come from the store
-(:func:`shift_stats`), so they include earlier runs and other stations' results in the
-same database.
+The shift's figures come from the store's quality tables (:func:`shift_stats`, shift calendar
+:class:`~station.store.quality.ShiftCalendar`), so they include earlier runs and other stations' results in the
+same database: units tested are distinct units with a tested result (PASS, FAIL, RETEST), first-pass yield is over
+units whose first tested result fell in the shift (ERROR, ABORTED, UNFINISHED results are not tested).
 
 :meth:`LiveStatus.status` is the typed status (:class:`~station.web.models.StationStatus`, the
 answer of ``GET /api/status``); :meth:`LiveStatus.snapshot` is the same as plain JSON-able data
@@ -34,7 +35,7 @@ from dataclasses import dataclass, field
 from datetime import UTC, datetime, timedelta
 from typing import Any
 
-from sqlalchemy import select
+from sqlalchemy import and_, case, func, select
 
 from station.sequence.records import (
     Measured,
@@ -48,49 +49,50 @@ from station.sequence.records import (
     UnitFinished,
 )
 from station.store.db import Database
-from station.store.models import UNFINISHED, Run, RunUnit, Unit
+from station.store.models import QualityResult
 from station.store.models import Station as StationRow
+from station.store.quality import ShiftCalendar
 from station.web.listing import list_runs
 from station.web.models import RigState, RunSummary, ShiftStats, SlotStatus, StationStatus, StepProgress
 from station.web.models.status import StationState
 
-SHIFT_HOURS = 8.0
-"""Length of a shift (h); shifts start at 06:00, 14:00 and 22:00 UTC."""
-SHIFT_ANCHOR_HOUR = 6
+
+def shift_start(now: datetime, shifts: ShiftCalendar | None = None) -> tuple[datetime, str]:
+    """The start (UTC, timezone-aware) and name of the shift of ``shifts`` (default A 06:00, B 14:00, C 22:00 UTC)
+    that contains ``now``."""
+    cal = shifts if shifts is not None else ShiftCalendar()
+    now = now.astimezone(UTC)
+    midnight = now.replace(hour=0, minute=0, second=0, microsecond=0)
+    minute = now.hour * 60 + now.minute
+    started = [(name, m) for name, m in cal.shifts if m <= minute]
+    if started:
+        name, m = started[-1]
+        return midnight + timedelta(minutes=m), name
+    name, m = cal.shifts[-1]
+    return midnight - timedelta(days=1) + timedelta(minutes=m), name
 
 
-def shift_start(now: datetime) -> datetime:
-    """The start of the shift containing ``now`` (UTC, timezone-aware)."""
-    anchor = now.astimezone(UTC).replace(hour=SHIFT_ANCHOR_HOUR, minute=0, second=0, microsecond=0)
-    if anchor > now:
-        anchor -= timedelta(days=1)
-    shift = timedelta(hours=SHIFT_HOURS)
-    return anchor + shift * int((now - anchor) / shift)
-
-
-def shift_stats(db: Database, now: datetime | None = None, station: str | None = None) -> ShiftStats:
-    """First-pass yield and units per hour of the shift containing ``now`` (default: now, UTC)."""
+def shift_stats(db: Database, now: datetime | None = None, station: str | None = None,
+                shifts: ShiftCalendar | None = None) -> ShiftStats:
+    """The figures of the shift containing ``now`` (default: now, UTC) from the quality tables (all stations in
+    the database, or ``station``). Definitions: :mod:`station.store.quality_index` (tested, first pass)."""
     now = now if now is not None else datetime.now(UTC)
-    since = shift_start(now)
+    since, name = shift_start(now, shifts)
+    q = QualityResult
+    first = q.attempt == 1
     with db.transaction() as s:
-        q = (select(RunUnit.unit_id, RunUnit.outcome, Run.started_at, Run.id)
-             .join(Run, RunUnit.run_id == Run.id).join(StationRow, Run.station_id == StationRow.id)
-             .where(Run.outcome != UNFINISHED, RunUnit.unit_id.is_not(None)))
+        stmt = select(func.count(), func.sum(case((q.tested, 0), else_=1)),
+                      func.count(func.distinct(case((q.tested, q.unit_id)))), func.sum(case((first, 1), else_=0)),
+                      func.sum(case((and_(first, q.outcome == Outcome.PASS.value), 1), else_=0))
+                      ).where(q.started_at >= since, q.started_at <= now)
         if station is not None:
-            q = q.where(StationRow.name == station)
-        rows = s.execute(q.order_by(Run.started_at, Run.id)).all()
-        first_ever: dict[int, Any] = {}
-        for uid, _outcome, started, run_pk in s.execute(
-            select(RunUnit.unit_id, RunUnit.outcome, Run.started_at, Run.id).join(Run, RunUnit.run_id == Run.id)
-            .join(Unit, RunUnit.unit_id == Unit.id).order_by(Run.started_at, Run.id)
-        ).all():
-            first_ever.setdefault(uid, (started, run_pk))
-    in_shift = [r for r in rows if _aware(r[2]) >= since and _aware(r[2]) <= now]
-    first = [r for r in in_shift if first_ever.get(r[0]) == (r[2], r[3])]
-    passed = sum(1 for r in first if r[1] == Outcome.PASS.value)
+            stmt = stmt.join(StationRow, q.station_id == StationRow.id).where(StationRow.name == station)
+        results, not_tested, units, first_tested, first_pass = (int(x or 0) for x in s.execute(stmt).one())
     hours = max((now - since).total_seconds() / 3600.0, 1.0 / 60.0)
-    return ShiftStats(since=since.isoformat(), units_tested=len(in_shift), first_pass_units=len(first),
-                      first_pass_yield=passed / len(first) if first else None, units_per_hour=len(in_shift) / hours)
+    return ShiftStats(shift=name, since=since.isoformat(), results=results, not_tested=not_tested,
+                      units_tested=units, first_pass_units=first_tested,
+                      first_pass_yield=first_pass / first_tested if first_tested else None,
+                      units_per_hour=units / hours)
 
 
 def _aware(t: datetime) -> datetime:
@@ -134,6 +136,8 @@ class LiveStatus:
 
     def __init__(self, db: Database | None = None, now: Callable[[], datetime] | None = None) -> None:
         self.db = db
+        self.shifts = ShiftCalendar()
+        """The shift calendar of the shift figures (set by :func:`station.web.app.create_app`)."""
         self._now = now if now is not None else (lambda: datetime.now(UTC))
         self._lock = threading.Lock()
         self._live = _Live()
@@ -269,7 +273,8 @@ class LiveStatus:
                 step=StepProgress(index=lv.step_index, name=lv.step_name, kind=lv.step_kind, hold_s=lv.step_hold_s),
                 steps_done=lv.steps_done, steps_total=total,
                 progress=lv.steps_done / total if total else (1.0 if lv.outcome else 0.0), remaining_s=remaining,
-                slots=[s.model_copy() for s in lv.slots], rig_state=lv.rig_state, shift=shift, recent_runs=recent,
+                slots=[s.model_copy() for s in lv.slots], shift=shift, recent_runs=recent,
+                rig_state=lv.rig_state if lv.state == "running" else None,  # only while a run holds the rig
             )
 
     def snapshot(self, *, with_store: bool = True) -> dict[str, Any]:
@@ -286,7 +291,7 @@ class LiveStatus:
         now = time.monotonic()
         if cached is not None and cached[0] == epoch and now - cached[1] < 10.0:
             return cached[2]
-        figures = shift_stats(self.db, self._now()), list_runs(self.db, limit=10)
+        figures = shift_stats(self.db, self._now(), shifts=self.shifts), list_runs(self.db, limit=10)[0]
         with self._lock:
             self._store_cache = (epoch, now, figures)
         return figures

@@ -39,6 +39,8 @@ class RunFilter(BaseModel):
     limit: int = Field(50, ge=1, le=1000, description="newest runs to return")
     station: str | None = Field(None, description="station name")
     outcome: Outcome | None = Field(None, description="run outcome")
+    cursor: str | None = Field(None, max_length=400, description="the next page: the ``X-Next-Cursor`` header of "
+                                                                 "the previous page (absent on the last page)")
 
 
 class StartRunRequest(BaseModel):

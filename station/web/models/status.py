@@ -52,16 +52,21 @@ class StepProgress(BaseModel):
 
 
 class ShiftStats(BaseModel):
-    """Production figures of a shift (shifts start at 06:00, 14:00 and 22:00 UTC)."""
+    """Production figures of the current shift (the station's shift calendar, UTC), over every station recording
+    into the database. Tested: the run reached a verdict on the unit (PASS, FAIL or RETEST); ERROR, ABORTED,
+    REFUSED and UNFINISHED results are not tested and never use up a unit's first pass."""
 
     model_config = ConfigDict(frozen=True)
 
+    shift: str = Field(description="the shift's name in the calendar")
     since: str = Field(description="start of the shift (UTC, ISO 8601)")
-    units_tested: int = Field(description="unit results of finished runs in the shift")
-    first_pass_units: int = Field(description="units whose first ever test was in this shift")
+    results: int = Field(description="unit results of ended runs in the shift (tested or not)")
+    not_tested: int = Field(description="of those, results without a verdict (ERROR, ABORTED, REFUSED)")
+    units_tested: int = Field(description="distinct units with a tested result in the shift")
+    first_pass_units: int = Field(description="units whose first tested result was in this shift")
     first_pass_yield: float | None = Field(description="fraction of those that passed that first test (1); null if "
                                                        "there were none")
-    units_per_hour: float = Field(description="unit results per hour since the shift started (1/h)")
+    units_per_hour: float = Field(description="distinct units tested per hour since the shift started (1/h)")
 
 
 class StationStatus(BaseModel):

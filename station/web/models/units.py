@@ -19,6 +19,10 @@ class UnitFilter(BaseModel):
     outcome: Outcome | None = Field(None, description="the unit's latest outcome (PASS, FAIL, ERROR, ABORTED, "
                                                       "UNFINISHED)")
     station: str | None = Field(None, description="station name")
+    q: str | None = Field(None, max_length=100, description="part of the serial number (case-insensitive)")
+    limit: int = Field(100, ge=1, le=1000, description="units per page (ordered by serial)")
+    cursor: str | None = Field(None, max_length=400, description="the next page: the ``X-Next-Cursor`` header of "
+                                                                 "the previous page (absent on the last page)")
 
 
 class UnitOverview(BaseModel):

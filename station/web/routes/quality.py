@@ -22,6 +22,7 @@ from station.store.spc import RULES
 from station.web import charts
 from station.web.context import Web
 from station.web.labels import parameter_label, unit_label
+from station.web.models.common import problem
 from station.web.models.quality import (
     DEFINITIONS,
     CapabilityEntry,
@@ -39,6 +40,8 @@ from station.web.templating import templates
 
 router = APIRouter()
 Filters = Annotated[QualityQuery, Query()]
+ByQuery = Annotated[GroupBy, Query(description="group by station, shift (the shift calendar), UTC day of the run "
+                                               "start, lot, or one total row")]
 CPK_TARGET = 1.33
 """Capability below this is flagged on the page (the usual customer requirement)."""
 
@@ -143,7 +146,7 @@ def _csv(name: str, header: list[str], rows: list[list[object]]) -> Response:
 
 
 @router.get("/quality/yield.csv", include_in_schema=False)
-def quality_yield_csv(web: Web, query: Filters, by: GroupBy = "station") -> Response:
+def quality_yield_csv(web: Web, query: Filters, by: ByQuery = "station") -> Response:
     t = _yield_table(web, by, query)
     fields = list(YieldEntry.model_fields)
     return _csv(f"yield-by-{by}", fields, [[getattr(r, f) for f in fields] for r in t.rows])
@@ -157,7 +160,7 @@ def quality_capability_csv(web: Web, query: Filters) -> Response:
 
 
 @router.get("/api/quality/yield", tags=["quality"], response_model=YieldTable)
-def api_quality_yield(web: Web, query: Filters, by: GroupBy = "station") -> YieldTable:
+def api_quality_yield(web: Web, query: Filters, by: ByQuery = "station") -> YieldTable:
     """First-pass and final yield grouped by station, shift, day, lot or in total (see ``definitions``)."""
     return _yield_table(web, by, query)
 
@@ -180,7 +183,7 @@ def api_quality_control_charts(web: Web, query: Filters,
 
 
 @router.get("/api/quality/histogram/{name}", tags=["quality"], response_model=HistogramEntry,
-            responses={404: {"description": "no values of this parameter in the selection"}})
+            responses={404: problem("no values of this parameter in the selection")})
 def api_quality_histogram(web: Web, name: str, query: Filters,
                           bins: Annotated[int, Query(ge=5, le=200, description="number of bins")] = 40
                           ) -> HistogramEntry:

@@ -9,21 +9,28 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, Body, Depends, HTTPException, Query
+from fastapi import APIRouter, Body, Depends, HTTPException, Query, Request, Response
 
 from station.kernel.errors import StationBusy, StationError
 from station.web.context import Web, require_token
-from station.web.listing import list_runs
+from station.web.listing import PAGED, CursorError, list_runs, next_page
 from station.web.models import RunAbortAccepted, RunAccepted, RunFilter, RunSummary, StartRunRequest, problem
 
 router = APIRouter(tags=["runs"])
 UNAUTHORIZED = {401: problem("missing or wrong bearer token (or no token configured)")}
 
 
-@router.get("/api/runs", response_model=list[RunSummary])
-def api_runs(web: Web, query: Annotated[RunFilter, Query()]) -> list[RunSummary]:
-    """Runs, newest first, with every slot's unit and outcome."""
-    return list_runs(web.db, limit=query.limit, station=query.station, outcome=query.outcome)
+@router.get("/api/runs", response_model=list[RunSummary], responses=PAGED)
+def api_runs(web: Web, query: Annotated[RunFilter, Query()], request: Request, response: Response) -> list[RunSummary]:
+    """Runs, newest first, with every slot's unit and outcome; ``limit`` per page, the next page's cursor in the
+    ``X-Next-Cursor`` header (and a ``Link: <...>; rel="next"`` header)."""
+    try:
+        runs, nxt = list_runs(web.db, limit=query.limit, station=query.station, outcome=query.outcome,
+                              cursor=query.cursor)
+    except CursorError as exc:
+        raise HTTPException(422, f"cursor: {exc}") from None
+    next_page(request, response, nxt)
+    return runs
 
 
 @router.post("/api/runs", status_code=202, response_model=RunAccepted, dependencies=[Depends(require_token)],

@@ -19,7 +19,7 @@ from station.session.csv_v1 import read_session
 from station.store.queries import show_unit, unit_image
 from station.web import plots
 from station.web.context import Web
-from station.web.listing import latest_checks, list_unit_results, shown_marginal
+from station.web.listing import PAGED, CursorError, latest_checks, list_unit_results, next_page, shown_marginal
 from station.web.lookup import plot_source, recordings, unit_or_404
 from station.web.models import UnitFilter, UnitOverview, UnitRecord, problem
 from station.web.templating import templates
@@ -72,11 +72,31 @@ def unit_plot(web: Web, serial: str, name: str) -> Response:
     return Response(svg, media_type="image/svg+xml", headers=_SVG_CACHED)
 
 
-@router.get("/api/units", tags=["units"], response_model=list[UnitOverview])
-def api_units(web: Web, query: Annotated[UnitFilter, Query()]) -> list[UnitOverview]:
-    """Units with their latest result among the runs matching the filters."""
-    return list_unit_results(web.db, day_from=query.date_from, day_to=query.date_to, outcome=query.outcome,
-                             station=query.station)
+@router.get("/api/units", tags=["units"], response_model=list[UnitOverview], responses=PAGED)
+def api_units(web: Web, query: Annotated[UnitFilter, Query()], request: Request,
+              response: Response) -> list[UnitOverview]:
+    """Units by serial with their latest result among the runs matching the filters; ``limit`` per page, the
+    next page's cursor in the ``X-Next-Cursor`` header (and a ``Link: <...>; rel="next"`` header)."""
+    try:
+        units, nxt = list_unit_results(web.db, day_from=query.date_from, day_to=query.date_to,
+                                       outcome=query.outcome, station=query.station, search=query.q,
+                                       limit=query.limit, cursor=query.cursor)
+    except CursorError as exc:
+        raise HTTPException(422, f"cursor: {exc}") from None
+    next_page(request, response, nxt)
+    return units
+
+
+@router.get("/units", response_class=HTMLResponse, include_in_schema=False)
+def units_page(request: Request, web: Web, query: Annotated[UnitFilter, Query()]) -> HTMLResponse:
+    try:
+        units, nxt = list_unit_results(web.db, day_from=query.date_from, day_to=query.date_to,
+                                       outcome=query.outcome, station=query.station, search=query.q,
+                                       limit=min(query.limit, 100), cursor=query.cursor)
+    except CursorError as exc:
+        raise HTTPException(422, f"cursor: {exc}") from None
+    more = str(request.url.include_query_params(cursor=nxt)) if nxt else None
+    return templates.TemplateResponse(request, "units.html", {"units": units, "query": query, "next": more})
 
 
 @router.get("/api/units/{serial}", tags=["units"], response_model=UnitRecord,
