@@ -177,20 +177,26 @@ def _num(x: float | None) -> float | None:
 
 def latest_checks(db: Database, serial: str) -> list[LimitCheckResult]:
     """The limit checks (step ``'limits'``) of the unit's newest finished run with any."""
+    return latest_checks_of_run(db, serial)[1]
+
+
+def latest_checks_of_run(db: Database, serial: str) -> tuple[str | None, list[LimitCheckResult]]:
+    """The run id and the limit checks (step ``'limits'``) of the unit's newest finished run with any."""
     with db.transaction() as s:
-        ru_id = s.scalar(
-            select(RunUnit.id).join(Run, RunUnit.run_id == Run.id).join(Unit, RunUnit.unit_id == Unit.id)
+        found = s.execute(
+            select(RunUnit.id, Run.run_uid).join(Run, RunUnit.run_id == Run.id).join(Unit, RunUnit.unit_id == Unit.id)
             .join(LimitCheck, LimitCheck.run_unit_id == RunUnit.id)
             .where(Unit.serial == serial, Run.outcome != UNFINISHED, LimitCheck.step == "limits")
             .order_by(Run.started_at.desc(), Run.id.desc()).limit(1)
-        )
-        if ru_id is None:
-            return []
+        ).first()
+        if found is None:
+            return None, []
+        ru_id, run_uid = found
         checks = s.scalars(select(LimitCheck).where(LimitCheck.run_unit_id == ru_id, LimitCheck.step == "limits")
                            .order_by(LimitCheck.id)).all()
-        return [LimitCheckResult(name=c.name, value=_num(c.value), std=_num(c.std), low=_num(c.low),
-                                 high=_num(c.high), unit=c.unit, passed=c.passed, verdict=c.verdict, k=c.k)
-                for c in checks]
+        return run_uid, [LimitCheckResult(name=c.name, value=_num(c.value), std=_num(c.std), low=_num(c.low),
+                                          high=_num(c.high), unit=c.unit, passed=c.passed, verdict=c.verdict, k=c.k)
+                         for c in checks]
 
 
 def shown_marginal(c: LimitCheckResult, fraction: float) -> bool:

@@ -7,6 +7,8 @@ from pathlib import Path
 
 from fastapi.templating import Jinja2Templates
 
+from station.web.labels import parameter_label, unit_label
+
 TEMPLATES_DIR = Path(__file__).resolve().parent / "templates"
 
 
@@ -19,5 +21,7 @@ def fmt(value: float | None) -> str:
 
 templates = Jinja2Templates(directory=str(TEMPLATES_DIR))
 templates.env.filters["fmt"] = fmt
+templates.env.filters["label"] = parameter_label
+templates.env.filters["unit"] = unit_label
 
 __all__ = ["TEMPLATES_DIR", "fmt", "templates"]

@@ -16,10 +16,19 @@ from fastapi.responses import HTMLResponse, Response
 from station.eeprom.image import ImageError
 from station.kernel.errors import StationError
 from station.session.csv_v1 import read_session
+from station.store.quality_index import TESTED
 from station.store.queries import show_unit, unit_image
 from station.web import plots
 from station.web.context import Web
-from station.web.listing import PAGED, CursorError, latest_checks, list_unit_results, next_page, shown_marginal
+from station.web.listing import (
+    PAGED,
+    CursorError,
+    latest_checks,
+    latest_checks_of_run,
+    list_unit_results,
+    next_page,
+    shown_marginal,
+)
 from station.web.lookup import plot_source, recordings, unit_or_404
 from station.web.models import UnitFilter, UnitOverview, UnitRecord, problem
 from station.web.templating import templates
@@ -37,12 +46,17 @@ def unit_page(request: Request, web: Web, serial: str) -> HTMLResponse:
     detail = show_unit(web.db, serial)
     if detail is None:
         return templates.TemplateResponse(request, "missing.html", {"what": f"unit {serial}"}, status_code=404)
-    checks = [(c, shown_marginal(c, web.marginal_fraction)) for c in latest_checks(web.db, serial)]
+    checks_run, latest = latest_checks_of_run(web.db, serial)
+    checks = [(c, shown_marginal(c, web.marginal_fraction)) for c in latest]
     recorded = {rec.run_id for rec in recordings(detail)}
+    verdict = next((r for r in detail.runs if r.outcome in TESTED and r.run_outcome != "UNFINISHED"), None)
+    newest = detail.runs[0] if detail.runs else None
     return templates.TemplateResponse(request, "unit.html", {
         "d": detail, "checks": checks, "plots": PLOT_NAMES if plot_source(detail) is not None else (),
         "params": detail.latest_params(), "marginal_fraction": web.marginal_fraction,
         "diag_runs": [r for r in detail.runs if r.run_id in recorded],
+        "verdict": verdict, "newest": newest, "checks_run": checks_run,
+        "disposition": detail.dispositions[-1] if detail.dispositions else None,
     })
 
 
