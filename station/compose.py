@@ -74,6 +74,7 @@ class StationConfig:
         clock_scale: 1 for real hardware; a simulated station's scale otherwise.
         plan: the rig plan (poses, rate steps, durations, site gravity).
         operator: who runs the station (recorded on every run).
+        lot: the production lot of the units the station calibrates (recorded on every run; '' unknown).
         provision: write each PASS unit's image, read it back, verify the corrected output on the rig.
         rig_options: keyword arguments of the rig's opener (None: :func:`~station.rig.rig_client_options`
             for ``clock_scale``); sensor_options: of the sensor's opener.
@@ -94,6 +95,7 @@ class StationConfig:
     clock_scale: float = 1.0
     plan: RigPlan = field(default_factory=default_plan)
     operator: str = ""
+    lot: str = ""
     provision: bool = False
     rig_options: Mapping[str, Any] | None = None
     sensor_options: Mapping[str, Any] | None = None
@@ -120,7 +122,7 @@ class StationConfig:
         """A station configuration file (TOML, ``format = "station-config/1"``); ``overrides`` win.
 
         Keys: ``rig`` (URL), ``sensors`` (list of URLs), ``station`` (id), ``db`` (URL), ``limits``
-        (path, relative to the file), ``out`` (directory, relative to the file), ``scale``, ``operator``.
+        (path, relative to the file), ``out`` (directory, relative to the file), ``scale``, ``operator``, ``lot``.
         Unknown keys are refused, as in a limits file.
         """
         try:
@@ -131,7 +133,7 @@ class StationConfig:
             raise ConfigError(f"{path}: not valid TOML: {exc}") from None
         if data.get("format") != CONFIG_FORMAT:
             raise ConfigError(f"{path}: format {data.get('format')!r}; this station reads {CONFIG_FORMAT!r}")
-        known = {"format", "rig", "sensors", "station", "db", "limits", "out", "scale", "operator"}
+        known = {"format", "rig", "sensors", "station", "db", "limits", "out", "scale", "operator", "lot"}
         extra = sorted(set(data) - known)
         if extra:
             raise ConfigError(f"{path}: unknown key(s) {', '.join(extra)}")
@@ -152,6 +154,7 @@ class StationConfig:
         kw: dict[str, Any] = {
             "rig_url": text("rig"), "sensor_urls": tuple(sensors), "station_id": text("station") or "station",
             "db_url": text("db"), "clock_scale": float(scale), "operator": text("operator") or "",
+            "lot": text("lot") or "",
         }
         if text("limits"):
             kw["limits_path"] = base / str(data["limits"])
@@ -208,7 +211,7 @@ def open_hardware(
         rig.close()
 
 
-def run_context(plan: RigPlan | None = None, limits: Any = None, operator: str = "") -> RunContext:
+def run_context(plan: RigPlan | None = None, limits: Any = None, operator: str = "", lot: str = "") -> RunContext:
     """A :class:`~station.store.recorder.RunContext` fingerprinting a rig plan and product limits.
 
     The sequence version names the step count, the hashes are SHA-256 of the frozen objects' ``repr``;
@@ -217,7 +220,7 @@ def run_context(plan: RigPlan | None = None, limits: Any = None, operator: str =
     """
     from station.store.recorder import RunContext, digest_of
 
-    kw: dict[str, str] = {"operator": operator}
+    kw: dict[str, str] = {"operator": operator, "lot": lot}
     if isinstance(limits, LimitsFile):
         kw["limits_version"] = f"{limits.name} {limits.version}"
         kw["limits_hash"] = str(limits.sha256)
@@ -240,6 +243,7 @@ def attach_recorder(
     limits: Any = None,
     context: RunContext | None = None,
     notify: Callable[[str], None] | None = None,
+    lot: str = "",
 ) -> Recorder:
     """Open the database at ``db_url`` (migrating it), recover stale runs, subscribe a recorder.
 
@@ -272,7 +276,7 @@ def attach_recorder(
             station_name = runner_or_subscribe.station
     else:
         subscribe = runner_or_subscribe
-    ctx = context if context is not None else run_context(plan, limits, operator)
+    ctx = context if context is not None else run_context(plan, limits, operator, lot)
     recorder = Recorder(db, ctx)
     recovered = recorder.recover(station_name)
     if recovered:
@@ -352,7 +356,7 @@ class Station:
         if config.record:
             self.recorder = attach_recorder(
                 self.subscribers.append, config.db_url, station_name=config.station_id,
-                operator=config.operator, plan=config.plan, limits=self.limits,
+                operator=config.operator, plan=config.plan, limits=self.limits, lot=config.lot,
             )
         if admit is None and self.recorder is not None:
             from station.store.queries import retest_gate

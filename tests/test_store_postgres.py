@@ -218,3 +218,34 @@ def test_recovery_on_postgres(pg_url: str) -> None:
         with db.transaction() as s:
             assert s.scalars(select(Run.outcome)).one() == "ERROR"
             assert s.scalars(select(RunUnit.outcome)).one() == "ERROR"
+
+
+def test_quality_statistics_agree_with_sqlite(pg_url: str, tmp_path: Path) -> None:
+    """The same synthetic history on PostgreSQL and on SQLite: every yield table, capability, control chart and
+    histogram computed by the two databases' SQL agrees (the day and minute of a run come from different SQL)."""
+    from station.store.quality import QualityFilter, capabilities, control_charts, histogram, yield_tables
+    from station.store.synthetic import DRIFTING, SHIFTED_LOT, fill
+
+    pg = open_database(pg_url)
+    lite = open_database(f"sqlite:///{tmp_path / 'q.sqlite'}")
+    try:
+        for db in (pg, lite):
+            fill(db, 1500, seed=5, days=6)
+        for f in (QualityFilter(), QualityFilter(lot=SHIFTED_LOT, station="EOL-2")):
+            assert yield_tables(pg, f) == yield_tables(lite, f)
+            a, b = capabilities(pg, f), capabilities(lite, f)
+            assert [c.name for c in a] == [c.name for c in b] and a
+            for x, y in zip(a, b, strict=True):
+                assert (x.cap.n, x.n_below, x.n_above) == (y.cap.n, y.n_below, y.n_above)
+                assert x.cap.cpk == pytest.approx(y.cap.cpk, rel=1e-9)
+                assert x.cap.ppk == pytest.approx(y.cap.ppk, rel=1e-9)
+            ca, cb = control_charts(pg, f), control_charts(lite, f)
+            for x, y in zip(ca, cb, strict=True):
+                assert [p.label for p in x.chart.points] == [p.label for p in y.chart.points]
+                assert x.chart.violations == y.chart.violations
+                assert x.chart.center == pytest.approx(y.chart.center, rel=1e-9)
+            ha, hb = histogram(pg, DRIFTING, f), histogram(lite, DRIFTING, f)
+            assert ha is not None and hb is not None and ha.counts == hb.counts
+    finally:
+        pg.close()
+        lite.close()
