@@ -369,3 +369,20 @@ def test_unit_list_search_and_cursor_pages(client: TestClient) -> None:
     assert runs == [x["run_id"] for x in client.get("/api/runs", params={"limit": 150}).json()]
     assert starts == sorted(starts, reverse=True) and all(t.endswith("+00:00") for t in starts)
     assert client.get("/api/runs", params={"cursor": "bm9wZQ"}).status_code == 422
+
+
+def test_an_old_database_gets_its_statistics_on_migration(db: Database) -> None:
+    P, F = Outcome.PASS, Outcome.FAIL
+    _feed(db, _run("a", "2026-11-20T09:00:00+00:00", [("M1", F, 0.3), ("M2", P, 0.02)], F))
+    _feed(db, _run("b", "2026-11-20T10:00:00+00:00", [("M1", P, 0.01)], P))
+    before = yield_tables(db), capabilities(db)
+    from station.store.db import downgrade, upgrade
+
+    downgrade(db.engine, "0002")  # a database of the previous version: no quality tables, no lot
+    with db.engine.connect() as c:
+        assert "quality_results" not in {r[0] for r in c.execute(text("SELECT name FROM sqlite_master"))}
+    upgrade(db.engine)
+    after = yield_tables(db), capabilities(db)
+    assert after[0] == before[0] and after[0]["total"][0].first_pass == 1
+    assert [(c.name, c.cap.n, c.cap.mean) for c in after[1]] == [(c.name, c.cap.n, pytest.approx(c.cap.mean))
+                                                                  for c in before[1]]

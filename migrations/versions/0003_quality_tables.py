@@ -9,6 +9,8 @@ Create Date: 2026-11-24
 
 from __future__ import annotations
 
+import sqlite3
+
 import sqlalchemy as sa
 from alembic import op
 
@@ -108,5 +110,9 @@ def downgrade() -> None:
         op.drop_index(ix, table_name='quality_results')
     op.drop_table('quality_results')
     op.drop_table('quality_parameters')
-    with op.batch_alter_table('runs') as batch:
-        batch.drop_column('lot')
+    if op.get_bind().dialect.name == 'sqlite' and sqlite3.sqlite_version_info >= (3, 35):
+        # in place: a batch copy of runs would drop a table that run_units refers to (foreign keys are on)
+        op.execute('ALTER TABLE runs DROP COLUMN lot')
+    else:
+        with op.batch_alter_table('runs') as batch:
+            batch.drop_column('lot')
