@@ -369,6 +369,8 @@ def test_unit_list_search_and_cursor_pages(client: TestClient) -> None:
     assert runs == [x["run_id"] for x in client.get("/api/runs", params={"limit": 150}).json()]
     assert starts == sorted(starts, reverse=True) and all(t.endswith("+00:00") for t in starts)
     assert client.get("/api/runs", params={"cursor": "bm9wZQ"}).status_code == 422
+    unit = client.get("/api/units/IMU-0000042").json()  # ISO 8601 with the UTC offset everywhere
+    assert all(r["started_at"].endswith("+00:00") and r["finished_at"].endswith("+00:00") for r in unit["runs"])
 
 
 def test_an_old_database_gets_its_statistics_on_migration(db: Database) -> None:

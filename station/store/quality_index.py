@@ -167,10 +167,11 @@ def rebuild(conn: Connection) -> None:
         "WHERE q2.unit_id = quality_results.unit_id AND q2.tested ORDER BY q2.attempt DESC LIMIT 1), '')"))
     conn.execute(text(
         "INSERT INTO quality_values (result_id, param_id, day, value) "
-        "SELECT q.id, p.id, q.day, MIN(c.value) FROM limit_checks c "
+        "SELECT q.id, p.id, q.day, c.value FROM limit_checks c "
         "JOIN quality_results q ON q.run_unit_id = c.run_unit_id "
         "JOIN quality_parameters p ON p.name = c.name "
-        "WHERE c.step = 'limits' AND c.value IS NOT NULL AND q.tested GROUP BY q.id, p.id, q.day"))
+        "WHERE c.step = 'limits' AND c.value IS NOT NULL AND q.tested "
+        "ON CONFLICT DO NOTHING"))  # a name checked twice in one result (never written so): the first value
     conn.execute(text(
         "INSERT INTO quality_daily (param_id, day, station_id, lot, limits_version, n, s1, s2, vmin, vmax, low, "
         "high, n_below, n_above) "

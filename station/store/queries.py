@@ -32,7 +32,10 @@ from station.store.models import Station as StationRow
 
 
 def _iso(t: datetime | None) -> str | None:
-    return t.isoformat() if t is not None else None
+    """ISO 8601 with the UTC offset (SQLite hands back the stored UTC time without it)."""
+    if t is None:
+        return None
+    return (t.replace(tzinfo=UTC) if t.tzinfo is None else t.astimezone(UTC)).isoformat()
 
 
 @dataclass(frozen=True)

@@ -134,9 +134,10 @@ def yield_trend_svg(labels: Sequence[str], fpy: Sequence[float | None], final: S
     out = _frame(title, w)
     if not vals:
         return "".join([*out, f'<text x="{ML}" y="100" {FONT} font-size="12">no tested units</text></svg>'])
-    lo = min(min(vals) * 100 - 1, 95.0)
-    _, _, y = _scale(lo, 100.5, H - MB, MT)
-    out += _yticks(lo, 100.5, y, w)
+    lo = float(min(math.floor(min(vals) * 100 - 0.5), 96))
+    lo -= (100 - lo) % 4  # four equal steps of whole percent up to 100
+    _, _, y = _scale(lo, 100.0, H - MB, MT)
+    out += _yticks(lo, 100.0, y, w)
     n = len(labels)
 
     def x(i: int) -> float:

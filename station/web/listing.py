@@ -27,7 +27,7 @@ from station.web.models import LimitCheckResult, RunSummary, RunUnitOutcome, Uni
 def _iso(t: datetime | None) -> str | None:
     if t is None:
         return None
-    return (t if t.tzinfo is not None else t.replace(tzinfo=UTC)).isoformat()
+    return (t.replace(tzinfo=UTC) if t.tzinfo is None else t.astimezone(UTC)).isoformat()
 
 
 class CursorError(ValueError):
