@@ -168,7 +168,7 @@ def test_shift_calendar() -> None:
     cal = ShiftCalendar.parse("early=05:30, late=13:30, night=21:30")
     assert [cal.of(m) for m in (0, 330, 800, 810, 1290, 1439)] == ["night", "early", "early", "late", "night",
                                                                    "night"]
-    for bad in ("A=25:00", "A", "B=14:00,A=06:00", "A=06:00,A=07:00", ""):
+    for bad in ("A=25:00", "A", "B=14:00,A=06:00", "A=06:00,A=07:00", "", "A=06:10"):
         with pytest.raises(QualityFilterError):
             ShiftCalendar.parse(bad)
 
@@ -240,9 +240,12 @@ def test_recorder_index_equals_the_rebuild(db: Database) -> None:
     _feed(db, _run("b", "2026-11-21T01:00:00+00:00", [("X2", R, 0.09), ("X3", P, -0.02)], R), lot="L-A")
     _feed(db, _run("c", "2026-11-21T06:10:00+00:00", [("X2", P, 0.03)], P), lot="L-B")
 
-    def snapshot() -> tuple[list[tuple], list[tuple], list[tuple]]:
+    def snapshot() -> tuple[list[tuple], list[tuple], list[tuple], list[tuple]]:
         with db.engine.connect() as c:
-            return (c.execute(text("SELECT run_unit_id, unit_id, lot, day, minute, outcome, tested, attempt, "
+            return (c.execute(text("SELECT day, quarter, station_id, lot, limits_version, results, not_tested, "
+                                   "tested, first_tested, first_pass, final_pass, retests FROM quality_yield "
+                                   "WHERE results > 0 OR final_pass <> 0 ORDER BY 1, 2, 3, 4")).all(),
+                    c.execute(text("SELECT run_unit_id, unit_id, lot, day, minute, outcome, tested, attempt, "
                                    "final_outcome, latest FROM quality_results ORDER BY run_unit_id")).all(),
                     c.execute(text("SELECT q.run_unit_id, p.name, v.day, v.value FROM quality_values v "
                                    "JOIN quality_results q ON q.id = v.result_id JOIN quality_parameters p "
@@ -251,10 +254,14 @@ def test_recorder_index_equals_the_rebuild(db: Database) -> None:
                                    "n_below, n_above, s1 + n * p.ref, ROUND(s2, 12) FROM quality_daily d "
                                    "JOIN quality_parameters p ON p.id = d.param_id ORDER BY 1, 2, 3, 4")).all())
 
-    incremental = snapshot()
+    yields_before, *incremental = snapshot()
     with db.engine.begin() as conn:
         rebuild(conn)
-    rebuilt = snapshot()
+    yields_after, *rebuilt = snapshot()
+    assert yields_before == yields_after
+    # per quarter hour: results, not tested, tested, first tested, first pass, final pass, retests; X2 failed
+    # first at 23:30, its final pass (06:10 the next day) is counted where it was first tested
+    assert [r[5:] for r in yields_after] == [(2, 0, 2, 2, 1, 2, 0), (2, 0, 2, 1, 1, 1, 1), (1, 0, 1, 0, 0, 0, 1)]
     assert incremental[0] == rebuilt[0] and incremental[1] == rebuilt[1]
     for a, b in zip(incremental[2], rebuilt[2], strict=True):  # the sums are about a different ref: compare means
         assert a[:12] == b[:12] and a[12] == pytest.approx(b[12], abs=1e-12)

@@ -1,6 +1,6 @@
 """Quality analytics: the production lot of a run, and the narrow, indexed quality tables (results, values,
-daily sums per parameter) that yield, capability and control charts aggregate in SQL. Existing records are
-indexed here (station.store.quality_index.rebuild), so an old database has its statistics at once.
+daily sums per parameter, yield counts per quarter hour) that yield, capability and control charts aggregate
+in SQL. Existing records are indexed here (station.store.quality_index.rebuild), so an old database has its statistics at once.
 
 Revision ID: 0003
 Revises: 0002
@@ -95,12 +95,31 @@ def upgrade() -> None:
     sa.UniqueConstraint('param_id', 'day', 'station_id', 'lot', 'limits_version', name='uq_quality_daily_group')
     )
     op.create_index('ix_quality_daily_day', 'quality_daily', ['day'], unique=False)
+    op.create_table('quality_yield',
+    sa.Column('id', sa.Integer(), nullable=False),
+    sa.Column('day', sa.String(length=10), nullable=False),
+    sa.Column('quarter', sa.Integer(), nullable=False),
+    sa.Column('station_id', sa.Integer(), nullable=False),
+    sa.Column('lot', sa.String(length=100), nullable=False),
+    sa.Column('limits_version', sa.String(length=100), nullable=False),
+    sa.Column('results', sa.Integer(), nullable=False),
+    sa.Column('not_tested', sa.Integer(), nullable=False),
+    sa.Column('tested', sa.Integer(), nullable=False),
+    sa.Column('first_tested', sa.Integer(), nullable=False),
+    sa.Column('first_pass', sa.Integer(), nullable=False),
+    sa.Column('final_pass', sa.Integer(), nullable=False),
+    sa.Column('retests', sa.Integer(), nullable=False),
+    sa.ForeignKeyConstraint(['station_id'], ['stations.id'], name=op.f('fk_quality_yield_station_id_stations')),
+    sa.PrimaryKeyConstraint('id', name=op.f('pk_quality_yield')),
+    sa.UniqueConstraint('day', 'quarter', 'station_id', 'lot', 'limits_version', name='uq_quality_yield_group')
+    )
     from station.store.quality_index import rebuild
 
     rebuild(op.get_bind())
 
 
 def downgrade() -> None:
+    op.drop_table('quality_yield')
     op.drop_index('ix_quality_daily_day', table_name='quality_daily')
     op.drop_table('quality_daily')
     op.drop_index('ix_quality_values_param_day', table_name='quality_values')

@@ -387,3 +387,29 @@ class QualityDaily(Base):
     high: Mapped[float | None] = mapped_column(Float)
     n_below: Mapped[int] = mapped_column(Integer)
     n_above: Mapped[int] = mapped_column(Integer)
+
+
+class QualityYield(Base):
+    """Yield counts of the results per quarter hour of one day, station, lot and limits version (the shift
+    calendar's starts are quarter hours, so every shift is a sum of these). See :class:`QualityResult` for
+    tested and attempt; ``first_pass``/``final_pass`` count first tested results that passed / whose unit's
+    newest tested result is PASS (kept up to date when a unit is retested)."""
+
+    __tablename__ = "quality_yield"
+    __table_args__ = (
+        UniqueConstraint("day", "quarter", "station_id", "lot", "limits_version", name="uq_quality_yield_group"),
+    )
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    day: Mapped[str] = mapped_column(String(10))
+    quarter: Mapped[int] = mapped_column(Integer)  # quarter hour of the UTC day of the run start, 0-95
+    station_id: Mapped[int] = mapped_column(ForeignKey("stations.id"))
+    lot: Mapped[str] = mapped_column(String(100), default="")
+    limits_version: Mapped[str] = mapped_column(String(100), default="")
+    results: Mapped[int] = mapped_column(Integer)
+    not_tested: Mapped[int] = mapped_column(Integer)
+    tested: Mapped[int] = mapped_column(Integer)
+    first_tested: Mapped[int] = mapped_column(Integer)
+    first_pass: Mapped[int] = mapped_column(Integer)
+    final_pass: Mapped[int] = mapped_column(Integer)
+    retests: Mapped[int] = mapped_column(Integer)

@@ -18,10 +18,10 @@ from dataclasses import dataclass, field
 from datetime import date
 from typing import Any
 
-from sqlalchemy import Select, and_, case, func, literal, select
+from sqlalchemy import Select, case, func, literal, select
 
 from station.store.db import Database
-from station.store.models import QualityDaily, QualityParameter, QualityResult, QualityValue
+from station.store.models import QualityDaily, QualityParameter, QualityResult, QualityValue, QualityYield
 from station.store.models import Station as StationRow
 from station.store.spc import Capability, ControlChart, capability, control_chart
 
@@ -36,6 +36,7 @@ class QualityFilterError(ValueError):
 class ShiftCalendar:
     """Named shifts by their UTC start (minutes after midnight, ascending); each runs until the next starts.
 
+    Starts are quarter hours (the yield counts are kept per quarter hour of the day).
     Results between 00:00 and the first start belong to the last shift (the night shift running past midnight);
     the day table groups by the UTC calendar day of the run start.
     Text form: ``"A=06:00,B=14:00,C=22:00"`` (:meth:`parse`).
@@ -56,6 +57,8 @@ class ShiftCalendar:
                 raise QualityFilterError(f"shift {part!r}: the start must be HH:MM (UTC)") from None
             if not (0 <= hh < 24 and 0 <= mm < 60) or not name.strip() or len(name.strip()) > 20:
                 raise QualityFilterError(f"shift {part!r}: a name of 1-20 characters and a start 00:00-23:59")
+            if mm % 15:
+                raise QualityFilterError(f"shift {part!r}: shifts start on a quarter hour (:00, :15, :30, :45)")
             out.append((name.strip(), hh * 60 + mm))
         starts = [m for _, m in out]
         if not out or starts != sorted(set(starts)) or len({n for n, _ in out}) != len(out):
@@ -139,24 +142,9 @@ class YieldRow:
         return self.final_pass / self.first_tested if self.first_tested else None
 
 
-def _yield_columns() -> list[Any]:
-    q = QualityResult
-    first = q.attempt == 1
-    return [
-        func.count(),
-        func.sum(case((q.tested, 0), else_=1)),
-        func.sum(case((q.tested, 1), else_=0)),
-        func.sum(case((first, 1), else_=0)),
-        func.sum(case((and_(first, q.outcome == "PASS"), 1), else_=0)),
-        func.sum(case((and_(first, q.final_outcome == "PASS"), 1), else_=0)),
-        func.sum(case((q.attempt > 1, 1), else_=0)),
-    ]
-
-
-def _shift_case(shifts: ShiftCalendar) -> Any:
-    q = QualityResult
-    whens = [(q.minute < shifts.shifts[0][1], literal(shifts.shifts[-1][0]))]
-    whens += [(q.minute < nxt, literal(name))
+def _shift_case(shifts: ShiftCalendar, minute: Any) -> Any:
+    whens = [(minute < shifts.shifts[0][1], literal(shifts.shifts[-1][0]))]
+    whens += [(minute < nxt, literal(name))
               for (name, _), (_, nxt) in zip(shifts.shifts, shifts.shifts[1:], strict=False)]
     return case(*whens, else_=literal(shifts.shifts[-1][0]))
 
@@ -165,16 +153,19 @@ def yield_tables(db: Database, f: QualityFilter = QualityFilter(),
                  shifts: ShiftCalendar = ShiftCalendar()) -> dict[str, list[YieldRow]]:
     """Yield rows grouped by 'station', 'shift', 'day', 'lot' and 'total' (one row, group '').
 
-    One aggregate query over the filtered results, grouped by day, shift, station and lot, is rolled up into the
-    five tables (every count but the distinct units is additive); one more counts the distinct units tested.
+    One aggregate over the quarter-hour yield counts (:class:`~station.store.models.QualityYield`), grouped by
+    day, shift, station and lot, is rolled up into the five tables (every count is additive); one more query
+    counts the distinct units tested (the total's ``units_tested``).
     """
-    q = QualityResult
-    shift = _shift_case(shifts)
+    y, q = QualityYield, QualityResult
+    shift = _shift_case(shifts, y.quarter * 15)
     with db.transaction() as s:
         sid = _station_id(s, f.station)
         names: dict[int, str] = {int(i): str(n) for i, n in s.execute(select(StationRow.id, StationRow.name))}
-        stmt = _where(select(q.day, shift, q.station_id, q.lot, *_yield_columns()), q, f, sid)
-        rows = s.execute(stmt.group_by(q.day, shift, q.station_id, q.lot)).all()
+        cols = [func.sum(getattr(y, k)) for k in ("results", "not_tested", "tested", "first_tested", "first_pass",
+                                                   "final_pass", "retests")]
+        stmt = _where(select(y.day, shift, y.station_id, y.lot, *cols), y, f, sid)
+        rows = s.execute(stmt.group_by(y.day, shift, y.station_id, y.lot)).all()
         distinct_units = s.scalar(_where(select(func.count(func.distinct(q.unit_id))).where(q.tested), q, f, sid))
     acc: dict[str, dict[str, list[int]]] = {by: {} for by in (*GROUPS, "total")}
     for day, sh, st, lot, *counts in rows:

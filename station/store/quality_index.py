@@ -20,6 +20,7 @@ from typing import Any
 
 from sqlalchemy import Connection, func, select, text, update
 from sqlalchemy.dialects import postgresql, sqlite
+from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from station.store.models import (
@@ -28,6 +29,7 @@ from station.store.models import (
     QualityParameter,
     QualityResult,
     QualityValue,
+    QualityYield,
     Run,
     RunUnit,
 )
@@ -47,9 +49,12 @@ def _param(s: Session, cache: dict[str, QualityParameter], name: str, unit: str,
         p = s.scalar(select(QualityParameter).where(QualityParameter.name == name))
         if p is None:
             ref = (low + high) / 2.0 if low is not None and high is not None else value
-            p = QualityParameter(name=name, unit=unit, ref=ref)
-            s.add(p)
-            s.flush()
+            try:
+                with s.begin_nested():  # another station may add it at the same moment
+                    p = QualityParameter(name=name, unit=unit, ref=ref)
+                    s.add(p)
+            except IntegrityError:
+                p = s.scalars(select(QualityParameter).where(QualityParameter.name == name)).one()
         cache[name] = p
     return p
 
@@ -70,18 +75,39 @@ def index_run(s: Session, run_pk: int) -> int:
     sums: dict[int, list[Any]] = {}
     cache: dict[str, QualityParameter] = {}
     added = 0
+    lot, lv = run.lot or "", run.limits_version
+    # yield counts per bucket (day, quarter, station, lot, limits version): results, not tested, tested,
+    # first tested, first pass, final pass, retests
+    counts: dict[tuple[str, int, int, str, str], list[int]] = {}
+    here = (day, minute // 15, run.station_id, lot, lv)
     for ru in s.scalars(select(RunUnit).where(RunUnit.run_id == run_pk).order_by(RunUnit.slot)):
         if ru.unit_id is None or ru.id in done:
             continue
         tested = ru.outcome in TESTED
         s.execute(update(QualityResult).where(QualityResult.unit_id == ru.unit_id, QualityResult.latest)
                   .values(latest=False))
+        c = counts.setdefault(here, [0] * 7)
+        c[0] += 1
         if tested:
             prior = s.scalar(select(func.count()).select_from(QualityResult)
                              .where(QualityResult.unit_id == ru.unit_id, QualityResult.tested)) or 0
             attempt, final = prior + 1, ru.outcome
+            c[2] += 1
+            if attempt == 1:
+                c[3] += 1
+                c[4] += int(final == "PASS")
+                c[5] += int(final == "PASS")
+            else:
+                c[6] += 1
+                first = s.execute(select(QualityResult.day, QualityResult.minute, QualityResult.station_id,
+                                         QualityResult.lot, QualityResult.limits_version, QualityResult.final_outcome)
+                                  .where(QualityResult.unit_id == ru.unit_id, QualityResult.attempt == 1)).first()
+                if first is not None:  # the unit's final pass is counted where it was first tested
+                    key = (first[0], first[1] // 15, first[2], first[3], first[4])
+                    counts.setdefault(key, [0] * 7)[5] += int(final == "PASS") - int(first[5] == "PASS")
             s.execute(update(QualityResult).where(QualityResult.unit_id == ru.unit_id).values(final_outcome=final))
         else:
+            c[1] += 1
             attempt = 0
             final = s.scalar(select(QualityResult.final_outcome).where(QualityResult.unit_id == ru.unit_id)
                              .limit(1)) or ""
@@ -109,6 +135,10 @@ def index_run(s: Session, run_pk: int) -> int:
             acc[3], acc[4] = min(acc[3], c.value), max(acc[4], c.value)
             acc[7] += int(c.low is not None and c.value < c.low)
             acc[8] += int(c.high is not None and c.value > c.high)
+    if counts:
+        _upsert_yield(s, [dict(day=k[0], quarter=k[1], station_id=k[2], lot=k[3], limits_version=k[4], results=v[0],
+                               not_tested=v[1], tested=v[2], first_tested=v[3], first_pass=v[4], final_pass=v[5],
+                               retests=v[6]) for k, v in counts.items()])
     if sums:
         _upsert_daily(s, [dict(param_id=pid, day=day, station_id=run.station_id, lot=run.lot or "",
                                limits_version=run.limits_version, n=a[0], s1=a[1], s2=a[2], vmin=a[3], vmax=a[4],
@@ -130,6 +160,19 @@ def _upsert_daily(s: Session, rows: list[dict[str, Any]]) -> None:
     s.execute(stmt)
 
 
+YIELD_COUNTS = ("results", "not_tested", "tested", "first_tested", "first_pass", "final_pass", "retests")
+
+
+def _upsert_yield(s: Session, rows: list[dict[str, Any]]) -> None:
+    dialect = s.get_bind().dialect.name
+    ins: Any = (postgresql.insert if dialect == "postgresql" else sqlite.insert)(QualityYield)
+    t = QualityYield.__table__
+    rows = sorted(rows, key=lambda r: (r["day"], r["quarter"], r["station_id"], r["lot"], r["limits_version"]))
+    s.execute(ins.values(rows).on_conflict_do_update(  # sorted: stations lock shared rows in one order
+        index_elements=["day", "quarter", "station_id", "lot", "limits_version"],
+        set_={k: t.c[k] + ins.excluded[k] for k in YIELD_COUNTS}))
+
+
 def _day_minute(dialect: str) -> tuple[str, str]:
     if dialect == "postgresql":
         utc = "(r.started_at AT TIME ZONE 'UTC')"
@@ -145,7 +188,7 @@ def rebuild(conn: Connection) -> None:
     dialect = conn.dialect.name
     day, minute = _day_minute(dialect)
     tested = "ru.outcome IN ('PASS', 'FAIL', 'RETEST')"
-    for table in ("quality_daily", "quality_values", "quality_results", "quality_parameters"):
+    for table in ("quality_yield", "quality_daily", "quality_values", "quality_results", "quality_parameters"):
         conn.execute(text(f"DELETE FROM {table}"))
     conn.execute(text(
         "INSERT INTO quality_parameters (name, unit, ref) "
@@ -166,6 +209,16 @@ def rebuild(conn: Connection) -> None:
         "UPDATE quality_results SET final_outcome = COALESCE((SELECT q2.outcome FROM quality_results q2 "
         "WHERE q2.unit_id = quality_results.unit_id AND q2.tested ORDER BY q2.attempt DESC LIMIT 1), '')"))
     conn.execute(text(
+        "INSERT INTO quality_yield (day, quarter, station_id, lot, limits_version, results, not_tested, tested, "
+        "first_tested, first_pass, final_pass, retests) "
+        "SELECT day, minute / 15, station_id, lot, limits_version, COUNT(*), "
+        "SUM(CASE WHEN tested THEN 0 ELSE 1 END), SUM(CASE WHEN tested THEN 1 ELSE 0 END), "
+        "SUM(CASE WHEN attempt = 1 THEN 1 ELSE 0 END), "
+        "SUM(CASE WHEN attempt = 1 AND outcome = 'PASS' THEN 1 ELSE 0 END), "
+        "SUM(CASE WHEN attempt = 1 AND final_outcome = 'PASS' THEN 1 ELSE 0 END), "
+        "SUM(CASE WHEN attempt > 1 THEN 1 ELSE 0 END) "
+        "FROM quality_results GROUP BY day, minute / 15, station_id, lot, limits_version"))
+    conn.execute(text(
         "INSERT INTO quality_values (result_id, param_id, day, value) "
         "SELECT q.id, p.id, q.day, c.value FROM limit_checks c "
         "JOIN quality_results q ON q.run_unit_id = c.run_unit_id "
@@ -184,7 +237,7 @@ def rebuild(conn: Connection) -> None:
         "WHERE c.step = 'limits' AND c.value IS NOT NULL AND q.tested "
         "GROUP BY p.id, q.day, q.station_id, q.lot, q.limits_version"))
     if dialect == "postgresql":
-        for table in ("quality_results", "quality_values", "quality_daily"):
+        for table in ("quality_results", "quality_values", "quality_daily", "quality_yield"):
             conn.execute(text(f"ANALYZE {table}"))
     else:
         conn.execute(text("ANALYZE"))

@@ -16,7 +16,7 @@ from fastapi.responses import HTMLResponse, Response
 from sqlalchemy import select
 
 from station.store import quality as q
-from station.store.models import QualityDaily, QualityResult
+from station.store.models import QualityDaily, QualityYield
 from station.store.models import Station as StationRow
 from station.store.spc import RULES
 from station.web import charts
@@ -90,7 +90,7 @@ def _choices(web: Web) -> dict[str, list[str]]:
     with web.db.transaction() as s:
         return {
             "stations": list(s.scalars(select(StationRow.name).order_by(StationRow.name))),
-            "lots": [x for x in s.scalars(select(QualityResult.lot).distinct().order_by(QualityResult.lot)) if x],
+            "lots": [x for x in s.scalars(select(QualityYield.lot).distinct().order_by(QualityYield.lot)) if x],
             "limits": [x for x in s.scalars(select(QualityDaily.limits_version).distinct()
                                             .order_by(QualityDaily.limits_version)) if x],
         }
