@@ -30,7 +30,7 @@ def _scale(lo: float, hi: float, a: float, b: float) -> tuple[float, float, call
 
 def _frame(title: str, width: int = W, height: int = H) -> list[str]:
     return [f'<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {width} {height}" width="100%" '
-            f'style="max-width:{width}px;height:auto" role="img" aria-label="{escape(title)}">',
+            f'style="width:100%;height:auto" role="img" aria-label="{escape(title)}">',
             f'<rect width="{width}" height="{height}" fill="#fff"/>',
             f'<text x="{ML}" y="15" {FONT} font-size="12" font-weight="600">{escape(title)}</text>']
 
