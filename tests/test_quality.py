@@ -395,3 +395,18 @@ def test_an_old_database_gets_its_statistics_on_migration(db: Database) -> None:
     assert after[0] == before[0] and after[0]["total"][0].first_pass == 1
     assert [(c.name, c.cap.n, c.cap.mean) for c in after[1]] == [(c.name, c.cap.n, pytest.approx(c.cap.mean))
                                                                   for c in before[1]]
+
+
+def test_status_shows_the_rig_only_while_a_run_holds_it(db: Database) -> None:
+    from station.sequence.records import RigReading
+    from station.web.state import LiveStatus
+
+    live = LiveStatus(db)
+    recs = _run("live", "2026-11-20T07:00:00+00:00", [("S1", Outcome.ABORTED, None)], Outcome.ABORTED)
+    live(recs[0])
+    live(RigReading("live", 1.0, 0.0, 0.0, 10.0, -18.7, "MOVING", 0))
+    assert live.status(with_store=False).rig_state is not None  # running: the rig's last reading
+    for r in recs[1:]:
+        live(r)
+    st = live.status(with_store=False)
+    assert st.state == "idle" and st.rig_state is None and st.outcome == "ABORTED"
