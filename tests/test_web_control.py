@@ -50,11 +50,15 @@ def test_start_conflict_abort_through_the_api(tmp_path: Path) -> None:
         # the rig's readings reached the live status (and the page's JSON), the store ignores them
         readings = [r for r in result.records if isinstance(r, RigReading)]
         assert readings and all(abs(r.roll_deg) <= 360 and "REMOTE" in r.status for r in readings)
-        rig_state = client.get("/api/status").json()["rig_state"]
-        assert rig_state is not None and set(rig_state) >= {"roll_deg", "pitch_deg", "yaw_deg", "rate_dps", "status"}
+        assert client.get("/api/status").json()["rig_state"] is None  # idle: the rig is not held, nothing shown
 
         second = client.post("/api/runs", headers=AUTH).json()["run_id"]
-        time.sleep(0.5)
+        rig_state, deadline = None, time.monotonic() + 30.0
+        while rig_state is None and time.monotonic() < deadline:  # while the run holds the rig: its readings
+            status = client.get("/api/status").json()
+            rig_state = status["rig_state"] if status["state"] == "running" else None
+            time.sleep(0.05)
+        assert rig_state is not None and set(rig_state) >= {"roll_deg", "pitch_deg", "yaw_deg", "rate_dps", "status"}
         assert client.post(f"/api/runs/{second}/abort", headers=AUTH).status_code == 202
         result = control.wait(120)
         assert result is not None and result.run_id == second and result.outcome == Outcome.ABORTED
