@@ -117,9 +117,9 @@ def histogram_svg(h: Histogram) -> str:
             out.append(f'<line x1="{x(lim):.1f}" x2="{x(lim):.1f}" y1="{MT}" y2="{H - MB}" stroke="#c62828" '
                        f'stroke-width="1.6"/><text x="{x(lim):.1f}" y="{MT + 10}" {FONT} font-size="10" '
                        f'fill="#c62828" text-anchor="middle">{name}</text>')
-    for v in (h.lo, (h.lo + h.hi) / 2, h.hi):
-        out.append(f'<text x="{x(v):.1f}" y="{H - MB + 14}" {FONT} font-size="10" text-anchor="middle">{_fmt(v)}'
-                   '</text>')
+    for v, anchor in ((h.lo, "start"), ((h.lo + h.hi) / 2, "middle"), (h.hi, "end")):
+        out.append(f'<text x="{x(v):.1f}" y="{H - MB + 14}" {FONT} font-size="10" text-anchor="{anchor}">'
+                   f'{_fmt(v)}</text>')
     sig = f", sigma {_fmt(h.sigma)}" if h.sigma else ""
     out.append(f'<text x="{ML}" y="{H - 6}" {FONT} font-size="10" fill="#444">normal fit: mean {_fmt(h.mean)}{sig}'
                '</text></svg>')
