@@ -110,6 +110,21 @@ def _print_params(params: object) -> None:
                       f"(temperature span {note.span_k:.1f} K); orders {note.orders}")
     elif note.status != "absent":
         console.print(f"temperature terms: {note.status}: {note.reason}")
+    nl = params.quality.get("scale_nonlinearity")
+    if isinstance(nl, dict):
+        if nl.get("status") == "fitted":
+            k = params.gyro.scale_nonlinearity
+            k_std = params.gyro.scale_nonlinearity_std
+            parts = [f"{a} {100 * k[i] * REF_RATE_RADPS:+.4f} +- {100 * k_std[i] * REF_RATE_RADPS:.4f} %"
+                     for i, a in enumerate("xyz") if a in nl.get("axes", [])]
+            console.print("gyro scale nonlinearity u + k u|u| fitted (relative error k|u| at 200 deg/s): "
+                          + ", ".join(parts))
+        else:
+            console.print(f"gyro scale nonlinearity: {nl.get('status')}: {nl.get('reason')}")
+
+
+#: The rate at which ``station fit`` states the gyro nonlinearity as a relative scale error (200 deg/s, rad/s).
+REF_RATE_RADPS = float(np.radians(200.0))
 
 
 @app.command()
@@ -126,6 +141,9 @@ def fit(
     thermal: Annotated[str, typer.Option(
         help="temperature terms: auto (when the recording's temperature course separates them from the warm-up), "
              "off, require (not for a rig-free fit)")] = "auto",
+    scale_nonlinearity: Annotated[str, typer.Option(
+        help="gyro scale nonlinearity y = u + k u|u|: auto (on the axes whose rate steps hold two or more rate "
+             "magnitudes, kept where significant), off")] = "auto",
 ) -> None:
     """Fit the parameter set of eq. (1) to a session and print it.
 
@@ -142,6 +160,8 @@ def fit(
     try:
         if thermal not in ("auto", "off", "require"):
             raise StationError(f"--thermal {thermal!r}: expected auto, off or require")
+        if scale_nonlinearity not in ("auto", "off"):
+            raise StationError(f"--scale-nonlinearity {scale_nonlinearity!r}: expected auto or off")
         tc_range = dict(load_limits(limits).correlation_time_s) if limits is not None else {}
         session = read_session(session_path)
         free = rig_free or is_rig_free(session)
@@ -151,7 +171,7 @@ def fit(
             raise StationError("--thermal require needs rig references; the rig-free fit has no temperature terms")
         params = (fit_rig_free(session, RigFreeOptions(tc_range_s=tc_range)) if free
                   else fit_session(session, FitOptions(g_sensitivity=g_sensitivity, tc_range_s=tc_range,
-                                                       thermal=thermal)))
+                                                       thermal=thermal, scale_nonlinearity=scale_nonlinearity)))
     except StationError as exc:
         raise fail(exc) from None
     if as_json:

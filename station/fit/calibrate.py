@@ -39,6 +39,10 @@ from station.session.model import Kind, Session
 AXES = "xyz"
 #: Values of :attr:`FitOptions.thermal`.
 THERMAL_MODES = ("auto", "off", "require")
+#: Values of :attr:`FitOptions.scale_nonlinearity`.
+NONLINEARITY_MODES = ("auto", "off")
+#: Rate magnitudes within this relative tolerance count as one level (identifiability of the nonlinearity).
+_LEVEL_RTOL = 0.05
 
 
 @dataclass(frozen=True)
@@ -69,6 +73,13 @@ class FitOptions:
             ``a + b exp(-t/tau)`` (any tau), at least this (K).
         reference_temperature_degc: T_ref (degC); None: the unit's temperature at power-on (mean of the
             first second of the recording).
+        scale_nonlinearity: the gyro's symmetric quadratic scale term ``y = u + k u|u|`` per output axis
+            (``u`` = M ref, the physics' ``scale_nonlinearity``; Algorithm 1's line 6' inverts it): ``'auto'``
+            fits it on the axes whose rate steps hold at least two distinct rate magnitudes (with one magnitude
+            ``u|u|`` is ``|u| u``, a scale error M already holds) and keeps it where its Wald statistic exceeds
+            ``nonlinearity_wald``; ``'off'`` (the default) never. The result says which
+            (``quality['scale_nonlinearity']``).
+        nonlinearity_wald: Wald statistic (z^2) the coefficient must exceed to be kept (9: 3 sigma).
     """
 
     max_blocks: int = 70
@@ -84,8 +95,13 @@ class FitOptions:
     min_temperature_span_k: float = 5.0
     min_temperature_independent_k: float = 1.0
     reference_temperature_degc: float | None = None
+    scale_nonlinearity: str = "off"
+    nonlinearity_wald: float = 9.0
 
     def __post_init__(self) -> None:
+        if self.scale_nonlinearity not in NONLINEARITY_MODES:
+            raise ValueError(f"FitOptions.scale_nonlinearity must be one of {', '.join(NONLINEARITY_MODES)}, "
+                             f"got {self.scale_nonlinearity!r}")
         if self.thermal not in THERMAL_MODES:
             raise ValueError(f"FitOptions.thermal must be one of {', '.join(THERMAL_MODES)}, got {self.thermal!r}")
         if not 1 <= int(self.thermal_max_order) <= MAX_TEMP_ORDER:
@@ -146,6 +162,7 @@ class _TriadLinear:
     fits: list[AxisFit]
     n_ref: int  # number of reference columns (3 with M, 0 when M comes from angles)
     extra: int  # extra regressor columns (3 for g-sensitivity)
+    nonlin_col: tuple[int, ...] = ()  # per axis: design column of the nonlinearity term, -1 without one
 
 
 def _design(blocks: Blocks, with_ref: bool, g_sens: bool) -> np.ndarray:
@@ -167,6 +184,7 @@ def _fit_triad(
     with_ref: bool,
     g_sens: bool,
     triad: str,
+    nonlin_m: np.ndarray | None = None,
 ) -> tuple[_TriadLinear, Blocks]:
     force = np.nan_to_num(session.ref_accel_mps2)
     blocks = make_blocks(
@@ -174,12 +192,40 @@ def _fit_triad(
     )
     design = _design(blocks, with_ref, g_sens)
     tc_range = options.tc_range_s.get(triad)
-    fits = [
-        fit_axis(blocks, k, design, float(noise.sigma[k]), lr_threshold=options.drift_lr_threshold,
-                 tc_range_s=tc_range)
-        for k in range(3)
-    ]
-    return _TriadLinear(fits=fits, n_ref=3 if with_ref else 0, extra=3 if g_sens else 0), blocks
+    fits, cols = [], []
+    for k in range(3):
+        d_k, col = _with_nonlinearity(design, blocks, nonlin_m, k)
+        fits.append(fit_axis(blocks, k, d_k, float(noise.sigma[k]), lr_threshold=options.drift_lr_threshold,
+                             tc_range_s=tc_range))
+        cols.append(col)
+    tri = _TriadLinear(fits=fits, n_ref=3 if with_ref else 0, extra=3 if g_sens else 0,
+                       nonlin_col=tuple(cols) if nonlin_m is not None else ())
+    return tri, blocks
+
+
+def _with_nonlinearity(
+    design: np.ndarray, blocks: Blocks, nonlin_m: np.ndarray | None, k: int
+) -> tuple[np.ndarray, int]:
+    """Axis ``k``'s design with the scale-nonlinearity regressor ``u|u|`` (``u = M^_k . ref`` per block)
+    appended when row ``k`` of ``nonlin_m`` is given (a NaN row: none); returns the design and the column (-1: none)."""
+    if nonlin_m is None or not np.all(np.isfinite(nonlin_m[k])):
+        return design, -1
+    u = blocks.ref @ nonlin_m[k]
+    return np.column_stack([design, u * np.abs(u)]), design.shape[1]
+
+
+def nonlinearity_levels(blocks: Blocks, m_row: np.ndarray) -> int:
+    """Distinct rate magnitudes axis ``m_row`` sees in the blocks (levels within :data:`_LEVEL_RTOL` merge; rates
+    under 5 % of the largest, e.g. rest and poses, do not count). Two or more identify ``u + k u|u|``."""
+    u = np.abs(blocks.ref @ m_row)
+    top = float(u.max()) if u.size else 0.0
+    if top <= 0.0:
+        return 0
+    levels: list[float] = []
+    for v in np.sort(u[u > 0.05 * top]):
+        if not levels or v > levels[-1] * (1.0 + _LEVEL_RTOL):
+            levels.append(float(v))
+    return len(levels)
 
 
 def _fit_triad_thermal(
@@ -196,6 +242,7 @@ def _fit_triad_thermal(
     dt: np.ndarray,
     m_hat: np.ndarray | None,
     orders: tuple[list[int], list[int]] | None = None,
+    nonlin_m: np.ndarray | None = None,
 ) -> tuple[_TriadLinear, Blocks, dict[str, np.ndarray], tuple[list[int], list[int]]]:
     """The triad fit with the temperature terms (:mod:`station.fit.thermal`), orders chosen or given.
 
@@ -215,6 +262,7 @@ def _fit_triad_thermal(
     fits: list[AxisFit] = []
     n_bias: list[int] = []
     n_scale: list[int] = []
+    cols: list[int] = []
     for k in range(3):
         m_row = None if (m_hat is None or not with_ref) else m_hat[k]
         if orders is not None:
@@ -239,10 +287,23 @@ def _fit_triad_thermal(
         off += nb
         coeff["temp_scale_coeff"][k, :ns] = fit.beta[off:off + ns]
         coeff["temp_scale_coeff_std"][k, :ns] = std[off:off + ns]
+        if nonlin_m is not None:  # orders given (chosen without it): refit with the nonlinearity column last
+            design, col = _with_nonlinearity(design, blocks, nonlin_m, k)
+            if col >= 0:
+                fit = fit_axis(blocks, k, design, float(noise.sigma[k]), lr_threshold=options.drift_lr_threshold,
+                               tc_range_s=tc_range)
+                std = np.sqrt(np.clip(np.diag(fit.beta_cov), 0.0, None))
+                off = base.shape[1]
+                coeff["temp_bias_coeff"][k, :nb] = fit.beta[off:off + nb]
+                coeff["temp_bias_coeff_std"][k, :nb] = std[off:off + nb]
+                off += nb
+                coeff["temp_scale_coeff"][k, :ns] = fit.beta[off:off + ns]
+                coeff["temp_scale_coeff_std"][k, :ns] = std[off:off + ns]
+            cols.append(col)
         fits.append(fit)
         n_bias.append(nb)
         n_scale.append(ns)
-    tri = _TriadLinear(fits=fits, n_ref=3 if with_ref else 0, extra=3 if g_sens else 0)
+    tri = _TriadLinear(fits=fits, n_ref=3 if with_ref else 0, extra=3 if g_sens else 0, nonlin_col=tuple(cols))
     return tri, blocks, coeff, (n_bias, n_scale)
 
 
@@ -296,6 +357,12 @@ def _unpack(tri: _TriadLinear) -> dict[str, np.ndarray]:
         out["correlation_time_s"][k], out["correlation_time_s_std"][k] = f.tc_s, f.tc_std_s
         out["drift_noise"][k], out["drift_noise_std"][k] = f.drift_noise, f.drift_noise_std
     out.update(misalignment=m, misalignment_std=m_std, g_sensitivity=g, g_sensitivity_std=g_std)
+    if tri.nonlin_col:
+        k_nl, k_std = np.zeros(3), np.zeros(3)
+        for k, (f, col) in enumerate(zip(tri.fits, tri.nonlin_col, strict=True)):
+            if col >= 0:
+                k_nl[k], k_std[k] = f.beta[col], float(np.sqrt(max(f.beta_cov[col, col], 0.0)))
+        out.update(scale_nonlinearity=k_nl, scale_nonlinearity_std=k_std)
     return out
 
 
@@ -304,7 +371,11 @@ def mean_model(
 ) -> np.ndarray:
     """The fitted eq. (1) without noise: M ref + b_stat + b_drift exp(-t/T_c) (+ G force), and with ``dt``
     (T - T_ref per sample, K) the temperature terms of :mod:`station.fit.thermal`."""
-    out = np.nan_to_num(ref) @ p["misalignment"].T + p["bias_static"]
+    lin = np.nan_to_num(ref) @ p["misalignment"].T
+    out = lin + p["bias_static"]
+    k_nl = p.get("scale_nonlinearity")
+    if k_nl is not None and np.any(k_nl):
+        out += k_nl * lin * np.abs(lin)  # y = u + k u|u| (the physics' scale nonlinearity)
     tc = p["correlation_time_s"]
     for k in range(3):
         if np.isfinite(tc[k]) and p["bias_drift"][k] != 0.0:
@@ -387,6 +458,53 @@ def _top(note: ThermalFit, triad: str) -> int:
     return max([1, *o.get("bias", []), *o.get("scale", [])])
 
 
+def _gyro_nonlinearity(
+    session: Session, g_ref: np.ndarray, g_runs: list[tuple[int, int, int]], g_noise: _Noise, options: FitOptions,
+    g: dict[str, np.ndarray], g_tri: _TriadLinear, g_blocks: Blocks, *, rate: bool, dt: np.ndarray | None,
+    orders: tuple[list[int], list[int]] | None,
+) -> tuple[dict[str, np.ndarray], _TriadLinear, Blocks, dict[str, Any]]:
+    """The gyro refitted with ``k u|u|`` on the axes that identify it and keep it (see
+    :attr:`FitOptions.scale_nonlinearity`): two passes, the regressor's M^ from the previous one. Returns the
+    triad's parameters, fits, blocks and a note (``status`` fitted / not_identifiable / not_significant)."""
+    rule = (f"u + k u|u| per axis where the rate steps hold >= 2 rate magnitudes; kept where "
+            f"(k/sigma_k)^2 >= {options.nonlinearity_wald:g}")
+    if not rate:
+        return g, g_tri, g_blocks, {"status": "not_identifiable", "rule": rule, "axes": [],
+                                    "reason": "no rate steps (M_w from known angles): the nonlinearity needs rates"}
+    m_hat = np.asarray(g["misalignment"], dtype=float)
+    levels = [nonlinearity_levels(g_blocks, m_hat[k]) for k in range(3)]
+    use = np.array([lv >= 2 for lv in levels])
+    if not use.any():
+        return g, g_tri, g_blocks, {
+            "status": "not_identifiable", "rule": rule, "axes": [], "levels": levels,
+            "reason": "each axis sees one rate magnitude: with one, k u|u| is a scale error M already holds; "
+                      "add rate steps at a second magnitude (e.g. 50 and 200 deg/s)"}
+    z = np.zeros(3)
+    for _ in range(2):
+        nm = np.where(use[:, None], m_hat, np.nan)
+        if dt is None:
+            tri, blocks = _fit_triad(session, session.gyro_radps, g_ref, g_runs, g_noise, options, with_ref=True,
+                                     g_sens=options.g_sensitivity, triad="gyro", nonlin_m=nm)
+            p = _unpack(tri)
+        else:
+            tri, blocks, coeff, _ = _fit_triad_thermal(
+                session, session.gyro_radps, g_ref, g_runs, g_noise, options, with_ref=True,
+                g_sens=options.g_sensitivity, triad="gyro", dt=dt, m_hat=m_hat, orders=orders, nonlin_m=nm)
+            p = {**_unpack(tri), **coeff}
+        k_std = p["scale_nonlinearity_std"]
+        z = np.divide(p["scale_nonlinearity"], k_std, out=np.zeros(3), where=k_std > 0)
+        keep = use & (z**2 >= options.nonlinearity_wald)
+        m_hat = np.asarray(p["misalignment"], dtype=float)
+        if not keep.any():
+            return g, g_tri, g_blocks, {"status": "not_significant", "rule": rule, "axes": [], "levels": levels,
+                                        "z": [round(float(v), 2) for v in z],
+                                        "reason": "no axis's coefficient passes the Wald test"}
+        use = keep  # the second pass: the kept axes, the regressor from this pass's M^
+    axes = [AXES[k] for k in range(3) if use[k]]
+    return p, tri, blocks, {"status": "fitted", "rule": rule, "axes": axes, "levels": levels,
+                            "z": [round(float(v), 2) for v in z], "reason": ""}
+
+
 def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
     gyro_method = check_session(session, min_pose_samples=options.min_pose_samples)
     ts = 1.0 / session.sample_rate_hz
@@ -438,6 +556,12 @@ def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
             "accel": {"bias": a_orders[0], "scale": a_orders[1]},
             "gyro": {"bias": g_orders[0], "scale": g_orders[1]},
         })
+    nonlin_note: dict[str, Any] | None = None
+    if options.scale_nonlinearity != "off":
+        with numerics("gyroscope fit with the scale nonlinearity"):
+            g, g_tri, g_blocks, nonlin_note = _gyro_nonlinearity(
+                session, g_ref, g_runs, g_noise, options, g, g_tri, g_blocks, rate=gyro_method == "rate", dt=dt,
+                orders=g_orders if dt is not None else None)
     angle_report: dict[str, Any] = {}
     if gyro_method == "angle":
         bias_t = g["bias_static"] + np.zeros((len(session), 3))
@@ -469,11 +593,16 @@ def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
     }
     if angle_report:
         quality["known_angle"] = angle_report
+    if nonlin_note is not None:
+        quality["scale_nonlinearity"] = nonlin_note
     deg = float(np.degrees(1.0))
     n = len(session)
     a_design = _sample_design(n, session.ref_accel_mps2, None)
     g_design = _sample_design(n, g_ref if gyro_method == "rate" else None,
                               session.ref_accel_mps2 if options.g_sensitivity else None)
+    if np.any(g.get("scale_nonlinearity", 0.0)):  # the nonlinearity regressors (a superset: ref_i |ref_i|)
+        r = np.nan_to_num(g_ref)
+        g_design = np.column_stack([g_design, r * np.abs(r)])
     if dt is not None:  # the temperature regressors the fit used (a superset for the scale: every ref_i dT^j)
         a_design = np.column_stack([a_design, temperature_columns(
             dt, session.ref_accel_mps2, _top(thermal_note, "accel"))])
