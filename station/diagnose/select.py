@@ -82,6 +82,9 @@ REFIT_ROUNDS = 8
 GM_CACHE = 48
 #: Power at which a rejected candidate's ``detectable_from`` is quoted (:func:`detectable_from`).
 DETECT_POWER = 0.9
+#: Shortest warm-up T_c (s) the diagnosis considers: a faster "warm-up" is no drift of eq. 3 at the blocks'
+#: resolution (and its block means overflow).
+TC_FLOOR_S = 1.0
 #: Candidates that look like the warm-up drift: tested with the drift's T_c re-fitted.
 PROFILE_TC = ("temperature_bias", "temperature_scale", "bias_random_walk")
 
@@ -158,7 +161,8 @@ class SensorProblem:
         self.tmin = np.minimum(t[:, None], t[None, :])
         self.d_temp = sd.block_mean(baseline.d_temp)  # temperature rise per block (K)
         # eq. 3's T_c inside the sensor class's range, where one is given (SensorData.tc_range_s)
-        self.tc = sd.clip_tc([tc if np.isfinite(tc) and tc > 0 else span for tc in sd.params.correlation_time_s])
+        self.tc = np.maximum(sd.clip_tc([tc if np.isfinite(tc) and tc > 0 else span
+                                         for tc in sd.params.correlation_time_s]), TC_FLOOR_S)
         self._gm_cache: dict[float, np.ndarray] = {}
         self.gm = [self._gm(float(tc)) for tc in self.tc]
         ref_b = sd.block_mean(sd.ref)
@@ -194,7 +198,7 @@ class SensorProblem:
     def _set_tc(self, k: int, tc: float) -> None:
         """Set axis k's warm-up time constant T_c (s), clipped into the sensor class's range: its drift column
         and its GM covariance (eq. 3)."""
-        tc = float(self.sd.clip_tc(tc))
+        tc = max(float(self.sd.clip_tc(tc)), TC_FLOOR_S)
         self.tc[k] = tc
         self.base[k] = self._base_design(tc)
         self.gm[k] = self._gm(tc)
