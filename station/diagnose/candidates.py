@@ -28,9 +28,13 @@ NAMES = (
     "temperature_bias", "temperature_scale", "g_sensitivity", "scale_nonlinearity", "scale_asymmetry",
     "lever_arm", "earth_rotation", "time_offset", "bias_random_walk", "outliers",
     "pose_tilt",  # ours: the rig's (or a hand's) poses are not where the reference says
+    # the IEEE Std 952 / 1431 scale-factor polynomial, its even (k2 u^2) and odd (k3 u^3) terms apart
+    "scale_nonlinearity_even", "scale_nonlinearity_odd",
 )
 #: Candidates that are mean terms (regressors); the others are tested by select.py directly.
-MEAN_CANDIDATES = (*NAMES[:8], "pose_tilt")
+MEAN_CANDIDATES = (*NAMES[:8], "pose_tilt", "scale_nonlinearity_even", "scale_nonlinearity_odd")
+#: Largest time offset (s) the exact-delay candidate searches.
+MAX_DELAY_S = 0.05
 
 _DEG = math.pi / 180.0
 
@@ -75,6 +79,16 @@ def _g_sensitivity(b: Baseline, s: SensorData) -> np.ndarray:
 
 def _nonlinearity(b: Baseline, s: SensorData) -> np.ndarray:
     return _diag(s.u * np.abs(s.u))
+
+
+def _poly_even(b: Baseline, s: SensorData) -> np.ndarray:
+    """IEEE scale polynomial, even term: ``k2 u^2`` per axis, k2 relative at the reference input (1/U)."""
+    return _diag(s.u**2)
+
+
+def _poly_odd(b: Baseline, s: SensorData) -> np.ndarray:
+    """IEEE scale polynomial, odd term: ``k3 u^3`` per axis (1/U^2)."""
+    return _diag(s.u**3)
 
 
 def _asymmetry(b: Baseline, s: SensorData) -> np.ndarray:
@@ -183,7 +197,19 @@ def _time_offset(b: Baseline, s: SensorData) -> np.ndarray | None:
     du = np.gradient(s.u, b.session.t_s, axis=0)
     if not np.any(du):
         return None
-    return -du[:, :, None]  # y(t) = u(t - delta) ~ u(t) - delta du/dt
+    return -du[:, :, None]  # y(t) = u(t - delta) ~ u(t) - delta du/dt (first order: the start of the search)
+
+
+def delay_regressor(b: Baseline, s: SensorData, tau_s: float) -> np.ndarray:
+    """The exact delay as a regressor at ``tau_s`` (s): ``(u(t - tau) - u(t)) / tau`` (n, 3, 1), the reference
+    interpolated at ``t - tau``, so that the coefficient is the delay itself when it equals ``tau_s``
+    (``y(t) = u(t - tau)``, eq. 1 with the motion late); the first-order regressor ``-du/dt`` at ``tau -> 0``."""
+    if abs(tau_s) < 1e-6:
+        out = _time_offset(b, s)
+        return np.zeros((len(s.u), 3, 1)) if out is None else out
+    t = b.session.t_s
+    shifted = np.stack([np.interp(t - tau_s, t, s.u[:, k]) for k in range(3)], axis=1)
+    return ((shifted - s.u) / tau_s)[:, :, None]
 
 
 LIBRARY: dict[str, Candidate] = {
@@ -195,10 +221,15 @@ LIBRARY: dict[str, Candidate] = {
                   "scale factor proportional to the temperature rise"),
         Candidate("g_sensitivity", ("gyro",), _g_sensitivity, "gyro output proportional to specific force"),
         Candidate("scale_nonlinearity", ("accel", "gyro"), _nonlinearity, "quadratic scale term u|u|"),
+        Candidate("scale_nonlinearity_even", ("accel", "gyro"), _poly_even,
+                  "IEEE scale polynomial, even term k2 u^2 (same error for both signs)"),
+        Candidate("scale_nonlinearity_odd", ("accel", "gyro"), _poly_odd,
+                  "IEEE scale polynomial, odd term k3 u^3"),
         Candidate("scale_asymmetry", ("accel", "gyro"), _asymmetry, "different scale for positive and negative input"),
         Candidate("lever_arm", ("accel",), _lever_arm, "accelerometer off the rotation centre: w x (w x r) + a x r"),
         Candidate("earth_rotation", ("gyro",), _earth_rotation, "Earth rate at the site's latitude and heading"),
-        Candidate("time_offset", ("accel", "gyro"), _time_offset, "sensor samples late against the rig reference"),
+        Candidate("time_offset", ("accel", "gyro"), _time_offset,
+                  "sensor samples late against the rig reference (exact delay, fitted by a 1-D search)"),
         Candidate(pose_tilt.NAME, pose_tilt.SENSORS, pose_tilt.build, pose_tilt.DESCRIPTION),
     )
 }
@@ -215,9 +246,12 @@ def unit_factor(name: str, sensor: str) -> tuple[float, str]:
     gyro = sensor == "gyro"
     if name == "temperature_bias":
         return (1.0 / _DEG, "deg/s/K") if gyro else (1e3 / STANDARD_GRAVITY, "mg/K")
-    if name == "scale_nonlinearity":
+    if name in ("scale_nonlinearity", "scale_nonlinearity_even"):
         ref = GYRO_NONLINEARITY_REF_RADPS if gyro else STANDARD_GRAVITY
         return ref, "relative scale error at " + ("200 deg/s" if gyro else "1 g")
+    if name == "scale_nonlinearity_odd":
+        ref = GYRO_NONLINEARITY_REF_RADPS if gyro else STANDARD_GRAVITY
+        return ref**2, "relative scale error at " + ("200 deg/s" if gyro else "1 g")
     fixed = {
         "temperature_scale": (1e6, "ppm/K"),
         "g_sensitivity": (STANDARD_GRAVITY / _DEG, "deg/s per g"),
@@ -260,7 +294,9 @@ RIG_STEPS: dict[str, str] = {
     "temperature_scale": "repeat poses or rate steps late in the session, when the unit is warm",
     "g_sensitivity": "rate steps with the spin axis horizontal, or poses at two headings",
     "scale_nonlinearity": "steps at a second input magnitude (more rates, or tilted poses for the accelerometer)",
-    "scale_asymmetry": "both signs of every rate step and both poses of every axis",
+    "scale_asymmetry": "both signs of every rate step and both poses of every axis, at three or more rates",
+    "scale_nonlinearity_even": "rate steps at three or more magnitudes, both signs (|w| and w^2 then differ)",
+    "scale_nonlinearity_odd": "rate steps at three or more magnitudes (w|w| and w^3 then differ)",
     "lever_arm": "rate steps at two or more rates about each axis",
     "earth_rotation": "each pose held at two headings (table turned 180 deg about the vertical)",
     "time_offset": "rate-table ramps with higher angular acceleration",

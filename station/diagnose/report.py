@@ -109,6 +109,7 @@ def diagnose(session: Session, *, warmup_tc_s: Mapping[str, tuple[float, float]]
         "findings": findings,
         "rejected": decision.rejected,
         "inseparable": decision.inseparable,
+        "unexplained": [u.to_dict() for u in decision.unexplained],
         "location": locate(baseline),
         "warmup_tc_range_s": {s: list(sd.tc_range_s) for s in SENSORS
                               if (sd := baseline.sensor(s)).tc_range_s is not None} or None,

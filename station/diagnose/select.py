@@ -51,7 +51,10 @@ from typing import Any
 import numpy as np
 from scipy import linalg, optimize, stats
 
-from station.diagnose.candidates import LIBRARY, RIG_STEPS, SHAPES, engineering, unit_factor
+from station.diagnose import robust
+from station.diagnose.candidates import (
+    LIBRARY, MAX_DELAY_S, RIG_STEPS, SHAPES, delay_regressor, engineering, unit_factor,
+)
 from station.diagnose.residuals import SENSORS, Baseline, SensorData
 from station.fit.blocks import block_exp_mean, power_on_gm_correlation
 
@@ -645,6 +648,7 @@ class Decision:
     findings: list[dict[str, Any]]
     rejected: list[dict[str, Any]]
     inseparable: list[dict[str, Any]]
+    unexplained: list[robust.Unexplained] = field(default_factory=list)
 
 
 def _r2(signal: np.ndarray, span: np.ndarray) -> float:
@@ -733,6 +737,7 @@ def select(baseline: Baseline, *, max_effects: int = 4) -> Decision:
     findings: list[dict[str, Any]] = []
     rejected: list[dict[str, Any]] = []
     inseparable: list[dict[str, Any]] = []
+    unexplained: list[robust.Unexplained] = []
     for sensor in SENSORS:
         sd = baseline.sensor(sensor)
         prob = SensorProblem(baseline, sd)
@@ -745,8 +750,15 @@ def select(baseline: Baseline, *, max_effects: int = 4) -> Decision:
                 else:
                     why = "no data for it" if z is None else "the recording never excites it (all regressors 0)"
                     rejected.append({"effect": name, "sensor": sensor, "reason": f"not testable: {why}"})
+        if "time_offset" in regs:
+            regs["time_offset"], tau = _refine_delay(prob, baseline, sd, regs["time_offset"])
+        else:
+            tau = 0.0
         pool = set(regs) | {"bias_random_walk"}
         last: dict[str, Test] = {}
+        names: list[str] = []
+        walk: Test | None = None
+        mine: list[dict[str, Any]] = []
         for _step in range(max_effects):
             before = prob.quality()
             tests = {name: prob.test_mean(name, regs[name]) for name in sorted(pool - {"bias_random_walk"})}
@@ -798,13 +810,40 @@ def select(baseline: Baseline, *, max_effects: int = 4) -> Decision:
             if best.effect == "bias_random_walk":
                 prob.k2 = float(best.theta[0] ** 2)
                 prob._fit_q()
+                walk = best
             else:
                 prob.accepted.append(regs[best.effect])
+                names.append(best.effect)
                 prob.refit_drift()
             after = prob.quality()
             pool.discard(best.effect)
             last.pop(best.effect, None)
-            findings.append(_finding(sd, best, before, after))
+            mine.append(_finding(sd, best, before, after))
+        # checks that hold when the model is wrong (robust.py): drop-one under the dispersion, stand-ins,
+        # what stays unexplained; rounds until nothing more is rejected
+        confidence: dict[str, dict[str, Any]] = {}
+        for _round in range(3):
+            audit = robust.audit(prob, baseline, names, regs, walk, _fitted_samples(prob, baseline, sd, names, tau))
+            confidence = audit.confidence
+            gone = {r["effect"] for r in audit.rejected}
+            rejected.extend(audit.rejected)
+            unexplained.extend(audit.unexplained if not gone else [])
+            if not gone:
+                break
+            keep = [i for i, n in enumerate(names) if n not in gone]
+            prob.accepted = [prob.accepted[i] for i in keep]
+            names = [names[i] for i in keep]
+            if "bias_random_walk" in gone:
+                walk = None
+                prob.k2 = 0.0
+            prob.refit_drift()
+            mine = [f for f in mine if f["effect"] not in gone]
+            if _round == 2:
+                unexplained.extend(robust.audit(prob, baseline, names, regs, walk,
+                                                _fitted_samples(prob, baseline, sd, names, tau)).unexplained)
+        for f in mine:
+            f["confidence"] = confidence.get(f["effect"], {"level": "low"})
+        findings.extend(mine)
         for t in last.values():
             entry: dict[str, Any] = {"effect": t.effect, "sensor": sensor, "gain": round(t.gain, 3),
                                      "bic_gain": round(t.bic_gain, 3), "params": t.params}
@@ -828,6 +867,15 @@ def select(baseline: Baseline, *, max_effects: int = 4) -> Decision:
                     "rig_step": RIG_STEPS["temperature_bias"],
                 })
         out = _outlier_test(sd)
+        if any(u.sensor == sensor for u in unexplained):
+            # structure no candidate explains: effects named for it are stand-ins (robust.py)
+            for item in [i for i in inseparable if i["sensor"] == sensor and "temperature_bias" not in i["effects"]]:
+                inseparable.remove(item)
+                rejected.append({"effect": " / ".join(item["effects"]), "sensor": sensor,
+                                 "reason": "inseparable stand-ins for structure that stays unexplained"})
+            if out["accepted"]:
+                out["accepted"] = False
+                out["reason"] = "more outliers than allowed, but where structure stays unexplained"
         if out.pop("accepted"):
             findings.append({
                 "effect": "outliers", "sensor": sensor, "axes": [AX[k] for k in out.pop("axes")] or list(AX),
@@ -836,12 +884,54 @@ def select(baseline: Baseline, *, max_effects: int = 4) -> Decision:
                 "fit": {},
             })
         else:
-            rejected.append({"effect": "outliers", "sensor": sensor, "reason": "no more outliers than allowed",
+            rejected.append({"effect": "outliers", "sensor": sensor,
+                             "reason": out.get("reason", "no more outliers than allowed"),
                              "count": out["count"], "p_value": out["p_value"]})
-    return Decision(findings, rejected, inseparable)
+    return Decision(findings, rejected, inseparable, unexplained)
 
 
 AX = "xyz"
+#: Fixed-point rounds of the exact-delay fit (:func:`_refine_delay`).
+DELAY_ROUNDS = 6
+
+
+def _refine_delay(prob: SensorProblem, baseline: Baseline, sd: SensorData, first: np.ndarray) -> tuple[np.ndarray, float]:
+    """The time offset as an exact delay: start from the first-order estimate (coefficient of ``-du/dt``),
+    then evaluate the reference at ``t - tau`` (:func:`delay_regressor`) and take the coefficient as the
+    next ``tau`` until it is a fixed point (the coefficient equals the delay the regressor was built with:
+    the least-squares delay of ``y = u(t - tau)``). Returns the block regressor and tau (s), |tau| <= 50 ms."""
+    tau = float(np.clip(prob.test_mean("time_offset", first).theta[0], -MAX_DELAY_S, MAX_DELAY_S))
+    zb = first
+    for _ in range(DELAY_ROUNDS):
+        if abs(tau) < 1e-5:
+            return first, tau
+        zb = sd.block_mean(delay_regressor(baseline, sd, tau))
+        new = float(np.clip(prob.test_mean("time_offset", zb).theta[0], -MAX_DELAY_S, MAX_DELAY_S))
+        done = abs(new - tau) < 1e-6 + 1e-3 * abs(tau)
+        tau = new
+        if done:
+            break
+    return zb, tau
+
+
+def _fitted_samples(prob: SensorProblem, baseline: Baseline, sd: SensorData, names: list[str],
+                    tau: float) -> np.ndarray:
+    """The accepted mean effects' fitted signal per sample (n, 3), at the joint fit's coefficients."""
+    out = np.zeros((len(baseline.session), 3))
+    if not names:
+        return out
+    chols, yw = prob.whitened()
+    x, nbase = prob.design(chols, prob.accepted)
+    beta, *_ = linalg.lstsq(x, yw, cond=RCOND, check_finite=False)
+    col = nbase
+    for name, zb in zip(names, prob.accepted, strict=True):
+        p = zb.shape[2]
+        theta = beta[col:col + p]
+        col += p
+        z = delay_regressor(baseline, sd, tau) if name == "time_offset" else LIBRARY[name].build(baseline, sd)
+        if z is not None:
+            out += np.einsum("nkp,p->nk", z, theta)
+    return out
 
 
 def _finding(sd: SensorData, t: Test, before: dict[str, Any], after: dict[str, Any]) -> dict[str, Any]:
