@@ -16,17 +16,36 @@ import typer
 from station.kernel.errors import StationError
 
 
+def _fmt_value(params: dict[str, Any]) -> tuple[str, str]:
+    """A finding's parameters as 'value +- std' text and its unit (numbers rounded for people)."""
+    if "value" not in params:  # outliers: one named parameter
+        (name, p), = params.items()
+        return f"{p['value']:.3g} +- {p['std']:.2g}", f"{p['unit']} ({name})"
+    v = np.asarray(params["value"], dtype=float).ravel()
+    sd = np.asarray(params["std"], dtype=float).ravel()
+    text = ", ".join(f"{a:.3g}+-{b:.2g}" for a, b in zip(v, sd, strict=False))
+    return text, str(params.get("unit", ""))
+
+
 def _print_text(report: dict[str, Any]) -> None:
     findings = report["findings"]
-    typer.echo(f"diagnosis of {report['serial']}: {len(findings)} finding(s)")
+    unexplained = report.get("unexplained", [])
+    typer.echo(f"diagnosis of {report['serial']}: {len(findings)} finding(s), {len(unexplained)} unexplained")
+    if findings:
+        typer.echo(f"  {'effect':24s} {'sensor':6s} {'axes':4s} {'confidence':10s} value (unit)")
     for f in findings:
-        params = {k: v for k, v in f["parameters"].items()} if f["effect"] == "outliers" else f["parameters"]
-        typer.echo(f"  {f['effect']} ({f['sensor']}, axes {''.join(f['axes'])}): {json.dumps(params)}")
+        text, unit = _fmt_value(f["parameters"])
+        conf = (f.get("confidence") or {}).get("level", "-")
+        typer.echo(f"  {f['effect']:24s} {f['sensor']:6s} {''.join(f['axes']):4s} {conf:10s} {text} {unit}")
         ev = f["evidence"]
         if "likelihood_gain_chi2" in ev:
             typer.echo(f"    evidence: chi2 gain {ev['likelihood_gain_chi2']:.1f} for {ev['params']} parameter(s), "
                        f"BIC gain {ev['bic_gain']:.1f}, held-out error {ev['heldout_before']:.3f} -> "
                        f"{ev['heldout_after']:.3f}")
+            q = f.get("confidence") or {}
+            if "quasi_gain_chi2" in q:
+                typer.echo(f"    against the full model, noise inflated by its dispersion: chi2 gain "
+                           f"{q['quasi_gain_chi2']:.1f} (threshold {q['threshold']:.1f})")
             b, a = f["fit"]["before"], f["fit"]["after"]
             typer.echo(f"    block chi2 per axis {b['block_chi2']} -> {a['block_chi2']}")
         else:
@@ -35,12 +54,16 @@ def _print_text(report: dict[str, Any]) -> None:
             r = f["rerun"]
             typer.echo(f"    simulator re-run, block RMS per axis: {r['rms_base']} -> {r['rms_with_this_effect']} "
                        f"{r['unit']} with this effect")
+    for u in unexplained:
+        typer.echo(f"  UNEXPLAINED ({u['sensor']}, axes {''.join(u['axes'])}, in {'/'.join(u['segment_kinds'])} "
+                   f"segments): {u['covariate']}; excess chi2 {u['excess_chi2']:.0f}. No candidate of the library "
+                   "explains it.")
     for item in report["inseparable"]:
         typer.echo(f"  inseparable ({item['sensor']}): {' / '.join(item['effects'])}; rig step: {item['rig_step']}")
     if report.get("warmup_tc_range_s"):
         ranges = ", ".join(f"{k} {lo:g}-{hi:g} s" for k, (lo, hi) in report["warmup_tc_range_s"].items())
         typer.echo(f"  warm-up T_c kept in the sensor class's range: {ranges}")
-    if not findings and not report["inseparable"]:
+    if not findings and not report["inseparable"] and not unexplained:
         typer.echo("  the base model (eq. 1 + eq. 3) explains this recording")
     sizes = [r for r in report["rejected"] if r.get("detectable_from")]
     if sizes:
