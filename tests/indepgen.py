@@ -135,6 +135,8 @@ class _Piece:
     w0: float = 0.0
     acc: float = 0.0
     spin_id: int = -1
+    pose_a: str | None = None  # the rig pose at the start (hold: the pose held), None off the pose list
+    pose_b: str | None = None  # the rig pose at the end of a slerp
 
 
 @dataclass
@@ -144,7 +146,7 @@ class Motion:
     pieces: list[_Piece] = field(default_factory=list)
     wobble_rad: float = 0.0
     ripple: float = 0.0
-    tilt: dict[int, Rotation] = field(default_factory=dict)  # pose tilt per segment (rig error)
+    tilt: dict[str, Rotation] = field(default_factory=dict)  # the rig's error per pose (every visit, rest too)
 
     @property
     def end(self) -> float:
@@ -166,8 +168,8 @@ class Motion:
             tt = t[sel] - p.t0
             if p.what == "hold":
                 r = p.a
-                if true and p.segment in self.tilt:
-                    r = self.tilt[p.segment] * r
+                if true and p.pose_a in self.tilt:
+                    r = self.tilt[p.pose_a] * r
                 rot[sel] = r.as_matrix()
             elif p.what == "slerp":
                 dur = p.t1 - p.t0
@@ -176,10 +178,23 @@ class Motion:
                 ds = 0.5 * math.pi / dur * np.sin(math.pi * u)
                 dds = 0.5 * (math.pi / dur) ** 2 * np.cos(math.pi * u)
                 slerp = Slerp([0.0, 1.0], Rotation.concatenate([p.a, p.b]))
-                rot[sel] = slerp(s).as_matrix()
+                r_nom = slerp(s)
                 phi = (p.a.inv() * p.b).as_rotvec()
                 w[sel] = ds[:, None] * phi
                 al[sel] = dds[:, None] * phi
+                if self.tilt:
+                    # the rate reference comes from the rig's encoders and includes the moves between the tilted
+                    # poses; its attitude (the specific-force reference) is the nominal pose
+                    # the rig moves between the poses where they really are: the world tilt T(s) = slerp of the
+                    # two poses' tilts on top of the nominal path, body rate + s' R^T psi
+                    ta = self.tilt.get(p.pose_a, Rotation.identity())
+                    tb = self.tilt.get(p.pose_b, Rotation.identity())
+                    tilt = Slerp([0.0, 1.0], Rotation.concatenate([ta, tb]))(s)
+                    psi = (ta.inv() * tb).as_rotvec()
+                    rot[sel] = (tilt * r_nom).as_matrix() if true else r_nom.as_matrix()
+                    w[sel] += ds[:, None] * r_nom.inv().apply(np.tile(psi, (len(s), 1)))
+                else:
+                    rot[sel] = r_nom.as_matrix()
             else:  # spin about the table axis
                 th = p.th0 + p.w0 * tt + 0.5 * p.acc * tt**2
                 dth = p.w0 + p.acc * tt
@@ -219,22 +234,24 @@ def build_motion(plan: Plan, rng: np.random.Generator) -> Motion:
         m.pieces.append(p)
         t = p.t1
 
-    add(_Piece(0.0, plan.rest_s, seg, Kind.REST, 0.0, "hold", cur))
+    add(_Piece(0.0, plan.rest_s, seg, Kind.REST, 0.0, "hold", cur, pose_a=plan.rest_pose))
+    cur_pose: str | None = plan.rest_pose
     for pose in plan.poses:
         seg += 1
-        target = _pose_rotation(pose, float(rng.uniform(-0.6, 0.6)))
-        add(_Piece(t, t + plan.move_s, seg, Kind.MOVE, t + plan.move_s, "slerp", cur, target))
+        target = _pose_rotation(pose)
+        add(_Piece(t, t + plan.move_s, seg, Kind.MOVE, t + plan.move_s, "slerp", cur, target, pose_a=cur_pose,
+                   pose_b=pose))
         seg += 1
-        add(_Piece(t, t + plan.hold_s, seg, Kind.POSE, t + plan.settle_s, "hold", target))
-        cur = target
+        add(_Piece(t, t + plan.hold_s, seg, Kind.POSE, t + plan.settle_s, "hold", target, pose_a=pose))
+        cur, cur_pose = target, pose
     acc = plan.table_accel_dps2 * DEG
     for spin_id, axis in enumerate(plan.axes):
         k = "xyz".index(axis)
         flip = rng.random() < 0.5
         start = _up_rotation(k, -1.0 if flip else 1.0, float(rng.uniform(0, 2 * math.pi)))
         seg += 1
-        add(_Piece(t, t + plan.move_s, seg, Kind.MOVE, t + plan.move_s, "slerp", cur, start))
-        cur = start
+        add(_Piece(t, t + plan.move_s, seg, Kind.MOVE, t + plan.move_s, "slerp", cur, start, pose_a=cur_pose))
+        cur, cur_pose = start, None
         steps = []
         for r in plan.rates_dps:
             signs = (1.0, -1.0) if rng.random() < 0.5 else (-1.0, 1.0)
@@ -260,9 +277,9 @@ def build_motion(plan: Plan, rng: np.random.Generator) -> Motion:
         add(_Piece(t, t + 1.0, seg, Kind.MOVE, t + 1.0, "hold", cur))
     seg += 1
     home = _pose_rotation(plan.rest_pose)
-    add(_Piece(t, t + plan.move_s, seg, Kind.MOVE, t + plan.move_s, "slerp", cur, home))
+    add(_Piece(t, t + plan.move_s, seg, Kind.MOVE, t + plan.move_s, "slerp", cur, home, pose_b=plan.rest_pose))
     seg += 1
-    add(_Piece(t, t + plan.hold_s, seg, Kind.POSE, t + plan.settle_s, "hold", home))
+    add(_Piece(t, t + plan.hold_s, seg, Kind.POSE, t + plan.settle_s, "hold", home, pose_a=plan.rest_pose))
     return m
 
 
@@ -299,10 +316,9 @@ def generate(seed: int, effects: dict[str, float] | None = None, plan: Plan | No
     motion.wobble_rad = eff.get("wobble", 0.0) * DEG
     motion.ripple = eff.get("ripple", 0.0)
     if eff.get("pose_tilt"):
-        for p in motion.pieces:
-            if p.kind == Kind.POSE:
-                motion.tilt[p.segment] = Rotation.from_rotvec(rng.normal(0.0, eff["pose_tilt"] * DEG / math.sqrt(2),
-                                                                          3) * np.array([1.0, 1.0, 0.0]))
+        for pose in POSE_ANGLES_DEG:  # a horizontal tilt axis per pose, fixed for every visit
+            motion.tilt[pose] = Rotation.from_rotvec(rng.normal(0.0, eff["pose_tilt"] * DEG / math.sqrt(2), 3)
+                                                     * np.array([1.0, 1.0, 0.0]))
     fs = plan.rate_hz
     n = int(motion.end * fs)
     t = np.arange(n) / fs
