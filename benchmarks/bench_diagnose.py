@@ -74,6 +74,11 @@ CONCEALED: dict[str, float] = {
 }
 
 
+#: The effects the station's simulator has (the library's names without the IEEE even/odd scale terms), in the
+#: order the study's seeds and pairs were drawn from before those were added.
+SIM_NAMES = tuple(n for n in NAMES if n in CONCEALED)
+
+
 def study_seed(name: str, s: int) -> int:
     """Seed of the ``s``-th recording of effect ``name``'s study."""
     return 100 * (NAMES.index(name) + 1) + s
@@ -238,8 +243,8 @@ def study_pairs(n: int) -> list[tuple[int, tuple[str, str]]]:
     rng = np.random.default_rng(7)
     out = []
     for s in range(n):
-        a, b = rng.choice(len(NAMES), size=2, replace=False)
-        out.append((9000 + s, (NAMES[a], NAMES[b])))
+        a, b = rng.choice(len(SIM_NAMES), size=2, replace=False)
+        out.append((9000 + s, (SIM_NAMES[a], SIM_NAMES[b])))
     return out
 
 
@@ -320,13 +325,13 @@ def detectable(names: list[str], seeds: int) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--seeds", type=int, default=10)
-    ap.add_argument("--effects", default=",".join(NAMES), help="comma-separated effects of the per-effect study")
+    ap.add_argument("--effects", default=",".join(SIM_NAMES), help="comma-separated effects of the per-effect study")
     ap.add_argument("--clean", type=int, default=50)
     ap.add_argument("--pairs", type=int, default=PAIRS)
     ap.add_argument("--chamber", type=int, default=0, help="recordings for the temperature rig-step study")
     ap.add_argument("--sweep", action="store_true", help="also the detection rate against magnitude")
     ap.add_argument("--sweep-seeds", type=int, default=5)
-    ap.add_argument("--sweep-effects", default=",".join(NAMES), help="comma-separated effect names")
+    ap.add_argument("--sweep-effects", default=",".join(SIM_NAMES), help="comma-separated effect names")
     ap.add_argument("--information", default="", help="comma-separated effect names: noncentrality and power per "
                     "recording of the study (is a miss information-limited?); name@pairs: the pair study's "
                     "recordings that hold it")
@@ -378,7 +383,9 @@ def main() -> None:
         pairs.append((pair, sorted(named), ok))
         print(f"  pair {pair}: named {sorted(named)} {'OK' if ok else 'MISSED'}", flush=True)
 
-    short = {n: n[:9] for n in NAMES}
+    short = {n: n[:9] if n not in SIM_NAMES[3:4] and not n.startswith("scale_nonlinearity_") else
+             {"scale_nonlinearity": "scale_nl", "scale_nonlinearity_even": "s_nl_even",
+              "scale_nonlinearity_odd": "s_nl_odd"}[n] for n in NAMES}
     print("\nconfusion matrix (rows: true effect, columns: named effect; counts of recordings)")
     print(f"{'true':20s} " + " ".join(f"{short[n]:>9s}" for n in NAMES))
     for row in (*studied, "none"):
