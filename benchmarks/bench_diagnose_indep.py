@@ -25,10 +25,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
-import indepgen  # noqa: E402
+import indepgen
 
-from station.diagnose import diagnose  # noqa: E402
-from station.kernel.limits_file import DEFAULT_LIMITS_PATH, load_limits  # noqa: E402
+from station.diagnose import diagnose
+from station.kernel.limits_file import DEFAULT_LIMITS_PATH, load_limits
 
 #: Magnitudes (indepgen units) of the single-effect rows.
 SINGLE = {
@@ -43,7 +43,7 @@ OUTSIDE = {"wobble": 0.2, "ripple": 0.001}
 def warmup_tc() -> dict[str, tuple[float, float]] | None:
     try:
         return dict(load_limits(DEFAULT_LIMITS_PATH).correlation_time_s)
-    except Exception:  # noqa: BLE001
+    except Exception:
         return None
 
 
@@ -105,16 +105,16 @@ def main() -> None:
         st = stats.setdefault(label, {"n": 0, "found": 0, "instead": Counter(), "false": 0, "insep": 0, "unexpl": 0})
         st["n"] += 1
         if label in OUTSIDE:
-            where, kind = indepgen.OUTSIDE_LOCATION[label]
+            where, _ = indepgen.OUTSIDE_LOCATION[label]
             right = any(u["sensor"] == where and "spin frequency" in u["covariate"] for u in unexplained)
             st["unexpl"] += bool(unexplained)
             st["found"] += bool(right and not named)
             st["false"] += len(named)
             st["instead"].update(named)
             outside_ok[label] += bool(right and not named)
-            print(f"  {label:24s} seed {s}: named {sorted(named) or '-'}; unexplained "
-                  f"{[(u['sensor'], ''.join(u['axes']), u['segment_kinds'], u['covariate'][:40]) for u in unexplained]}",
-                  flush=True)
+            where_found = [(u["sensor"], "".join(u["axes"]), u["segment_kinds"], u["covariate"][:40])
+                           for u in unexplained]
+            print(f"  {label:24s} seed {s}: named {sorted(named) or '-'}; unexplained {where_found}", flush=True)
             continue
         false = named - truth - ({"outliers"} if "outliers" in truth else set())
         st["false"] += len(false)

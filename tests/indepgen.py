@@ -340,7 +340,8 @@ def generate(seed: int, effects: dict[str, float] | None = None, plan: Plan | No
     w_in = w_true.copy()
     if eff.get("earth_rotation"):
         lat, head = plan.latitude_deg * DEG, plan.heading_deg * DEG
-        e_world = EARTH_RATE * np.array([-math.sin(head) * math.cos(lat), math.cos(head) * math.cos(lat), math.sin(lat)])
+        north = np.array([-math.sin(head), math.cos(head), 0.0])  # the rig's y axis at heading_deg from north
+        e_world = EARTH_RATE * (math.cos(lat) * north + np.array([0.0, 0.0, math.sin(lat)]))
         w_in = w_in + eff["earth_rotation"] * np.einsum("nji,j->ni", r_true, e_world)
 
     # --- temperature (K): self-heating, room drift; sensor reading quantized ---

@@ -83,14 +83,12 @@ def diagnose(session: Session, *, warmup_tc_s: Mapping[str, tuple[float, float]]
         findings = []
         fitted = []
         for f in decision.findings:
-            res = f.pop("_block_residual", None)
-            if res is not None:
-                sd = baseline.sensor(f["sensor"])
-                curves.append((f"{f['sensor']} {f['effect']}", sd.t_s, res[0], res[1]))
-            theta = f.pop("_theta", None)
-            if theta is not None or f["effect"] == "outliers":
-                fitted.append(FittedEffect(f["effect"], f["sensor"], np.zeros(0) if theta is None else theta))
-            findings.append(f)
+            if f.block_residual is not None:
+                sd = baseline.sensor(f.sensor)
+                curves.append((f"{f.sensor} {f.effect}", sd.t_s, *f.block_residual))
+            if f.theta is not None or f.effect == "outliers":
+                fitted.append(FittedEffect(f.effect, f.sensor, np.zeros(0) if f.theta is None else f.theta))
+            findings.append(f.to_dict())
         try:
             runs: Rerun | None = rerun(baseline, fitted)
         except FitError as exc:
@@ -107,8 +105,8 @@ def diagnose(session: Session, *, warmup_tc_s: Mapping[str, tuple[float, float]]
         "format": FORMAT,
         "serial": session.serial,
         "findings": findings,
-        "rejected": decision.rejected,
-        "inseparable": decision.inseparable,
+        "rejected": [r.to_dict() for r in decision.rejected],
+        "inseparable": [i.to_dict() for i in decision.inseparable],
         "unexplained": [u.to_dict() for u in decision.unexplained],
         "location": locate(baseline),
         "warmup_tc_range_s": {s: list(sd.tc_range_s) for s in SENSORS

@@ -20,7 +20,8 @@ structure it leaves passes other candidates' tests. After the forward selection,
    taken for a stand-in of that physics and rejected.
 
 Confidence of a finding: the drop-one quasi-likelihood gain over its threshold
-(``high`` at 4x or more, ``medium`` at 1.5x, else ``low``).
+(``high`` at 4x or more, ``medium`` at 1.5x, else ``low``). A ``low`` one next to an effect
+:data:`DOMINANT` times stronger on the same sensor is rejected (the dominant model's imperfection).
 """
 
 from __future__ import annotations
@@ -41,6 +42,10 @@ PHI_UNEXPLAINED = 1.5
 #: An accepted effect with at least this share of its whitened fitted signal's energy in unexplained cells
 #: is a stand-in for the unexplained physics.
 STAND_IN_SHARE = 0.5
+#: A finding whose drop-one gain is below ``MARGINAL`` times its threshold while another finding of the sensor
+#: is ``DOMINANT`` times stronger is rejected: a model that fits a signal of chi^2 G to 99.99 % leaves G / 1e4.
+MARGINAL = 1.5
+DOMINANT = 100.0
 AX = "xyz"
 #: Prefix of an accepted term that no finding names (see :data:`station.diagnose.select.NUISANCE`).
 NUISANCE = "~"
@@ -249,6 +254,16 @@ def audit(prob: Any, baseline: Any, names: list[str], regs: dict[str, np.ndarray
                                                "that stands in for unexplained structure"})
     finally:
         _restore_noise(prob, saved)
+    # --- a marginal effect next to a dominant one: the dominant model's imperfection can leave that much ---
+    gains = {n: c["quasi_gain_chi2"] for n, c in out.confidence.items()}
+    for name, c in list(out.confidence.items()):
+        dominant = max((g for n, g in gains.items() if n != name), default=0.0)
+        if c["quasi_gain_chi2"] < MARGINAL * c["threshold"] and dominant >= DOMINANT * c["quasi_gain_chi2"]:
+            del out.confidence[name]
+            out.rejected.append({"effect": name, "sensor": sd.sensor, "gain": c["quasi_gain_chi2"],
+                                 "threshold": c["threshold"],
+                                 "reason": f"marginal (chi2 gain below {MARGINAL:g}x its threshold) next to an effect "
+                                           f"{DOMINANT:g}x stronger, whose model's imperfection can leave that much"})
     # --- locate what stays unexplained ---
     if bad_cells:
         kinds = sorted({Kind(c).label for c, _ in bad_cells})
