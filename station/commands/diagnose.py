@@ -18,8 +18,15 @@ from station.kernel.errors import StationError
 
 def _fmt_value(params: dict[str, Any]) -> tuple[str, str]:
     """A finding's parameters as 'value +- std' text and its unit (numbers rounded for people)."""
+    if "pairs" in params:  # pose_tilt: per pose pair; the summary here, the pairs in --json
+        d = [v["half_difference"] for v in params["pairs"].values() if v.get("half_difference")]
+        text = "; ".join(f"{k.split(':')[0]} {v['half_difference']['value']:+.3f}+-{v['half_difference']['std']:.3f}"
+                         for k, v in params["pairs"].items() if v.get("half_difference"))
+        rms = params.get("rms_half_difference_deg")
+        unit = "deg (tilt half-differences)" if d else ""
+        return (f"rms {rms:.3f} ({text})" if rms is not None else text or "-"), unit
     if "value" not in params:  # outliers: one named parameter
-        (name, p), = params.items()
+        name, p = next(iter(params.items()))
         return f"{p['value']:.3g} +- {p['std']:.2g}", f"{p['unit']} ({name})"
     v = np.asarray(params["value"], dtype=float).ravel()
     sd = np.asarray(params["std"], dtype=float).ravel()

@@ -328,10 +328,11 @@ class SensorProblem:
     def total_nll(self) -> float:
         return sum(self._axis_nll(k, float(self.q[k]), self.k2, self._accepted_axis(k)) for k in range(3))
 
-    def test_mean(self, name: str, zb: np.ndarray) -> Test:
+    def test_mean(self, name: str, zb: np.ndarray, *, profile: bool = False) -> Test:
         """Nested test of a mean candidate with block regressors ``zb`` (m, 3, p) against the current model.
 
-        Candidates that compete with the drift (``PROFILE_TC``) get the drift's T_c re-fitted with them.
+        Candidates that compete with the drift (``PROFILE_TC``), and every candidate with ``profile``, get the
+        drift's T_c and q re-fitted for the null and the alternative (a likelihood ratio with both profiled).
         """
         chols, yw = self.whitened()
         x0, _ = self.design(chols, self.accepted)
@@ -339,7 +340,7 @@ class SensorProblem:
         chi0 = float(np.sum((yw - x0 @ b0) ** 2))
         r0 = self._rank(x0)
         saved = None
-        if name in PROFILE_TC:
+        if profile or name in PROFILE_TC:
             saved = self._snapshot()
             # the null gets the same T_c refinement as the alternative: only the candidate may make the gain
             self.refit_drift()

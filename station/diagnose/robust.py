@@ -10,8 +10,10 @@ structure it leaves passes other candidates' tests. After the forward selection,
    dispersion (1 when the model is right).
 2. **Drop-one re-test under the dispersion**: every accepted effect is tested again against the
    full final model without it, with the white block noise inflated by ``max(1, phi)`` of its
-   block's kind and axis. An effect that only lives on structure another effect's imperfect model
-   (or unexplained physics) left behind loses its significance there and is rejected.
+   block's kind and axis, and the drift's T_c and q re-fitted for both models (a drift noise fitted
+   with the effect in would make its absence look worse than it is). An effect that only lives on
+   structure another effect's imperfect model (or unexplained physics) left behind loses its
+   significance there and is rejected.
 3. **Unexplained**: where the final model's innovations stay above the noise (per kind and axis,
    chi^2 tail below :data:`ALPHA_UNEXPLAINED` and ``phi`` above :data:`PHI_UNEXPLAINED`), or where
    the sample residual in the rate-table holds follows the table's angle (a term periodic at the
@@ -220,7 +222,7 @@ def audit(prob: Any, baseline: Any, names: list[str], regs: dict[str, np.ndarray
             others = accepted[:i] + accepted[i + 1:]
             prob.accepted = others
             try:
-                t = prob.test_mean(name, accepted[i])
+                t = prob.test_mean(name, accepted[i], profile=True)
             finally:
                 prob.accepted = accepted
             if name in stand_in:
