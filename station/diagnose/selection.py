@@ -229,7 +229,8 @@ def select(baseline: Baseline, *, max_effects: int = 4) -> Decision:
         out = outlier_test(sd)
         if any(u.sensor == sensor for u in unexplained):
             # structure no candidate explains: effects named for it are stand-ins (robust.py)
-            for item in [i for i in inseparable if i["sensor"] == sensor and "temperature_bias" not in i["effects"]]:
+            for item in [i for i in inseparable
+                         if i["sensor"] == sensor and "bias_drift (eq. 3 warm-up)" not in i["effects"]]:
                 inseparable.remove(item)
                 rejected.append({"effect": " / ".join(item["effects"]), "sensor": sensor,
                                  "reason": "inseparable stand-ins for structure that stays unexplained"})
