@@ -354,6 +354,12 @@ class SensorProblem:
             chols, yw = self.whitened()
         x1, _ = self.design(chols, [*self.accepted, zb])
         gain_rank = self._rank(x1) - r0
+        if profile:
+            # the null's and the alternative's drift (T_c, q) differ: count the rank gain on one well-conditioned
+            # weighting (the white block noise), not on two different whitenings
+            wch = [np.diag(np.sqrt(self.white[:, k])) for k in range(3)]
+            gain_rank = (self._rank(self.design(wch, [*self.accepted, zb])[0])
+                         - self._rank(self.design(wch, self.accepted)[0]))
         b1, *_ = linalg.lstsq(x1, yw, cond=RCOND, check_finite=False)
         chi1 = float(np.sum((yw - x1 @ b1) ** 2))
         gain = chi0 - chi1
