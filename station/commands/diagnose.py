@@ -57,6 +57,10 @@ def _print_text(report: dict[str, Any]) -> None:
             typer.echo(f"    block chi2 per axis {b['block_chi2']} -> {a['block_chi2']}")
         else:
             typer.echo(f"    evidence: {json.dumps(ev)}")
+        cal = f.get("calibration")
+        if cal is not None:
+            typer.echo(f"    calibration: {'compensates it' if cal['compensated'] else 'does not compensate it'}: "
+                       f"{cal['note']}")
         if "rerun" in f:
             r = f["rerun"]
             typer.echo(f"    simulator re-run, block RMS per axis: {r['rms_base']} -> {r['rms_with_this_effect']} "

@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from station.diagnose.compensation import compensation
 from station.diagnose.rerun import FittedEffect, Rerun, rerun
 from station.diagnose.residuals import SENSORS, Baseline, fit_baseline, locate
 from station.diagnose.select import select
@@ -100,6 +101,10 @@ def diagnose(session: Session, *, warmup_tc_s: Mapping[str, tuple[float, float]]
                 part = runs.finding_part(f["effect"], f["sensor"])
                 if part is not None:
                     f["rerun"] = part
+        for f, c in zip(findings, compensation(
+                session, [(f["effect"], f["sensor"]) for f in findings], warmup_tc_s=warmup_tc_s),
+                        strict=True):
+            f["calibration"] = c.to_dict()
     p = baseline.params
     report = {
         "format": FORMAT,

@@ -1,0 +1,98 @@
+"""Which of a diagnosis's findings the station's calibration compensates (issue 18, item 4).
+
+For each finding the report says whether the calibration the station would write for this recording removes
+the effect from the corrected output: the effect has parameters in the parameter set that Algorithm 1 applies
+(:data:`station.fit.compensation.APPLIED`), and the fit, run with those terms enabled on this recording,
+actually fits them (:func:`station.fit.compensation.compensated_by`). Otherwise it says why not: no
+parameter for the effect, or the recording does not let the fit identify it (the fit's own note).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from station.fit.calibrate import FitOptions, fit_session
+from station.fit.compensation import APPLIED, COMPENSATION, compensated_by, field_value
+from station.fit.params import ParameterSet
+from station.kernel.errors import StationError
+from station.session.model import Session
+
+#: Diagnosis names -> the physics effect whose parameters compensate them. The fit's ``u + k u|u|`` is odd in
+#: the rate: it stands for the odd (cubic-like) polynomial term, not for the even one.
+ALIASES = {"scale_nonlinearity_odd": "scale_nonlinearity"}
+
+#: Why an effect without applied parameters stays in the output.
+NOT_COMPENSABLE = {
+    "scale_nonlinearity_even": "no parameter: the even scale term (k2 w^2) is not in the parameter set",
+    "time_offset": "carried as time_offset_s in the set but not estimated by the fit nor applied to values",
+    "scale_asymmetry": "no parameter for a sign-dependent scale in the parameter set",
+    "lever_arm": "a property of the rig mounting, not of the unit",
+    "earth_rotation": "a property of the place, not of the unit",
+    "bias_random_walk": "a random process: no calibration removes it",
+    "outliers": "single bad samples: Algorithm 1's moving average only dilutes them",
+    "pose_tilt": "a property of the rig's poses, not of the unit",
+}
+
+
+@dataclass(frozen=True)
+class Compensation:
+    """Whether the calibration compensates one finding, and why (not)."""
+
+    effect: str
+    compensated: bool
+    note: str
+
+    def to_dict(self) -> dict[str, object]:
+        return {"compensated": self.compensated, "note": self.note}
+
+
+def _fields(effect: str, sensor: str) -> tuple[str, ...]:
+    """The effect's parameter-set fields for this sensor (all of them when none is the sensor's)."""
+    own = tuple(f for f in COMPENSATION[effect] if f.startswith(f"{sensor}."))
+    return own or COMPENSATION[effect]
+
+
+def _why_not_fitted(params: ParameterSet, effect: str) -> str:
+    if effect.startswith("temperature_"):
+        return f"the fit has the terms but did not fit them here: {params.thermal.status}: {params.thermal.reason}"
+    if effect == "scale_nonlinearity":
+        note = params.quality.get("scale_nonlinearity") or {}
+        return f"the fit has the term but did not fit it here: {note.get('status')}: {note.get('reason')}"
+    return "the fit has the term but it is not significant in this recording"
+
+
+def compensation(
+    session: Session, findings: list[tuple[str, str]], *,
+    warmup_tc_s: Mapping[str, tuple[float, float]] | None = None,
+) -> list[Compensation]:
+    """One :class:`Compensation` per ``(effect, sensor)`` in ``findings`` (the diagnosis's findings, in order)."""
+    effects = [e for e, _ in findings]
+    physics = [ALIASES.get(e, e) for e in effects]
+    params: ParameterSet | None = None
+    error = ""
+    if any(p in APPLIED for p in physics):
+        options = FitOptions(tc_range_s=dict(warmup_tc_s or {}), thermal="auto", scale_nonlinearity="auto",
+                             g_sensitivity="g_sensitivity" in physics)
+        try:
+            params = fit_session(session, options)
+        except StationError as exc:
+            error = f"the fit with the terms refused the recording: {exc}"
+    out = []
+    for (name, sensor), eff in zip(findings, physics, strict=True):
+        if eff not in APPLIED:
+            out.append(Compensation(name, False, NOT_COMPENSABLE.get(eff, "no parameter for it in the set")))
+        elif params is None:
+            out.append(Compensation(name, False, error))
+        elif compensated_by(params, eff) and any(
+                np.any(np.asarray(field_value(params, f)) != 0) for f in _fields(eff, sensor)):
+            fields = ", ".join(_fields(eff, sensor))
+            out.append(Compensation(name, True, f"the calibration fits and applies it ({fields})"))
+        else:
+            out.append(Compensation(name, False, _why_not_fitted(params, eff)))
+    return out
+
+
+__all__ = ["ALIASES", "NOT_COMPENSABLE", "Compensation", "compensation"]
