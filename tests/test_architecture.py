@@ -29,9 +29,11 @@ ALLOWED: dict[str, set[str]] = {
     "correct": {"kernel", "session", "fit"},
     "physics": {"kernel", "session", "fit"},
     "diagnose": {"kernel", "session", "fit", "correct", "physics"},
+    # what the Modbus devices share: URL parsing, the pymodbus transport, the heartbeat
+    "modbus": {"kernel"},
     # hardware behind protocols, selected by URL scheme
-    "rig": {"kernel"},
-    "chamber": {"kernel"},
+    "rig": {"kernel", "modbus"},
+    "chamber": {"kernel", "modbus"},
     "sensor": {"kernel"},
     "eeprom": {"kernel", "fit", "sensor"},
     # the sequence: steps, runner, records, limits, gates, provisioning, on-rig verification

@@ -12,13 +12,8 @@ from __future__ import annotations
 import logging
 import math
 import threading
-import time
 from collections.abc import Callable
 from typing import Any
-
-from pymodbus import FramerType
-from pymodbus.client import ModbusSerialClient, ModbusTcpClient
-from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
 
 from station.chamber import registers as reg
 from station.chamber.protocol import (
@@ -32,12 +27,17 @@ from station.chamber.protocol import (
 from station.chamber.registers import HR, IR, Mode, Status
 from station.chamber.url import ChamberUrl, parse_chamber_url
 from station.kernel.clock import Clock, WallClock
+from station.modbus.client import ModbusTransport
+from station.modbus.heartbeat import Heartbeat
 
 log = logging.getLogger(__name__)
 
 
-class ModbusChamber:
+class ModbusChamber(ModbusTransport, Heartbeat):
     """A climate chamber behind Modbus; implements :class:`station.chamber.protocol.Chamber`.
+
+    The transport (retries, reconnects) is :class:`station.modbus.client.ModbusTransport`'s, the
+    heartbeat thread :class:`station.modbus.heartbeat.Heartbeat`'s.
 
     Args:
         url: chamber URL (:mod:`station.chamber.url`) or a parsed :class:`ChamberUrl`.
@@ -48,6 +48,15 @@ class ModbusChamber:
         setpoint_tol_k: the air readback must be within this of the setpoint to confirm it (K).
         retry_backoff_s: pause before a retry (wall s).
     """
+
+    _role = "chamber"
+    _protocol_error = ChamberProtocolError
+    _timeout_error = ChamberTimeout
+    _name_exceptions = False
+    _heartbeat_register = HR.HEARTBEAT
+    _log = log
+
+    url: ChamberUrl
 
     def __init__(
         self,
@@ -68,61 +77,12 @@ class ModbusChamber:
         self.setpoint_tol_k = setpoint_tol_k
         self.retry_backoff_s = retry_backoff_s
         self.reconnects = 0
-        self.heartbeat_failures = 0
-        self.last_heartbeat_error: Exception | None = None
+        self._init_heartbeat()
         self.listeners: list[Callable[[ChamberState], None]] = []
         self._lock = threading.RLock()
         self._identity: ChamberIdentity | None = None
         self._alive_seen: tuple[int, float] | None = None
-        self._hb_counter = 0
-        self._hb_stop = threading.Event()
-        self._hb_thread: threading.Thread | None = None
-        self._client = self._make_client()
-
-    # ------------------------------------------------------------------ transport
-
-    def _make_client(self) -> ModbusTcpClient | ModbusSerialClient:
-        u = self.url
-        if u.is_tcp:
-            return ModbusTcpClient(u.host, port=u.port, timeout=u.timeout_s, retries=0)
-        return ModbusSerialClient(u.device, framer=FramerType.RTU, baudrate=u.baud, bytesize=u.bytesize,
-                                  parity=u.parity, stopbits=u.stopbits, timeout=u.timeout_s, retries=0)
-
-    def _transact(self, what: str, request: Callable[[], Any], retries: int | None = None) -> Any:
-        attempts = 1 + (self.url.retries if retries is None else retries)
-        last: Exception | None = None
-        for attempt in range(attempts):
-            if attempt:
-                time.sleep(self.retry_backoff_s)
-            with self._lock:
-                try:
-                    if not self._client.connected and not self._client.connect():
-                        raise ConnectionException(f"cannot connect to {self.url}")
-                    response = request()
-                except (ConnectionException, ModbusIOException, OSError) as exc:
-                    last = exc
-                    self._client.close()
-                    self.reconnects += 1
-                    continue
-                except ModbusException as exc:
-                    raise ChamberProtocolError(f"chamber {what}: {exc}") from exc
-            if response.isError():
-                code = int(getattr(response, "exception_code", 0))
-                raise ChamberProtocolError(f"chamber {what}: Modbus exception {code}", exception_code=code)
-            return response
-        raise ChamberTimeout(f"chamber {what}: no answer from {self.url} after {attempts} attempts ({last})")
-
-    def _read_input(self, address: int, count: int, what: str) -> list[int]:
-        unit = self.url.unit
-        response = self._transact(what, lambda: self._client.read_input_registers(address, count=count, device_id=unit))
-        regs = list(response.registers)
-        if len(regs) != count:
-            raise ChamberProtocolError(f"chamber {what}: asked for {count} registers, got {len(regs)}")
-        return regs
-
-    def _write(self, address: int, values: list[int], what: str, retries: int | None = None) -> None:
-        unit = self.url.unit
-        self._transact(what, lambda: self._client.write_registers(address, values, device_id=unit), retries=retries)
+        self._open_transport()
 
     # ------------------------------------------------------------------ reading
 
@@ -268,40 +228,12 @@ class ModbusChamber:
             raise ValueError(f"chamber watchdog timeout {timeout_s} s outside [{lo}, {hi}] s")
         self._write(HR.WATCHDOG_S, [s], "watchdog timeout")
 
-    def beat(self) -> None:
-        self._hb_counter = (self._hb_counter + 1) & 0xFFFF
-        self._write(HR.HEARTBEAT, [self._hb_counter], "heartbeat", retries=0)
-
-    def _heartbeat_loop(self) -> None:
-        while not self._hb_stop.is_set():
-            try:
-                self.beat()
-            except Exception as exc:  # keep beating; the chamber's watchdog decides
-                self.heartbeat_failures += 1
-                self.last_heartbeat_error = exc
-                log.warning("chamber heartbeat failed: %s", exc)
-            self._hb_stop.wait(self.heartbeat_period_s / self.clock.scale)
-
-    def start_heartbeat(self) -> None:
-        if self._hb_thread is not None and self._hb_thread.is_alive():
-            return
-        self._hb_stop.clear()
-        self._hb_thread = threading.Thread(target=self._heartbeat_loop, name="chamber-heartbeat", daemon=True)
-        self._hb_thread.start()
-
-    def stop_heartbeat(self) -> None:
-        self._hb_stop.set()
-        if self._hb_thread is not None:
-            self._hb_thread.join()
-            self._hb_thread = None
-
     # ------------------------------------------------------------------ lifetime
 
     def close(self) -> None:
         """Stop the heartbeat and close the link (the chamber keeps its mode; its watchdog guards it)."""
         self.stop_heartbeat()
-        with self._lock:
-            self._client.close()
+        self._close_link()
 
     def __enter__(self) -> ModbusChamber:
         return self

@@ -20,6 +20,7 @@ from typing import TypeVar
 
 from station.kernel.clock import Clock, WallClock
 from station.kernel.geometry import POSE_ANGLES_DEG
+from station.modbus.heartbeat import Heartbeat
 from station.rig import registers as reg
 from station.rig.protocol import (
     Orientation,
@@ -36,7 +37,7 @@ from station.rig.registers import HR, IR, AckResult, Command, Status
 log = logging.getLogger(__name__)
 
 
-class RegisterRig:
+class RegisterRig(Heartbeat):
     """A rig behind its register map; implements :class:`station.rig.protocol.Rig` given a transport.
 
     Args:
@@ -49,8 +50,13 @@ class RegisterRig:
         alive_timeout_s: the rig's alive counter must change within this (rig s).
 
     Transports implement :meth:`_read_input`, :meth:`_write` and :meth:`_close_link`, and count
-    re-established links in :attr:`reconnects`.
+    re-established links in :attr:`reconnects`. The heartbeat thread is
+    :class:`station.modbus.heartbeat.Heartbeat`'s.
     """
+
+    _role = "rig"
+    _heartbeat_register = HR.HEARTBEAT
+    _log = log
 
     def __init__(
         self,
@@ -73,17 +79,13 @@ class RegisterRig:
         self.ack_timeout_s = ack_timeout_s
         self.alive_timeout_s = alive_timeout_s
         self.reconnects = 0
-        self.heartbeat_failures = 0
-        self.last_heartbeat_error: Exception | None = None
+        self._init_heartbeat()
         self._lock = threading.RLock()
         self._seq = 0
         self._target_roll_deg = 0.0
         self._target_pitch_deg = 0.0
         self._target_rate_dps = 0.0
         self._alive_seen: tuple[int, float] | None = None
-        self._hb_counter = 0
-        self._hb_stop = threading.Event()
-        self._hb_thread: threading.Thread | None = None
         self._identity: RigIdentity | None = None
 
     # ------------------------------------------------------------------ transport hooks
@@ -300,36 +302,6 @@ class RegisterRig:
         if not lo <= ms <= hi:
             raise ValueError(f"watchdog timeout {timeout_s} s outside [{lo / 1000}, {hi / 1000}] s")
         self._write(HR.WATCHDOG_MS, [ms], "watchdog timeout")
-
-    def beat(self) -> None:
-        """Write the next heartbeat value once (the heartbeat thread calls this periodically)."""
-        self._hb_counter = (self._hb_counter + 1) & 0xFFFF
-        self._write(HR.HEARTBEAT, [self._hb_counter], "heartbeat", retries=0)
-
-    def _heartbeat_loop(self) -> None:
-        while not self._hb_stop.is_set():
-            try:
-                self.beat()
-            except Exception as exc:  # keep beating; the rig's watchdog decides
-                self.heartbeat_failures += 1
-                self.last_heartbeat_error = exc
-                log.warning("rig heartbeat failed: %s", exc)
-            self._hb_stop.wait(self.heartbeat_period_s / self.clock.scale)
-
-    def start_heartbeat(self) -> None:
-        """Start the heartbeat thread (idempotent)."""
-        if self._hb_thread is not None and self._hb_thread.is_alive():
-            return
-        self._hb_stop.clear()
-        self._hb_thread = threading.Thread(target=self._heartbeat_loop, name="rig-heartbeat", daemon=True)
-        self._hb_thread.start()
-
-    def stop_heartbeat(self) -> None:
-        """Stop the heartbeat thread; the rig's watchdog will trip if nothing else beats."""
-        self._hb_stop.set()
-        if self._hb_thread is not None:
-            self._hb_thread.join()
-            self._hb_thread = None
 
     # ------------------------------------------------------------------ lifetime
 

@@ -17,30 +17,19 @@ are wall seconds.
 
 from __future__ import annotations
 
-import time
-from collections.abc import Callable
 from typing import Any
 
-from pymodbus import FramerType
-from pymodbus.client import ModbusSerialClient, ModbusTcpClient
-from pymodbus.constants import ExcCodes
-from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
-
 from station.kernel.clock import Clock
+from station.modbus.client import ModbusTransport
 from station.rig.mapped import RegisterRig, start_rig
 from station.rig.protocol import RigProtocolError, RigTimeout
 from station.rig.url import RigUrl, parse_rig_url
 
 
-def _exception_name(code: int) -> str:
-    try:
-        return ExcCodes(code).name
-    except ValueError:
-        return f"code {code}"
-
-
-class ModbusRig(RegisterRig):
+class ModbusRig(ModbusTransport, RegisterRig):
     """A rig behind Modbus; implements :class:`station.rig.protocol.Rig` (see :class:`RegisterRig`).
+
+    The transport (retries, reconnects) is :class:`station.modbus.client.ModbusTransport`'s.
 
     Args:
         url: rig URL (see :mod:`station.rig.url`) or a parsed :class:`RigUrl`.
@@ -48,6 +37,12 @@ class ModbusRig(RegisterRig):
         retry_backoff_s: pause before a retry (wall s).
         options: the motion and supervision settings of :class:`RegisterRig`.
     """
+
+    _role = "rig"
+    _protocol_error = RigProtocolError
+    _timeout_error = RigTimeout
+
+    url: RigUrl
 
     def __init__(
         self,
@@ -60,68 +55,7 @@ class ModbusRig(RegisterRig):
         super().__init__(clock, **options)
         self.url = url if isinstance(url, RigUrl) else parse_rig_url(url)
         self.retry_backoff_s = retry_backoff_s
-        self._client = self._make_client()
-
-    # ------------------------------------------------------------------ transport
-
-    def _make_client(self) -> ModbusTcpClient | ModbusSerialClient:
-        u = self.url
-        if u.is_tcp:
-            return ModbusTcpClient(u.host, port=u.port, timeout=u.timeout_s, retries=0)
-        return ModbusSerialClient(
-            u.device,
-            framer=FramerType.RTU,
-            baudrate=u.baud,
-            bytesize=u.bytesize,
-            parity=u.parity,
-            stopbits=u.stopbits,
-            timeout=u.timeout_s,
-            retries=0,
-        )
-
-    def _transact(self, what: str, request: Callable[[], Any], retries: int | None = None) -> Any:
-        """Run one Modbus request with bounded retries; returns the (non-error) response."""
-        attempts = 1 + (self.url.retries if retries is None else retries)
-        last: Exception | None = None
-        for attempt in range(attempts):
-            if attempt:
-                time.sleep(self.retry_backoff_s)
-            with self._lock:
-                try:
-                    if not self._client.connected and not self._client.connect():
-                        raise ConnectionException(f"cannot connect to {self.url}")
-                    response = request()
-                except (ConnectionException, ModbusIOException, OSError) as exc:
-                    # no answer, refused or dropped link: start over on a fresh connection
-                    last = exc
-                    self._client.close()
-                    self.reconnects += 1
-                    continue
-                except ModbusException as exc:
-                    raise RigProtocolError(f"rig {what}: {exc}") from exc
-            if response.isError():
-                code = int(getattr(response, "exception_code", 0))
-                raise RigProtocolError(
-                    f"rig {what}: Modbus exception {code} ({_exception_name(code)})", exception_code=code
-                )
-            return response
-        raise RigTimeout(f"rig {what}: no answer from {self.url} after {attempts} attempts ({last})")
-
-    def _read_input(self, address: int, count: int, what: str) -> list[int]:
-        unit = self.url.unit
-        response = self._transact(what, lambda: self._client.read_input_registers(address, count=count, device_id=unit))
-        registers = list(response.registers)
-        if len(registers) != count:
-            raise RigProtocolError(f"rig {what}: asked for {count} registers, got {len(registers)}")
-        return registers
-
-    def _write(self, address: int, values: list[int], what: str, retries: int | None = None) -> None:
-        unit = self.url.unit
-        self._transact(what, lambda: self._client.write_registers(address, values, device_id=unit), retries=retries)
-
-    def _close_link(self) -> None:
-        with self._lock:
-            self._client.close()
+        self._open_transport()
 
     def __enter__(self) -> ModbusRig:
         return self
