@@ -18,7 +18,6 @@ plant that cannot reach the setpoint (capacity limits), a stalled alive counter.
 
 from __future__ import annotations
 
-import asyncio
 import math
 import threading
 from dataclasses import dataclass
@@ -26,13 +25,11 @@ from dataclasses import dataclass
 import numpy as np
 from pymodbus.constants import ExcCodes
 from pymodbus.server import ModbusTcpServer
-from pymodbus.simulator import DataType, SimData, SimDevice
 
 from station.chamber import registers as reg
 from station.chamber.registers import HR, IR, AlarmCode, Mode, Status
 from station.kernel.clock import Clock
-
-_WRITE_CODES = frozenset({6, 16, 23})
+from station.sim.modbus_server import ThreadedModbusServer
 
 
 @dataclass
@@ -306,12 +303,17 @@ class ChamberModel:
             return out
 
 
-class SimulatedChamber:
+class SimulatedChamber(ThreadedModbusServer):
     """The chamber model served over Modbus/TCP in a background thread (port 0: a free port).
 
     Use as a context manager or call :meth:`start` / :meth:`stop`; ``model_options`` are those of
-    :class:`ChamberModel`. :attr:`url` is what :func:`station.chamber.open_chamber` takes.
+    :class:`ChamberModel`. :attr:`url` is what :func:`station.chamber.open_chamber` takes. The thread,
+    the lifetime and the datastore hook are :class:`~station.sim.modbus_server.ThreadedModbusServer`'s.
     """
+
+    _role = "chamber"
+    _map = reg
+    model: ChamberModel
 
     def __init__(self, clock: Clock, host: str = "127.0.0.1", port: int = 0, *, unit: int = 1,
                  faults: ChamberFaults | None = None, **model_options: float) -> None:
@@ -320,13 +322,7 @@ class SimulatedChamber:
         self.port = port
         self.unit = unit
         self.model = ChamberModel(clock, faults=faults, **model_options)  # type: ignore[arg-type]
-        self.accesses = 0
-        self._loop: asyncio.AbstractEventLoop | None = None
-        self._thread: threading.Thread | None = None
-        self._ready = threading.Event()
-        self._stop_event: asyncio.Event | None = None
-        self._server: ModbusTcpServer | None = None
-        self._start_error: BaseException | None = None
+        self._init_server()
 
     @property
     def faults(self) -> ChamberFaults:
@@ -344,92 +340,11 @@ class SimulatedChamber:
 
     # ------------------------------------------------------------------ pymodbus glue
 
-    def _device(self) -> SimDevice:
-        bits = [SimData(0, count=16, values=False, datatype=DataType.BITS, readonly=True)]
-        holding = [SimData(reg.HOLDING_START, count=reg.HOLDING_COUNT, values=0, datatype=DataType.REGISTERS)]
-        inputs = [
-            SimData(reg.STATE_START, count=reg.STATE_COUNT, values=0, datatype=DataType.REGISTERS),
-            SimData(reg.IDENT_START, count=reg.IDENT_COUNT, values=0, datatype=DataType.REGISTERS),
-        ]
-        return SimDevice(id=self.unit, simdata=(bits, list(bits), holding, inputs), action=self._action)
-
-    async def _action(self, function_code: int, start_address: int, address: int, count: int,
-                      registers: list[int], set_values: list[int] | list[bool] | None) -> ExcCodes | None:
-        self.accesses += 1
-        faults = self.model.faults
-        if faults.exception_replies:
-            return ExcCodes(faults.exception_replies)
-        if faults.no_answer:
-            if set_values is not None:
-                set_values[:] = registers[address - start_address : address - start_address + count]
-            return None
-        if function_code == 4:
-            for addr, value in self.model.input_registers().items():
-                registers[addr - start_address] = value
-        elif function_code in (3, 23) and set_values is None:
-            first = reg.HOLDING_START - start_address
-            registers[first : first + reg.HOLDING_COUNT] = self.model.holding
-        if set_values is not None and function_code in _WRITE_CODES:
-            rc = self.model.write_holding(address, [int(v) for v in set_values])
-            if rc is not None:
-                return rc
-        return None
-
-    def _trace_packet(self, sending: bool, data: bytes) -> bytes:
-        if sending and self.model.faults.no_answer:
-            return b""
-        return data
-
-    async def _serve(self) -> None:
-        self._stop_event = asyncio.Event()
+    async def _open_server(self) -> ModbusTcpServer:
         server = ModbusTcpServer(self._device(), address=(self.host, self.port), trace_packet=self._trace_packet)
         await server.serve_forever(background=True)
         self.port = int(server.transport.sockets[0].getsockname()[1])  # type: ignore[attr-defined]
-        self._server = server
-        self._ready.set()
-        await self._stop_event.wait()
-        await server.shutdown()
-
-    def _run(self) -> None:
-        assert self._loop is not None
-        asyncio.set_event_loop(self._loop)
-        try:
-            self._loop.run_until_complete(self._serve())
-        except BaseException as exc:  # reported to start()
-            self._start_error = exc
-        finally:
-            self._ready.set()
-            self._loop.close()
-
-    def start(self) -> SimulatedChamber:
-        """Start serving; returns self once the server listens."""
-        if self._thread is not None:
-            return self
-        self._ready.clear()
-        self._start_error = None
-        self._loop = asyncio.new_event_loop()
-        self._thread = threading.Thread(target=self._run, name="sim-chamber", daemon=True)
-        self._thread.start()
-        if not self._ready.wait(timeout=10.0) or self._start_error is not None:
-            self.stop()
-            raise RuntimeError(f"simulated chamber did not start: {self._start_error!r}")
-        return self
-
-    def stop(self) -> None:
-        """Stop the server and its thread (idempotent)."""
-        loop, thread = self._loop, self._thread
-        if loop is not None and thread is not None and thread.is_alive():
-            if self._stop_event is not None:
-                loop.call_soon_threadsafe(self._stop_event.set)
-            thread.join(timeout=10.0)
-        self._thread = None
-        self._server = None
-
-    def __enter__(self) -> SimulatedChamber:
-        return self.start()
-
-    def __exit__(self, *exc: object) -> None:
-        self.stop()
+        return server
 
 
 __all__ = ["ChamberFaults", "ChamberModel", "SimulatedChamber"]

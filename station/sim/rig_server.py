@@ -27,15 +27,14 @@ from dataclasses import dataclass
 import numpy as np
 from pymodbus.constants import ExcCodes
 from pymodbus.server import ModbusSerialServer, ModbusTcpServer
-from pymodbus.simulator import DataType, SimData, SimDevice
 
 from station.kernel.clock import Clock
 from station.kernel.geometry import Kinematics, kinematics_from_angles
 from station.physics.motion import AxisTrajectory
 from station.rig import registers as reg
 from station.rig.registers import HR, IR, AckResult, Command, FaultCode, Status
+from station.sim.modbus_server import ThreadedModbusServer
 
-_WRITE_CODES = frozenset({6, 16, 23})
 _EPS_RATE = 1e-9  # rad/s: below this an axis is still
 _EPS_ANGLE = 1e-7  # rad: position match for IN_POSITION
 
@@ -482,14 +481,18 @@ class _PtyBridge:
                 os.close(fd)
 
 
-class SimulatedRig(RigModelView):
+class SimulatedRig(RigModelView, ThreadedModbusServer):
     """The rig model served over Modbus in a background thread.
 
     ``transport="tcp"`` listens on ``host:port`` (port 0 picks a free port);
     ``transport="rtu"`` serves Modbus RTU on a pty pair and :attr:`url` names the
     client end (``modbus-rtu:///dev/pts/N?...``). Use as a context manager or call
-    :meth:`start` / :meth:`stop`. Motion parameters are those of :class:`RigModel`.
+    :meth:`start` / :meth:`stop`. Motion parameters are those of :class:`RigModel`. The thread,
+    the lifetime and the datastore hook are :class:`~station.sim.modbus_server.ThreadedModbusServer`'s.
     """
+
+    _role = "rig"
+    _map = reg
 
     def __init__(
         self,
@@ -528,15 +531,9 @@ class SimulatedRig(RigModelView):
             firmware_id=firmware_id,
             faults=faults,
         )
-        self.accesses = 0  # datastore accesses (a write single register counts twice)
+        self._init_server()
         self.connections_dropped = 0
-        self._loop: asyncio.AbstractEventLoop | None = None
-        self._thread: threading.Thread | None = None
-        self._ready = threading.Event()
-        self._stop_event: asyncio.Event | None = None
-        self._server: ModbusTcpServer | ModbusSerialServer | None = None
         self._bridge: _PtyBridge | None = None
-        self._start_error: BaseException | None = None
         self._swallow = 0
 
     @property
@@ -558,46 +555,9 @@ class SimulatedRig(RigModelView):
 
     # ------------------------------------------------------------------ pymodbus glue
 
-    def _device(self) -> SimDevice:
-        bits = [SimData(0, count=16, values=False, datatype=DataType.BITS, readonly=True)]
-        holding = [SimData(reg.HOLDING_START, count=reg.HOLDING_COUNT, values=0, datatype=DataType.REGISTERS)]
-        inputs = [
-            SimData(reg.STATE_START, count=reg.STATE_COUNT, values=0, datatype=DataType.REGISTERS),
-            SimData(reg.IDENT_START, count=reg.IDENT_COUNT, values=0, datatype=DataType.REGISTERS),
-        ]
-        return SimDevice(id=self.unit, simdata=(bits, list(bits), holding, inputs), action=self._action)
-
-    async def _action(
-        self,
-        function_code: int,
-        start_address: int,
-        address: int,
-        count: int,
-        registers: list[int],
-        set_values: list[int] | list[bool] | None,
-    ) -> ExcCodes | None:
-        """pymodbus datastore hook: runs before every register access (on the server loop)."""
-        self.accesses += 1
-        faults = self.model.faults
-        if faults.exception_replies:
-            return ExcCodes(faults.exception_replies)
-        if faults.no_answer:
-            if set_values is not None:  # a rig that does not answer does not act either
-                set_values[:] = registers[address - start_address : address - start_address + count]
-            return None
-        if function_code == 4:
-            for addr, value in self.model.input_registers().items():
-                registers[addr - start_address] = value
-        elif function_code in (3, 23) and set_values is None:
-            first = reg.HOLDING_START - start_address
-            registers[first : first + reg.HOLDING_COUNT] = self.model.holding
-        if set_values is not None and function_code in _WRITE_CODES:
-            rc = self.model.write_holding(address, [int(v) for v in set_values])
-            if rc is not None:
-                return rc
+    def _after_access(self) -> None:
         if self.model.take_drop_request():
             asyncio.get_running_loop().call_soon(self._drop_connections)
-        return None
 
     def _trace_packet(self, sending: bool, data: bytes) -> bytes:
         if sending and (self.model.faults.no_answer or self._swallow > 0):
@@ -616,8 +576,7 @@ class SimulatedRig(RigModelView):
             conn.close()
             self.connections_dropped += 1
 
-    async def _serve(self) -> None:
-        self._stop_event = asyncio.Event()
+    async def _open_server(self) -> ModbusTcpServer | ModbusSerialServer:
         server: ModbusTcpServer | ModbusSerialServer
         if self.transport == "tcp":
             server = ModbusTcpServer(self._device(), address=(self.host, self.port), trace_packet=self._trace_packet)
@@ -635,52 +594,11 @@ class SimulatedRig(RigModelView):
                 trace_packet=self._trace_packet,
             )
             await server.serve_forever(background=True)
-        self._server = server
-        self._ready.set()
-        await self._stop_event.wait()
-        await server.shutdown()
+        return server
+
+    async def _closed(self) -> None:
         if self._bridge is not None:
             self._bridge.close()
 
-    def _run(self) -> None:
-        assert self._loop is not None
-        asyncio.set_event_loop(self._loop)
-        try:
-            self._loop.run_until_complete(self._serve())
-        except BaseException as exc:  # reported to start()
-            self._start_error = exc
-        finally:
-            self._ready.set()
-            self._loop.close()
-
-    # ------------------------------------------------------------------ lifetime
-
-    def start(self) -> SimulatedRig:
-        """Start serving; returns self once the server listens."""
-        if self._thread is not None:
-            return self
-        self._ready.clear()
-        self._start_error = None
-        self._loop = asyncio.new_event_loop()
-        self._thread = threading.Thread(target=self._run, name=f"sim-rig-{self.transport}", daemon=True)
-        self._thread.start()
-        if not self._ready.wait(timeout=10.0) or self._start_error is not None:
-            self.stop()
-            raise RuntimeError(f"simulated rig did not start: {self._start_error!r}")
-        return self
-
-    def stop(self) -> None:
-        """Stop the server and its thread (idempotent)."""
-        loop, thread = self._loop, self._thread
-        if loop is not None and thread is not None and thread.is_alive():
-            if self._stop_event is not None:
-                loop.call_soon_threadsafe(self._stop_event.set)
-            thread.join(timeout=10.0)
-        self._thread = None
-        self._server = None
-
-    def __enter__(self) -> SimulatedRig:
-        return self.start()
-
-    def __exit__(self, *exc: object) -> None:
-        self.stop()
+    def _thread_name(self) -> str:
+        return f"sim-rig-{self.transport}"
