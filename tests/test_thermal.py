@@ -442,3 +442,14 @@ def test_order_chosen_by_the_data(plateau_fit: tuple) -> None:
     assert abs(p.gyro.temp_bias_coeff[1, 1] - c2) < 4 * p.gyro.temp_bias_coeff_std[1, 1]
     assert abs(p.accel.temp_bias_coeff[2, 2] - c3) < 4 * p.accel.temp_bias_coeff_std[2, 2]
     assert "Wald" in p.thermal.rule
+
+
+def test_temperature_levels_and_order_caps() -> None:
+    """The polynomial order is capped by the temperature levels the data hold (two plateaus: order 1)."""
+    from station.fit.thermal import temperature_levels
+
+    two_plateaus = np.concatenate([10.0 + np.linspace(0, 2.5, 50), 40.0 + np.linspace(0, 4.0, 50)])
+    assert temperature_levels(two_plateaus) == 2
+    assert temperature_levels(np.linspace(5.0, 45.0, 200)) == 9  # a ramp: 1 + 40 // 5
+    assert temperature_levels(np.array([5.0, 15.0, 25.0, 45.0])) == 4
+    assert temperature_levels(np.array([np.nan])) == 0

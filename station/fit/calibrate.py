@@ -32,7 +32,13 @@ from station.fit.checks import check_session
 from station.fit.consistency import check_rotations
 from station.fit.goodness import TriadResidual, goodness_of_fit
 from station.fit.params import MAX_TEMP_ORDER, AllanCoefficients, ParameterSet, ThermalFit, TriadParams
-from station.fit.thermal import assess_temperature, axis_regressors, select_orders, temperature_columns
+from station.fit.thermal import (
+    assess_temperature,
+    axis_regressors,
+    order_caps,
+    select_orders,
+    temperature_columns,
+)
 from station.kernel.errors import FitError
 from station.session.model import Kind, Session
 
@@ -268,13 +274,13 @@ def _fit_triad_thermal(
         if orders is not None:
             nb, ns = orders[0][k], orders[1][k]
         else:
-            nb, ns = top, (top if m_row is not None else 0)
+            nb, ns = order_caps(blocks, m_row, top)
         design = np.column_stack([base, axis_regressors(blocks, m_row, nb, ns)])
         fit = fit_axis(blocks, k, design, float(noise.sigma[k]), lr_threshold=options.drift_lr_threshold,
                        tc_range_s=tc_range)
         if orders is None:
             nb2, ns2 = select_orders(blocks, k, base, m_row, float(noise.sigma[k]), fit, top,
-                                     options.thermal_order_wald)
+                                     options.thermal_order_wald, start=(nb, ns))
             if (nb2, ns2) != (nb, ns):
                 nb, ns = nb2, ns2
                 design = np.column_stack([base, axis_regressors(blocks, m_row, nb, ns)])

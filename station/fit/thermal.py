@@ -35,7 +35,10 @@ from station.fit.params import MAX_TEMP_ORDER, ThermalFit
 from station.session.model import Session
 
 ORDER_RULE = (
-    "per output axis, bias and scale polynomials start at order thermal_max_order; at the full model's "
+    "per output axis, bias and scale polynomials start at order thermal_max_order, capped at the number of "
+    "temperature levels the polynomial's data hold minus one (levels: clusters of the blocks' temperatures "
+    "apart by more than 3 K, a cluster spanning s K counting 1 + floor(s / 5 K); for the scale only the blocks "
+    "with a reference input count); at the full model's "
     "(T_c, q) the highest order of a polynomial is dropped while its coefficient's Wald statistic z^2 is "
     "below thermal_order_wald (9: 3 sigma), never below order 1; then the axis is refitted at the chosen orders"
 )
@@ -149,9 +152,42 @@ def axis_regressors(blocks: Blocks, m_row: np.ndarray | None, bias_order: int, s
     return np.column_stack(cols) if cols else np.zeros((len(blocks), 0))
 
 
+#: Block temperatures further apart than this (K) are separate levels; a cluster spanning s K counts
+#: 1 + floor(s / LEVEL_SPAN_K) levels (a ramp holds many, a plateau with its self-heating one).
+LEVEL_GAP_K = 3.0
+LEVEL_SPAN_K = 5.0
+
+
+def temperature_levels(dt: np.ndarray) -> int:
+    """How many distinct temperature levels the values ``dt`` (K) hold (see :data:`LEVEL_GAP_K`)."""
+    x = np.sort(np.asarray(dt, dtype=float)[np.isfinite(dt)])
+    if not x.size:
+        return 0
+    cuts = np.flatnonzero(np.diff(x) > LEVEL_GAP_K)
+    levels = 0
+    for part in np.split(x, cuts + 1):
+        levels += 1 + int((part[-1] - part[0]) // LEVEL_SPAN_K)
+    return levels
+
+
+def order_caps(blocks: Blocks, m_row: np.ndarray | None, top: int) -> tuple[int, int]:
+    """Highest (bias, scale) orders the blocks can identify: the temperature levels minus one, at least 1 and at
+    most ``top``; the scale counts only blocks with a reference input (5 % of the largest or more)."""
+    ex = blocks.extra
+    assert ex is not None
+    dt = ex[:, 0]
+    cap_b = max(1, min(top, temperature_levels(dt) - 1))
+    if m_row is None:
+        return cap_b, 0
+    u = np.abs(blocks.ref @ m_row)
+    live = u > 0.05 * float(u.max()) if u.size and u.max() > 0 else np.zeros(len(u), dtype=bool)
+    cap_s = max(1, min(top, temperature_levels(dt[live]) - 1))
+    return cap_b, cap_s
+
+
 def select_orders(
     blocks: Blocks, axis: int, base: np.ndarray, m_row: np.ndarray | None, sigma_w: float, full: AxisFit,
-    max_order: int, wald: float,
+    max_order: int, wald: float, start: tuple[int, int] | None = None,
 ) -> tuple[int, int]:
     """(bias order, scale order) of one axis by backward elimination (:data:`ORDER_RULE`).
 
@@ -159,7 +195,7 @@ def select_orders(
     """
     tc = full.tc_s if np.isfinite(full.tc_s) else float(blocks.t_s.max() + blocks.width_s.max())
     y = blocks.y[:, axis]
-    nb, ns = max_order, (max_order if m_row is not None else 0)
+    nb, ns = start if start is not None else (max_order, (max_order if m_row is not None else 0))
     while True:
         design = np.column_stack([base, axis_regressors(blocks, m_row, nb, ns)])
         prob = _Problem(blocks, y, design, sigma_w, with_drift=full.drift_resolved)
