@@ -286,6 +286,12 @@ def _fit_triad_thermal(
                 design = np.column_stack([base, axis_regressors(blocks, m_row, nb, ns)])
                 fit = fit_axis(blocks, k, design, float(noise.sigma[k]), lr_threshold=options.drift_lr_threshold,
                                tc_range_s=tc_range)
+        if nonlin_m is not None:  # orders chosen without it: refit with the nonlinearity column last
+            design, col = _with_nonlinearity(design, blocks, nonlin_m, k)
+            if col >= 0:
+                fit = fit_axis(blocks, k, design, float(noise.sigma[k]), lr_threshold=options.drift_lr_threshold,
+                               tc_range_s=tc_range)
+            cols.append(col)
         std = np.sqrt(np.clip(np.diag(fit.beta_cov), 0.0, None))
         off = base.shape[1]
         coeff["temp_bias_coeff"][k, :nb] = fit.beta[off:off + nb]
@@ -293,19 +299,6 @@ def _fit_triad_thermal(
         off += nb
         coeff["temp_scale_coeff"][k, :ns] = fit.beta[off:off + ns]
         coeff["temp_scale_coeff_std"][k, :ns] = std[off:off + ns]
-        if nonlin_m is not None:  # orders given (chosen without it): refit with the nonlinearity column last
-            design, col = _with_nonlinearity(design, blocks, nonlin_m, k)
-            if col >= 0:
-                fit = fit_axis(blocks, k, design, float(noise.sigma[k]), lr_threshold=options.drift_lr_threshold,
-                               tc_range_s=tc_range)
-                std = np.sqrt(np.clip(np.diag(fit.beta_cov), 0.0, None))
-                off = base.shape[1]
-                coeff["temp_bias_coeff"][k, :nb] = fit.beta[off:off + nb]
-                coeff["temp_bias_coeff_std"][k, :nb] = std[off:off + nb]
-                off += nb
-                coeff["temp_scale_coeff"][k, :ns] = fit.beta[off:off + ns]
-                coeff["temp_scale_coeff_std"][k, :ns] = std[off:off + ns]
-            cols.append(col)
         fits.append(fit)
         n_bias.append(nb)
         n_scale.append(ns)
