@@ -16,27 +16,23 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import glob
-import os
-import pwd
-import shutil
-import socket
-import subprocess
+import sys
 import tempfile
 import time
-import uuid
 from collections.abc import Iterator
 from pathlib import Path
 
 import httpx
 import numpy as np
-from sqlalchemy import create_engine, text
-from sqlalchemy.engine import make_url
 
 from station.store import open_database
 from station.store.synthetic import DRIFTING, SHIFTED_LOT, fill
 from station.web.app import create_app
 from station.web.serve import ServerThread
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+
+from pgcluster import ClusterStartError, PostgresUnavailable, fresh_database, throwaway_cluster
 
 
 def endpoints(units: int, rng: np.random.Generator) -> dict[str, list[str]]:
@@ -87,47 +83,15 @@ def run_one(url: str, backend: str, units: int, n: int) -> list[tuple[str, int, 
 
 
 @contextlib.contextmanager
-def throwaway_postgres() -> Iterator[str]:
-    """A server URL of a temporary PostgreSQL cluster (stopped and deleted afterwards)."""
-    found = shutil.which("initdb") or (sorted(glob.glob("/usr/lib/postgresql/*/bin/initdb")) or [None])[-1]
-    if found is None:
-        raise SystemExit("no initdb: install Debian's 'postgresql' package or give --postgres-url")
-    bindir = Path(found).resolve().parent
-    tmp = Path(tempfile.mkdtemp(prefix="station-bench-pg-"))
-    run_as: dict[str, object] = {}
-    if os.geteuid() == 0:
-        pw = pwd.getpwnam("postgres")
-        os.chown(tmp, pw.pw_uid, pw.pw_gid)
-        run_as = {"user": pw.pw_uid, "group": pw.pw_gid, "extra_groups": []}
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = int(s.getsockname()[1])
-    data = tmp / "data"
-    subprocess.run([str(bindir / "initdb"), "-D", str(data), "-A", "trust", "-U", "postgres", "-E", "UTF8",
-                    "--no-sync"], check=True, capture_output=True, cwd=tmp, **run_as)  # type: ignore[arg-type]
-    opts = f"-h 127.0.0.1 -p {port} -k {tmp} -c fsync=off -c shared_buffers=512MB -c work_mem=64MB"
-    subprocess.run([str(bindir / "pg_ctl"), "-D", str(data), "-l", str(tmp / "log"), "-o", opts, "-w", "-t", "60",
-                    "start"], check=True, capture_output=True, cwd=tmp, **run_as)  # type: ignore[arg-type]
+def throwaway_bench_cluster() -> Iterator[str]:
+    """A temporary PostgreSQL cluster sized for the benchmark (``tests/pgcluster.py``); exits with the reason
+    when none can be run."""
     try:
-        yield f"postgresql+psycopg://postgres@127.0.0.1:{port}/postgres"
-    finally:
-        subprocess.run([str(bindir / "pg_ctl"), "-D", str(data), "-m", "immediate", "-w", "stop"],
-                       capture_output=True, cwd=tmp, **run_as)  # type: ignore[arg-type]
-        shutil.rmtree(tmp, ignore_errors=True)
-
-
-@contextlib.contextmanager
-def pg_database(server: str) -> Iterator[str]:
-    name = f"station_bench_{uuid.uuid4().hex[:8]}"
-    admin = create_engine(server, isolation_level="AUTOCOMMIT")
-    with admin.connect() as c:
-        c.execute(text(f'CREATE DATABASE "{name}"'))
-    try:
-        yield make_url(server).set(database=name).render_as_string(hide_password=False)
-    finally:
-        with admin.connect() as c:
-            c.execute(text(f'DROP DATABASE IF EXISTS "{name}" WITH (FORCE)'))
-        admin.dispose()
+        with throwaway_cluster(server_options="-c fsync=off -c shared_buffers=512MB -c work_mem=64MB",
+                               prefix="station-bench-pg-") as server:
+            yield server
+    except (PostgresUnavailable, ClusterStartError) as exc:
+        raise SystemExit(f"{exc}; or give --postgres-url") from None
 
 
 def main() -> None:
@@ -146,9 +110,9 @@ def main() -> None:
             with tempfile.TemporaryDirectory(prefix="station-bench-") as tmp:
                 rows += run_one(f"sqlite:///{tmp}/q.sqlite", "sqlite", n, args.requests)
     if args.postgres or args.postgres_url:
-        with (contextlib.nullcontext(args.postgres_url) if args.postgres_url else throwaway_postgres()) as server:
+        with (contextlib.nullcontext(args.postgres_url) if args.postgres_url else throwaway_bench_cluster()) as server:
             for n in sizes:
-                with pg_database(server) as url:
+                with fresh_database(server, prefix="station_bench_") as url:
                     rows += run_one(url, "postgresql", n, args.requests)
     print(f"\n{'backend':<11} {'units':>7}  {'endpoint':<30} {'p50 ms':>8} {'p95 ms':>8} {'max ms':>8}  target")
     for backend, n, name, p50, p95, mx in rows:

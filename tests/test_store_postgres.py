@@ -10,23 +10,17 @@ are skipped with the reason. Debian packages: ``postgresql`` (server and initdb)
 
 from __future__ import annotations
 
-import glob
+import contextlib
 import os
-import pwd
-import shutil
-import socket
-import subprocess
-import tempfile
 import threading
-import uuid
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 from alembic.autogenerate import compare_metadata
 from alembic.runtime.migration import MigrationContext
-from sqlalchemy import create_engine, func, inspect, select, text
-from sqlalchemy.engine import make_url
+from pgcluster import ClusterStartError, PostgresUnavailable, fresh_database, throwaway_cluster
+from sqlalchemy import func, inspect, select
 
 from station.kernel.measurement import Measurement
 from station.sequence.records import (
@@ -53,20 +47,6 @@ TABLES = {
 RUNS_PER_STATION = 100
 
 
-def _initdb() -> Path | None:
-    found = shutil.which("initdb")
-    if found:
-        return Path(found)
-    candidates = sorted(glob.glob("/usr/lib/postgresql/*/bin/initdb"), key=lambda p: int(p.split("/")[4]))
-    return Path(candidates[-1]) if candidates else None
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 @pytest.fixture(scope="module")
 def pg_server() -> Iterator[str]:
     """A server URL (database 'postgres'); a throwaway cluster unless STATION_TEST_PG_URL is set."""
@@ -74,53 +54,21 @@ def pg_server() -> Iterator[str]:
     if url:
         yield url
         return
-    initdb = _initdb()
-    if initdb is None:
-        pytest.skip("no PostgreSQL server: initdb not found (install Debian's 'postgresql' package "
-                    "or set STATION_TEST_PG_URL)")
-    bindir = initdb.resolve().parent
-    run_as: dict[str, object] = {}
-    tmp = Path(tempfile.mkdtemp(prefix="station-pg-"))
-    if os.geteuid() == 0:
+    with contextlib.ExitStack() as stack:
         try:
-            pw = pwd.getpwnam("postgres")
-        except KeyError:
-            shutil.rmtree(tmp)
-            pytest.skip("running as root and there is no 'postgres' user to run the PostgreSQL server as")
-        os.chown(tmp, pw.pw_uid, pw.pw_gid)
-        run_as = {"user": pw.pw_uid, "group": pw.pw_gid, "extra_groups": []}
-    data, port = tmp / "data", _free_port()
-    try:
-        subprocess.run([str(bindir / "initdb"), "-D", str(data), "-A", "trust", "-U", "postgres", "-E", "UTF8",
-                        "--no-sync"], check=True, capture_output=True, cwd=tmp, **run_as)  # type: ignore[arg-type]
-        opts = f"-h 127.0.0.1 -p {port} -k {tmp} -c fsync=off -c max_connections=50"
-        subprocess.run([str(bindir / "pg_ctl"), "-D", str(data), "-l", str(tmp / "log"), "-o", opts, "-w",
-                        "-t", "60", "start"], check=True, capture_output=True, cwd=tmp, **run_as)  # type: ignore[arg-type]
-    except subprocess.CalledProcessError as exc:
-        log = (tmp / "log").read_text() if (tmp / "log").exists() else ""
-        shutil.rmtree(tmp, ignore_errors=True)
-        pytest.fail(f"could not start a throwaway PostgreSQL cluster: {exc.stderr!r} {log}")
-    try:
-        yield f"postgresql+psycopg://postgres@127.0.0.1:{port}/postgres"
-    finally:
-        subprocess.run([str(bindir / "pg_ctl"), "-D", str(data), "-m", "immediate", "-w", "stop"],
-                       capture_output=True, cwd=tmp, **run_as)  # type: ignore[arg-type]
-        shutil.rmtree(tmp, ignore_errors=True)
+            url = stack.enter_context(throwaway_cluster(server_options="-c fsync=off -c max_connections=50"))
+        except PostgresUnavailable as exc:
+            pytest.skip(f"{exc} (or set STATION_TEST_PG_URL)")
+        except ClusterStartError as exc:
+            pytest.fail(str(exc))
+        yield url
 
 
 @pytest.fixture
 def pg_url(pg_server: str) -> Iterator[str]:
     """A fresh, empty database on the server; dropped afterwards."""
-    name = f"station_test_{uuid.uuid4().hex[:10]}"
-    admin = create_engine(pg_server, isolation_level="AUTOCOMMIT")
-    with admin.connect() as conn:
-        conn.execute(text(f'CREATE DATABASE "{name}"'))
-    try:
-        yield make_url(pg_server).set(database=name).render_as_string(hide_password=False)
-    finally:
-        with admin.connect() as conn:
-            conn.execute(text(f'DROP DATABASE IF EXISTS "{name}" WITH (FORCE)'))
-        admin.dispose()
+    with fresh_database(pg_server) as url:
+        yield url
 
 
 def test_upgrade_from_empty_and_round_trip(pg_url: str) -> None:
