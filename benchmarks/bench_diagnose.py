@@ -160,8 +160,8 @@ def _power_cells(name: str, seed: int, on: dict[str, float], off: dict[str, floa
     and P(found on either sensor)."""
     from scipy import linalg, stats
 
+    from station.diagnose.likelihood import RCOND, SensorProblem
     from station.diagnose.residuals import fit_baseline
-    from station.diagnose.select import RCOND, SensorProblem
 
     plan = plan_for(seed)
     sim_on = simulate_session(seed, plan=plan, effects=Effects(**on))

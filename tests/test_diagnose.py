@@ -106,7 +106,7 @@ def test_attitude_reproduces_the_rig() -> None:
 
 def test_eigen_likelihood_matches_cholesky() -> None:
     """The q profile's diagonalized likelihood equals the direct Cholesky one (same constant)."""
-    from station.diagnose.select import SensorProblem
+    from station.diagnose.likelihood import SensorProblem
 
     res = simulate_session(11, plan=PLAN)
     baseline = fit_baseline(res.session)
@@ -279,8 +279,8 @@ def test_nonlinearity_that_distorts_the_base_warmup_names_no_temperature_bias() 
 def test_block_data_do_not_depend_on_the_base_fit_warmup() -> None:
     """The diagnosis's block data are the recording minus the base fit's M ref + b_stat only: changing the base
     fit's b_drift and T_c (eq. 3) leaves them unchanged."""
+    from station.diagnose.likelihood import SensorProblem
     from station.diagnose.residuals import _sensor_data
-    from station.diagnose.select import SensorProblem
 
     res = simulate_session(11, plan=PLAN)
     baseline = fit_baseline(res.session)
@@ -297,7 +297,7 @@ def test_drift_refit_reaches_its_optimum() -> None:
     """The drift's T_c re-fit runs to convergence: another re-fit moves nothing. (A nested test re-fits the null
     and then the alternative from the null's T_c; a null left short of its optimum hands the alternative's extra
     improvement to the candidate.)"""
-    from station.diagnose.select import SensorProblem
+    from station.diagnose.likelihood import SensorProblem
 
     baseline = fit_baseline(simulate_session(5, plan=PLAN).session)
     for sd in (baseline.accel, baseline.gyro):
@@ -314,7 +314,8 @@ def test_detectable_from_is_the_size_at_the_quoted_power() -> None:
     found, one at a fifth of the smallest is not."""
     from scipy import stats
 
-    from station.diagnose.select import DETECT_POWER, Test, detectable_from
+    from station.diagnose.likelihood import Test
+    from station.diagnose.reporting import DETECT_POWER, detectable_from
 
     cov = np.diag([1e-10, 4e-10, 9e-10])
     t = Test(effect="temperature_scale", sensor="gyro", gain=3.0, params=3, bic_gain=3.0 - 3 * math.log(900.0),

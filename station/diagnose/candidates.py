@@ -4,7 +4,7 @@ Each *mean* candidate is a set of regressors built from the session's references
 metadata: per sample an array ``Z`` of shape (n, 3, p) such that the effect adds
 ``Z[i, k] @ theta`` to output axis k of sample i (theta: p parameters in SI). They are
 block-averaged by :mod:`station.diagnose.residuals` and fitted jointly with the base
-model's linear terms by :mod:`station.diagnose.select`. Two candidates are not mean
+model's linear terms by :mod:`station.diagnose.selection`. Two candidates are not mean
 terms: ``bias_random_walk`` changes the block covariance and ``outliers`` is a count.
 
 Units: ``u = M ref`` in m/s^2 (accelerometer) or rad/s (gyroscope), temperature rise in K,

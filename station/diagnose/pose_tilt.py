@@ -29,7 +29,7 @@ the base model by the poses alone. For a pair of opposite poses +k/-k and a rota
 
 :func:`build` therefore fits ``d`` and ``s`` per pair and axis (``phi(+-k) = s +- d``) rather
 than the per-pose tilts, and leaves a half-sum out (zero column) where the recording cannot
-determine it; the rank gain of :mod:`station.diagnose.select` counts the rest. What separates
+determine it; the rank gain of :mod:`station.diagnose.likelihood` counts the rest. What separates
 the half-sums from the misalignment is :data:`RIG_STEP`.
 
 Units: specific force m/s^2, tilt rad inside and deg in :func:`engineering`.

@@ -13,7 +13,7 @@ unit in engineering units), ``evidence`` (likelihood gain, BIC gain, held-out er
 has ``rerun`` (block RMS of its sensor per axis: base, base + this effect, all effects).
 Each ``rejected`` entry has ``effect``, ``sensor`` and ``reason``; a mean candidate that brought no
 significant improvement also has ``detectable_from`` (per parameter, in its engineering unit, the size
-this recording would have shown with the quoted ``power``; :func:`station.diagnose.select.detectable_from`).
+this recording would have shown with the quoted ``power``; :func:`station.diagnose.reporting.detectable_from`).
 
 ``rerun`` (:mod:`station.diagnose.rerun`): the simulator re-run on the recording's own motion
 with the base model and with the accepted effects, compared with the recording per block:
@@ -38,7 +38,7 @@ from threadpoolctl import threadpool_limits
 from station.diagnose.compensation import compensation
 from station.diagnose.rerun import FittedEffect, Rerun, rerun
 from station.diagnose.residuals import SENSORS, Baseline, fit_baseline, locate
-from station.diagnose.select import select
+from station.diagnose.selection import select
 from station.kernel.errors import FitError
 from station.session.model import Session
 

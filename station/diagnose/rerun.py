@@ -1,6 +1,6 @@
 """Re-run the simulator with the fitted models and compare it with the recording.
 
-The diagnosis names effects from block regressions (:mod:`station.diagnose.select`); this
+The diagnosis names effects from block regressions (:mod:`station.diagnose.selection`); this
 module checks the result the other way round: the project's simulator
 (:class:`station.physics.imu.ImuModel`) renders the unit twice on the *recording's own* rig motion
 and temperature course,

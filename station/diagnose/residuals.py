@@ -7,7 +7,7 @@ samples inside one segment (settled rest, pose and rate steps, and the rig's mov
 its reference is known). Block means are the data of the diagnosis: averaging shrinks the
 white noise by ``sqrt(n)``, so an effect far below the noise of any single sample shows
 up, while the drift and the correlated noise are handled by the block covariance in
-:mod:`station.diagnose.select`.
+:mod:`station.diagnose.selection`.
 
 Units: SI (accelerometer m/s^2, gyroscope rad/s, time s, temperature K).
 """

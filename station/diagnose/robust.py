@@ -1,6 +1,6 @@
 """Checks of the forward selection that hold when the model is wrong (issue 16), and what stays unexplained.
 
-The nested tests of :mod:`station.diagnose.select` assume the extended model is right. When it is
+The nested tests of :mod:`station.diagnose.likelihood` assume the extended model is right. When it is
 not (an effect whose shape a candidate only approximates, or physics outside the library), the
 structure it leaves passes other candidates' tests. After the forward selection, per sensor:
 
@@ -49,7 +49,7 @@ STAND_IN_SHARE = 0.5
 MARGINAL = 1.5
 DOMINANT = 100.0
 AX = "xyz"
-#: Prefix of an accepted term that no finding names (see :data:`station.diagnose.select.NUISANCE`).
+#: Prefix of an accepted term that no finding names (see :data:`station.diagnose.selection.NUISANCE`).
 NUISANCE = "~"
 
 
@@ -163,12 +163,10 @@ def audit(prob: Any, baseline: Any, names: list[str], regs: dict[str, np.ndarray
           fitted_samples: np.ndarray) -> Audit:
     """Run the checks of the module docstring on the final model of one sensor.
 
-    ``prob``: the :class:`station.diagnose.select.SensorProblem` with the accepted mean effects (block
+    ``prob``: the :class:`station.diagnose.likelihood.SensorProblem` with the accepted mean effects (block
     regressors ``regs[name]`` in the order of ``names``) and, with ``random_walk`` (its Test), the walk;
     ``fitted_samples``: the accepted mean effects' fitted signal per sample (n, 3) for the periodic check.
     """
-    from station.diagnose.select import Test  # noqa: F401  (type only; avoids an import cycle)
-
     sd = prob.sd
     out = Audit()
     gyro = sd.sensor == "gyro"
