@@ -3,7 +3,7 @@
 
 # Lazy (PEP 562): importing the package, e.g. for its CLI commands, loads no heavy dependency.
 _EXPORTS = {
-    "NAMES": "station.diagnose.candidates",
+    "NAMES": "station.diagnose.registry",
     "FORMAT": "station.diagnose.report",
     "Diagnosis": "station.diagnose.report",
     "diagnose": "station.diagnose.report",

@@ -1,52 +1,33 @@
-"""The library of candidate effects the base model (eq. 1 + eq. 3) leaves out.
+"""The regressors of the candidate effects the base model (eq. 1 + eq. 3) leaves out.
 
-Each *mean* candidate is a set of regressors built from the session's references and
-metadata: per sample an array ``Z`` of shape (n, 3, p) such that the effect adds
-``Z[i, k] @ theta`` to output axis k of sample i (theta: p parameters in SI). They are
+The candidates themselves (names, units, simulator and compensation mappings, identifiability) are
+:mod:`station.diagnose.registry`; this module holds their regressors. Each *mean* candidate is a set
+of regressors built from the session's references and metadata: per sample an array ``Z`` of shape
+(n, 3, p) such that the effect adds ``Z[i, k] @ theta`` to output axis k of sample i (theta: p
+parameters in SI). They are
 block-averaged by :mod:`station.diagnose.residuals` and fitted jointly with the base
 model's linear terms by :mod:`station.diagnose.selection`. Two candidates are not mean
 terms: ``bias_random_walk`` changes the block covariance and ``outliers`` is a count.
 
 Units: ``u = M ref`` in m/s^2 (accelerometer) or rad/s (gyroscope), temperature rise in K,
-time in s. :func:`engineering` converts fitted SI parameters to the units the report uses.
+time in s. :func:`station.diagnose.registry.engineering` converts fitted SI parameters to the units the
+report uses.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
-from dataclasses import dataclass
 
 import numpy as np
 
-from station.diagnose import pose_tilt
 from station.diagnose.residuals import Baseline, SensorData
 from station.kernel.geometry import POSE_ANGLES_DEG, rotation_matrices, up_vector
-from station.physics.effects import EARTH_RATE_RADPS, GYRO_NONLINEARITY_REF_RADPS, STANDARD_GRAVITY
+from station.physics.effects import EARTH_RATE_RADPS
 
-NAMES = (
-    "temperature_bias", "temperature_scale", "g_sensitivity", "scale_nonlinearity", "scale_asymmetry",
-    "lever_arm", "earth_rotation", "time_offset", "bias_random_walk", "outliers",
-    "pose_tilt",  # ours: the rig's (or a hand's) poses are not where the reference says
-    # the IEEE Std 952 / 1431 scale-factor polynomial, its even (k2 u^2) and odd (k3 u^3) terms apart
-    "scale_nonlinearity_even", "scale_nonlinearity_odd",
-)
-#: Candidates that are mean terms (regressors); the others are tested by select.py directly.
-MEAN_CANDIDATES = (*NAMES[:8], "pose_tilt", "scale_nonlinearity_even", "scale_nonlinearity_odd")
 #: Largest time offset (s) the exact-delay candidate searches.
 MAX_DELAY_S = 0.05
 
 _DEG = math.pi / 180.0
-
-
-@dataclass(frozen=True)
-class Candidate:
-    """A mean candidate: which sensors it applies to, its parameters and its regressors."""
-
-    name: str
-    sensors: tuple[str, ...]
-    build: Callable[[Baseline, SensorData], np.ndarray | None]
-    description: str
 
 
 def _diag(values: np.ndarray) -> np.ndarray:
@@ -57,19 +38,19 @@ def _diag(values: np.ndarray) -> np.ndarray:
     return z
 
 
-def _temperature_bias(b: Baseline, s: SensorData) -> np.ndarray | None:
+def temperature_bias(b: Baseline, s: SensorData) -> np.ndarray | None:
     if not np.any(b.d_temp):
         return None
     return _diag(np.repeat(b.d_temp[:, None], 3, axis=1))
 
 
-def _temperature_scale(b: Baseline, s: SensorData) -> np.ndarray | None:
+def temperature_scale(b: Baseline, s: SensorData) -> np.ndarray | None:
     if not np.any(b.d_temp):
         return None
     return _diag(s.u * b.d_temp[:, None])
 
 
-def _g_sensitivity(b: Baseline, s: SensorData) -> np.ndarray:
+def g_sensitivity(b: Baseline, s: SensorData) -> np.ndarray:
     f = np.nan_to_num(b.session.ref_accel_mps2)
     z = np.zeros((len(f), 3, 9))
     for k in range(3):
@@ -77,21 +58,21 @@ def _g_sensitivity(b: Baseline, s: SensorData) -> np.ndarray:
     return z
 
 
-def _nonlinearity(b: Baseline, s: SensorData) -> np.ndarray:
+def nonlinearity(b: Baseline, s: SensorData) -> np.ndarray:
     return _diag(s.u * np.abs(s.u))
 
 
-def _poly_even(b: Baseline, s: SensorData) -> np.ndarray:
+def poly_even(b: Baseline, s: SensorData) -> np.ndarray:
     """IEEE scale polynomial, even term: ``k2 u^2`` per axis, k2 relative at the reference input (1/U)."""
     return _diag(s.u**2)
 
 
-def _poly_odd(b: Baseline, s: SensorData) -> np.ndarray:
+def poly_odd(b: Baseline, s: SensorData) -> np.ndarray:
     """IEEE scale polynomial, odd term: ``k3 u^3`` per axis (1/U^2)."""
     return _diag(s.u**3)
 
 
-def _asymmetry(b: Baseline, s: SensorData) -> np.ndarray:
+def asymmetry(b: Baseline, s: SensorData) -> np.ndarray:
     return _diag(0.5 * np.abs(s.u))
 
 
@@ -102,7 +83,7 @@ def _angular(b: Baseline) -> tuple[np.ndarray, np.ndarray]:
     return w, alpha
 
 
-def _lever_arm(b: Baseline, s: SensorData) -> np.ndarray | None:
+def lever_arm(b: Baseline, s: SensorData) -> np.ndarray | None:
     w, alpha = _angular(b)
     if not np.any(w):
         return None
@@ -176,7 +157,7 @@ def attitude(b: Baseline) -> np.ndarray | None:
     return np.einsum("ij,njk->nik", r0, _quat_matrix(quat))
 
 
-def _earth_rotation(b: Baseline, s: SensorData) -> np.ndarray | None:
+def earth_rotation(b: Baseline, s: SensorData) -> np.ndarray | None:
     session = b.session
     lat = session.meta_float("latitude_deg")
     if lat is None:
@@ -193,7 +174,7 @@ def _earth_rotation(b: Baseline, s: SensorData) -> np.ndarray | None:
     return (seen @ np.nan_to_num(s.params.misalignment).T)[:, :, None]
 
 
-def _time_offset(b: Baseline, s: SensorData) -> np.ndarray | None:
+def time_offset(b: Baseline, s: SensorData) -> np.ndarray | None:
     du = np.gradient(s.u, b.session.t_s, axis=0)
     if not np.any(du):
         return None
@@ -205,106 +186,27 @@ def delay_regressor(b: Baseline, s: SensorData, tau_s: float) -> np.ndarray:
     interpolated at ``t - tau``, so that the coefficient is the delay itself when it equals ``tau_s``
     (``y(t) = u(t - tau)``, eq. 1 with the motion late); the first-order regressor ``-du/dt`` at ``tau -> 0``."""
     if abs(tau_s) < 1e-6:
-        out = _time_offset(b, s)
+        out = time_offset(b, s)
         return np.zeros((len(s.u), 3, 1)) if out is None else out
     t = b.session.t_s
     shifted = np.stack([np.interp(t - tau_s, t, s.u[:, k]) for k in range(3)], axis=1)
     return ((shifted - s.u) / tau_s)[:, :, None]
 
 
-LIBRARY: dict[str, Candidate] = {
-    c.name: c
-    for c in (
-        Candidate("temperature_bias", ("accel", "gyro"), _temperature_bias,
-                  "bias proportional to the temperature rise"),
-        Candidate("temperature_scale", ("accel", "gyro"), _temperature_scale,
-                  "scale factor proportional to the temperature rise"),
-        Candidate("g_sensitivity", ("gyro",), _g_sensitivity, "gyro output proportional to specific force"),
-        Candidate("scale_nonlinearity", ("accel", "gyro"), _nonlinearity, "quadratic scale term u|u|"),
-        Candidate("scale_nonlinearity_even", ("accel", "gyro"), _poly_even,
-                  "IEEE scale polynomial, even term k2 u^2 (same error for both signs)"),
-        Candidate("scale_nonlinearity_odd", ("accel", "gyro"), _poly_odd,
-                  "IEEE scale polynomial, odd term k3 u^3"),
-        Candidate("scale_asymmetry", ("accel", "gyro"), _asymmetry, "different scale for positive and negative input"),
-        Candidate("lever_arm", ("accel",), _lever_arm, "accelerometer off the rotation centre: w x (w x r) + a x r"),
-        Candidate("earth_rotation", ("gyro",), _earth_rotation, "Earth rate at the site's latitude and heading"),
-        Candidate("time_offset", ("accel", "gyro"), _time_offset,
-                  "sensor samples late against the rig reference (exact delay, fitted by a 1-D search)"),
-        Candidate(pose_tilt.NAME, pose_tilt.SENSORS, pose_tilt.build, pose_tilt.DESCRIPTION),
-    )
-}
+#: Names this module held before the registry (station.diagnose.registry); kept as thin aliases.
+_FROM_REGISTRY = ("LIBRARY", "MEAN_CANDIDATES", "NAMES", "RIG_STEPS", "SHAPES", "engineering", "unit_factor")
 
 
-def unit_factor(name: str, sensor: str) -> tuple[float, str]:
-    """The factor from candidate ``name``'s SI parameters to its engineering unit, and that unit.
+def __getattr__(name: str) -> object:
+    # PEP 562, resolved on use: the registry imports this module for the regressors
+    if name in _FROM_REGISTRY:
+        from station.diagnose import registry
 
-    temperature_bias: mg/K (accel) or deg/s/K (gyro); temperature_scale: ppm/K;
-    g_sensitivity: deg/s per g; scale_nonlinearity: relative scale error at 1 g or
-    200 deg/s; scale_asymmetry: relative scale difference positive minus negative;
-    lever_arm: mm; earth_rotation: multiple of the Earth rate; time_offset: ms; pose_tilt: deg.
-    """
-    gyro = sensor == "gyro"
-    if name == "temperature_bias":
-        return (1.0 / _DEG, "deg/s/K") if gyro else (1e3 / STANDARD_GRAVITY, "mg/K")
-    if name in ("scale_nonlinearity", "scale_nonlinearity_even"):
-        ref = GYRO_NONLINEARITY_REF_RADPS if gyro else STANDARD_GRAVITY
-        return ref, "relative scale error at " + ("200 deg/s" if gyro else "1 g")
-    if name == "scale_nonlinearity_odd":
-        ref = GYRO_NONLINEARITY_REF_RADPS if gyro else STANDARD_GRAVITY
-        return ref**2, "relative scale error at " + ("200 deg/s" if gyro else "1 g")
-    fixed = {
-        "temperature_scale": (1e6, "ppm/K"),
-        "g_sensitivity": (STANDARD_GRAVITY / _DEG, "deg/s per g"),
-        "scale_asymmetry": (1.0, "relative (positive - negative scale)"),
-        "lever_arm": (1e3, "mm"),
-        "earth_rotation": (1.0, "multiple of the Earth rate"),
-        "time_offset": (1e3, "ms"),
-        "pose_tilt": (1.0 / _DEG, "deg"),
-    }
-    return fixed[name]
+        return getattr(registry, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
-
-#: Candidates whose parameters form a matrix rather than a per-axis vector.
-SHAPES: dict[str, tuple[int, int]] = {"g_sensitivity": (3, 3)}
-
-
-def engineering(name: str, sensor: str, theta: np.ndarray, cov: np.ndarray) -> dict[str, object]:
-    """Fitted SI parameters (and covariance) of candidate ``name`` in engineering units (:func:`unit_factor`);
-    lever_arm adds the arm's length in mm, earth_rotation the rate in deg/h; pose_tilt per pose pair
-    (:func:`station.diagnose.pose_tilt.engineering`)."""
-    if name == "pose_tilt":
-        return pose_tilt.engineering(theta, cov)
-    factor, unit = unit_factor(name, sensor)
-    v, s = theta * factor, np.sqrt(np.clip(np.diag(cov), 0.0, None)) * factor
-    if name in SHAPES:
-        v, s = v.reshape(SHAPES[name]), s.reshape(SHAPES[name])
-    out: dict[str, object] = {"value": np.round(v, 9).tolist(), "std": np.round(s, 9).tolist(), "unit": unit}
-    if name == "lever_arm":
-        out["length_mm"] = round(float(np.linalg.norm(theta) * 1e3), 3)
-    if name == "earth_rotation":
-        out["deg_per_h"] = round(float(theta[0] * EARTH_RATE_RADPS / _DEG * 3600.0), 4)
-    return out
-
-
-#: The rig step that separates a candidate from the base model or from another candidate.
-RIG_STEPS: dict[str, str] = {
-    "temperature_bias": "a temperature course no warm-up exponential can follow: a climate-chamber cycle (e.g. "
-                        "+-2 K with a 5 min period) during the session; a ramp is not enough (a slow warm-up "
-                        "is a ramp too)",
-    "temperature_scale": "repeat poses or rate steps late in the session, when the unit is warm",
-    "g_sensitivity": "rate steps with the spin axis horizontal, or poses at two headings",
-    "scale_nonlinearity": "steps at a second input magnitude (more rates, or tilted poses for the accelerometer)",
-    "scale_asymmetry": "both signs of every rate step and both poses of every axis, at three or more rates",
-    "scale_nonlinearity_even": "rate steps at three or more magnitudes, both signs (|w| and w^2 then differ)",
-    "scale_nonlinearity_odd": "rate steps at three or more magnitudes (w|w| and w^3 then differ)",
-    "lever_arm": "rate steps at two or more rates about each axis",
-    "earth_rotation": "each pose held at two headings (table turned 180 deg about the vertical)",
-    "time_offset": "rate-table ramps with higher angular acceleration",
-    "bias_random_walk": "a still rest several correlation times long",
-    "outliers": "a longer still rest",
-    "pose_tilt": pose_tilt.RIG_STEP,
-}
 
 __all__ = [
-    "LIBRARY", "MEAN_CANDIDATES", "NAMES", "RIG_STEPS", "Candidate", "attitude", "earth_rate_world", "engineering",
+    "MAX_DELAY_S", "asymmetry", "attitude", "delay_regressor", "earth_rate_world", "earth_rotation", "g_sensitivity",
+    "lever_arm", "nonlinearity", "poly_even", "poly_odd", "temperature_bias", "temperature_scale", "time_offset",
 ]

@@ -14,27 +14,27 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from station.diagnose.registry import REGISTRY
 from station.fit.calibrate import FitOptions, fit_session
 from station.fit.compensation import APPLIED, COMPENSATION, compensated_by, field_value
 from station.fit.params import ParameterSet
 from station.kernel.errors import StationError
 from station.session.model import Session
 
-#: Diagnosis names -> the physics effect whose parameters compensate them. The fit's ``u + k u|u|`` is odd in
-#: the rate: it stands for the odd (cubic-like) polynomial term, not for the even one.
-ALIASES = {"scale_nonlinearity_odd": "scale_nonlinearity"}
+#: Why an effect without applied parameters stays in the output when the registry does not say.
+NO_PARAMETER = "no parameter for it in the set"
 
-#: Why an effect without applied parameters stays in the output.
-NOT_COMPENSABLE = {
-    "scale_nonlinearity_even": "no parameter: the even scale term (k2 w^2) is not in the parameter set",
-    "time_offset": "carried as time_offset_s in the set but not estimated by the fit nor applied to values",
-    "scale_asymmetry": "no parameter for a sign-dependent scale in the parameter set",
-    "lever_arm": "a property of the rig mounting, not of the unit",
-    "earth_rotation": "a property of the place, not of the unit",
-    "bias_random_walk": "a random process: no calibration removes it",
-    "outliers": "single bad samples: Algorithm 1's moving average only dilutes them",
-    "pose_tilt": "a property of the rig's poses, not of the unit",
-}
+
+def _physics(name: str) -> str:
+    """The physics effect whose parameters compensate diagnosis effect ``name`` (the registry's
+    ``compensation``; the name itself for one the registry maps to none or does not know)."""
+    effect = REGISTRY.get(name)
+    return name if effect is None or effect.compensation is None else effect.compensation
+
+
+def _not_compensated(name: str) -> str:
+    effect = REGISTRY.get(name)
+    return effect.not_compensated if effect is not None and effect.not_compensated else NO_PARAMETER
 
 
 @dataclass(frozen=True)
@@ -70,7 +70,7 @@ def compensation(
 ) -> list[Compensation]:
     """One :class:`Compensation` per ``(effect, sensor)`` in ``findings`` (the diagnosis's findings, in order)."""
     effects = [e for e, _ in findings]
-    physics = [ALIASES.get(e, e) for e in effects]
+    physics = [_physics(e) for e in effects]
     params: ParameterSet | None = None
     error = ""
     if any(p in APPLIED for p in physics):
@@ -83,7 +83,7 @@ def compensation(
     out = []
     for (name, sensor), eff in zip(findings, physics, strict=True):
         if eff not in APPLIED:
-            out.append(Compensation(name, False, NOT_COMPENSABLE.get(eff, "no parameter for it in the set")))
+            out.append(Compensation(name, False, _not_compensated(name)))
         elif params is None:
             out.append(Compensation(name, False, error))
         elif compensated_by(params, eff) and any(
@@ -95,4 +95,4 @@ def compensation(
     return out
 
 
-__all__ = ["ALIASES", "NOT_COMPENSABLE", "Compensation", "compensation"]
+__all__ = ["NO_PARAMETER", "Compensation", "compensation"]

@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 from scipy import linalg, optimize, stats
 
+from station.diagnose.registry import EFFECTS
 from station.diagnose.residuals import Baseline, SensorData
 from station.fit.blocks import block_exp_mean, power_on_gm_correlation
 
@@ -69,7 +70,7 @@ Q_BOUND = 10.0
 #: resolution (and its block means overflow).
 TC_FLOOR_S = 1.0
 #: Candidates that look like the warm-up drift: tested with the drift's T_c re-fitted.
-PROFILE_TC = ("temperature_bias", "temperature_scale", "bias_random_walk")
+PROFILE_TC = tuple(e.name for e in EFFECTS if e.identifiability.profile_tc)
 
 #: Per axis of a held-out fold: Cholesky of the training covariance, kriging weights, conditional Cholesky.
 _FoldAxis = tuple[np.ndarray, np.ndarray, np.ndarray | None]

@@ -11,8 +11,8 @@ from typing import Any
 import numpy as np
 from scipy import optimize, stats
 
-from station.diagnose.candidates import SHAPES, engineering, unit_factor
 from station.diagnose.likelihood import ALPHA, Test
+from station.diagnose.registry import REGISTRY, engineering, unit_factor
 from station.diagnose.residuals import SensorData
 
 #: Outlier rate per sample and axis that the base fit already tolerates (it rejects them):
@@ -39,8 +39,9 @@ def detectable_from(t: Test) -> dict[str, Any] | None:
     lam = optimize.brentq(lambda x: stats.ncx2.sf(t.threshold, p, x) - DETECT_POWER, 1e-9, 1e6)
     factor, unit = unit_factor(t.effect, t.sensor)
     size = math.sqrt(lam) * np.sqrt(np.clip(np.diag(t.cov), 0.0, None)) * factor
-    if t.effect in SHAPES:
-        size = size.reshape(SHAPES[t.effect])
+    shape = REGISTRY[t.effect].shape
+    if shape is not None:
+        size = size.reshape(shape)
     return {"value": round_sig(size).tolist(), "unit": unit, "power": DETECT_POWER,
             "noncentrality": round(lam, 2)}
 
@@ -70,7 +71,7 @@ def outlier_test(sd: SensorData) -> dict[str, Any]:
 def affected_axes(name: str, theta: np.ndarray, cov: np.ndarray) -> list[int]:
     std = np.sqrt(np.clip(np.diag(cov), 1e-300, None))
     z = np.abs(theta) / std
-    if len(theta) == 3 and name not in ("lever_arm",):
+    if len(theta) == 3 and REGISTRY[name].per_axis:
         return [k for k in range(3) if z[k] > 3.0] or [int(np.argmax(z))]
     if len(theta) == 9:
         zz = z.reshape(3, 3)
@@ -82,13 +83,13 @@ def affected_axes(name: str, theta: np.ndarray, cov: np.ndarray) -> list[int]:
 def finding(sd: SensorData, t: Test, before: dict[str, Any], after: dict[str, Any]) -> dict[str, Any]:
     if t.effect == "bias_random_walk":
         k, k_std = float(t.theta[0]), float(math.sqrt(t.cov[0, 0]))
-        factor, unit = (180.0 / math.pi, "deg/s/sqrt(s)") if sd.sensor == "gyro" else (1.0, "m/s^2/sqrt(s)")
+        factor, unit = unit_factor(t.effect, sd.sensor)
         params: dict[str, Any] = {"density": {"value": k * factor, "std": k_std * factor, "unit": unit}}
         axes = [0, 1, 2]
     else:
         params = engineering(t.effect, sd.sensor, t.theta, t.cov)
         axes = affected_axes(t.effect, t.theta, t.cov)
-    unit_factor = 180.0 / math.pi if sd.sensor == "gyro" else 1.0
+    out_factor = 180.0 / math.pi if sd.sensor == "gyro" else 1.0
     unit = "deg/s" if sd.sensor == "gyro" else "m/s^2"
     return {
         "effect": t.effect,
@@ -102,9 +103,9 @@ def finding(sd: SensorData, t: Test, before: dict[str, Any], after: dict[str, An
         },
         "fit": {
             "before": {"bic": round(before["bic"], 3), "block_chi2": np.round(before["block_chi2"], 4).tolist(),
-                       "block_rms": np.round(before["block_rms"] * unit_factor, 9).tolist(), "unit": unit},
+                       "block_rms": np.round(before["block_rms"] * out_factor, 9).tolist(), "unit": unit},
             "after": {"bic": round(after["bic"], 3), "block_chi2": np.round(after["block_chi2"], 4).tolist(),
-                      "block_rms": np.round(after["block_rms"] * unit_factor, 9).tolist(), "unit": unit},
+                      "block_rms": np.round(after["block_rms"] * out_factor, 9).tolist(), "unit": unit},
         },
         "_block_residual": (before["block_residual"], after["block_residual"]),
         "_theta": np.array(t.theta, dtype=float),  # fitted SI parameters, for the simulator re-run (rerun.py)

@@ -7,7 +7,8 @@ and temperature course,
 
 * **base**: the fitted eq. (1) with the drift of eq. (3) (``baseline.params``),
 * **extended**: the same plus every accepted mean effect with its fitted SI parameters
-  (mapped onto the simulator's :class:`~station.physics.effects.EffectTruth`),
+  (mapped onto the simulator's :class:`~station.physics.effects.EffectTruth` by each effect's entry in
+  :mod:`station.diagnose.registry`),
 
 and both are compared with the recording per block of :mod:`station.diagnose.residuals`.
 
@@ -47,8 +48,8 @@ from typing import Any
 
 import numpy as np
 
-from station.diagnose import pose_tilt
-from station.diagnose.candidates import attitude, earth_rate_world
+from station.diagnose.candidates import attitude
+from station.diagnose.registry import EFFECTS, REGISTRY, simulator_input
 from station.diagnose.residuals import SENSORS, Baseline, SensorData
 from station.fit.blocks import block_exp_mean
 from station.kernel.errors import FitError
@@ -58,13 +59,10 @@ from station.physics.imu import Environment, ImuModel
 from station.physics.unit import TriadTruth, UnitTruth
 from station.session.model import Kind
 
-#: Effects with a mean signal: simulated with their fitted parameters.
-SIMULATED = (
-    "temperature_bias", "temperature_scale", "g_sensitivity", "scale_nonlinearity", "scale_asymmetry",
-    "lever_arm", "earth_rotation", "time_offset", "pose_tilt",
-)
+#: Effects with a mean signal and a simulator mapping: simulated with their fitted parameters.
+SIMULATED = tuple(e.name for e in EFFECTS if e.simulate is not None)
 #: Effects that change only the noise, not the expected output.
-STOCHASTIC = ("bias_random_walk", "outliers")
+STOCHASTIC = tuple(e.name for e in EFFECTS if e.kind != "mean")
 
 _UNITS = {"accel": ("m/s^2", 1.0), "gyro": ("deg/s", 180.0 / math.pi)}
 
@@ -240,45 +238,12 @@ def _triads(baseline: Baseline) -> dict[str, Triad]:
 def _effect_truth(
     drive: Drive, effects: Iterable[FittedEffect]
 ) -> tuple[EffectTruth, dict[str, float], np.ndarray | None]:
-    """The simulator's coefficients (SI) for the base gyro G plus ``effects``, the time offset per sensor, and
-    the change of the true specific force (m/s^2, (n, 3)) by fitted pose tilts (None without)."""
-    c: dict[str, np.ndarray] = {
-        name: np.zeros(3) for name in (
-            "accel_temp_bias", "gyro_temp_bias", "accel_temp_scale", "gyro_temp_scale", "accel_nonlinearity",
-            "gyro_nonlinearity", "accel_asymmetry", "gyro_asymmetry", "lever_arm_m", "earth_rate_radps")
-    }
-    g_sens = np.nan_to_num(np.asarray(drive.baseline.params.gyro.g_sensitivity, dtype=float)).copy()
-    offsets = dict.fromkeys(SENSORS, 0.0)
-    session = drive.baseline.session
-    tilt_force: np.ndarray | None = None
-    for e in effects:
-        th = np.asarray(e.theta, dtype=float)
-        s = e.sensor
-        if e.effect == "temperature_bias":
-            c[f"{s}_temp_bias"] += th  # + c dT
-        elif e.effect == "temperature_scale":
-            c[f"{s}_temp_scale"] += th  # (M x)(1 + s dT)
-        elif e.effect == "scale_nonlinearity":
-            c[f"{s}_nonlinearity"] += th  # u + k u|u|
-        elif e.effect == "scale_asymmetry":
-            c[f"{s}_asymmetry"] += th  # u (1 + a/2 sign u) = u + (a/2)|u|
-        elif e.effect == "g_sensitivity":
-            g_sens += th.reshape(3, 3)  # row k: gyro axis k per specific force
-        elif e.effect == "lever_arm":
-            c["lever_arm_m"] += th  # sensor frame (m)
-        elif e.effect == "earth_rotation":
-            lat = session.meta_float("latitude_deg") or 0.0
-            world = earth_rate_world(lat, session.meta_float("heading_deg") or 0.0)
-            if drive.rotation() is None:  # as candidates.py: only the vertical part, along 'up'
-                world = np.array([0.0, 0.0, world[2]])
-            c["earth_rate_radps"] += float(th[0]) * world
-        elif e.effect == "time_offset":
-            offsets[s] += float(th[0])
-        elif e.effect == "pose_tilt":  # the poses' true gravity is f_ref x phi off the reference
-            tilt_force = pose_tilt.specific_force_change(drive.baseline, drive.baseline.accel, th)
-        else:
-            raise KeyError(e.effect)
-    return EffectTruth(g_sensitivity=g_sens, **c), offsets, tilt_force
+    """The simulator's coefficients (SI) for the base gyro G plus ``effects`` (each by its registry entry's
+    simulator mapping), the time offset per sensor, and the change of the true specific force (m/s^2, (n, 3))
+    by fitted pose tilts (None without)."""
+    acc = simulator_input(drive.baseline, lambda: drive.rotation() is not None,
+                          [(e.effect, e.sensor, e.theta) for e in effects])
+    return acc.truth(), acc.time_offset_s, acc.tilt_force
 
 
 class Drive:
@@ -509,20 +474,20 @@ def rerun(baseline: Baseline, findings: Iterable[FittedEffect], *, refit: bool =
     """
     simulated, skipped = [], []
     for e in findings:
-        if e.effect in SIMULATED:
+        effect = REGISTRY.get(e.effect)
+        if effect is not None and effect.simulate is not None:
             simulated.append(e)
-        elif e.effect in STOCHASTIC:
-            skipped.append({"effect": e.effect, "sensor": e.sensor,
-                            "reason": "stochastic: does not change the expected output"})
         else:
-            skipped.append({"effect": e.effect, "sensor": e.sensor, "reason": "no simulator counterpart"})
+            reason = effect.not_simulated if effect is not None else "no simulator counterpart"
+            skipped.append({"effect": e.effect, "sensor": e.sensor, "reason": reason})
     drive = Drive(baseline)
     base = run_model(drive, "base", [], refit=refit)
     if not simulated:
         return Rerun(baseline, base, base, (), tuple(skipped))
     extended = run_model(drive, "extended", simulated, refit=refit)
-    # the lever arm reaches the gyro through G f
-    coupled = any(e.effect == "lever_arm" for e in simulated) and bool(np.any(extended.effect_truth.g_sensitivity))
+    # an effect on the specific force (the lever arm) reaches the gyro through G f
+    coupled = (any(REGISTRY[e.effect].reaches_gyro for e in simulated)
+               and bool(np.any(extended.effect_truth.g_sensitivity)))
     alone = []
     for e in simulated:
         only = all(x is e for x in simulated if x.sensor == e.sensor)

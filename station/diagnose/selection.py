@@ -33,8 +33,9 @@ import numpy as np
 from scipy import linalg
 
 from station.diagnose import robust
-from station.diagnose.candidates import LIBRARY, MAX_DELAY_S, RIG_STEPS, delay_regressor
+from station.diagnose.candidates import MAX_DELAY_S, delay_regressor
 from station.diagnose.likelihood import RCOND, SensorProblem, Test
+from station.diagnose.registry import LIBRARY, RIG_STEPS
 from station.diagnose.reporting import AX, detectable_from, finding, outlier_test
 from station.diagnose.residuals import SENSORS, Baseline, SensorData
 from station.diagnose.results import Finding, Inseparable, Rejection
