@@ -81,7 +81,7 @@ def affected_axes(name: str, theta: np.ndarray, cov: np.ndarray) -> list[int]:
 
 
 def finding(sd: SensorData, t: Test, before: dict[str, Any], after: dict[str, Any]) -> dict[str, Any]:
-    if t.effect == "bias_random_walk":
+    if REGISTRY[t.effect].kind == "noise":  # bias_random_walk: a density
         k, k_std = float(t.theta[0]), float(math.sqrt(t.cov[0, 0]))
         factor, unit = unit_factor(t.effect, sd.sensor)
         params: dict[str, Any] = {"density": {"value": k * factor, "std": k_std * factor, "unit": unit}}

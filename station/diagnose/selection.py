@@ -35,7 +35,7 @@ from scipy import linalg
 from station.diagnose import robust
 from station.diagnose.candidates import MAX_DELAY_S, delay_regressor
 from station.diagnose.likelihood import RCOND, SensorProblem, Test
-from station.diagnose.registry import LIBRARY, RIG_STEPS
+from station.diagnose.registry import LIBRARY, REGISTRY, RIG_STEPS
 from station.diagnose.reporting import AX, detectable_from, finding, outlier_test
 from station.diagnose.residuals import SENSORS, Baseline, SensorData
 from station.diagnose.results import Finding, Inseparable, Rejection
@@ -45,6 +45,8 @@ COLLINEAR_R2 = 0.9
 #: A temperature course that an exponential warm-up (eq. 3) explains to this R^2 (after the other base terms)
 #: cannot be told from the warm-up in this recording.
 TEMPERATURE_R2 = 0.98
+#: The base model's part a temperature bias can be inseparable from (eq. 3's warm-up), as the registry names it.
+WARMUP = REGISTRY["temperature_bias"].identifiability.base_twin
 #: Prefix of an accepted term that is in the model but named by no finding (an inseparable pair's signal).
 NUISANCE = "~"
 #: Fixed-point rounds of the exact-delay fit (:func:`_refine_delay`).
@@ -145,7 +147,7 @@ def select(baseline: Baseline, *, max_effects: int = 4) -> Decision:
                 last.pop(best.effect, None)
                 r2, t_like = prob.temperature_collinearity()
                 inseparable.append({
-                    "effects": ["temperature_bias", "bias_drift (eq. 3 warm-up)"], "sensor": sensor,
+                    "effects": ["temperature_bias", WARMUP], "sensor": sensor,
                     "evidence": {"gain": round(best.gain, 2), "bic_gain": round(best.bic_gain, 2),
                                  "chi2_only_temperature": round(prob.temperature_unique(best.theta), 2),
                                  "r2_temperature_vs_warmup": round(r2, 4), "warmup_time_constant_s": round(t_like, 1)},
@@ -222,7 +224,7 @@ def select(baseline: Baseline, *, max_effects: int = 4) -> Decision:
             r2, t_like = prob.temperature_collinearity()
             if r2 > TEMPERATURE_R2:
                 inseparable.append({
-                    "effects": ["temperature_bias", "bias_drift (eq. 3 warm-up)"], "sensor": sensor,
+                    "effects": ["temperature_bias", WARMUP], "sensor": sensor,
                     "evidence": {"r2_temperature_vs_warmup": round(r2, 4), "warmup_time_constant_s": round(t_like, 1),
                                  "note": "the temperature course has the shape of a warm-up exp(-t/T_c) here"},
                     "rig_step": RIG_STEPS["temperature_bias"],
@@ -231,7 +233,7 @@ def select(baseline: Baseline, *, max_effects: int = 4) -> Decision:
         if any(u.sensor == sensor for u in unexplained):
             # structure no candidate explains: effects named for it are stand-ins (robust.py)
             for item in [i for i in inseparable
-                         if i["sensor"] == sensor and "bias_drift (eq. 3 warm-up)" not in i["effects"]]:
+                         if i["sensor"] == sensor and WARMUP not in i["effects"]]:
                 inseparable.remove(item)
                 rejected.append({"effect": " / ".join(item["effects"]), "sensor": sensor,
                                  "reason": "inseparable stand-ins for structure that stays unexplained"})
