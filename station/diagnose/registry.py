@@ -111,6 +111,13 @@ def _sim_pose_tilt(acc: SimulatorInput, theta: np.ndarray, sensor: str) -> None:
 class Identifiability:
     """What a candidate needs from the recording, and what separates it.
 
+    Where the rules act: ``needs`` in the regressors (None or zeros: a rejection ``not testable``);
+    ``profile_tc`` in :meth:`station.diagnose.likelihood.SensorProblem.test_mean`; ``base_twin`` and the
+    pairs of candidates in :func:`station.diagnose.selection.select`. Which candidates a recording cannot
+    tell apart (e.g. ``scale_asymmetry`` and ``scale_nonlinearity_even`` with fewer than three input
+    magnitudes) is decided from the data, not from the plan: two candidates whose fitted signals explain
+    each other to ``COLLINEAR_R2`` are listed as inseparable, with both candidates' ``rig_step``.
+
     Attributes:
         needs: what the recording must hold for the candidate to be testable at all; the regressors
             return None (``not testable: no data for it``) or zeros (``never excites it``) otherwise.
