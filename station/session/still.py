@@ -17,8 +17,11 @@ accelerometer alone, as imu_tk does:
    minus the initial still's mean, plus its windowed standard deviation, norms over the axes) exceeds
    ``threshold`` times its initial-still level or ``still_rate_dps`` (default 1 deg/s), whichever is
    larger (the floor keeps a slowly drifting gyro bias from ending a still interval).
-5. **minimum length** (``min_still_s``, default 1.5 s): runs of still samples shorter than this
-   belong to the move around them.
+5. **minimum length** (``min_still_s``, default 1.5 s): a sample is still in steps 3-4 only when its
+   whole centred window is, so a run of still samples is the quiet interval less half a window at
+   each end; runs whose quiet interval (the run plus one window) is shorter than this belong to the
+   move around them. The run's edges stay where they are (half a window inside the quiet interval),
+   so the moves keep their slow beginnings and ends.
 
 The first still run, when it starts within one window of the recording's start and is at least
 ``initial_still_s`` long, is the ``rest`` segment (the initial still: gyro bias, eq. 3 warm-up);
@@ -123,7 +126,8 @@ def detect_still(
     edges = np.diff(np.concatenate(([0], still.astype(np.int8), [0])))
     starts = np.flatnonzero(edges == 1)
     stops = np.flatnonzero(edges == -1)
-    keep = (stops - starts) >= max(2, round(opt.min_still_s * fs))
+    # step 5: the quiet interval is the run plus half a window each side (the windows' erosion)
+    keep = (stops - starts) >= max(2, round(opt.min_still_s * fs) - (window - 1))
     starts, stops = starts[keep], stops[keep]
     rest = bool(len(starts) and starts[0] <= window and stops[0] - starts[0] >= n_init)
     return StillIntervals(starts=starts, stops=stops, rest=rest, reference_mps2=reference, activity_mps2=activity)
