@@ -11,7 +11,12 @@ fits it rig-free at the local gravity 9.8128 m/s^2 and at imu_tk's default 9.817
 2. the gravity-norm RMS over the still segments at 9.81744 and at 9.8128 for raw, published and
    station, on all still segments and held out (the station's leave-poses-out cross-validation);
 3. the gravity-direction RMS after each move (between consecutive still segments of the same
-   segmentation) for raw, published and station, fitted and held out.
+   segmentation) for raw, published and station, fitted and held out, with the station - published
+   difference and its standard error (paired bootstrap over the moves);
+4. a fair held-out comparison: the published model (imu_tk's: accel ``T K raw - b`` from the gravity
+   norm of the still means, gyro bias the initial still's raw mean, gyro M from the rotations with a
+   0.01 s step) re-fitted by us in the same leave-poses-out folds as the station's cross-validation,
+   so both held-out errors come from fits that did not see the held-out poses.
 
 Conventions (shared/real/README.md): accel ``calibrated = T K raw - b`` (bias after the matrix,
 matrices column-major in the list); gyro ``calibrated = M (raw - b)``, the published one
@@ -30,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from station.fit.export import openaxes_coefficients
-from station.fit.multipos import direction_errors_deg
+from station.fit.multipos import direction_errors_deg, fit_accel_norm, fit_gyro_rotations, norm_residuals
 from station.fit.params import ParameterSet
 from station.fit.rigfree import RigFreeOptions, fit_rig_free
 from station.session.model import Kind, Session
@@ -74,6 +79,56 @@ def unit(v: np.ndarray) -> np.ndarray:
 
 def direction_rms(c: np.ndarray, bias: np.ndarray, moves: list[np.ndarray], dt: float, u: np.ndarray) -> float:
     return rms(direction_errors_deg(c, [m - bias for m in moves], dt, u[:-1], u[1:]))
+
+
+def paired_rms_difference(a: np.ndarray, b: np.ndarray, draws: int = 4000, seed: int = 0) -> tuple[float, float]:
+    """RMS(a) - RMS(b) for paired errors and its standard error by the bootstrap over the pairs."""
+    rng = np.random.default_rng(seed)
+    idx = rng.integers(0, len(a), size=(draws, len(a)))
+    d = np.sqrt(np.mean(a[idx] ** 2, axis=1)) - np.sqrt(np.mean(b[idx] ** 2, axis=1))
+    return rms(a) - rms(b), float(np.std(d))
+
+
+def imu_tk_cross_validation(session: Session, folds: int = 5) -> dict[str, np.ndarray]:
+    """The published model re-fitted per fold, in the folds of the station's ``cross_validate``.
+
+    Fold f holds out every pose whose pose number (the rest never) is f modulo ``folds``. The accelerometer's
+    ``T K``, ``b`` come from the gravity norm (at 9.81744) of the kept segments' raw means, the gyro bias is
+    the initial still's raw mean (never held out), the gyro ``M`` is fitted to the moves between two kept
+    segments with that fold's gravity directions and a fixed 0.01 s step. Held-out errors: the gravity
+    norm of the held-out poses, the direction after each move touching a held-out pose (a move touching
+    two folds' poses keeps the later fold's error, as the station's). Also the in-sample fit on all poses."""
+    still, means, moves_raw = still_and_moves(session)
+    rest = [s for s in still if s.kind == Kind.REST]
+    bias = session.gyro_radps[rest[0].start:rest[0].stop].mean(axis=0)
+    moves = [m - bias for m in moves_raw]
+    is_pose = np.array([s.kind == Kind.POSE for s in still])
+    order = np.cumsum(is_pose) - 1
+    norm_err = np.full(len(still), np.nan)
+    dir_err = np.full(len(moves), np.nan)
+
+    def fit(kept: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        acc = fit_accel_norm(means[kept], G_TK)
+        u = unit(acc.calibrate(means))
+        train = [j for j in range(len(moves)) if kept[j] and kept[j + 1]]
+        gyr = fit_gyro_rotations([moves[j] for j in train], PUBLISHED_STEP_S, u[train], u[[j + 1 for j in train]])
+        return acc.a_matrix, acc.bias, gyr.c_matrix
+
+    for f in range(folds):
+        held = is_pose & (order % folds == f)
+        a, b, c = fit(~held)
+        norm_err[held] = norm_residuals(a, b, means[held], G_TK)
+        u = unit((means - b) @ a.T)
+        test = [j for j in range(len(moves)) if held[j] or held[j + 1]]
+        dir_err[test] = direction_errors_deg(c, [moves[j] for j in test], PUBLISHED_STEP_S, u[test],
+                                             u[[j + 1 for j in test]])
+    a, b, c = fit(np.ones(len(still), dtype=bool))
+    u = unit((means - b) @ a.T)
+    return {
+        "norm_held_out": norm_err[is_pose], "direction_held_out": dir_err,
+        "norm_fitted": norm_residuals(a, b, means, G_TK),
+        "direction_fitted": direction_errors_deg(c, moves, PUBLISHED_STEP_S, u[:-1], u[1:]),
+    }
 
 
 def main() -> int:
@@ -180,9 +235,32 @@ def main() -> int:
         q = tk_model[accel].quality["rig_free"]
         print(f"{'':<16}{'station, imu_tk model accelerometer':<44}{q['gyro_direction_rms_deg']:8.3f}"
               f"{q['cross_validation']['gyro_direction_rms_deg']:10.3f}")
+        e_pub = direction_errors_deg(m_pub, [m - bw_pub for m in moves], PUBLISHED_STEP_S, u_pub[:-1], u_pub[1:])
+        for label, fit in (("eq. 3", fits[accel, G_TK]), ("imu_tk acc.", tk_model[accel])):
+            d, se = paired_rms_difference(np.array(fit.quality["rig_free"]["gyro_direction_error_deg"]), e_pub)
+            print(f"{'':<16}{f'station ({label}) - published, same moves':<44}{d:+8.3f} +- {se:.3f} "
+                  "(paired bootstrap SE)")
     q = fits["bmi160", G_TK].quality["rig_free"]
     print(f"target <= 0.96 deg on the fitted poses: station {q['gyro_direction_rms_deg']:.3f} -> "
           f"{'met' if q['gyro_direction_rms_deg'] <= 0.96 else 'MISSED'}")
+
+    # --- 4. fair held-out comparison -----------------------------------------------------------
+    print("\n4. Held out, both models re-fitted per fold (the station's 5 leave-poses-out folds): station (eq. 3")
+    print("   model) vs the published model structure (imu_tk) re-fitted by us; in-sample the fit on all poses.")
+    print("   Difference: station - imu_tk held out, +- its standard error (paired bootstrap over poses / moves).")
+    print(f"{'sensor':<9}{'figure':<24}{'imu_tk fitted':>14}{'imu_tk held out':>17}{'station fitted':>16}"
+          f"{'station held out':>18}{'difference':>20}")
+    for accel in ("adxl355", "bmi160"):
+        tk = imu_tk_cross_validation(sessions[accel])
+        q = fits[accel, G_TK].quality["rig_free"]
+        cv = q["cross_validation"]
+        rows = (("gravity norm, mm/s^2", 1e3, "norm_fitted", "norm_held_out", "accel_norm_error_mps2"),
+                ("gravity direction, deg", 1.0, "direction_fitted", "direction_held_out", "gyro_direction_error_deg"))
+        for label, k, fitted, held, key in rows:
+            ours_in, ours_out = k * np.array(q[key]), k * np.array(cv[key])
+            d, se = paired_rms_difference(ours_out, k * tk[held])
+            print(f"{accel:<9}{label:<24}{rms(k * tk[fitted]):14.3f}{rms(k * tk[held]):17.3f}{rms(ours_in):16.3f}"
+                  f"{rms(ours_out):18.3f}{f'{d:+.3f} +- {se:.3f}':>20}")
     return 0
 
 

@@ -88,8 +88,37 @@ def test_gyro_direction_error_as_published_on_the_same_moves(sessions: dict[str,
     moves = [s.gyro_radps[still[i].stop - 1:still[i + 1].start + 1] - bw_pub for i in range(len(still) - 1)]
     published = float(np.sqrt(np.mean(direction_errors_deg(m_pub, moves, 0.01, u[:-1], u[1:]) ** 2)))
     ours = fits["bmi160"].quality["rig_free"]["gyro_direction_rms_deg"]
-    assert published == pytest.approx(0.974, abs=0.01)  # the README's 0.96 is on another segmentation
+    assert published == pytest.approx(0.96, abs=0.005)  # issue 17's independent re-computation: 0.96 deg
     assert ours <= 1.02 * published  # issue target 0.96 deg; see the benchmark's table
+
+
+def test_gyro_direction_error_not_worse_than_published(sessions: dict[str, Session],
+                                                       fits: dict[str, ParameterSet]) -> None:
+    # The still detector must keep the 2.4 s pose at ~145 s (its minimum length once applied to the run the
+    # 1 s window had eroded to 1.4 s, merging two moves into one): with it, the published calibration's
+    # direction RMS on our moves is the issue's 0.96 deg (0.974 without it).
+    s = sessions["bmi160"]
+    still = s.segments_of(Kind.REST, Kind.POSE)
+    assert any(144.0 <= s.t_s[p.start] <= 146.5 and s.t_s[p.stop - 1] - s.t_s[p.start] >= 1.0 for p in still)
+    means = np.array([s.accel_mps2[a.start:a.stop].mean(axis=0) for a in still])
+    a_pub, b_pub = PUBLISHED[12:21].reshape(3, 3, order="F"), PUBLISHED[21:24]
+    m_pub, bw_pub = PUBLISHED[24:33].reshape(3, 3, order="F"), PUBLISHED[33:36]
+    u = means @ a_pub.T - b_pub
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    moves = [s.gyro_radps[still[i].stop - 1:still[i + 1].start + 1] - bw_pub for i in range(len(still) - 1)]
+    e_pub = direction_errors_deg(m_pub, moves, 0.01, u[:-1], u[1:])
+    e_ours = np.array(fits["bmi160"].quality["rig_free"]["gyro_direction_error_deg"])
+    assert len(e_ours) == len(e_pub) == 38
+    # The station's RMS over the same 38 moves must not be worse than the published calibration's by more than
+    # two standard errors of the paired difference (bootstrap over the moves): the published result, 0.962 deg,
+    # is the bound; the per-move errors of ~1 deg that neither calibration explains set the tolerance.
+    def rms(e: np.ndarray) -> np.ndarray:
+        return np.sqrt(np.mean(e**2, axis=-1))
+
+    idx = np.random.default_rng(0).integers(0, len(e_pub), size=(4000, len(e_pub)))
+    se = float(np.std(rms(e_ours[idx]) - rms(e_pub[idx])))
+    assert 0.002 < se < 0.03
+    assert rms(e_ours) <= rms(e_pub) + 2.0 * se, (rms(e_ours), rms(e_pub), se)
 
 
 def test_cross_validation_is_reported(fits: dict[str, ParameterSet]) -> None:

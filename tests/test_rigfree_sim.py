@@ -87,6 +87,47 @@ def test_still_detector_finds_every_true_still_interval() -> None:
         assert a <= s0 <= a + fs and b - fs <= s1 <= b
 
 
+def test_still_detector_keeps_a_pose_as_long_as_the_minimum() -> None:
+    # 100 Hz: 20 s initial still, then moves of 2 s (a steady turn about a horizontal axis) around poses of
+    # 1.4, 1.7, 2.0, 2.4 and 3 s. The centred 1 s window sees a pose as still only 0.5 s after it starts and
+    # 0.5 s before it ends; the 1.5 s minimum is the quiet interval's, so 1.7 s and longer are found, 1.4 s not.
+    fs, rng = 100.0, np.random.default_rng(320)
+    lengths_s = (1.4, 1.7, 2.0, 2.4, 3.0)
+    parts: list[tuple[np.ndarray, np.ndarray]] = []
+    truth: list[tuple[int, int]] = []
+    angle = 0.0
+    rate = np.radians(45.0)  # rad/s about x
+
+    def still(n: int, angle: float) -> None:
+        g = 9.81 * np.array([0.0, np.sin(angle), np.cos(angle)])
+        parts.append((np.tile(g, (n, 1)), np.zeros((n, 3))))
+
+    def move(angle: float) -> float:
+        a = angle + rate * np.arange(200) / fs
+        acc = 9.81 * np.column_stack([np.zeros(200), np.sin(a), np.cos(a)])
+        parts.append((acc, np.tile([rate, 0.0, 0.0], (200, 1))))
+        return angle + rate * 2.0
+
+    still(2000, angle)
+    cursor = 2000
+    for length in lengths_s:
+        angle = move(angle)
+        n = round(length * fs)
+        still(n, angle)
+        truth.append((cursor + 200, cursor + 200 + n))
+        cursor += 200 + n
+    move(angle)
+    acc = np.concatenate([p[0] for p in parts]) + rng.normal(0, 0.01, (sum(len(p[0]) for p in parts), 3))
+    gyro = np.concatenate([p[1] for p in parts]) + rng.normal(0, 0.002, acc.shape)
+    iv = detect_still(acc, fs, gyro_radps=gyro)
+    assert iv.rest
+    found = list(zip(iv.starts[1:].tolist(), iv.stops[1:].tolist(), strict=True))
+    expected = [(a, b) for (a, b), length in zip(truth, lengths_s, strict=True) if length >= 1.5]
+    assert len(found) == len(expected), (found, truth)
+    for (s0, s1), (a, b) in zip(found, expected, strict=True):
+        assert a <= s0 <= a + fs and b - fs <= s1 <= b  # inside the true pose, trimmed by at most the window
+
+
 def test_import_fit_export_on_the_command_line(tmp_path: Path) -> None:
     acc, gyr, res, a_off, _, a_sens, g_sens = _write_imu_tk(tmp_path, 311)
     out = tmp_path / "s.csv"
