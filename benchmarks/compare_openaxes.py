@@ -1,6 +1,6 @@
 """The rig-free fit against OpenAXES's published imu_tk calibration, on the real OpenAXES recording.
 
-    python benchmarks/compare_openaxes.py
+    python benchmarks/compare_openaxes.py [--gyro-study]
 
 Reads ../shared/real/openaxes/ (never copied into the repo; $STATION_REAL overrides ../shared/real),
 imports it with the station importer (still detector with its defaults) once per accelerometer,
@@ -17,6 +17,10 @@ fits it rig-free at the local gravity 9.8128 m/s^2 and at imu_tk's default 9.817
    norm of the still means, gyro bias the initial still's raw mean, gyro M from the rotations with a
    0.01 s step) re-fitted by us in the same leave-poses-out folds as the station's cross-validation,
    so both held-out errors come from fits that did not see the held-out poses.
+
+``--gyro-study`` prints only the ablation of the gyro fit's choices (section 5): on the BMI160 moves, with the
+published accelerometer's directions, the gyro fitted (C, by the station's RK4 fit) with each gyro bias, each
+integration scheme and each choice of the directions' samples, and the published calibration on the same input.
 
 Conventions (shared/real/README.md): accel ``calibrated = T K raw - b`` (bias after the matrix,
 matrices column-major in the list); gyro ``calibrated = M (raw - b)``, the published one
@@ -129,6 +133,101 @@ def imu_tk_cross_validation(session: Session, folds: int = 5) -> dict[str, np.nd
         "norm_fitted": norm_residuals(a, b, means, G_TK),
         "direction_fitted": direction_errors_deg(c, moves, PUBLISHED_STEP_S, u[:-1], u[1:]),
     }
+
+
+def _integrate(c: np.ndarray, moves: list[np.ndarray], dt: float, scheme: str) -> np.ndarray:
+    """Rotations (end-body to start-body) of each move with calibration C under an integration scheme."""
+    from scipy.interpolate import CubicSpline
+    from scipy.spatial.transform import Rotation
+
+    from station.fit.multipos import _pad, integrate_moves
+
+    if scheme == "rk4":  # the station's: RK4 on the sample grid, the rate linear between samples
+        return integrate_moves(np.einsum("ij,knj->kni", c, _pad(moves)), dt)
+    if scheme == "zoh":  # each sample's rate held over the following period (exact rotation per step)
+        return np.array([np.prod([Rotation.from_rotvec(w * dt) for w in m[:-1] @ c.T]).as_matrix()
+                         if len(m) > 1 else np.eye(3) for m in moves])
+    sub = 4  # "linear4" / "cubic4": 4 RK4 sub-steps per sample, the rate linear or cubic-spline between samples
+    out = []
+    for m in moves:
+        t = np.arange(len(m)) * dt
+        tt = np.linspace(0.0, t[-1], (len(m) - 1) * sub + 1)
+        w = CubicSpline(t, m, axis=0)(tt) if scheme == "cubic4" else np.column_stack(
+            [np.interp(tt, t, m[:, k]) for k in range(3)])
+        out.append(integrate_moves((w @ c.T)[:, None, :], dt / sub)[0])
+    return np.array(out)
+
+
+def gyro_study() -> int:
+    """Section 5: which of the gyro fit's choices moves the direction RMS (BMI160 moves, published accel)."""
+    from station.fit.rigfree import prepare
+
+    s = import_openaxes(LOG, accel="bmi160", gravity_mps2=G_TK)
+    prep, extra = prepare(s)
+    still, ts, gyro, acc = prep.still, prep.ts, s.gyro_radps, s.accel_mps2
+    a_pub, b_pub, m_pub, bw_pub = published("bmi160")
+    spans = [(still[i].stop - 1, still[i + 1].start + 1) for i in range(len(still) - 1)]
+    eq3 = gyro - extra["gyro"]  # the station's bias curve b_stat + b_drift exp(-t/T_c)
+    means = np.array([gyro[x.start:x.stop].mean(axis=0) for x in still])
+
+    def local(i: int, a: int, b: int) -> np.ndarray:  # the adjacent still segments' means, linear across the move
+        w = np.linspace(0.0, 1.0, b - a)[:, None]
+        return (1 - w) * means[i] + w * means[i + 1]
+
+    biases = {
+        "eq. 3 over all stills (station)": lambda i, a, b: eq3[a:b],
+        "initial still's raw mean (imu_tk)": lambda i, a, b: means[0],
+        "adjacent stills' means": local,
+    }
+
+    def directions(n: int | None) -> tuple[np.ndarray, np.ndarray]:
+        def cal(y: np.ndarray) -> np.ndarray:
+            return unit(np.atleast_2d(y) @ a_pub.T - b_pub)[0]
+        if n is None:
+            u = np.array([cal(acc[x.start:x.stop].mean(axis=0)) for x in still])
+            return u[:-1], u[1:]
+        return (np.array([cal(acc[still[i].stop - n:still[i].stop].mean(axis=0)) for i in range(len(spans))]),
+                np.array([cal(acc[still[i + 1].start:still[i + 1].start + n].mean(axis=0)) for i in range(len(spans))]))
+
+    def errors(c: np.ndarray, moves: list[np.ndarray], dt: float, ub: np.ndarray, ua: np.ndarray,
+               scheme: str = "rk4") -> np.ndarray:
+        pred = np.einsum("nji,nj->ni", _integrate(c, moves, dt, scheme), ub)
+        return np.degrees(np.arccos(np.clip(np.sum(pred * ua, axis=1), -1.0, 1.0)))
+
+    print(f"5. Gyro fit ablation: BMI160, {len(spans)} moves, directions from the published accelerometer; "
+          "'fitted': C by the station's fit on that input; 'published': the published M, b on the same moves")
+    print(f"{'choice (loss: unit-vector difference, station)':<58}{'fitted':>8}{'published':>11}")
+    ub, ua = directions(None)
+    for name, bias in biases.items():
+        moves = [gyro[a:b] - bias(i, a, b) for i, (a, b) in enumerate(spans)]
+        fit = fit_gyro_rotations(moves, ts, ub, ua)
+        pub = rms(direction_errors_deg(m_pub, [gyro[a:b] - bw_pub for a, b in spans], PUBLISHED_STEP_S, ub, ua))
+        print(f"{'gyro bias: ' + name:<58}{fit.rms_deg:8.4f}{pub:11.4f}")
+    moves = [gyro[a:b] - eq3[a:b] for a, b in spans]
+    fit = fit_gyro_rotations(moves, ts, ub, ua)
+    for scheme, label in (("rk4", "RK4, rate linear between samples (station)"), ("zoh", "rate held per sample"),
+                          ("linear4", "RK4, 4 sub-steps, rate linear"), ("cubic4", "RK4, 4 sub-steps, cubic spline")):
+        e = errors(fit.c_matrix, moves, ts, ub, ua, scheme)
+        print(f"{'integration: ' + label:<58}{rms(e):8.4f}")
+    for n in (None, 200, 100, 50):
+        ub_n, ua_n = directions(n)
+        label = "whole still segment (station)" if n is None else f"the {n} samples next to the move"
+        fit_n = fit_gyro_rotations(moves, ts, ub_n, ua_n)
+        print(f"{'directions from ' + label:<58}{fit_n.rms_deg:8.4f}")
+    mid = [((x.start + x.stop) // 2 if i else x.stop - 1, (still[i + 1].start + still[i + 1].stop) // 2)
+           for i, x in enumerate(still[:-1])]
+    fit_m = fit_gyro_rotations([gyro[a:b] - eq3[a:b] for a, b in mid], ts, ub, ua)
+    print(f"{'moves integrated from mid-still to mid-still':<58}{fit_m.rms_deg:8.4f}")
+    from scipy.optimize import least_squares
+
+    for loss, label in (("linear", "the angle itself (least squares)"),
+                        ("soft_l1", "the angle, robust (soft L1, 1 deg)")):
+        sol = least_squares(lambda x: errors(x.reshape(3, 3), moves, ts, ub, ua), fit.c_matrix.ravel(), loss=loss,
+                            f_scale=1.0, diff_step=1e-6)
+        print(f"{'loss: ' + label:<58}{rms(errors(sol.x.reshape(3, 3), moves, ts, ub, ua)):8.4f}")
+    fit_t = fit_gyro_rotations(moves, PUBLISHED_STEP_S, ub, ua)
+    print(f"{'time base: a fixed 0.01 s step instead of 1/100.054 Hz':<58}{fit_t.rms_deg:8.4f}")
+    return 0
 
 
 def main() -> int:
@@ -265,4 +364,6 @@ def main() -> int:
 
 
 if __name__ == "__main__":
+    if "--gyro-study" in sys.argv[1:]:
+        sys.exit(gyro_study() if LOG.is_file() else main())
     sys.exit(main())
