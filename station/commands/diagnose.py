@@ -37,7 +37,10 @@ def _fmt_value(params: dict[str, Any]) -> tuple[str, str]:
 def _print_text(report: dict[str, Any]) -> None:
     findings = report["findings"]
     unexplained = report.get("unexplained", [])
-    typer.echo(f"diagnosis of {report['serial']}: {len(findings)} finding(s), {len(unexplained)} unexplained")
+    untestable = report.get("untestable", [])
+    method = f" ({report['method']}: still poses only)" if report.get("method") else ""
+    typer.echo(f"diagnosis of {report['serial']}{method}: {len(findings)} finding(s), {len(unexplained)} unexplained"
+               + (f", {len(untestable)} untestable here" if untestable else ""))
     if findings:
         typer.echo(f"  {'effect':24s} {'sensor':6s} {'axes':4s} {'confidence':10s} value (unit)")
     for f in findings:
@@ -48,7 +51,8 @@ def _print_text(report: dict[str, Any]) -> None:
         if "likelihood_gain_chi2" in ev:
             typer.echo(f"    evidence: chi2 gain {ev['likelihood_gain_chi2']:.1f} for {ev['params']} parameter(s), "
                        f"BIC gain {ev['bic_gain']:.1f}, held-out error {ev['heldout_before']:.3f} -> "
-                       f"{ev['heldout_after']:.3f}")
+                       f"{ev['heldout_after']:.3f}"
+                       + (" (1 = as expected)" if f["effect"] == "bias_random_walk" else ""))
             q = f.get("confidence") or {}
             if "quasi_gain_chi2" in q:
                 typer.echo(f"    against the full model, noise inflated by its dispersion: chi2 gain "
@@ -69,6 +73,10 @@ def _print_text(report: dict[str, Any]) -> None:
         typer.echo(f"  UNEXPLAINED ({u['sensor']}, axes {''.join(u['axes'])}, in {'/'.join(u['segment_kinds'])} "
                    f"segments): {u['covariate']}; excess chi2 {u['excess_chi2']:.0f}. No candidate of the library "
                    "explains it.")
+    if untestable:
+        typer.echo("  not testable on this recording:")
+        for u in untestable:
+            typer.echo(f"    {u['effect']} ({u['sensor']}): {u['reason']}")
     for item in report["inseparable"]:
         typer.echo(f"  inseparable ({item['sensor']}): {' / '.join(item['effects'])}; rig step: {item['rig_step']}")
     if report.get("warmup_tc_range_s"):

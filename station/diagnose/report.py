@@ -74,8 +74,15 @@ def diagnose(session: Session, *, warmup_tc_s: Mapping[str, tuple[float, float]]
     ``LimitsFile.correlation_time_s``; see :func:`station.diagnose.residuals.fit_baseline`. None: the
     recording alone decides T_c (a temperature bias then often cannot be told from the warm-up).
 
+    A rig-free recording (hand-held poses without references, :func:`station.fit.rigfree.is_rig_free`) is
+    diagnosed by :func:`station.diagnose.rigfree.diagnose_rig_free` (its report adds ``untestable``).
+
     Raises :class:`station.kernel.errors.FitError` when the base fit refuses the recording.
     """
+    from station.diagnose import rigfree
+
+    if rigfree.wants_rig_free(session):
+        return rigfree.diagnose_rig_free(session, warmup_tc_s=warmup_tc_s)
     # the linear algebra is on a few hundred blocks: BLAS threads only spin
     with threadpool_limits(limits=1, user_api="blas"):
         baseline = fit_baseline(session, warmup_tc_s=warmup_tc_s)

@@ -215,7 +215,18 @@ def fit_baseline(
         if not (0.0 < lo <= hi and math.isfinite(hi)):
             raise ValueError(f"warm-up T_c range of the {name} must be 0 < low <= high (s), got {rng!r}")
         ranges[name] = (lo, hi)
-    params = fit_session(session)
+    return baseline_from_params(session, fit_session(session), warmup_tc_s=ranges,
+                                max_settled_blocks=max_settled_blocks)
+
+
+def baseline_from_params(
+    session: Session, params: ParameterSet, *, gyro_radps: np.ndarray | None = None,
+    warmup_tc_s: Mapping[str, tuple[float, float]] | None = None, max_settled_blocks: int = 150,
+) -> Baseline:
+    """:func:`fit_baseline` with the base parameter set given (e.g. a rig-free fit's, whose references the
+    caller wrote into ``session``); ``gyro_radps``: the gyro data to take the residual of (default the
+    session's). ``warmup_tc_s`` as in :func:`fit_baseline` (not checked here)."""
+    ranges = dict(warmup_tc_s or {})
     g_ref = session.ref_gyro_radps
     if params.quality.get("gyro_scale_method") != "rate":
         g_ref = np.where(np.isnan(g_ref), 0.0, g_ref)
@@ -223,7 +234,8 @@ def fit_baseline(
         g_ref = np.where(static[:, None], g_ref, np.nan)
     accel = _sensor_data(session, "accel", params.accel, session.accel_mps2, session.ref_accel_mps2,
                          max_settled_blocks)
-    gyro = _sensor_data(session, "gyro", params.gyro, session.gyro_radps, g_ref, max_settled_blocks)
+    gyro = _sensor_data(session, "gyro", params.gyro, session.gyro_radps if gyro_radps is None else gyro_radps,
+                        g_ref, max_settled_blocks)
     accel = replace(accel, tc_range_s=ranges.get("accel"))
     gyro = replace(gyro, tc_range_s=ranges.get("gyro"))
     return Baseline(session=session, params=params, d_temp=_temperature(session), accel=accel, gyro=gyro)
@@ -282,4 +294,4 @@ def locate(baseline: Baseline) -> dict[str, Any]:
     return out
 
 
-__all__ = ["SENSORS", "Baseline", "SensorData", "fit_baseline", "locate"]
+__all__ = ["SENSORS", "Baseline", "SensorData", "baseline_from_params", "fit_baseline", "locate"]

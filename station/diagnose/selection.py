@@ -26,6 +26,7 @@ the full model under the final model's dispersion and locates what stays unexpla
 
 from __future__ import annotations
 
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -90,8 +91,14 @@ def _unique(prob: SensorProblem, best: Test, twin: Test, regs: dict[str, np.ndar
 
 
 
-def select(baseline: Baseline, *, max_effects: int = 4) -> Decision:
-    """Forward selection of candidate effects per sensor (see the module docstring)."""
+def select(baseline: Baseline, *, max_effects: int = 4,
+           candidates: Mapping[str, Collection[str]] | None = None) -> Decision:
+    """Forward selection of candidate effects per sensor (see the module docstring).
+
+    ``candidates``: per sensor, the mean candidates to test (None: every one of the library); a recording that
+    cannot test some (e.g. a rig-free one, :mod:`station.diagnose.rigfree`) says so itself. ``bias_random_walk``
+    and ``outliers`` are always tested.
+    """
     findings: list[dict[str, Any]] = []
     rejected: list[dict[str, Any]] = []
     inseparable: list[dict[str, Any]] = []
@@ -101,7 +108,7 @@ def select(baseline: Baseline, *, max_effects: int = 4) -> Decision:
         prob = SensorProblem(baseline, sd)
         regs: dict[str, np.ndarray] = {}
         for name, cand in LIBRARY.items():
-            if sensor in cand.sensors:
+            if sensor in cand.sensors and (candidates is None or name in candidates.get(sensor, ())):
                 z = cand.build(baseline, sd)
                 if z is not None and np.any(z):
                     regs[name] = sd.block_mean(z)
@@ -171,8 +178,16 @@ def select(baseline: Baseline, *, max_effects: int = 4) -> Decision:
                 })
                 continue
             if best.effect == "bias_random_walk":
+                # its held-out check: the held-out blocks' prediction error under the covariance without and
+                # with the walk (the mean model is the same; a walk that is there makes the kriging from the
+                # training segments predict better and the errors' spread match, 1 = as expected)
+                e0 = prob._heldout_errors(prob.accepted, prob._heldout_folds())
                 prob.k2 = float(best.theta[0] ** 2)
                 prob._fit_q()
+                e1 = prob._heldout_errors(prob.accepted, prob._heldout_folds())
+                if len(e0) == len(e1) and len(e0) > 1:
+                    best.heldout_before, best.heldout_after = float(e0.mean()), float(e1.mean())
+                    best.heldout_change_se = float(np.std(e1 - e0, ddof=1) / np.sqrt(len(e0)))
                 walk = best
             else:
                 prob.accepted.append(regs[best.effect])

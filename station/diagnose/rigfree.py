@@ -1,0 +1,259 @@
+"""Diagnosis of a rig-free (hand-held, multi-position) recording: what it can test and what it cannot.
+
+A rig-free recording has no rig references: still poses at unknown orientations, hand moves
+between them (Tedaldi et al. 2014; :mod:`station.fit.rigfree`). The diagnosis here:
+
+1. **Base model** from :func:`station.fit.rigfree.fit_rig_free` (eq. 1 + eq. 3, in its stated frame
+   convention). References derived from it, per still segment: the accelerometer's fitted gravity
+   direction ``u_i = unit(M_a^-1 (mean_i - b_stat - b_drift g(t)))`` times the local gravity as the
+   specific force, and a zero rate for the gyroscope. The moves have no sample-level reference (the
+   hand's rate and linear acceleration are what the recording measures, not what it knows), so the
+   blocks of the diagnosis are the still segments only; the moves' information (the rotation between
+   two stills) is already spent on the gyroscope's M in the base fit.
+2. **Candidates** restricted to those such a recording can test (:data:`TESTABLE`); the others are
+   listed as :class:`Untestable` with the reason (:data:`REASONS`).
+3. **Earth rate**: a still gyro sees the Earth rate, whose vertical part ``Omega sin(lat)`` lies along
+   gravity in every pose, i.e. it is a g-sensitivity ``Omega sin(lat) / g`` times the identity. With the
+   latitude in the metadata (``latitude_deg``) that part is removed as known physics; without it a
+   g-sensitivity finding that the vertical Earth rate explains (``G = c I``, ``|c| <= Omega / g``) is
+   rejected. The horizontal part needs the heading of every pose, which a hand does not keep.
+
+Units: SI inside; the report in the engineering units of :mod:`station.diagnose.candidates`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy import stats
+from threadpoolctl import threadpool_limits
+
+from station.diagnose.residuals import SENSORS, Baseline, baseline_from_params, locate
+from station.diagnose.selection import select
+from station.fit.rigfree import RigFreeOptions, fit_rig_free, is_rig_free
+from station.kernel.constants import EARTH_RATE_RADPS
+from station.session.model import Kind, Session
+
+__all__ = ["REASONS", "TESTABLE", "Untestable", "diagnose_rig_free", "earth_vertical_radps", "rig_free_baseline",
+           "rig_free_references", "trimmed_kinds", "untestable"]
+
+#: Mean candidates a rig-free recording can test, per sensor (plus ``bias_random_walk`` and ``outliers``,
+#: which the selection always tests). The temperature candidates need a temperature span (checked per recording).
+TESTABLE: dict[str, tuple[str, ...]] = {
+    "accel": ("temperature_bias", "temperature_scale"),
+    "gyro": ("temperature_bias", "g_sensitivity"),
+}
+
+_NO_RATE = ("the rig-free recording has no known rate: the gyro's only reference is zero in the still poses "
+            "(the moves' rates are unknown, only the rotation between two stills is)")
+_NORM_ONLY = ("every still pose has |f| = g, and its direction is a free parameter of the rig-free fit "
+              "(2 of each pose's 3 numbers): only the gravity norm tests the accelerometer's scale, and the "
+              "rig-free fit's M and b_stat already take all of it that is linear")
+#: Why a candidate cannot be tested on a rig-free recording, per (effect, sensor).
+REASONS: dict[tuple[str, str], str] = {
+    ("earth_rotation", "gyro"): "needs the heading of every pose (a hand keeps none); the vertical part "
+                                "Omega sin(lat) along gravity is a g-sensitivity c I and is removed with the latitude "
+                                "in the metadata or else not taken for a g-sensitivity",
+    ("pose_tilt", "accel"): "no independent pose reference: every pose's gravity direction is a free parameter of "
+                            "the rig-free fit",
+    ("lever_arm", "accel"): "needs known rates and angular accelerations (rate-table steps); the hand's are unknown",
+    ("time_offset", "accel"): "the references are the still poses: a delay shifts no still's mean, and the "
+                              "rotation between two stills does not depend on when it was sampled",
+    ("time_offset", "gyro"): "the references are the still poses: a delay shifts no still's mean, and the "
+                             "rotation between two stills does not depend on when it was sampled",
+    ("temperature_scale", "gyro"): _NO_RATE + "; a scale change needs a non-zero input",
+    **{(name, "gyro"): _NO_RATE for name in ("scale_nonlinearity", "scale_nonlinearity_even",
+                                              "scale_nonlinearity_odd", "scale_asymmetry")},
+    **{(name, "accel"): _NORM_ONLY for name in ("scale_nonlinearity", "scale_nonlinearity_even",
+                                               "scale_nonlinearity_odd", "scale_asymmetry")},
+}
+_NO_TEMPERATURE = "needs a temperature span: the recording has no temperature channel, or its temperature does not change"
+#: Trimmed from both ends of every still pose before the diagnosis (s): the hand's release and pick-up.
+EDGE_S = 0.5
+#: A g-sensitivity consistent with the vertical Earth rate at this p-value (or more) is rejected as Earth rate.
+EARTH_P = 1e-3
+
+
+@dataclass(frozen=True)
+class Untestable:
+    """A candidate this kind of recording cannot test, and why."""
+
+    effect: str
+    sensor: str
+    reason: str
+
+    def to_dict(self) -> dict[str, str]:
+        return {"effect": self.effect, "sensor": self.sensor, "reason": self.reason}
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def _still(session: Session) -> list:
+    return session.segments_of(Kind.REST, Kind.POSE)
+
+
+def rig_free_references(session: Session, params: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(specific force reference (n, 3) m/s^2, rate reference (n, 3) rad/s, gravity direction per still (s, 3)):
+    in each still segment ``g u_i`` and 0, elsewhere NaN (no reference). ``u_i`` is the fitted accelerometer's
+    gravity direction of still i, in the rig-free fit's frame (eq. 1 inverted with eq. 3's drift removed)."""
+    a = params.accel
+    m = np.nan_to_num(np.asarray(a.misalignment, dtype=float))
+    drift = np.zeros((len(session), 3))
+    for k in range(3):
+        tc, bd = float(a.correlation_time_s[k]), float(a.bias_drift[k])
+        if math.isfinite(tc) and tc > 0 and bd != 0.0:
+            drift[:, k] = bd * np.exp(-session.t_s / tc)
+    cal = np.linalg.solve(m, (session.accel_mps2 - a.bias_static - drift).T).T
+    ref_a = np.full((len(session), 3), np.nan)
+    ref_w = np.full((len(session), 3), np.nan)
+    dirs = []
+    for s in _still(session):
+        u = _unit(np.median(cal[s.start:s.stop], axis=0))
+        dirs.append(u)
+        ref_a[s.start:s.stop] = session.gravity_mps2 * u
+        ref_w[s.start:s.stop] = 0.0
+    return ref_a, ref_w, np.array(dirs)
+
+
+def trimmed_kinds(session: Session, edge_s: float | None = None) -> np.ndarray:
+    """The session's segment kinds with ``EDGE_S`` at both ends of every pose (and the end of the rest) relabelled
+    as move: a hand lets the unit go and takes it up there, and that motion is no sensor outlier and no
+    offset of the still's mean."""
+    edge = round((EDGE_S if edge_s is None else edge_s) * session.sample_rate_hz)
+    kind = np.array(session.kind, dtype=np.int8)
+    for s in _still(session):
+        lo = s.start + (edge if s.kind == Kind.POSE else 0)
+        hi = s.stop - edge
+        if hi - lo < max(20, edge):  # too short to trim: the whole still goes with the moves
+            kind[s.start:s.stop] = int(Kind.MOVE)
+            continue
+        kind[s.start:lo] = int(Kind.MOVE)
+        kind[hi:s.stop] = int(Kind.MOVE)
+    return kind
+
+
+def earth_vertical_radps(session: Session) -> float | None:
+    """``Omega sin(latitude)`` (rad/s), the Earth rate's vertical part, or None without ``latitude_deg``."""
+    lat = session.meta_float("latitude_deg")
+    return None if lat is None else EARTH_RATE_RADPS * math.sin(math.radians(lat))
+
+
+def rig_free_baseline(
+    session: Session, *, warmup_tc_s: Mapping[str, tuple[float, float]] | None = None, max_settled_blocks: int = 150
+) -> Baseline:
+    """The base fit (:func:`fit_rig_free`) and both triads' residuals against it, on the still segments.
+
+    With ``latitude_deg`` in the metadata, the vertical Earth rate along each still's gravity direction
+    (through the fitted gyro M) is taken out of the gyro's residual as known physics.
+    Raises :class:`~station.kernel.errors.FitError` when the rig-free fit refuses the recording.
+    """
+    params = fit_rig_free(session, RigFreeOptions(cv_folds=0, tc_range_s=dict(warmup_tc_s or {})))
+    ref_a, ref_w, _ = rig_free_references(session, params)
+    kind = trimmed_kinds(session)
+    ref_a[kind == int(Kind.MOVE)] = np.nan
+    ref_w[kind == int(Kind.MOVE)] = np.nan
+    ref_session = session.replace(ref_accel_mps2=ref_a, ref_gyro_radps=ref_w, kind=kind)
+    gyro = session.gyro_radps
+    vertical = earth_vertical_radps(session)
+    if vertical is not None:
+        up = np.nan_to_num(ref_a) / session.gravity_mps2  # zero outside the stills
+        gyro = gyro - vertical * up @ np.asarray(params.gyro.misalignment, dtype=float).T
+    return baseline_from_params(ref_session, params, gyro_radps=gyro, warmup_tc_s=warmup_tc_s,
+                                max_settled_blocks=max_settled_blocks)
+
+
+def untestable(baseline: Baseline) -> list[Untestable]:
+    """The candidates the rig-free recording of ``baseline`` cannot test, with the reason."""
+    out = [Untestable(e, s, r) for (e, s), r in REASONS.items()]
+    if not np.any(baseline.d_temp):
+        out += [Untestable(e, s, _NO_TEMPERATURE) for s in SENSORS for e in TESTABLE[s] if e.startswith("temperature")]
+    return sorted(out, key=lambda u: (u.sensor, u.effect))
+
+
+def _earth_check(finding: dict[str, Any]) -> tuple[float, float] | None:
+    """(c in deg/s per g, p-value) of ``G = c I`` with ``|c| <= Omega / g`` against the fitted g-sensitivity
+    (engineering units, per-element std); None when the finding carries no 3x3 matrix."""
+    p = finding.get("parameters", {})
+    g = np.asarray(p.get("value", []), dtype=float)
+    s = np.asarray(p.get("std", []), dtype=float)
+    if g.shape != (3, 3) or s.shape != (3, 3) or not np.all(s > 0):
+        return None
+    w = 1.0 / s**2
+    cmax = math.degrees(EARTH_RATE_RADPS)  # deg/s per g: the whole Earth rate along a 1 g specific force
+    c = float(np.clip(np.sum(np.diag(w) * np.diag(g)) / np.sum(np.diag(w)), -cmax, cmax))
+    chi2 = float(np.sum(w * (g - c * np.eye(3)) ** 2))
+    return c, float(stats.chi2.sf(chi2, 8))
+
+
+def diagnose_rig_free(session: Session, *, warmup_tc_s: Mapping[str, tuple[float, float]] | None = None) -> Any:
+    """Diagnose a rig-free recording (see the module docstring): a :class:`station.diagnose.report.Diagnosis`
+    whose report has the keys of ``station-diagnosis/1`` plus ``untestable`` and ``rig_free``.
+
+    Raises :class:`~station.kernel.errors.FitError` when the rig-free fit refuses the recording.
+    """
+    from station.diagnose.report import FORMAT, Diagnosis
+
+    with threadpool_limits(limits=1, user_api="blas"):
+        baseline = rig_free_baseline(session, warmup_tc_s=warmup_tc_s)
+        testable = {s: tuple(e for e in TESTABLE[s] if not (e.startswith("temperature") and not np.any(baseline.d_temp)))
+                    for s in SENSORS}
+        decision = select(baseline, candidates=testable)
+    findings, curves = [], []
+    rejected = [r.to_dict() for r in decision.rejected]
+    vertical = earth_vertical_radps(session)
+    for f in decision.findings:
+        entry = f.to_dict()
+        if f.effect == "g_sensitivity" and vertical is None:
+            check = _earth_check(entry)
+            if check is not None and check[1] >= EARTH_P:
+                rejected.append({"effect": f.effect, "sensor": f.sensor, "earth_rate_c_dps_per_g": round(check[0], 6),
+                                 "p_value": round(check[1], 4), "parameters": entry["parameters"],
+                                 "reason": "consistent with the vertical Earth rate (c I, |c| <= 15.04 deg/h per g) "
+                                           "and the latitude is unknown: give --latitude to the import to test it"})
+                continue
+        if f.block_residual is not None:
+            sd = baseline.sensor(f.sensor)
+            curves.append((f"{f.sensor} {f.effect}", sd.t_s, *f.block_residual))
+        entry["calibration"] = {"compensated": False, "note": "not assessed on a rig-free recording"}
+        findings.append(entry)
+    p = baseline.params
+    rf = p.quality.get("rig_free", {})
+    report = {
+        "format": FORMAT,
+        "serial": session.serial,
+        "method": "rig-free",
+        "findings": findings,
+        "rejected": rejected,
+        "inseparable": [i.to_dict() for i in decision.inseparable],
+        "unexplained": [u.to_dict() for u in decision.unexplained],
+        "untestable": [u.to_dict() for u in untestable(baseline)],
+        "location": locate(baseline),
+        "warmup_tc_range_s": {s: list(sd.tc_range_s) for s in SENSORS
+                              if (sd := baseline.sensor(s)).tc_range_s is not None} or None,
+        "base_fit": {
+            "accel_residual_rms_mps2": np.round(p.accel.residual_rms, 9).tolist(),
+            "gyro_residual_rms_dps": np.round(np.degrees(p.gyro.residual_rms), 9).tolist(),
+            "accel_noise_std_mps2": np.round(p.accel.noise_std, 9).tolist(),
+            "gyro_noise_std_dps": np.round(np.degrees(p.gyro.noise_std), 9).tolist(),
+        },
+        "rig_free": {
+            "still_segments": rf.get("still_segments"), "moves": rf.get("moves"),
+            "accel_norm_rms_mps2": rf.get("accel_norm_rms_mps2"),
+            "gyro_direction_rms_deg": rf.get("gyro_direction_rms_deg"),
+            "earth_vertical_removed_dps": None if vertical is None else round(math.degrees(vertical), 6),
+            "blocks": "still segments only (the moves carry no sample-level reference)",
+        },
+        "rerun": {"error": "the simulator re-run needs the rig's motion; a hand-held recording's is unknown"},
+    }
+    return Diagnosis(report=report, baseline=baseline, curves=curves, rerun=None)
+
+
+def wants_rig_free(session: Session) -> bool:
+    """Whether ``station diagnose`` takes the rig-free path for ``session`` (:func:`is_rig_free`)."""
+    return is_rig_free(session)
