@@ -3,12 +3,13 @@
 Data: per sensor, the block-mean residuals of :mod:`station.diagnose.residuals`, three axes
 stacked. Noise model per axis (block covariance, eq. 3's drift included):
 
-    C = diag(sigma_w^2 / n_b) + q GM(T_c) + K^2 min(t_i, t_j)
+    C = diag(sigma_w^2 / n_b + v_b) + q GM(T_c) + K^2 min(t_i, t_j)
 
 with ``GM(T_c)_ij = exp(-|t_i - t_j|/T_c) - exp(-(t_i + t_j)/T_c)`` (the Gauss-Markov drift
 started at power-on, eq. 3; ``T_c`` from the base fit, or the record's span when the base
 fit left it unresolved) and ``q`` re-estimated per axis by maximum likelihood; ``K`` is the
-``bias_random_walk`` candidate (0 in the base model). Without K the covariance is
+``bias_random_walk`` candidate (0 in the base model); ``v_b`` the block's known extra variance
+(``SensorData.extra_var``, 0 but on rig-free recordings). Without K the covariance is
 diagonalized once per ``T_c`` (``D^-1/2 GM D^-1/2 = V diag(lambda) V^T``), so profiling q
 costs one small weighted least-squares fit per trial value.
 
@@ -140,6 +141,8 @@ class SensorProblem:
         self.y = sd.y + sd.block_mean(base_drift(baseline.session.t_s, sd))  # (m, 3), see base_drift
         t = sd.t_s
         self.white = (sd.sigma[None, :] ** 2) / sd.count[:, None]  # (m, 3)
+        if sd.extra_var is not None:  # known physics of unknown phase (SensorData.extra_var)
+            self.white = self.white + sd.extra_var
         span = float(t.max() + 0.5 * sd.width_s.max())
         self.dist = np.abs(t[:, None] - t[None, :])
         self.tmin = np.minimum(t[:, None], t[None, :])

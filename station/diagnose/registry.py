@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping
-from dataclasses import MISSING, dataclass, fields
+from dataclasses import MISSING, dataclass, field, fields
 from typing import Literal
 
 import numpy as np
@@ -113,7 +113,9 @@ class Identifiability:
 
     Where the rules act: ``needs`` in the regressors (None or zeros: a rejection ``not testable``);
     ``profile_tc`` in :meth:`station.diagnose.likelihood.SensorProblem.test_mean`; ``base_twin`` and the
-    pairs of candidates in :func:`station.diagnose.selection.select`. Which candidates a recording cannot
+    pairs of candidates in :func:`station.diagnose.selection.select`; ``rig_free`` in
+    :mod:`station.diagnose.rigfree` (the candidates a hand-held recording tests, and the reasons for the
+    others, :func:`rig_free_testable`). Which candidates a recording cannot
     tell apart (e.g. ``scale_asymmetry`` and ``scale_nonlinearity_even`` with fewer than three input
     magnitudes) is decided from the data, not from the plan: two candidates whose fitted signals explain
     each other to ``COLLINEAR_R2`` are listed as inseparable, with both candidates' ``rig_step``.
@@ -127,12 +129,16 @@ class Identifiability:
             (:data:`station.diagnose.likelihood.PROFILE_TC`).
         base_twin: the part of the base model it can be inseparable from (listed as the pair's second
             member by :mod:`station.diagnose.selection`), or None.
+        rig_free: per sensor, why a rig-free recording (hand-held still poses, no rig reference:
+            :mod:`station.fit.rigfree`) cannot test it; a sensor not listed: testable there, as far as the
+            recording holds what ``needs`` says.
     """
 
     needs: str
     rig_step: str
     profile_tc: bool = False
     base_twin: str | None = None
+    rig_free: Mapping[str, str] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -190,6 +196,16 @@ _NL_UNIT = ("relative scale error at 1 g", "relative scale error at 200 deg/s")
 _TEMPERATURE = "a temperature rise during the recording (the temperature column changes)"
 _INPUT = "a non-zero input on the axis (poses for the accelerometer, rate steps for the gyroscope)"
 _STOCHASTIC = "stochastic: does not change the expected output"
+# why a rig-free recording cannot test a candidate (Identifiability.rig_free)
+_RF_NO_RATE = ("no known rate: a hand-held recording's only gyro reference is zero in the still poses (the moves' "
+               "rates are unknown; only the rotation between two stills is known, and the base fit spends it on M)")
+_RF_NORM_ONLY = ("no per-axis reference: each still pose's gravity direction is a free parameter of the rig-free fit "
+                 "(2 of its 3 numbers), only the gravity norm is left, and the rig-free fit takes the linear part of "
+                 "it; a scale polynomial shows only through its projection on the norm, which this per-axis test "
+                 "does not model")
+_RF_DELAY = ("the references are the still poses: a delay shifts no still's mean, and the rotation between two "
+             "stills does not depend on when it was sampled (an accelerometer-gyroscope delay could show in the "
+             "moves' gravity direction, not modelled)")
 _NO_SIM = "no simulator counterpart"
 
 #: Every candidate effect, in the canonical order of :data:`NAMES` (report, benchmarks' seeds and tables).
@@ -210,7 +226,8 @@ EFFECTS: tuple[Effect, ...] = (
         "temperature_scale", "mean", ("accel", "gyro"), "scale factor proportional to the temperature rise",
         c.temperature_scale, _same((1e6, "ppm/K")),
         Identifiability(_TEMPERATURE + " and a non-zero input while it does",
-                        "repeat poses or rate steps late in the session, when the unit is warm", profile_tc=True),
+                        "repeat poses or rate steps late in the session, when the unit is warm", profile_tc=True,
+                        rig_free={"gyro": _RF_NO_RATE + "; a scale change needs a non-zero input"}),
         simulate=_add("temp_scale"),  # (M x)(1 + s dT)
         compensation="temperature_scale",
     ),
@@ -226,7 +243,8 @@ EFFECTS: tuple[Effect, ...] = (
         c.nonlinearity,
         _both((STANDARD_GRAVITY, _NL_UNIT[0]), (GYRO_NONLINEARITY_REF_RADPS, _NL_UNIT[1])),
         Identifiability(_INPUT + "; told from the scale factor at two or more input magnitudes",
-                        "steps at a second input magnitude (more rates, or tilted poses for the accelerometer)"),
+                        "steps at a second input magnitude (more rates, or tilted poses for the accelerometer)",
+                        rig_free={"accel": _RF_NORM_ONLY, "gyro": _RF_NO_RATE}),
         simulate=_add("nonlinearity"),  # u + k u|u|
         compensation="scale_nonlinearity",
     ),
@@ -234,7 +252,8 @@ EFFECTS: tuple[Effect, ...] = (
         "scale_asymmetry", "mean", ("accel", "gyro"), "different scale for positive and negative input",
         c.asymmetry, _same((1.0, "relative (positive - negative scale)")),
         Identifiability(_INPUT + "; told from the even scale term at three or more input magnitudes",
-                        "both signs of every rate step and both poses of every axis, at three or more rates"),
+                        "both signs of every rate step and both poses of every axis, at three or more rates",
+                        rig_free={"accel": _RF_NORM_ONLY, "gyro": _RF_NO_RATE}),
         simulate=_add("asymmetry"),  # u (1 + a/2 sign u) = u + (a/2)|u|
         compensation="scale_asymmetry",
         not_compensated="no parameter for a sign-dependent scale in the parameter set",
@@ -243,7 +262,9 @@ EFFECTS: tuple[Effect, ...] = (
         "lever_arm", "mean", ("accel",), "accelerometer off the rotation centre: w x (w x r) + a x r",
         c.lever_arm, _same((1e3, "mm"), ("accel",)),
         Identifiability("a non-zero rate reference (rate steps or ramps)",
-                        "rate steps at two or more rates about each axis"),
+                        "rate steps at two or more rates about each axis",
+                        rig_free={"accel": "needs known rates and angular accelerations (rate-table steps); "
+                                           "the hand's are unknown"}),
         simulate=_sim_lever_arm, reaches_gyro=True, compensation="lever_arm",
         not_compensated="a property of the rig mounting, not of the unit",
         per_axis=False, extra=lambda theta: {"length_mm": round(float(np.linalg.norm(theta) * 1e3), 3)},
@@ -253,7 +274,11 @@ EFFECTS: tuple[Effect, ...] = (
         c.earth_rotation, _same((1.0, "multiple of the Earth rate"), ("gyro",)),
         Identifiability("the site's latitude_deg in the recording's metadata (heading_deg, and a start pose "
                         "among the rig's six for the horizontal part)",
-                        "each pose held at two headings (table turned 180 deg about the vertical)"),
+                        "each pose held at two headings (table turned 180 deg about the vertical)",
+                        rig_free={"gyro": "needs the heading of every pose, which a hand does not keep; the vertical "
+                                          "part Omega sin(lat) lies along gravity in every pose, a g-sensitivity "
+                                          "c I: removed with latitude_deg in the metadata, otherwise a "
+                                          "g-sensitivity it explains is not named"}),
         simulate=_sim_earth_rotation, compensation="earth_rotation",
         not_compensated="a property of the place, not of the unit",
         extra=lambda theta: {"deg_per_h": round(float(theta[0] * EARTH_RATE_RADPS / _DEG * 3600.0), 4)},
@@ -263,7 +288,8 @@ EFFECTS: tuple[Effect, ...] = (
         "sensor samples late against the rig reference (exact delay, fitted by a 1-D search)",
         c.time_offset, _same((1e3, "ms")),
         Identifiability("a reference that changes in time (rate ramps or pose changes)",
-                        "rate-table ramps with higher angular acceleration"),
+                        "rate-table ramps with higher angular acceleration",
+                        rig_free={"accel": _RF_DELAY, "gyro": _RF_DELAY}),
         simulate=_sim_time_offset, compensation="time_offset",
         not_compensated="carried as time_offset_s in the set but not estimated by the fit nor applied to values",
     ),
@@ -287,7 +313,9 @@ EFFECTS: tuple[Effect, ...] = (
         pose_tilt.NAME, "mean", pose_tilt.SENSORS, pose_tilt.DESCRIPTION,  # ours: the rig's poses are off
         pose_tilt.build, _same((1.0 / _DEG, "deg"), pose_tilt.SENSORS),
         Identifiability("still gravity poses (pose segments); the half-sums also segments outside the poses "
-                        "that see gravity along the pose's axis", pose_tilt.RIG_STEP),
+                        "that see gravity along the pose's axis", pose_tilt.RIG_STEP,
+                        rig_free=dict.fromkeys(pose_tilt.SENSORS, "no independent pose reference: every pose's "
+                                               "gravity direction is a free parameter of the rig-free fit")),
         # its tilt force reaches the gyro through G as well, but the re-run has not marked it (kept as it was)
         simulate=_sim_pose_tilt, compensation="pose_tilt",
         not_compensated="a property of the rig's poses, not of the unit",
@@ -299,7 +327,8 @@ EFFECTS: tuple[Effect, ...] = (
         "IEEE scale polynomial, even term k2 u^2 (same error for both signs)",
         c.poly_even, _both((STANDARD_GRAVITY, _NL_UNIT[0]), (GYRO_NONLINEARITY_REF_RADPS, _NL_UNIT[1])),
         Identifiability(_INPUT + "; told from the scale asymmetry at three or more input magnitudes",
-                        "rate steps at three or more magnitudes, both signs (|w| and w^2 then differ)"),
+                        "rate steps at three or more magnitudes, both signs (|w| and w^2 then differ)",
+                        rig_free={"accel": _RF_NORM_ONLY, "gyro": _RF_NO_RATE}),
         not_simulated=_NO_SIM,
         not_compensated="no parameter: the even scale term (k2 w^2) is not in the parameter set",
     ),
@@ -308,7 +337,8 @@ EFFECTS: tuple[Effect, ...] = (
         c.poly_odd,
         _both((STANDARD_GRAVITY**2, _NL_UNIT[0]), (GYRO_NONLINEARITY_REF_RADPS**2, _NL_UNIT[1])),
         Identifiability(_INPUT + "; told from u|u| at three or more input magnitudes",
-                        "rate steps at three or more magnitudes (w|w| and w^3 then differ)"),
+                        "rate steps at three or more magnitudes (w|w| and w^3 then differ)",
+                        rig_free={"accel": _RF_NORM_ONLY, "gyro": _RF_NO_RATE}),
         not_simulated=_NO_SIM,
         # the fit's u + k u|u| is odd in the rate: it stands for the odd (cubic-like) term, not the even one
         compensation="scale_nonlinearity",
@@ -327,6 +357,20 @@ LIBRARY: dict[str, Effect] = {e.name: e for e in EFFECTS if e.kind == "mean"}
 RIG_STEPS: dict[str, str] = {e.name: e.identifiability.rig_step for e in EFFECTS}
 #: Candidates whose parameters form a matrix rather than a per-axis vector.
 SHAPES: dict[str, tuple[int, int]] = {e.name: e.shape for e in EFFECTS if e.shape is not None}
+
+
+def rig_free_testable() -> tuple[dict[str, tuple[str, ...]], list[tuple[str, str, str]]]:
+    """What a rig-free recording can test (``Identifiability.rig_free``): per sensor the mean candidates, and
+    (effect, sensor, reason) for each candidate it cannot test. ``bias_random_walk`` and ``outliers`` are
+    tested on any recording (not mean candidates: the selection tests them itself)."""
+    testable: dict[str, tuple[str, ...]] = {}
+    not_testable: list[tuple[str, str, str]] = []
+    for sensor in SENSORS:
+        here = [e for e in EFFECTS if sensor in e.sensors]
+        testable[sensor] = tuple(e.name for e in here if e.kind == "mean" and sensor not in e.identifiability.rig_free)
+        not_testable += [(e.name, sensor, e.identifiability.rig_free[sensor]) for e in here
+                         if sensor in e.identifiability.rig_free]
+    return testable, not_testable
 
 
 def unit_factor(name: str, sensor: str) -> tuple[float, str]:
@@ -366,5 +410,5 @@ def simulator_input(baseline: Baseline, rotation_known: Callable[[], bool],
 
 __all__ = [
     "EFFECTS", "LIBRARY", "MEAN_CANDIDATES", "NAMES", "REGISTRY", "RIG_STEPS", "SHAPES", "Effect", "Identifiability",
-    "SimulatorInput", "engineering", "simulator_input", "unit_factor",
+    "SimulatorInput", "engineering", "rig_free_testable", "simulator_input", "unit_factor",
 ]

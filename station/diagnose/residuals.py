@@ -53,6 +53,9 @@ class SensorData:
         segment, kind: segment index and :class:`Kind` code per block, (m,).
         tc_range_s: the sensor class's range of eq. 3's correlation time T_c (s), (low, high), that the
             diagnosis keeps the warm-up drift in; None: the recording alone decides T_c.
+        extra_var: variance added to each block mean's white-noise variance, (m, 3), in the sensor's unit
+            squared: known physics of unknown phase (a rig-free recording's horizontal Earth rate, whose
+            heading each pose draws anew, :mod:`station.diagnose.rigfree`); None: none.
     """
 
     sensor: str
@@ -72,6 +75,7 @@ class SensorData:
     segment: np.ndarray
     kind: np.ndarray
     tc_range_s: tuple[float, float] | None = None
+    extra_var: np.ndarray | None = None
 
     def clip_tc(self, tc_s: np.ndarray | float) -> np.ndarray:
         """``tc_s`` (s) clipped into :attr:`tc_range_s` (unchanged without a range)."""

@@ -10,8 +10,10 @@ between them (Tedaldi et al. 2014; :mod:`station.fit.rigfree`). The diagnosis he
    hand's rate and linear acceleration are what the recording measures, not what it knows), so the
    blocks of the diagnosis are the still segments only; the moves' information (the rotation between
    two stills) is already spent on the gyroscope's M in the base fit.
-2. **Candidates** restricted to those such a recording can test (:data:`TESTABLE`); the others are
-   listed as :class:`Untestable` with the reason (:data:`REASONS`).
+2. **Candidates** restricted to those such a recording can test: the registry's identifiability rules
+   (``Identifiability.rig_free``, :func:`station.diagnose.registry.rig_free_testable`) and what the recording
+   holds (``Identifiability.needs``: e.g. a temperature span); the others are listed as :class:`Untestable`
+   with the reason. ``bias_random_walk`` and ``outliers`` are tested as on any recording.
 3. **Earth rate**: a still gyro sees the Earth rate, whose vertical part ``Omega sin(lat)`` lies along
    gravity in every pose, i.e. it is a g-sensitivity ``Omega sin(lat) / g`` times the identity. With the
    latitude in the metadata (``latitude_deg``) that part is removed as known physics; without it a
@@ -25,53 +27,24 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 from scipy import stats
 from threadpoolctl import threadpool_limits
 
+from station.diagnose.registry import REGISTRY, rig_free_testable
 from station.diagnose.residuals import SENSORS, Baseline, baseline_from_params, locate
 from station.diagnose.selection import select
 from station.fit.rigfree import RigFreeOptions, fit_rig_free, is_rig_free
 from station.kernel.constants import EARTH_RATE_RADPS
 from station.session.model import Kind, Session
 
-__all__ = ["REASONS", "TESTABLE", "Untestable", "diagnose_rig_free", "earth_vertical_radps", "rig_free_baseline",
-           "rig_free_references", "trimmed_kinds", "untestable"]
+__all__ = ["EARTH_P", "EDGE_S", "Untestable", "diagnose_rig_free", "earth_horizontal_radps", "earth_vertical_radps",
+           "horizontal_earth_var", "rig_free_baseline", "rig_free_references", "testable", "trimmed_kinds",
+           "wants_rig_free"]
 
-#: Mean candidates a rig-free recording can test, per sensor (plus ``bias_random_walk`` and ``outliers``,
-#: which the selection always tests). The temperature candidates need a temperature span (checked per recording).
-TESTABLE: dict[str, tuple[str, ...]] = {
-    "accel": ("temperature_bias", "temperature_scale"),
-    "gyro": ("temperature_bias", "g_sensitivity"),
-}
-
-_NO_RATE = ("the rig-free recording has no known rate: the gyro's only reference is zero in the still poses "
-            "(the moves' rates are unknown, only the rotation between two stills is)")
-_NORM_ONLY = ("every still pose has |f| = g, and its direction is a free parameter of the rig-free fit "
-              "(2 of each pose's 3 numbers): only the gravity norm tests the accelerometer's scale, and the "
-              "rig-free fit's M and b_stat already take all of it that is linear")
-#: Why a candidate cannot be tested on a rig-free recording, per (effect, sensor).
-REASONS: dict[tuple[str, str], str] = {
-    ("earth_rotation", "gyro"): "needs the heading of every pose (a hand keeps none); the vertical part "
-                                "Omega sin(lat) along gravity is a g-sensitivity c I and is removed with the latitude "
-                                "in the metadata or else not taken for a g-sensitivity",
-    ("pose_tilt", "accel"): "no independent pose reference: every pose's gravity direction is a free parameter of "
-                            "the rig-free fit",
-    ("lever_arm", "accel"): "needs known rates and angular accelerations (rate-table steps); the hand's are unknown",
-    ("time_offset", "accel"): "the references are the still poses: a delay shifts no still's mean, and the "
-                              "rotation between two stills does not depend on when it was sampled",
-    ("time_offset", "gyro"): "the references are the still poses: a delay shifts no still's mean, and the "
-                             "rotation between two stills does not depend on when it was sampled",
-    ("temperature_scale", "gyro"): _NO_RATE + "; a scale change needs a non-zero input",
-    **{(name, "gyro"): _NO_RATE for name in ("scale_nonlinearity", "scale_nonlinearity_even",
-                                              "scale_nonlinearity_odd", "scale_asymmetry")},
-    **{(name, "accel"): _NORM_ONLY for name in ("scale_nonlinearity", "scale_nonlinearity_even",
-                                               "scale_nonlinearity_odd", "scale_asymmetry")},
-}
-_NO_TEMPERATURE = "needs a temperature span: the recording has no temperature channel, or its temperature does not change"
 #: Trimmed from both ends of every still pose before the diagnosis (s): the hand's release and pick-up.
 EDGE_S = 0.5
 #: A g-sensitivity consistent with the vertical Earth rate at this p-value (or more) is rejected as Earth rate.
@@ -149,8 +122,11 @@ def rig_free_baseline(
 ) -> Baseline:
     """The base fit (:func:`fit_rig_free`) and both triads' residuals against it, on the still segments.
 
-    With ``latitude_deg`` in the metadata, the vertical Earth rate along each still's gravity direction
-    (through the fitted gyro M) is taken out of the gyro's residual as known physics.
+    Earth rate: with ``latitude_deg`` in the metadata, the vertical Earth rate along each still's gravity
+    direction (through the fitted gyro M) is taken out of the gyro's residual as known physics. Its horizontal
+    part ``Omega cos(lat)`` points north, and every hand-held pose has its own unknown heading: it enters the
+    gyro's block covariance as a per-pose offset of random heading (:func:`horizontal_earth_var`), not as a
+    signal a candidate (or a bias random walk) may take.
     Raises :class:`~station.kernel.errors.FitError` when the rig-free fit refuses the recording.
     """
     params = fit_rig_free(session, RigFreeOptions(cv_folds=0, tc_range_s=dict(warmup_tc_s or {})))
@@ -161,19 +137,63 @@ def rig_free_baseline(
     ref_session = session.replace(ref_accel_mps2=ref_a, ref_gyro_radps=ref_w, kind=kind)
     gyro = session.gyro_radps
     vertical = earth_vertical_radps(session)
+    m_w = np.asarray(params.gyro.misalignment, dtype=float)
     if vertical is not None:
         up = np.nan_to_num(ref_a) / session.gravity_mps2  # zero outside the stills
-        gyro = gyro - vertical * up @ np.asarray(params.gyro.misalignment, dtype=float).T
-    return baseline_from_params(ref_session, params, gyro_radps=gyro, warmup_tc_s=warmup_tc_s,
-                                max_settled_blocks=max_settled_blocks)
+        gyro = gyro - vertical * up @ m_w.T
+    baseline = baseline_from_params(ref_session, params, gyro_radps=gyro, warmup_tc_s=warmup_tc_s,
+                                    max_settled_blocks=max_settled_blocks)
+    extra = horizontal_earth_var(baseline, m_w, earth_horizontal_radps(session))
+    return replace(baseline, gyro=replace(baseline.gyro, extra_var=extra))
 
 
-def untestable(baseline: Baseline) -> list[Untestable]:
-    """The candidates the rig-free recording of ``baseline`` cannot test, with the reason."""
-    out = [Untestable(e, s, r) for (e, s), r in REASONS.items()]
-    if not np.any(baseline.d_temp):
-        out += [Untestable(e, s, _NO_TEMPERATURE) for s in SENSORS for e in TESTABLE[s] if e.startswith("temperature")]
-    return sorted(out, key=lambda u: (u.sensor, u.effect))
+def earth_horizontal_radps(session: Session) -> float:
+    """``Omega cos(latitude)`` (rad/s), the Earth rate's horizontal part; without ``latitude_deg`` its largest
+    value ``Omega`` (the equator)."""
+    lat = session.meta_float("latitude_deg")
+    return EARTH_RATE_RADPS * (1.0 if lat is None else abs(math.cos(math.radians(lat))))
+
+
+def horizontal_earth_var(baseline: Baseline, m_w: np.ndarray, horizontal_radps: float) -> np.ndarray:
+    """Per gyro block, the variance (rad/s)^2 per axis of the horizontal Earth rate in a pose of unknown
+    heading: ``h (cos psi e1 + sin psi e2)`` with ``e1, e2`` perpendicular to the pose's gravity direction
+    ``u`` and psi uniform has the covariance ``h^2/2 (I - u u')``, through the gyro's M. One heading per pose:
+    a pose cut into b blocks gets b times it on each block (the pose mean then has the variance once). The rest
+    (one heading for the whole initial still) gets none: its offset is the bias the base fit takes."""
+    sd = baseline.gyro
+    up = sd.block_mean(np.nan_to_num(baseline.session.ref_accel_mps2))
+    norm = np.linalg.norm(up, axis=1, keepdims=True)
+    up = np.divide(up, norm, out=np.zeros_like(up), where=norm > 0)
+    proj = np.eye(3)[None] - up[:, :, None] * up[:, None, :]  # (m, 3, 3)
+    cov = 0.5 * horizontal_radps**2 * np.einsum("ij,mjk,lk->mil", m_w, proj, m_w)
+    var = np.diagonal(cov, axis1=1, axis2=2).copy()
+    pose = sd.kind == int(Kind.POSE)
+    blocks = np.bincount(sd.segment[pose].astype(int), minlength=int(sd.segment.max()) + 1) if np.any(pose) else None
+    var[~pose] = 0.0
+    if blocks is not None:
+        var[pose] *= blocks[sd.segment[pose].astype(int)][:, None]
+    return var
+
+
+def testable(baseline: Baseline) -> tuple[dict[str, tuple[str, ...]], list[Untestable]]:
+    """Per sensor, the mean candidates the rig-free recording of ``baseline`` can test, and the candidates it
+    cannot, with the reason: the registry's rule for rig-free recordings, else what the candidate ``needs``
+    when this recording does not excite it (its regressors None or zero, e.g. no temperature span)."""
+    rule, not_testable = rig_free_testable()
+    out = [Untestable(e, s, r) for e, s, r in not_testable]
+    keep: dict[str, tuple[str, ...]] = {}
+    for sensor in SENSORS:
+        sd = baseline.sensor(sensor)
+        here = []
+        for name in rule[sensor]:
+            effect = REGISTRY[name]
+            z = effect.build(baseline, sd) if effect.build is not None else None
+            if z is not None and np.any(z):
+                here.append(name)
+            else:
+                out.append(Untestable(name, sensor, f"needs {effect.identifiability.needs}"))
+        keep[sensor] = tuple(here)
+    return keep, sorted(out, key=lambda u: (u.sensor, u.effect))
 
 
 def _earth_check(finding: dict[str, Any]) -> tuple[float, float] | None:
@@ -201,9 +221,8 @@ def diagnose_rig_free(session: Session, *, warmup_tc_s: Mapping[str, tuple[float
 
     with threadpool_limits(limits=1, user_api="blas"):
         baseline = rig_free_baseline(session, warmup_tc_s=warmup_tc_s)
-        testable = {s: tuple(e for e in TESTABLE[s] if not (e.startswith("temperature") and not np.any(baseline.d_temp)))
-                    for s in SENSORS}
-        decision = select(baseline, candidates=testable)
+        candidates, untestable = testable(baseline)
+        decision = select(baseline, candidates=candidates)
     findings, curves = [], []
     rejected = [r.to_dict() for r in decision.rejected]
     vertical = earth_vertical_radps(session)
@@ -215,7 +234,8 @@ def diagnose_rig_free(session: Session, *, warmup_tc_s: Mapping[str, tuple[float
                 rejected.append({"effect": f.effect, "sensor": f.sensor, "earth_rate_c_dps_per_g": round(check[0], 6),
                                  "p_value": round(check[1], 4), "parameters": entry["parameters"],
                                  "reason": "consistent with the vertical Earth rate (c I, |c| <= 15.04 deg/h per g) "
-                                           "and the latitude is unknown: give --latitude to the import to test it"})
+                                           "and the latitude is unknown: give --latitude to the import "
+                                           "(latitude_deg in the metadata) to test it"})
                 continue
         if f.block_residual is not None:
             sd = baseline.sensor(f.sensor)
@@ -232,7 +252,7 @@ def diagnose_rig_free(session: Session, *, warmup_tc_s: Mapping[str, tuple[float
         "rejected": rejected,
         "inseparable": [i.to_dict() for i in decision.inseparable],
         "unexplained": [u.to_dict() for u in decision.unexplained],
-        "untestable": [u.to_dict() for u in untestable(baseline)],
+        "untestable": [u.to_dict() for u in untestable],
         "location": locate(baseline),
         "warmup_tc_range_s": {s: list(sd.tc_range_s) for s in SENSORS
                               if (sd := baseline.sensor(s)).tc_range_s is not None} or None,

@@ -84,11 +84,13 @@ def simulate_handheld(
     unit: UnitTruth | None = None,
     effects: Effects | None = None,
     attitudes: np.ndarray | None = None,
+    latitude_deg: float = 0.0,
 ) -> HandheldResult:
     """Simulate one hand-held multi-position recording (see the module docstring).
 
     ``attitudes``: the rest's and the poses' sensor-to-world rotations, (P + 1, 3, 3), instead of random ones
-    (e.g. every pose a turn about one axis).
+    (e.g. every pose a turn about one axis). ``latitude_deg``: the site, for an ``earth_rotation`` effect (the
+    world frame's heading is the attitudes' own; random attitudes give every pose a random heading).
     """
     plan = plan or HandheldPlan()
     unit_seq, imu_seq, hand_seq = np.random.SeedSequence(seed).spawn(3)
@@ -148,7 +150,7 @@ def simulate_handheld(
         omega[sel] = e2t_w1 + w2
         alpha[sel] = (np.einsum("nji,nj->ni", e2, (dds / d**2)[:, None] * phi) - np.cross(w2, e2t_w1)
                       + (ddw / d**2)[:, None] * psi)
-    model = ImuModel(unit, sensor_class, effects or Effects(), imu_seq)
+    model = ImuModel(unit, sensor_class, effects or Effects(), imu_seq, latitude_deg=latitude_deg)
     raw = model.render(Kinematics(ts, rotation, omega, alpha), plan.gravity_mps2)
     still_idx = tuple((int(np.ceil(a * fs - 1e-9)), min(n, int(np.ceil(b * fs - 1e-9)))) for a, b in still)
     return HandheldResult(ts, raw.accel_mps2, raw.gyro_radps, unit, still_idx, plan, seed)
