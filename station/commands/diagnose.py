@@ -38,7 +38,7 @@ def _print_text(report: dict[str, Any]) -> None:
     findings = report["findings"]
     unexplained = report.get("unexplained", [])
     untestable = report.get("untestable", [])
-    method = f" ({report['method']}: still poses only)" if report.get("method") else ""
+    method = f" ({report['method']}: tested on the still poses)" if report.get("method") else ""
     typer.echo(f"diagnosis of {report['serial']}{method}: {len(findings)} finding(s), {len(unexplained)} unexplained"
                + (f", {len(untestable)} untestable here" if untestable else ""))
     if findings:
@@ -75,8 +75,11 @@ def _print_text(report: dict[str, Any]) -> None:
                    "explains it.")
     if untestable:
         typer.echo("  not testable on this recording:")
+        by_reason: dict[tuple[str, str], list[str]] = {}
         for u in untestable:
-            typer.echo(f"    {u['effect']} ({u['sensor']}): {u['reason']}")
+            by_reason.setdefault((u["sensor"], u["reason"]), []).append(u["effect"])
+        for (sensor, reason), effects in by_reason.items():
+            typer.echo(f"    {', '.join(effects)} ({sensor}): {reason}")
     for item in report["inseparable"]:
         typer.echo(f"  inseparable ({item['sensor']}): {' / '.join(item['effects'])}; rig step: {item['rig_step']}")
     if report.get("warmup_tc_range_s"):

@@ -23,6 +23,10 @@ with the base model and with the accepted effects, compared with the recording p
 ``{"error": ...}`` when the recording cannot drive the simulator. ``warmup_tc_range_s``: the
 sensor class's T_c range per sensor the diagnosis kept eq. 3's warm-up in (null: none given). Pure numerics: only
 :func:`save_figure` writes a file.
+
+A rig-free recording (:mod:`station.diagnose.rigfree`) adds ``"method": "rig-free"``, ``untestable`` (``effect``,
+``sensor``, ``reason`` per candidate it cannot test) and ``rig_free`` (the base fit's still segments, moves,
+gravity-norm and move-direction RMS, the Earth rate handling); its ``rerun`` is ``{"error": ...}``.
 """
 
 from __future__ import annotations

@@ -42,7 +42,7 @@ from station.kernel.constants import EARTH_RATE_RADPS
 from station.session.model import Kind, Session
 
 __all__ = ["EARTH_P", "EDGE_S", "Untestable", "diagnose_rig_free", "earth_horizontal_radps", "earth_vertical_radps",
-           "horizontal_earth_var", "rig_free_baseline", "rig_free_references", "testable", "trimmed_kinds",
+           "horizontal_earth_var", "rig_free_baseline", "rig_free_candidates", "rig_free_references", "trimmed_kinds",
            "wants_rig_free"]
 
 #: Trimmed from both ends of every still pose before the diagnosis (s): the hand's release and pick-up.
@@ -175,7 +175,7 @@ def horizontal_earth_var(baseline: Baseline, m_w: np.ndarray, horizontal_radps: 
     return var
 
 
-def testable(baseline: Baseline) -> tuple[dict[str, tuple[str, ...]], list[Untestable]]:
+def rig_free_candidates(baseline: Baseline) -> tuple[dict[str, tuple[str, ...]], list[Untestable]]:
     """Per sensor, the mean candidates the rig-free recording of ``baseline`` can test, and the candidates it
     cannot, with the reason: the registry's rule for rig-free recordings, else what the candidate ``needs``
     when this recording does not excite it (its regressors None or zero, e.g. no temperature span)."""
@@ -221,7 +221,7 @@ def diagnose_rig_free(session: Session, *, warmup_tc_s: Mapping[str, tuple[float
 
     with threadpool_limits(limits=1, user_api="blas"):
         baseline = rig_free_baseline(session, warmup_tc_s=warmup_tc_s)
-        candidates, untestable = testable(baseline)
+        candidates, untestable = rig_free_candidates(baseline)
         decision = select(baseline, candidates=candidates)
     findings, curves = [], []
     rejected = [r.to_dict() for r in decision.rejected]
