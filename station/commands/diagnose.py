@@ -41,6 +41,10 @@ def _print_text(report: dict[str, Any]) -> None:
     method = f" ({report['method']}: tested on the still poses)" if report.get("method") else ""
     typer.echo(f"diagnosis of {report['serial']}{method}: {len(findings)} finding(s), {len(unexplained)} unexplained"
                + (f", {len(untestable)} untestable here" if untestable else ""))
+    if (rf := report.get("rig_free")) and rf.get("accel_norm_rms_mps2") is not None:
+        typer.echo(f"  base: rig-free fit, {rf['still_segments']} still segments, {rf['moves']} moves; gravity-norm "
+                   f"RMS {rf['accel_norm_rms_mps2'] * 1e3:.2f} mm/s^2, direction after each move "
+                   f"{rf['gyro_direction_rms_deg']:.3f} deg RMS")
     if findings:
         typer.echo(f"  {'effect':24s} {'sensor':6s} {'axes':4s} {'confidence':10s} value (unit)")
     for f in findings:
