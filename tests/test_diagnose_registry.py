@@ -44,6 +44,9 @@ def test_every_effect_has_all_its_parts(effect: registry.Effect) -> None:
         assert effect.not_compensated
     # identifiability: what the recording needs and the rig step that separates it
     assert effect.identifiability.needs and effect.identifiability.rig_step
+    # what a rig-free recording cannot test: per sensor it applies to, with the reason
+    assert set(effect.identifiability.rig_free) <= set(effect.sensors)
+    assert all(effect.identifiability.rig_free.values())
 
 
 def test_the_registry_is_the_only_list_of_names() -> None:

@@ -18,7 +18,10 @@ between them (Tedaldi et al. 2014; :mod:`station.fit.rigfree`). The diagnosis he
    gravity in every pose, i.e. it is a g-sensitivity ``Omega sin(lat) / g`` times the identity. With the
    latitude in the metadata (``latitude_deg``) that part is removed as known physics; without it a
    g-sensitivity finding that the vertical Earth rate explains (``G = c I``, ``|c| <= Omega / g``) is
-   rejected. The horizontal part needs the heading of every pose, which a hand does not keep.
+   rejected (a G that it does not explain is named, its diagonal then holding the vertical Earth rate as
+   well, at most 0.0042 deg/s per g). The horizontal part ``Omega cos(lat)`` needs the heading of every pose,
+   which a hand does not keep: it enters the gyro's block covariance as a per-pose offset of random heading
+   (``SensorData.extra_var``), so that neither a candidate nor a bias random walk takes it.
 
 Units: SI inside; the report in the engineering units of :mod:`station.diagnose.candidates`.
 """
@@ -28,7 +31,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from scipy import stats
@@ -40,6 +43,9 @@ from station.diagnose.selection import select
 from station.fit.rigfree import RigFreeOptions, fit_rig_free, is_rig_free
 from station.kernel.constants import EARTH_RATE_RADPS
 from station.session.model import Kind, Session
+
+if TYPE_CHECKING:
+    from station.diagnose.report import Diagnosis
 
 __all__ = ["EARTH_P", "EDGE_S", "Untestable", "diagnose_rig_free", "earth_horizontal_radps", "earth_vertical_radps",
            "horizontal_earth_var", "rig_free_baseline", "rig_free_candidates", "rig_free_references", "trimmed_kinds",
@@ -211,13 +217,14 @@ def _earth_check(finding: dict[str, Any]) -> tuple[float, float] | None:
     return c, float(stats.chi2.sf(chi2, 8))
 
 
-def diagnose_rig_free(session: Session, *, warmup_tc_s: Mapping[str, tuple[float, float]] | None = None) -> Any:
+def diagnose_rig_free(session: Session, *,
+                      warmup_tc_s: Mapping[str, tuple[float, float]] | None = None) -> Diagnosis:
     """Diagnose a rig-free recording (see the module docstring): a :class:`station.diagnose.report.Diagnosis`
     whose report has the keys of ``station-diagnosis/1`` plus ``untestable`` and ``rig_free``.
 
     Raises :class:`~station.kernel.errors.FitError` when the rig-free fit refuses the recording.
     """
-    from station.diagnose.report import FORMAT, Diagnosis
+    from station.diagnose.report import FORMAT, Diagnosis  # here: report imports this module
 
     with threadpool_limits(limits=1, user_api="blas"):
         baseline = rig_free_baseline(session, warmup_tc_s=warmup_tc_s)
