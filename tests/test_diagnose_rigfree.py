@@ -27,17 +27,12 @@ from station.session import write_session
 from station.session.model import Kind, Session
 from station.session.multipos_import import import_openaxes
 from station.session.still import detect_still, label_segments
-from station.sim.handheld import HandheldPlan, HandheldResult, simulate_handheld
+from station.sim.handheld import HandheldResult, simulate_handheld
 
 RUN = CliRunner()
 REAL = Path(os.environ.get("STATION_REAL", Path(__file__).resolve().parents[2] / "shared" / "real"))
 LOG = REAL / "openaxes" / "log_imu9_2022-06-22_22-13-55.csv"
 DPS_PER_G = 9.80665 * 180.0 / math.pi  # (rad/s per m/s^2) -> deg/s per g
-#: The rig-free fit refuses a long rest whose gyro, minus the bias of all stills, turns by more than 2 deg
-#: (station.fit.rigfree._check_still); a g-sensitivity or a bias random walk makes the rest's offset differ from
-#: that bias, so the planted recordings use OpenAXES's 40 s rest instead of the simulator's 120 s (with 120 s the
-#: fit refuses G = 0.02 deg/s per g or K = 0.0025 deg/s/sqrt(s) on some seeds).
-SHORT_REST = HandheldPlan(rest_s=40.0)
 
 
 def _session(res: HandheldResult, **meta: str) -> Session:
@@ -94,7 +89,7 @@ def test_vertical_earth_rate_is_no_g_sensitivity() -> None:
 @pytest.mark.parametrize("seed", [625, 626])
 def test_planted_g_sensitivity_is_found(seed: int) -> None:
     effects = Effects(g_sensitivity=0.02)
-    res = simulate_handheld(seed, SHORT_REST, effects=effects)
+    res = simulate_handheld(seed, effects=effects)
     report = diagnose(_session(res)).report
     assert _named(report) == {("g_sensitivity", "gyro")}
     p = next(f for f in report["findings"] if f["effect"] == "g_sensitivity")["parameters"]
@@ -106,7 +101,7 @@ def test_planted_g_sensitivity_is_found(seed: int) -> None:
 
 def test_planted_bias_random_walk_is_found() -> None:
     k = 0.0005  # accelerometer m/s^2/sqrt(s); the gyro's GYRO_PER_ACCEL times it in deg/s/sqrt(s)
-    report = diagnose(_session(simulate_handheld(627, SHORT_REST, effects=Effects(bias_random_walk=k)))).report
+    report = diagnose(_session(simulate_handheld(627, effects=Effects(bias_random_walk=k)))).report
     assert ("bias_random_walk", "gyro") in _named(report)
     assert _named(report) <= {("bias_random_walk", "gyro"), ("bias_random_walk", "accel")}
     f = next(f for f in report["findings"] if f["effect"] == "bias_random_walk" and f["sensor"] == "gyro")

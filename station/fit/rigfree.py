@@ -83,7 +83,8 @@ class RigFreeOptions:
             (1/3 for a uniform sphere, 0 when every pose is a turn about one axis).
         min_axis_reach: every axis must point within ``arccos(min_axis_reach)`` of up and of down in some pose.
         max_step_deg: largest rotation per sample the integration of a move accepts.
-        still_rotation_deg: a still segment whose gyro turns (integrated, bias removed) or whose gravity
+        still_rotation_deg: a still segment whose gyro turns (integrated, the segment's own mean rate
+            removed, so that a constant offset such as a g-sensitivity does not count) or whose gravity
             direction moves by more than this is refused as a move.
         cv_folds: folds of the leave-poses-out cross-validation (0: none).
         accel_drift: fit the accelerometer's eq. (3) drift jointly (step 3); False: imu_tk's model, no drift.
@@ -188,7 +189,12 @@ def _check_still(session: Session, segments: Sequence[Segment], gyro_unbiased: n
         if len(s) < options.min_segment_samples:
             raise FitError(f"segment {s.index} ({s.kind.label}) has {len(s)} samples; a still segment needs at least "
                            f"{options.min_segment_samples}")
-        turn = float(np.degrees(np.linalg.norm(gyro_unbiased[s.start:s.stop].sum(axis=0) * ts)))
+        # the largest rotation away from the segment's start, its own mean rate removed: a hand move (a burst)
+        # shows at least half its angle wherever it falls, a constant rate offset that the all-stills bias does
+        # not hold (a g-sensitivity in this pose, a random-walk excursion) does not add up over a long still
+        w = gyro_unbiased[s.start:s.stop]
+        swing = np.cumsum(w - w.mean(axis=0), axis=0) * ts
+        turn = float(np.degrees(np.linalg.norm(swing, axis=1).max(initial=0.0)))
         q = max(2, len(s) // 5)
         a0, a1 = accel[s.start:s.start + q].mean(axis=0), accel[s.stop - q:s.stop].mean(axis=0)
         tilt = float(np.degrees(np.arccos(np.clip(_unit(a0) @ _unit(a1), -1.0, 1.0))))
