@@ -11,9 +11,17 @@ changes by (eq. 1 with the tilted input)
 
 with ``a_1, a_2`` the two rotation axes of the pose (for the six standard poses the two
 other sensor axes) and M the base fit's misalignment matrix. Poses are told apart by the
-direction of their reference vector (within ``ALIGN_COS``); only samples in ``pose``
-segments are affected (a power-on rest or a rate step in the same orientation is taken as
-un-tilted, as in the simulator's ``pose_tilt`` effect).
+direction of their reference vector (within ``ALIGN_COS``). Where the tilt acts is one of two
+:data:`VARIANTS`, the one that explains more of the block residual is taken (same parameters):
+
+* ``rig``: a real rig's pose error belongs to the orientation it holds: every still sample in that
+  orientation of a rest or pose segment (the power-on rest, the settling, every visit) is tilted, and
+  along the rig's moves the tilt, a fixed direction in the world, is carried with the sensor
+  (``phi(t) = D(t)^T phi_P`` with ``D`` the reference rotation since the pose, integrated from the
+  reference rate) and handed over from the pose before to the pose after in proportion to the angle
+  turned (the independent generator's rig, ``tests/indepgen.py``, moves between the tilted poses);
+* ``segment``: pose segments only (a power-on rest or a rate step in the same orientation is taken as
+  un-tilted, as in the station simulator's ``pose_tilt`` effect).
 
 Identifiability, and the parameters. Six pose means give 6 x 3 = 18 numbers; the base model
 re-fits 12 of them (M's 9 entries and b's 3), so at most 6 of the 12 tilts can be told from
