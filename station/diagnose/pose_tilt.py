@@ -46,6 +46,7 @@ Units: specific force m/s^2, tilt rad inside and deg in :func:`engineering`.
 from __future__ import annotations
 
 import math
+import weakref
 from collections.abc import Mapping
 
 import numpy as np
@@ -237,12 +238,12 @@ def _assemble(baseline: Baseline, sd: SensorData, poses: list, column, free_of) 
         both = all(np.any(u) for u in ups)
         free = both and free_of(_AXES.index(k))
         for a in _rotation_axes(up_vector("+" + k)):
-            plus, minus = column(ip, a) @ m.T, column(im, a) @ m.T
+            plus, minus = column(ip, a), column(im, a)
             cols.append(plus - minus)  # d
             cols.append(plus + minus if free else np.zeros_like(plus))  # s
     for p in range(len(POSES), len(poses)):
-        cols.extend(column(p, a) @ m.T for a in _rotation_axes(poses[p][1]))
-    return np.stack(cols, axis=2)
+        cols.extend(column(p, a) for a in _rotation_axes(poses[p][1]))
+    return np.einsum("nkp,jk->njp", np.stack(cols, axis=2), m)  # M (f x a) per column
 
 
 #: The two places a pose error can act (:func:`build`): ``rig`` (every time the rig holds the pose, rest included,
@@ -329,8 +330,20 @@ def build(baseline: Baseline, sd: SensorData) -> np.ndarray | None:
     """
     if sd.sensor != "accel":
         return None
+    hit = _CACHE.get(baseline)
+    if hit is not None and hit[0] is sd:
+        return hit[1]
     best, zs = choose_variant(baseline, sd)
-    return zs[best]
+    z = zs[best]
+    if z is not None:
+        z.flags.writeable = False  # shared through the cache
+    _CACHE[baseline] = (sd, z)
+    return z
+
+
+#: The last regressors of :func:`build` per baseline (selection, the fitted signal, the re-run and the compensation
+#: ask for the same ones); entries go with their baseline.
+_CACHE: weakref.WeakKeyDictionary[Baseline, tuple[SensorData, np.ndarray | None]] = weakref.WeakKeyDictionary()
 
 
 def specific_force_change(baseline: Baseline, sd: SensorData, theta: np.ndarray) -> np.ndarray:
