@@ -337,3 +337,20 @@ def test_detectable_from_is_the_size_at_the_quoted_power() -> None:
     assert ("temperature_scale", "gyro") in _named(diagnose(big.session).report)
     small = simulate_session(21, plan=PLAN, effects=Effects(temperature_scale=0.2 * sizes.min()))
     assert "temperature_scale" not in {f["effect"] for f in diagnose(small.session).report["findings"]}
+
+
+def test_odd_scale_forms_a_plan_cannot_tell_apart_give_one_finding() -> None:
+    """A plan with a single rate magnitude (+-100 deg/s, the station study's seed 401): u|u| and u^3 are the same
+    signal there (both odd in the rate), so the scale nonlinearity is found and named by the better-fitting form,
+    with the other form and the rig step that separates them in its evidence, instead of naming nothing."""
+    from station.kernel.plan import random_plan
+
+    plan = random_plan(np.random.default_rng(10_000 + 401))
+    assert {abs(r) for _, r in plan.rate_steps} == {100.0}
+    res = simulate_session(401, plan=plan, effects=Effects(scale_nonlinearity=2e-4))
+    report = diagnose(res.session, warmup_tc_s={"accel": (50.0, 167.0), "gyro": (1030.0, 3760.0)}).report
+    assert [(f["effect"], f["sensor"]) for f in report["findings"]] == [("scale_nonlinearity", "gyro")]
+    form = report["findings"][0]["evidence"]["form_inseparable_from"]
+    assert set(form["effects"]) == {"scale_nonlinearity_odd"}
+    assert "magnitude" in form["rig_step"]
+    assert not any("scale_nonlinearity" in e for i in report["inseparable"] for e in i["effects"])

@@ -105,3 +105,30 @@ def test_cli_prints_the_unexplained_location(tmp_path: Path) -> None:
     assert result.exit_code == 0, result.output
     assert "0 finding(s), 1 unexplained" in result.output
     assert "UNEXPLAINED (accel" in result.output and "spin frequency" in result.output
+
+
+def test_a_random_walk_is_the_same_wander_throughout_and_named() -> None:
+    """Development seed 22 (the study's bias_random_walk row): the walk is named, and its K^2 agrees between the
+    record's halves and between increments inside and across segments."""
+    report = diagnose(indepgen.generate(22, {"bias_random_walk": 3e-4}).session, warmup_tc_s=TC).report
+    assert {e for e, _ in _named(report)} == {"bias_random_walk"}
+    for f in report["findings"]:
+        z = f["confidence"]["consistency"]
+        assert set(z) == {"halves", "inside_vs_across_segments"}
+        assert all(abs(v) <= 4.0 for v in z.values())
+
+
+def test_a_mis_modelled_mean_effect_is_not_taken_for_a_random_walk(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Development seed 101, a pose tilt that follows the pose along the moves, diagnosed with the pose-segment-only
+    tilt model (as before the ``rig`` variant): what the model leaves (jumps between segments) passed the random-walk
+    test; the consistency check rejects the wander (its K^2 across segment boundaries is many standard errors above
+    the one inside segments)."""
+    from station.diagnose import pose_tilt
+
+    monkeypatch.setattr(pose_tilt, "choose_variant",
+                        lambda b, sd: ("segment", {"segment": pose_tilt.build_variant(b, sd, "segment")}))
+    report = diagnose(indepgen.generate(101, {"pose_tilt": 0.1}).session, warmup_tc_s=TC).report
+    assert "bias_random_walk" not in {e for e, _ in _named(report)}
+    walk = [r for r in report["rejected"] if r["effect"] == "bias_random_walk" and "consistency" in r]
+    assert walk and "not the same wander" in walk[0]["reason"]
+    assert abs(walk[0]["consistency"]["inside_vs_across_segments"]) > 8.0

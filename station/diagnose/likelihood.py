@@ -42,6 +42,7 @@ from scipy import linalg, optimize, stats
 from station.diagnose.registry import EFFECTS
 from station.diagnose.residuals import Baseline, SensorData
 from station.fit.blocks import block_exp_mean, power_on_gm_correlation
+from station.session.model import Kind
 
 #: Significance of a single candidate test (chi^2 tail), on top of the BIC.
 ALPHA = 1e-5
@@ -67,6 +68,12 @@ GM_CACHE = 48
 #: and from the dispersion.
 Q_BOUNDED = False
 Q_BOUND = 10.0
+#: A bias random walk's increments are the same everywhere in the record: its K^2 estimated from the
+#: settled blocks' increments in the first and the second half of the record, and from pairs of blocks inside
+#: one segment and across a segment boundary, must agree within this many standard errors
+#: (:meth:`SensorProblem.walk_consistency`); structure a mis-modelled mean effect leaves (jumps between poses,
+#: a part of the record) does not.
+WALK_CONSISTENCY_Z = 4.0
 #: Shortest warm-up T_c (s) the diagnosis considers: a faster "warm-up" is no drift of eq. 3 at the blocks'
 #: resolution (and its block means overflow).
 TC_FLOOR_S = 1.0
@@ -566,6 +573,46 @@ class SensorProblem:
                     bic_gain=gain - math.log(self.n_rows), critical=crit, theta=np.array([k]),
                     cov=np.array([[k_std**2]]))
 
+    def walk_consistency(self) -> dict[str, Any]:
+        """Whether the wander in the current model's block residual is a random walk: the increments of the
+        residual between consecutive settled blocks (rest, pose, rate; moves left out), ``d = r_j - r_i``, have
+        ``E d^2 = w_i + w_j + K^2 dt`` (white block noise ``w``, :attr:`white`) for a random walk wherever they are
+        taken. Moment estimates of K^2 (three axes pooled, ``sum(d^2 - w_i - w_j) / sum(dt)``) from four sets of
+        pairs: the first / second half of the record, pairs inside one segment / across a segment boundary; the
+        standard error of each from ``var d^2 = 2 (E d^2)^2`` at the pooled K^2. Consistent when both
+        differences are within :data:`WALK_CONSISTENCY_Z` standard errors."""
+        raw = self.quality()["block_residual"]
+        sd = self.sd
+        settled = np.flatnonzero(sd.kind != int(Kind.MOVE))
+        if len(settled) < 6:
+            return {"consistent": True, "reason": "too few settled blocks"}
+        i, j = settled[:-1], settled[1:]
+        dt = sd.t_s[j] - sd.t_s[i]
+        d2 = (raw[j] - raw[i]) ** 2  # (pairs, 3)
+        w = self.white[i] + self.white[j]
+        excess = (d2 - w).sum(axis=1)
+        k2_all = max(float(excess.sum()) / max(3.0 * float(dt.sum()), 1e-300), 0.0)
+        var = (2.0 * (w + k2_all * dt[:, None]) ** 2).sum(axis=1)
+        mid = 0.5 * float(sd.t_s.max())
+        same = sd.segment[i] == sd.segment[j]
+        out: dict[str, Any] = {"k2_pooled": k2_all}
+        consistent = True
+        for name, a in (("halves", sd.t_s[j] <= mid), ("inside_vs_across_segments", same)):
+            est = []
+            for sel in (a, ~a):
+                if not sel.any():
+                    est = []
+                    break
+                den = 3.0 * float(dt[sel].sum())
+                est.append((float(excess[sel].sum()) / den, math.sqrt(float(var[sel].sum())) / den))
+            if len(est) < 2:
+                continue
+            z = (est[0][0] - est[1][0]) / max(math.hypot(est[0][1], est[1][1]), 1e-300)
+            out[name] = {"k2": [est[0][0], est[1][0]], "std": [est[0][1], est[1][1]], "z": round(z, 2)}
+            consistent = consistent and abs(z) <= WALK_CONSISTENCY_Z
+        out["consistent"] = consistent
+        return out
+
     def _temperature_vs_warmup(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(T grid s, R^2 (T, axis), energy (axis,)) of the block temperature course against eq. 3's warm-up.
 
@@ -636,6 +683,6 @@ class SensorProblem:
 
 
 __all__ = [
-    "ALPHA", "DRIFT_NOISE_MAX", "FOLDS", "HELDOUT_SE", "PROFILE_TC", "RCOND", "TC_FLOOR_S", "SensorProblem", "Test",
-    "base_drift",
+    "ALPHA", "DRIFT_NOISE_MAX", "FOLDS", "HELDOUT_SE", "PROFILE_TC", "RCOND", "TC_FLOOR_S", "WALK_CONSISTENCY_Z",
+    "SensorProblem", "Test", "base_drift",
 ]

@@ -11,9 +11,17 @@ changes by (eq. 1 with the tilted input)
 
 with ``a_1, a_2`` the two rotation axes of the pose (for the six standard poses the two
 other sensor axes) and M the base fit's misalignment matrix. Poses are told apart by the
-direction of their reference vector (within ``ALIGN_COS``); only samples in ``pose``
-segments are affected (a power-on rest or a rate step in the same orientation is taken as
-un-tilted, as in the simulator's ``pose_tilt`` effect).
+direction of their reference vector (within ``ALIGN_COS``). Where the tilt acts is one of two
+:data:`VARIANTS`, the one that explains more of the block residual is taken (same parameters):
+
+* ``rig``: a real rig's pose error belongs to the orientation it holds: every still sample in that
+  orientation of a rest or pose segment (the power-on rest, the settling, every visit) is tilted, and
+  along the rig's moves the tilt, a fixed direction in the world, is carried with the sensor
+  (``phi(t) = D(t)^T phi_P`` with ``D`` the reference rotation since the pose, integrated from the
+  reference rate) and handed over from the pose before to the pose after in proportion to the angle
+  turned (the independent generator's rig, ``tests/indepgen.py``, moves between the tilted poses);
+* ``segment``: pose segments only (a power-on rest or a rate step in the same orientation is taken as
+  un-tilted, as in the station simulator's ``pose_tilt`` effect).
 
 Identifiability, and the parameters. Six pose means give 6 x 3 = 18 numbers; the base model
 re-fits 12 of them (M's 9 entries and b's 3), so at most 6 of the 12 tilts can be told from
@@ -38,6 +46,7 @@ Units: specific force m/s^2, tilt rad inside and deg in :func:`engineering`.
 from __future__ import annotations
 
 import math
+import weakref
 from collections.abc import Mapping
 
 import numpy as np
@@ -106,47 +115,235 @@ def _has_free_axis(baseline: Baseline, sd: SensorData, k: int) -> bool:
     return bool(np.any(np.abs(sd.ref[other, k]) > 0.1 * np.abs(sd.ref[other]).max(initial=0.0)))
 
 
-def build(baseline: Baseline, sd: SensorData) -> np.ndarray | None:
-    """Per-sample regressors (n, 3, p) of the pose tilts (rad); None without pose segments.
+def _segment_ends(session_kind: np.ndarray, segment: np.ndarray) -> list[tuple[int, int, int]]:
+    """Contiguous runs of equal (segment, kind): (start, stop, kind)."""
+    n = len(segment)
+    if n == 0:
+        return []
+    change = np.flatnonzero((np.diff(segment) != 0) | (np.diff(session_kind) != 0)) + 1
+    starts = np.concatenate(([0], change))
+    stops = np.concatenate((change, [n]))
+    return [(int(a), int(b), int(session_kind[a])) for a, b in zip(starts, stops, strict=True)]
 
-    Accelerometer only (``sd.sensor == "accel"``); M is ``sd.params.misalignment``. A tilt
-    ``phi_j`` of pose ``P`` (rotation axis ``a_j``) adds ``M (f_ref x a_j) phi_j`` in ``P``'s
-    samples. Parameters, in this order (see :data:`PARAMETERS`):
 
-    * for each opposite pair +k/-k of the standard poses (z, x, y) and each of its two rotation
-      axes: the half-difference ``d = (phi(+k) - phi(-k)) / 2`` and the half-sum
-      ``s = (phi(+k) + phi(-k)) / 2`` (so ``phi(+-k) = s +- d``): 12 parameters. The column of
-      ``s`` is zero (not fitted) when no block outside the pose segments sees gravity along
-      axis k (then M's column k absorbs it exactly), or when only one pose of the pair is
-      present (then ``d`` alone is that pose's tilt);
-    * two per-pose tilts for every other reference direction, in order of first appearance.
+def _transport(w: np.ndarray, dt: float) -> np.ndarray:
+    """Body-frame rotation accumulated from the first sample, (n, 3, 3): ``D_0 = I``,
+    ``D_{i+1} = D_i exp([w_i dt]x)`` (``R(t) = R(t_0) D(t)`` for a sensor-to-world attitude ``R``)."""
+    out = np.empty((len(w), 3, 3))
+    d = np.eye(3)
+    for i in range(len(w)):
+        out[i] = d
+        v = w[i] * dt
+        ang = math.sqrt(float(v @ v))
+        if ang > 0.0:
+            k = v / ang
+            kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+            d = d @ (np.eye(3) + math.sin(ang) * kx + (1.0 - math.cos(ang)) * (kx @ kx))
+    return out
+
+
+def rig_places(baseline: Baseline) -> tuple[np.ndarray, list[tuple[str, np.ndarray]], list[tuple[int, int, int, int]]]:
+    """Where a rig's pose error acts (the ``rig`` variant of :func:`build`): (pose of each still sample (n,), -1
+    elsewhere; the pose list; the moves next to a pose as (start, stop, pose before or -1, pose after or -1)).
+
+    Still samples: every sample of a rest or pose segment *and* of the settling run labelled with the same
+    segment number, whose reference direction is a pose's (the rig's error belongs to the orientation it holds,
+    every time it holds it, the power-on rest too). Moves: the rig's moves (kind ``move``, a segment number of
+    their own) that start or end in such a pose; along them the tilt goes over from the pose before to the pose
+    after (the rig moves between the poses where they really are).
     """
-    if sd.sensor != "accel":
-        return None
-    index, poses = pose_groups(baseline)
-    if not np.any(index >= 0):
-        return None
-    m = np.nan_to_num(np.asarray(sd.params.misalignment, dtype=float))
-    f = sd.ref  # accelerometer reference, NaN -> 0 (m/s^2)
+    session = baseline.session
+    ref = np.asarray(session.ref_accel_mps2, dtype=float)
+    norm = np.linalg.norm(np.nan_to_num(ref), axis=1)
+    ok = np.all(np.isfinite(ref), axis=1) & (norm > 0)
+    kind = np.asarray(session.kind)
+    seg = np.asarray(session.segment)
+    held = np.isin(kind, [int(Kind.POSE), int(Kind.REST)])
+    still_segs = np.unique(seg[held])
+    still = np.isin(seg, still_segs) & ok & np.isin(kind, [int(Kind.POSE), int(Kind.REST), int(Kind.MOVE)])
+    poses: list[tuple[str, np.ndarray]] = [(p, up_vector(p)) for p in POSES]
+    index = np.full(len(session), -1, dtype=np.int64)
+    rows = np.flatnonzero(still)
+    if len(rows):
+        unit = ref[rows] / norm[rows, None]
+        for i, p in enumerate(POSES):
+            index[rows[unit @ up_vector(p) > ALIGN_COS]] = i
+        rest = rows[index[rows] < 0]
+        while len(rest):
+            u = ref[rest[0]] / norm[rest[0]]
+            match = (ref[rest] / norm[rest, None]) @ u > ALIGN_COS
+            index[rest[match]] = len(poses)
+            poses.append((f"pose ({u[0]:+.3f}, {u[1]:+.3f}, {u[2]:+.3f})", u))
+            rest = rest[~match]
+    moves = []
+    for a, b, k in _segment_ends(kind, seg):
+        if k != int(Kind.MOVE) or seg[a] in still_segs:
+            continue
+        before = int(index[a - 1]) if a > 0 else -1
+        after = int(index[b]) if b < len(index) else -1
+        if before >= 0 or after >= 0:
+            moves.append((a, b, before, after))
+    return index, poses, moves
 
-    def column(p: int, a: np.ndarray) -> np.ndarray:
+
+def _rig_columns(baseline: Baseline, f: np.ndarray) -> tuple[list[tuple[str, np.ndarray]], object]:
+    """(pose list, column(p, a)) of the ``rig`` variant: the body-frame tilt ``a`` (rad) of pose ``p``, in ``f x a``
+    (specific force m/s^2 per rad) wherever the rig holds or leaves/approaches that pose (see :func:`rig_places`)."""
+    index, poses, moves = rig_places(baseline)
+    w_ref = np.nan_to_num(np.asarray(baseline.session.ref_gyro_radps, dtype=float))
+    dt = 1.0 / baseline.session.sample_rate_hz
+    paths = []
+    for a, b, before, after in moves:
+        d = _transport(w_ref[a:b], dt)
+        ang = np.concatenate(([0.0], np.cumsum(np.linalg.norm(w_ref[a:b - 1], axis=1)) * dt))
+        s = ang / ang[-1] if ang[-1] > 0 else np.linspace(0.0, 1.0, b - a)
+        # a world-fixed tilt seen in the body frame along the move: D^T a (pose before), D^T D_end a (pose after)
+        d_end = d[-1]
+        paths.append((a, b, before, after, d, d_end, s))
+
+    def column(p: int, axis: np.ndarray) -> np.ndarray:
         out = np.zeros((len(f), 3))
         sel = index == p
-        out[sel] = np.cross(f[sel], a) @ m.T
+        out[sel] = np.cross(f[sel], axis)
+        for a, b, before, after, d, d_end, s in paths:
+            if before == p:
+                out[a:b] += (1.0 - s)[:, None] * np.cross(f[a:b], np.einsum("nji,j->ni", d, axis))
+            if after == p:
+                out[a:b] += s[:, None] * np.cross(f[a:b], np.einsum("nji,j->ni", d, d_end @ axis))
         return out
 
+    return poses, column
+
+
+def _segment_columns(baseline: Baseline, f: np.ndarray) -> tuple[list[tuple[str, np.ndarray]], object]:
+    """(pose list, column(p, a)) of the ``segment`` variant: the tilt in pose segments only (as the station's
+    simulator has it)."""
+    index, poses = pose_groups(baseline)
+
+    def column(p: int, axis: np.ndarray) -> np.ndarray:
+        out = np.zeros((len(f), 3))
+        sel = index == p
+        out[sel] = np.cross(f[sel], axis)
+        return out
+
+    return poses, column
+
+
+def _assemble(baseline: Baseline, sd: SensorData, poses: list, column, free_of) -> np.ndarray:
+    m = np.nan_to_num(np.asarray(sd.params.misalignment, dtype=float))
     cols: list[np.ndarray] = []
     for k in _PAIR_AXES:
         ip, im = POSES.index("+" + k), POSES.index("-" + k)
-        both = np.any(index == ip) and np.any(index == im)
-        free = both and _has_free_axis(baseline, sd, _AXES.index(k))
+        ups = [column(i, _rotation_axes(up_vector(POSES[i]))[0]) for i in (ip, im)]
+        both = all(np.any(u) for u in ups)
+        free = both and free_of(_AXES.index(k))
         for a in _rotation_axes(up_vector("+" + k)):
             plus, minus = column(ip, a), column(im, a)
             cols.append(plus - minus)  # d
             cols.append(plus + minus if free else np.zeros_like(plus))  # s
     for p in range(len(POSES), len(poses)):
         cols.extend(column(p, a) for a in _rotation_axes(poses[p][1]))
-    return np.stack(cols, axis=2)
+    return np.einsum("nkp,jk->njp", np.stack(cols, axis=2), m)  # M (f x a) per column
+
+
+#: The two places a pose error can act (:func:`build`): ``rig`` (every time the rig holds the pose, rest included,
+#: and along its moves to and from it) and ``segment`` (in pose segments only).
+VARIANTS = ("rig", "segment")
+
+
+def build_variant(baseline: Baseline, sd: SensorData, variant: str) -> np.ndarray | None:
+    """The regressors (n, 3, p) of :func:`build` for one of :data:`VARIANTS`; None without pose segments."""
+    if sd.sensor != "accel":
+        return None
+    index, _ = pose_groups(baseline)
+    if not np.any(index >= 0):
+        return None
+    f = sd.ref  # accelerometer reference, NaN -> 0 (m/s^2)
+    if variant == "segment":
+        poses, column = _segment_columns(baseline, f)
+        return _assemble(baseline, sd, poses, column, lambda k: _has_free_axis(baseline, sd, k))
+    poses, column = _rig_columns(baseline, f)
+    touched = np.zeros(len(f), dtype=bool)
+    for p in range(len(poses)):
+        for a in _rotation_axes(poses[p][1]):
+            touched |= np.any(column(p, a) != 0, axis=1)
+
+    def free_of(k: int) -> bool:
+        other = (sd.label >= 0) & ~touched
+        return bool(np.any(np.abs(sd.ref[other, k]) > 0.1 * np.abs(sd.ref[other]).max(initial=0.0)))
+
+    return _assemble(baseline, sd, poses, column, free_of)
+
+
+def _explained(sd: SensorData, zb: np.ndarray) -> float:
+    """Weighted block chi^2 the block regressors ``zb`` (m, 3, p) explain beyond the base terms (rows of M,
+    b_stat, eq. 3's warm-up at the base fit's T_c), white block noise: the variant choice of :func:`build`."""
+    ref_b = sd.block_mean(sd.ref)
+    t = sd.t_s
+    gain = 0.0
+    for k in range(3):
+        tc = float(sd.params.correlation_time_s[k])
+        tc = tc if math.isfinite(tc) and tc > 0 else float(t.max() + 1.0)
+        base = np.column_stack([ref_b, np.ones(len(t)), np.exp(-t / tc)])
+        w = np.sqrt(sd.count) / sd.sigma[k]
+        y = sd.y[:, k] * w
+        rss = []
+        for x in (base, np.column_stack([base, zb[:, k, :]])):
+            xw = x * w[:, None]
+            beta, *_ = np.linalg.lstsq(xw, y, rcond=1e-10)
+            r = y - xw @ beta
+            rss.append(float(r @ r))
+        gain += rss[0] - rss[1]
+    return gain
+
+
+def choose_variant(baseline: Baseline, sd: SensorData) -> tuple[str, dict[str, np.ndarray | None]]:
+    """The variant (:data:`VARIANTS`) whose regressors explain more of the block residual, and all variants'."""
+    zs = {v: build_variant(baseline, sd, v) for v in VARIANTS}
+    gains = {v: _explained(sd, sd.block_mean(z)) if z is not None else -math.inf for v, z in zs.items()}
+    return max(VARIANTS, key=lambda v: gains[v]), zs
+
+
+def build(baseline: Baseline, sd: SensorData) -> np.ndarray | None:
+    """Per-sample regressors (n, 3, p) of the pose tilts (rad); None without pose segments.
+
+    Accelerometer only (``sd.sensor == "accel"``); M is ``sd.params.misalignment``. A tilt
+    ``phi_j`` of pose ``P`` (rotation axis ``a_j``) adds ``M (f_ref x a_j) phi_j`` where the rig holds
+    ``P``. Where that is (:data:`VARIANTS`, the one that explains more of the block residual is taken, the
+    same parameters either way):
+
+    * ``rig``: every still sample in ``P``'s orientation that belongs to a rest or pose segment (the power-on
+      rest, the settling, every visit), and along the rig's moves from and to ``P``: the tilt, a fixed
+      direction in the world, carried along the reference rotation (integrated reference rate) and handed
+      over from the pose before to the pose after in proportion to the angle turned;
+    * ``segment``: pose segments only (the station's simulator).
+
+    Parameters, in this order (see :data:`PARAMETERS`):
+
+    * for each opposite pair +k/-k of the standard poses (z, x, y) and each of its two rotation
+      axes: the half-difference ``d = (phi(+k) - phi(-k)) / 2`` and the half-sum
+      ``s = (phi(+k) + phi(-k)) / 2`` (so ``phi(+-k) = s +- d``): 12 parameters. The column of
+      ``s`` is zero (not fitted) when no block the tilt does not reach sees gravity along
+      axis k (then M's column k absorbs it exactly), or when only one pose of the pair is
+      present (then ``d`` alone is that pose's tilt);
+    * two per-pose tilts for every other reference direction, in order of first appearance.
+    """
+    if sd.sensor != "accel":
+        return None
+    hit = _CACHE.get(baseline)
+    if hit is not None and hit[0] is sd:
+        return hit[1]
+    best, zs = choose_variant(baseline, sd)
+    z = zs[best]
+    if z is not None:
+        z.flags.writeable = False  # shared through the cache
+    _CACHE[baseline] = (sd, z)
+    return z
+
+
+#: The last regressors of :func:`build` per baseline (selection, the fitted signal, the re-run and the compensation
+#: ask for the same ones); entries go with their baseline.
+_CACHE: weakref.WeakKeyDictionary[Baseline, tuple[SensorData, np.ndarray | None]] = weakref.WeakKeyDictionary()
 
 
 def specific_force_change(baseline: Baseline, sd: SensorData, theta: np.ndarray) -> np.ndarray:
@@ -236,6 +433,7 @@ def engineering(theta: np.ndarray, cov: np.ndarray) -> dict[str, object]:
 PARAMETERS: tuple[str, ...] = _parameter_names()
 
 __all__ = [
-    "ALIGN_COS", "DESCRIPTION", "NAME", "PARAMETERS", "RIG_STEP", "SENSORS", "build", "engineering", "pose_groups",
+    "ALIGN_COS", "DESCRIPTION", "NAME", "PARAMETERS", "RIG_STEP", "SENSORS", "VARIANTS", "build", "build_variant",
+    "choose_variant", "engineering", "pose_groups", "rig_places",
     "specific_force_change", "theta_of",
 ]

@@ -132,6 +132,10 @@ class Identifiability:
         rig_free: per sensor, why a rig-free recording (hand-held still poses, no rig reference:
             :mod:`station.fit.rigfree`) cannot test it; a sensor not listed: testable there, as far as the
             recording holds what ``needs`` says.
+        family: candidates of one family are forms of the same physics (the odd scale terms ``u|u|`` and
+            ``u^3``: a scale nonlinearity odd in the input); where the recording cannot tell the forms apart,
+            :mod:`station.diagnose.selection` names the better-fitting form as the finding and lists the others
+            in its evidence (``form_inseparable_from``) instead of naming nothing. None: no family.
     """
 
     needs: str
@@ -139,6 +143,7 @@ class Identifiability:
     profile_tc: bool = False
     base_twin: str | None = None
     rig_free: Mapping[str, str] = field(default_factory=dict)
+    family: str | None = None
 
 
 @dataclass(frozen=True)
@@ -207,6 +212,7 @@ _RF_DELAY = ("the references are the still poses: a delay shifts no still's mean
              "stills does not depend on when it was sampled (an accelerometer-gyroscope delay could show in the "
              "moves' gravity direction, not modelled)")
 _NO_SIM = "no simulator counterpart"
+_ODD_SCALE = "scale nonlinearity odd in the input"
 
 #: Every candidate effect, in the canonical order of :data:`NAMES` (report, benchmarks' seeds and tables).
 EFFECTS: tuple[Effect, ...] = (
@@ -244,7 +250,7 @@ EFFECTS: tuple[Effect, ...] = (
         _both((STANDARD_GRAVITY, _NL_UNIT[0]), (GYRO_NONLINEARITY_REF_RADPS, _NL_UNIT[1])),
         Identifiability(_INPUT + "; told from the scale factor at two or more input magnitudes",
                         "steps at a second input magnitude (more rates, or tilted poses for the accelerometer)",
-                        rig_free={"accel": _RF_NORM_ONLY, "gyro": _RF_NO_RATE}),
+                        rig_free={"accel": _RF_NORM_ONLY, "gyro": _RF_NO_RATE}, family=_ODD_SCALE),
         simulate=_add("nonlinearity"),  # u + k u|u|
         compensation="scale_nonlinearity",
     ),
@@ -338,7 +344,7 @@ EFFECTS: tuple[Effect, ...] = (
         _both((STANDARD_GRAVITY**2, _NL_UNIT[0]), (GYRO_NONLINEARITY_REF_RADPS**2, _NL_UNIT[1])),
         Identifiability(_INPUT + "; told from u|u| at three or more input magnitudes",
                         "rate steps at three or more magnitudes (w|w| and w^3 then differ)",
-                        rig_free={"accel": _RF_NORM_ONLY, "gyro": _RF_NO_RATE}),
+                        rig_free={"accel": _RF_NORM_ONLY, "gyro": _RF_NO_RATE}, family=_ODD_SCALE),
         not_simulated=_NO_SIM,
         # the fit's u + k u|u| is odd in the rate: it stands for the odd (cubic-like) term, not the even one
         compensation="scale_nonlinearity",

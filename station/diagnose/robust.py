@@ -120,6 +120,11 @@ def _restore_noise(prob: Any, saved: Any) -> None:
     prob._eig_cache.update(cache)
 
 
+def _walk_summary(cons: dict[str, Any]) -> dict[str, float]:
+    """The z-scores of :meth:`station.diagnose.likelihood.SensorProblem.walk_consistency` for the report."""
+    return {k: v["z"] for k, v in cons.items() if isinstance(v, dict)}
+
+
 def _confidence(gain: float, threshold: float) -> str:
     r = gain / threshold if threshold > 0 else math.inf
     return "high" if r >= 4.0 else "medium" if r >= 1.5 else "low"
@@ -244,10 +249,18 @@ def audit(prob: Any, baseline: Any, names: list[str], regs: dict[str, np.ndarray
             finally:
                 prob.k2 = k2
                 prob._fit_q()
-            if t.passes and not bad_cells:
+            cons = prob.walk_consistency()
+            if t.passes and not bad_cells and cons["consistent"]:
                 out.confidence["bias_random_walk"] = {"level": _confidence(t.gain, t.threshold),
                                                       "quasi_gain_chi2": round(t.gain, 2),
-                                                      "threshold": round(t.threshold, 2)}
+                                                      "threshold": round(t.threshold, 2),
+                                                      "consistency": _walk_summary(cons)}
+            elif t.passes and not bad_cells:
+                out.rejected.append({"effect": "bias_random_walk", "sensor": sd.sensor, "gain": round(t.gain, 3),
+                                     "consistency": _walk_summary(cons),
+                                     "reason": "not the same wander throughout the record (its K^2 differs between "
+                                               "the halves, or between increments inside and across segments): "
+                                               "structure of a mean effect, not a random walk"})
             else:
                 out.rejected.append({"effect": "bias_random_walk", "sensor": sd.sensor, "gain": round(t.gain, 3),
                                      "reason": "not significant under the final model's dispersion, or a wander "

@@ -147,6 +147,13 @@ def select(baseline: Baseline, *, max_effects: int = 4,
                 # nearly collinear is not the same as inseparable: the best stays when what it alone
                 # explains (given the twin) is significant while what the twin alone explains is not
                 twins = [t for t in twins if not _unique(prob, best, t, regs)]
+            # forms of one physics (registry family): the effect is found, only its form is not told apart
+            family = REGISTRY[best.effect].identifiability.family
+            forms = [t for t in twins if family and REGISTRY[t.effect].identifiability.family == family]
+            if forms and len(forms) == len(twins):
+                twins = []
+            else:
+                forms = []
             if best.effect == "temperature_bias" and prob.temperature_unique(best.theta) < best.critical:
                 # significant, but what only a temperature bias explains is not: the warm-up (eq. 3) with
                 # another T_c could take it over
@@ -197,6 +204,13 @@ def select(baseline: Baseline, *, max_effects: int = 4,
             pool.discard(best.effect)
             last.pop(best.effect, None)
             mine.append(finding(sd, best, before, after))
+            if best.effect != "bias_random_walk" and forms:
+                for t in forms:
+                    pool.discard(t.effect)
+                    last.pop(t.effect, None)
+                mine[-1]["evidence"]["form_inseparable_from"] = {
+                    "family": family, "effects": {t.effect: {"gain": round(t.gain, 2)} for t in forms},
+                    "rig_step": RIG_STEPS[best.effect]}
         # checks that hold when the model is wrong (robust.py): drop-one under the dispersion, stand-ins,
         # what stays unexplained; rounds until nothing more is rejected
         confidence: dict[str, dict[str, Any]] = {}
