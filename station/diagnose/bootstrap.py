@@ -25,8 +25,8 @@ from typing import Any
 import numpy as np
 from scipy import linalg
 
-from station.diagnose.registry import SHAPES, unit_factor
 from station.diagnose.likelihood import RCOND
+from station.diagnose.registry import SHAPES, unit_factor
 
 #: Resamples per sensor (the linear refit costs a few ms each).
 RESAMPLES = 60
@@ -150,4 +150,4 @@ def bootstrap(prob: Any, names: list[str], thresholds: dict[str, float], phi: np
     return out
 
 
-__all__ = ["Bootstrap", "HIGH", "MEDIUM", "RESAMPLES", "SEED", "bootstrap", "level"]
+__all__ = ["HIGH", "MEDIUM", "RESAMPLES", "SEED", "Bootstrap", "bootstrap", "level"]

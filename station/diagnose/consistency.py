@@ -48,8 +48,8 @@ import numpy as np
 from scipy import linalg, stats
 
 from station.diagnose import robust
-from station.diagnose.registry import REGISTRY, SHAPES, unit_factor
 from station.diagnose.likelihood import RCOND
+from station.diagnose.registry import REGISTRY, SHAPES, unit_factor
 from station.session.model import Kind
 
 #: Significance of a consistency check (chi^2 tail): a finding fails below it.
@@ -322,4 +322,6 @@ def rejection(c: Check) -> dict[str, Any]:
                       f"this effect"}
 
 
-__all__ = ["ALPHA", "PARTS", "TOLERANCE", "Check", "check", "check_finding", "failed", "not_checked", "rejection", "review"]
+__all__ = [
+    "ALPHA", "PARTS", "TOLERANCE", "Check", "check", "check_finding", "failed", "not_checked", "rejection", "review",
+]
