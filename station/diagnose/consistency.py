@@ -50,6 +50,7 @@ from scipy import linalg, stats
 from station.diagnose import robust
 from station.diagnose.likelihood import RCOND
 from station.diagnose.registry import REGISTRY, SHAPES, unit_factor
+from station.diagnose.robust import AX
 from station.session.model import Kind
 
 #: Significance of a consistency check (chi^2 tail): a finding fails below it.
@@ -294,17 +295,49 @@ def not_checked(name: str, sensor: str) -> list[Check]:
     return [Check(name, sensor, None, reason=reason)]
 
 
-def review(prob: Any, baseline: Any, names: list[str]) -> tuple[dict[str, list[Check]], dict[str, Any] | None]:
-    """:func:`check` under the final model's dispersion (:func:`station.diagnose.robust.dispersion`), and the
-    rejection entry of the worst failing finding (None when every informative check passes)."""
-    phi, _ = robust.dispersion(prob)
+def review(prob: Any, baseline: Any, names: list[str], gains: dict[str, float] | None = None
+           ) -> tuple[dict[str, list[Check]], dict[str, Any] | None, robust.Unexplained | None]:
+    """:func:`check` under the final model's dispersion (:func:`station.diagnose.robust.dispersion`), the
+    rejection entry of the worst failing finding (None when every informative check passes) and, where that
+    finding's drop-one chi^2 gain (``gains``) shows its structure above the noise, where that structure stays
+    unexplained (:func:`locate`)."""
+    phi, table = robust.dispersion(prob)
     saved = robust._with_inflated_noise(prob, phi)
     try:
         checks = check(prob, baseline, names)
+        worst = failed([c for cs in checks.values() for c in cs])
+        where = None
+        if worst is not None and (gains or {}).get(worst.effect, 0.0) > 0.0:
+            where = locate(prob, names.index(worst.effect), worst, gains[worst.effect], table)
     finally:
         robust._restore_noise(prob, saved)
-    worst = failed([c for cs in checks.values() for c in cs])
-    return checks, (rejection(worst) if worst is not None else None)
+    return checks, (rejection(worst) if worst is not None else None), where
+
+
+#: A part (axis, segment kind) holding at least this share of a rejected finding's signal energy is where it is.
+LOCATE_SHARE = 0.1
+
+
+def locate(prob: Any, j: int, c: Check, gain: float, table: dict[str, list[float]]) -> robust.Unexplained:
+    """Where the structure of accepted term ``j``, rejected by check ``c``, lies: the axes and segment kinds
+    holding at least :data:`LOCATE_SHARE` of its whitened fitted signal energy; ``gain``: its chi^2 gain."""
+    chols, yw = prob.whitened()
+    x0, nbase = prob.design(chols, prob.accepted)
+    beta, *_ = linalg.lstsq(x0, yw, cond=RCOND, check_finite=False)
+    col = nbase + sum(a.shape[2] for a in prob.accepted[:j])
+    p = prob.accepted[j].shape[2]
+    energy = ((x0[:, col:col + p] @ beta[col:col + p]).reshape(3, prob.m) ** 2).T  # (m, 3)
+    total = max(float(energy.sum()), 1e-300)
+    axes = tuple(AX[k] for k in range(3) if energy[:, k].sum() / total >= LOCATE_SHARE)
+    kinds = tuple(sorted(Kind(k).label for k in np.unique(prob.sd.kind)
+                         if energy[prob.sd.kind == k].sum() / total >= LOCATE_SHARE))
+    a, b = PARTS[c.split]
+    what = f"what the {c.effect} model fits, but {a} and {b} disagree on it"
+    if c.part_a and c.part_b:
+        def fmt(v: dict[str, Any]) -> str:
+            return ", ".join(f"{x:.3g}+-{e:.2g}" for x, e in zip(v["value"], v["std"], strict=False)) + f" {v['unit']}"
+        what += f" ({a} {fmt(c.part_a)}; {b} {fmt(c.part_b)})"
+    return robust.Unexplained(c.sensor, axes, kinds, what, table, float(gain))
 
 
 def failed(checks: list[Check]) -> Check | None:
@@ -323,5 +356,15 @@ def rejection(c: Check) -> dict[str, Any]:
 
 
 __all__ = [
-    "ALPHA", "PARTS", "TOLERANCE", "Check", "check", "check_finding", "failed", "not_checked", "rejection", "review",
+    "ALPHA",
+    "PARTS",
+    "TOLERANCE",
+    "Check",
+    "check",
+    "check_finding",
+    "failed",
+    "locate",
+    "not_checked",
+    "rejection",
+    "review",
 ]

@@ -211,11 +211,14 @@ def select(baseline: Baseline, *, max_effects: int = 4,
             gone = {r["effect"] for r in audit.rejected}
             rejected.extend(audit.rejected)
             if not gone:  # effect-specific consistency (consistency.py): the worst failing finding goes
-                checks, bad = consistency.review(prob, baseline, [n if n in confidence else NUISANCE + n
-                                                                  for n in names])
+                checks, bad, where = consistency.review(
+                    prob, baseline, [n if n in confidence else NUISANCE + n for n in names],
+                    {n: c["quasi_gain_chi2"] for n, c in confidence.items()})
                 if bad is not None:
                     gone = {bad["effect"]}
                     rejected.append(bad)
+                if where is not None:  # its structure stays, and no candidate explains it
+                    unexplained.append(where)
             unexplained.extend(audit.unexplained if not gone else [])
             if not gone:
                 break
