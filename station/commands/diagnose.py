@@ -123,11 +123,11 @@ def _print_confidence(f: dict[str, Any]) -> None:
         parts = []
         for c in checks:
             if c.get("check") is None:
-                parts.append(f"not checked ({c['reason']})")
+                parts.append(f"not checked: {c['reason']}")
                 continue
             label = f"{c['parts'][0]} vs {c['parts'][1]}"
             if c["result"] == "not checked":
-                parts.append(f"{label}: not checked ({c['reason']})")
+                parts.append(f"{label}: not checked, {c['reason']}")
             else:
                 parts.append(f"{label}: {c['result']} (p {c['p_value']:.2g})")
         typer.echo(f"    consistency: {'; '.join(parts)}")

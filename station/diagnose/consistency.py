@@ -238,10 +238,10 @@ def check_finding(prob: Any, baseline: Any, j: int, name: str, split: str,
     share_b = float(energy[mask_b].sum()) / total
     if share_b < REACH or not mask_b.any():
         return _not_checked(name, sd.sensor, split, f"its signal does not reach the {b_name} of this recording "
-                                                    f"({100 * share_b:.1f} % of it there)")
+                                                    f"({100 * share_b:.1f} % of its energy)")
     if share_b > 1.0 - REACH or mask_b.all():
         return _not_checked(name, sd.sensor, split, f"its signal does not reach the {a_name} of this recording "
-                                                    f"({100 * (1 - share_b):.1f} % of it there)")
+                                                    f"({100 * (1 - share_b):.1f} % of its energy)")
     wb_full, _ = prob.design(chols, [zb * mask_b[:, None, None]])
     wb = wb_full[:, nbase:]
     coef, *_ = linalg.lstsq(x0, wb, cond=RCOND, check_finite=False)
