@@ -110,3 +110,40 @@ def test_the_bootstrap_is_seeded_and_states_the_spread(asymmetric) -> None:
     # a threshold no resample reaches: never accepted, low confidence
     never = bootstrap.bootstrap(prob, ["scale_asymmetry"], {"scale_asymmetry": 1e12}, phi, resamples=5, seed=3)
     assert never["scale_asymmetry"].accepted_fraction == 0.0 and never["scale_asymmetry"].level == "low"
+
+
+def test_findings_carry_their_checks_and_bootstrap_typed_and_in_the_report() -> None:
+    from station.diagnose import diagnose
+    from station.diagnose.selection import select
+
+    rec = indepgen.generate(19, {"time_offset": 10.0})
+    base = fit_baseline(rec.session, warmup_tc_s=TC)
+    decision = select(base, resamples=10, seed=5)
+    gyro = next(f for f in decision.findings if f.sensor == "gyro")
+    assert gyro.effect == "time_offset"
+    assert isinstance(gyro.bootstrap, bootstrap.Bootstrap) and gyro.bootstrap.resamples == 10
+    assert gyro.bootstrap.seed == 5 and gyro.bootstrap.accepted_fraction == 1.0
+    assert abs(gyro.bootstrap.median[0] - 10.0) < 0.5 and gyro.confidence["level"] == "high"
+    (c,) = gyro.consistency
+    assert isinstance(c, consistency.Check) and c.result == "passed"
+    entry = gyro.to_dict()
+    assert entry["consistency"][0]["check"] == "tumbles_vs_ramps" and entry["bootstrap"]["resamples"] == 10
+    # resamples=0 leaves the bootstrap out; the checks stay
+    report = diagnose(rec.session, warmup_tc_s=TC, resamples=0).report
+    for f in report["findings"]:
+        assert "bootstrap" not in f and f["consistency"]
+
+
+def test_cli_shows_the_checks_and_the_bootstrap(tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from station.cli import app
+    from station.kernel.limits_file import DEFAULT_LIMITS_PATH
+
+    path = tmp_path / "delay.csv"
+    indepgen.generate(19, {"time_offset": 10.0}).write(path)
+    r = CliRunner().invoke(app, ["diagnose", str(path), "--limits", str(DEFAULT_LIMITS_PATH), "--resamples", "4"])
+    assert r.exit_code == 0, r.output
+    assert "bootstrap over segments (4 resamples, seed 16)" in r.output
+    assert "consistency: tumbles (gravity turning) vs rate ramps and other moves: passed" in r.output
+    assert "vs rate ramps and other moves: not checked, its signal does not reach the rate ramps" in r.output

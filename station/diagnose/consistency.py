@@ -182,7 +182,11 @@ def _block_masks(prob: Any, baseline: Any, split: str, name: str, energy: np.nda
         cum = np.cumsum(energy[order])
         if cum[-1] <= 0:
             return None
-        cut = mag[order][int(np.searchsorted(cum, 0.5 * cum[-1]))]
+        ms = mag[order]
+        steps = np.flatnonzero(ms[1:] > ms[:-1])  # cut between distinct magnitudes, nearest half the energy
+        if not steps.size:
+            return np.zeros(len(mag), dtype=bool)
+        cut = ms[steps[int(np.argmin(np.abs(cum[steps] - 0.5 * cum[-1])))]]
         return mag > cut
     raise ValueError(f"unknown split {split!r}")
 
