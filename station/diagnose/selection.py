@@ -233,8 +233,9 @@ def select(baseline: Baseline, *, max_effects: int = 4,
             if _round == AUDIT_ROUNDS - 1:
                 unexplained.extend(robust.audit(prob, baseline, names, regs, walk,
                                                 _fitted_samples(prob, baseline, sd, names, tau)).unexplained)
-        boot = bootstrap.bootstrap(prob, names, {n: c["threshold"] for n, c in confidence.items()},
-                                   robust.dispersion(prob)[0], seed=seed) if names and resamples else {}
+        boot = (bootstrap.bootstrap(prob, names, {n: c["threshold"] for n, c in confidence.items()},
+                                    robust.dispersion(prob)[0], resamples=resamples, seed=seed)
+                if names and resamples else {})
         for f in mine:
             f["confidence"] = conf = dict(confidence.get(f["effect"], {"level": "low"}))
             if f["effect"] in boot:  # the level the report states is the bootstrap's (bootstrap.py)
