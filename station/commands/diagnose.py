@@ -1,4 +1,4 @@
-"""``station diagnose SESSION.csv [--json] [--plot OUT.png]``: the CLI front of :mod:`station.diagnose`.
+"""``station diagnose SESSION.csv [--json] [--plot OUT.png] [--resamples N]``: the CLI front of :mod:`station.diagnose`.
 
 Wire it into ``station/cli.py`` with ``app.command()(diagnose)`` (see the report of issue 6).
 """
@@ -65,6 +65,7 @@ def _print_text(report: dict[str, Any]) -> None:
             typer.echo(f"    block chi2 per axis {b['block_chi2']} -> {a['block_chi2']}")
         else:
             typer.echo(f"    evidence: {json.dumps(ev)}")
+        _print_confidence(f)
         cal = f.get("calibration")
         if cal is not None:
             typer.echo(f"    calibration: {'compensates it' if cal['compensated'] else 'does not compensate it'}: "
@@ -107,6 +108,31 @@ def _print_text(report: dict[str, Any]) -> None:
     _print_rerun(report.get("rerun"))
 
 
+def _print_confidence(f: dict[str, Any]) -> None:
+    """A finding's bootstrap and consistency checks, one line each."""
+    b = f.get("bootstrap")
+    if b:
+        spread = ""
+        if "median" in b:
+            values = ", ".join(f"{m:.3g}+-{s:.2g}" for m, s in zip(b["median"], b["std"], strict=False))
+            spread = f"; over the resamples {values} {b['unit']}"
+        typer.echo(f"    bootstrap over segments ({b['resamples']} resamples, seed {b['seed']}): named in "
+                   f"{100 * b['accepted_fraction']:.0f} %, spread {b['std_ratio']:.2g} x the stated std{spread}")
+    checks = f.get("consistency") or []
+    if checks:
+        parts = []
+        for c in checks:
+            if c.get("check") is None:
+                parts.append(f"not checked: {c['reason']}")
+                continue
+            label = f"{c['parts'][0]} vs {c['parts'][1]}"
+            if c["result"] == "not checked":
+                parts.append(f"{label}: not checked, {c['reason']}")
+            else:
+                parts.append(f"{label}: {c['result']} (p {c['p_value']:.2g})")
+        typer.echo(f"    consistency: {'; '.join(parts)}")
+
+
 def _print_rerun(rerun: dict[str, Any] | None) -> None:
     """The simulator re-run: recording minus simulation per block, base vs base + effects."""
     if not rerun:
@@ -136,6 +162,9 @@ def diagnose(
         "--limits", help="limits file (e.g. fixtures/limits/default.toml) whose correlation_time_s ranges are the "
         "sensor class's T_c: a warm-up outside them is not taken for eq. 3's drift. Default: the recording "
         "alone decides T_c")] = None,
+    resamples: Annotated[int | None, typer.Option(
+        "--resamples", min=0, help="bootstrap resamples over segments for each finding's confidence (0: none; "
+        "default: station.diagnose.bootstrap.RESAMPLES)")] = None,
 ) -> None:
     """Find the physics the base model misses in a recording, fit it and show the improvement."""
     import warnings
@@ -154,7 +183,8 @@ def diagnose(
         session = read_session(session_path)
         with warnings.catch_warnings(), numerics(f"diagnosis of {session.serial!r}"):
             warnings.simplefilter("ignore", RuntimeWarning)
-            result = run_diagnosis(session, warmup_tc_s=warmup_tc)
+            result = run_diagnosis(session, warmup_tc_s=warmup_tc,
+                                   **({} if resamples is None else {"resamples": resamples}))
         if plot is not None:
             save_figure(result, plot)
     except StationError as exc:

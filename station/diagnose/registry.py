@@ -162,6 +162,9 @@ class Effect:
         per_axis: a three-parameter vector whose parameter k acts on output axis k (False: e.g. the lever arm).
         engineering: a custom conversion of (theta, cov) to the report's parameters (replaces the generic one).
         extra: additional engineering values from theta (e.g. the lever arm's length).
+        consistency: the splits of the recording its effect-specific consistency checks compare its
+            parameters across (:data:`station.diagnose.consistency.PARTS` names; issue 16, item 1).
+        not_checked: why it has no consistency check (empty where it has one).
         simulate: the simulator mapping of fitted parameters, None when not simulated.
         not_simulated: why it is not simulated (empty when it is).
         reaches_gyro: an accelerometer effect whose simulated change of the specific force reaches the gyro
@@ -187,6 +190,8 @@ class Effect:
     per_axis: bool = True
     engineering: Callable[[np.ndarray, np.ndarray], dict[str, object]] | None = None
     extra: Callable[[np.ndarray], dict[str, object]] | None = None
+    consistency: tuple[str, ...] = ()
+    not_checked: str = ""
 
 
 def _both(accel: tuple[float, str], gyro: tuple[float, str]) -> dict[str, tuple[float, str]]:
@@ -226,7 +231,7 @@ EFFECTS: tuple[Effect, ...] = (
             "is a ramp too)",
             profile_tc=True, base_twin="bias_drift (eq. 3 warm-up)"),
         simulate=_add("temp_bias"),  # + c dT
-        compensation="temperature_bias",
+        compensation="temperature_bias", consistency=("early_vs_late",),
     ),
     Effect(
         "temperature_scale", "mean", ("accel", "gyro"), "scale factor proportional to the temperature rise",
@@ -235,14 +240,14 @@ EFFECTS: tuple[Effect, ...] = (
                         "repeat poses or rate steps late in the session, when the unit is warm", profile_tc=True,
                         rig_free={"gyro": _RF_NO_RATE + "; a scale change needs a non-zero input"}),
         simulate=_add("temp_scale"),  # (M x)(1 + s dT)
-        compensation="temperature_scale",
+        compensation="temperature_scale", consistency=("early_vs_late",),
     ),
     Effect(
         "g_sensitivity", "mean", ("gyro",), "gyro output proportional to specific force",
         c.g_sensitivity, _same((STANDARD_GRAVITY / _DEG, "deg/s per g"), ("gyro",)),
         Identifiability("a specific-force reference (gravity poses or rate steps)",
                         "rate steps with the spin axis horizontal, or poses at two headings"),
-        simulate=_sim_g_sensitivity, compensation="g_sensitivity", shape=(3, 3),
+        simulate=_sim_g_sensitivity, compensation="g_sensitivity", shape=(3, 3), consistency=("poses_vs_rates",),
     ),
     Effect(
         "scale_nonlinearity", "mean", ("accel", "gyro"), "quadratic scale term u|u|",
@@ -252,7 +257,7 @@ EFFECTS: tuple[Effect, ...] = (
                         "steps at a second input magnitude (more rates, or tilted poses for the accelerometer)",
                         rig_free={"accel": _RF_NORM_ONLY, "gyro": _RF_NO_RATE}, family=_ODD_SCALE),
         simulate=_add("nonlinearity"),  # u + k u|u|
-        compensation="scale_nonlinearity",
+        compensation="scale_nonlinearity", consistency=("negative_vs_positive_input", "low_vs_high_input"),
     ),
     Effect(
         "scale_asymmetry", "mean", ("accel", "gyro"), "different scale for positive and negative input",
@@ -263,6 +268,7 @@ EFFECTS: tuple[Effect, ...] = (
         simulate=_add("asymmetry"),  # u (1 + a/2 sign u) = u + (a/2)|u|
         compensation="scale_asymmetry",
         not_compensated="no parameter for a sign-dependent scale in the parameter set",
+        consistency=("negative_vs_positive_input", "low_vs_high_input"),
     ),
     Effect(
         "lever_arm", "mean", ("accel",), "accelerometer off the rotation centre: w x (w x r) + a x r",
@@ -274,6 +280,7 @@ EFFECTS: tuple[Effect, ...] = (
         simulate=_sim_lever_arm, reaches_gyro=True, compensation="lever_arm",
         not_compensated="a property of the rig mounting, not of the unit",
         per_axis=False, extra=lambda theta: {"length_mm": round(float(np.linalg.norm(theta) * 1e3), 3)},
+        consistency=("low_vs_high_input",),
     ),
     Effect(
         "earth_rotation", "mean", ("gyro",), "Earth rate at the site's latitude and heading",
@@ -288,6 +295,7 @@ EFFECTS: tuple[Effect, ...] = (
         simulate=_sim_earth_rotation, compensation="earth_rotation",
         not_compensated="a property of the place, not of the unit",
         extra=lambda theta: {"deg_per_h": round(float(theta[0] * EARTH_RATE_RADPS / _DEG * 3600.0), 4)},
+        consistency=("early_vs_late",),
     ),
     Effect(
         "time_offset", "mean", ("accel", "gyro"),
@@ -298,6 +306,7 @@ EFFECTS: tuple[Effect, ...] = (
                         rig_free={"accel": _RF_DELAY, "gyro": _RF_DELAY}),
         simulate=_sim_time_offset, compensation="time_offset",
         not_compensated="carried as time_offset_s in the set but not estimated by the fit nor applied to values",
+        consistency=("tumbles_vs_ramps",),
     ),
     Effect(
         "bias_random_walk", "noise", ("accel", "gyro"),
@@ -307,6 +316,7 @@ EFFECTS: tuple[Effect, ...] = (
                         "a still rest several correlation times long", profile_tc=True),
         not_simulated=_STOCHASTIC, compensation="bias_random_walk",
         not_compensated="a random process: no calibration removes it",
+        not_checked="a covariance, not a mean term: no parameters to compare between parts of the recording",
     ),
     Effect(
         "outliers", "count", ("accel", "gyro"), "more single bad samples than the sensor class allows",
@@ -314,6 +324,7 @@ EFFECTS: tuple[Effect, ...] = (
         Identifiability("settled samples (the base fit's outlier count)", "a longer still rest"),
         not_simulated=_STOCHASTIC, compensation="outliers",
         not_compensated="single bad samples: Algorithm 1's moving average only dilutes them",
+        not_checked="a count of single samples, tested against the sensor class's allowance",
     ),
     Effect(
         pose_tilt.NAME, "mean", pose_tilt.SENSORS, pose_tilt.DESCRIPTION,  # ours: the rig's poses are off
@@ -326,6 +337,7 @@ EFFECTS: tuple[Effect, ...] = (
         simulate=_sim_pose_tilt, compensation="pose_tilt",
         not_compensated="a property of the rig's poses, not of the unit",
         per_axis=False, engineering=pose_tilt.engineering,
+        not_checked="parameters per pose, most poses visited once: no second part to compare with",
     ),
     # the IEEE Std 952 / 1431 scale-factor polynomial, its even (k2 u^2) and odd (k3 u^3) terms apart
     Effect(
@@ -337,6 +349,7 @@ EFFECTS: tuple[Effect, ...] = (
                         rig_free={"accel": _RF_NORM_ONLY, "gyro": _RF_NO_RATE}),
         not_simulated=_NO_SIM,
         not_compensated="no parameter: the even scale term (k2 w^2) is not in the parameter set",
+        consistency=("negative_vs_positive_input", "low_vs_high_input"),
     ),
     Effect(
         "scale_nonlinearity_odd", "mean", ("accel", "gyro"), "IEEE scale polynomial, odd term k3 u^3",
@@ -347,7 +360,7 @@ EFFECTS: tuple[Effect, ...] = (
                         rig_free={"accel": _RF_NORM_ONLY, "gyro": _RF_NO_RATE}, family=_ODD_SCALE),
         not_simulated=_NO_SIM,
         # the fit's u + k u|u| is odd in the rate: it stands for the odd (cubic-like) term, not the even one
-        compensation="scale_nonlinearity",
+        compensation="scale_nonlinearity", consistency=("negative_vs_positive_input", "low_vs_high_input"),
     ),
 )
 

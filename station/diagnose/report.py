@@ -11,6 +11,12 @@ Each finding has ``effect``, ``sensor`` (accel|gyro), ``axes``, ``parameters`` (
 unit in engineering units), ``evidence`` (likelihood gain, BIC gain, held-out error) and
 ``fit`` (before/after: BIC, block chi^2 per axis, block residual RMS); a simulated finding also
 has ``rerun`` (block RMS of its sensor per axis: base, base + this effect, all effects).
+Each mean finding also has ``confidence`` (``level`` high/medium/low: the bootstrap's where it ran, else the
+drop-one test's against the full model), ``consistency`` (its effect-specific checks,
+:mod:`station.diagnose.consistency`: per check ``check``, ``parts``, ``result`` passed/failed/not
+informative/not checked, ``reason`` where not checked, chi^2 and the parameters per part) and ``bootstrap``
+(:mod:`station.diagnose.bootstrap`: ``accepted_fraction``, ``std_ratio``, parameters' median and spread). A
+finding failing a check is in ``rejected`` with the check under ``consistency``.
 Each ``rejected`` entry has ``effect``, ``sensor`` and ``reason``; a mean candidate that brought no
 significant improvement also has ``detectable_from`` (per parameter, in its engineering unit, the size
 this recording would have shown with the quoted ``power``; :func:`station.diagnose.reporting.detectable_from`).
@@ -39,6 +45,7 @@ from typing import Any
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from station.diagnose.bootstrap import RESAMPLES, SEED
 from station.diagnose.compensation import compensation
 from station.diagnose.rerun import FittedEffect, Rerun, rerun
 from station.diagnose.residuals import SENSORS, Baseline, fit_baseline, locate
@@ -71,7 +78,8 @@ class Diagnosis:
         return [(f["effect"], f["sensor"]) for f in self.report["findings"]]
 
 
-def diagnose(session: Session, *, warmup_tc_s: Mapping[str, tuple[float, float]] | None = None) -> Diagnosis:
+def diagnose(session: Session, *, warmup_tc_s: Mapping[str, tuple[float, float]] | None = None,
+             resamples: int = RESAMPLES, seed: int = SEED) -> Diagnosis:
     """Diagnose ``session``: which physics the base model (eq. 1 + eq. 3) is missing.
 
     ``warmup_tc_s``: the sensor class's range of eq. 3's T_c (s) per sensor, e.g.
@@ -80,6 +88,9 @@ def diagnose(session: Session, *, warmup_tc_s: Mapping[str, tuple[float, float]]
 
     A rig-free recording (hand-held poses without references, :func:`station.fit.rigfree.is_rig_free`) is
     diagnosed by :func:`station.diagnose.rigfree.diagnose_rig_free` (its report adds ``untestable``).
+
+    ``resamples``: the bootstrap over segments that states each finding's confidence
+    (:mod:`station.diagnose.bootstrap`, seeded with ``seed``: same recording, same numbers); 0 leaves it out.
 
     Raises :class:`station.kernel.errors.FitError` when the base fit refuses the recording.
     """
@@ -90,7 +101,7 @@ def diagnose(session: Session, *, warmup_tc_s: Mapping[str, tuple[float, float]]
     # the linear algebra is on a few hundred blocks: BLAS threads only spin
     with threadpool_limits(limits=1, user_api="blas"):
         baseline = fit_baseline(session, warmup_tc_s=warmup_tc_s)
-        decision = select(baseline)
+        decision = select(baseline, resamples=resamples, seed=seed)
         curves = []
         findings = []
         fitted = []

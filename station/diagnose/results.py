@@ -10,6 +10,8 @@ from typing import Any
 
 import numpy as np
 
+from station.diagnose.bootstrap import Bootstrap
+from station.diagnose.consistency import Check
 from station.diagnose.robust import Unexplained
 
 
@@ -28,6 +30,11 @@ class Finding:
     evidence: Mapping[str, Any]
     fit: Mapping[str, Any]
     confidence: Mapping[str, Any] | None = None
+    #: the effect-specific consistency checks (:mod:`station.diagnose.consistency`; a ``not checked`` entry with
+    #: the reason where none could run)
+    consistency: tuple[Check, ...] = ()
+    #: the bootstrap over segments (:mod:`station.diagnose.bootstrap`), None where not run
+    bootstrap: Bootstrap | None = None
     theta: np.ndarray | None = None
     block_residual: tuple[np.ndarray, np.ndarray] | None = None
 
@@ -35,13 +42,18 @@ class Finding:
     def from_entry(cls, d: Mapping[str, Any]) -> Finding:
         return cls(effect=d["effect"], sensor=d["sensor"], axes=tuple(d["axes"]), parameters=d["parameters"],
                    evidence=d["evidence"], fit=d.get("fit", {}), confidence=d.get("confidence"),
-                   theta=d.get("_theta"), block_residual=d.get("_block_residual"))
+                   consistency=tuple(d.get("consistency", ())), bootstrap=d.get("bootstrap"), theta=d.get("_theta"),
+                   block_residual=d.get("_block_residual"))
 
     def to_dict(self) -> dict[str, Any]:
         out = {"effect": self.effect, "sensor": self.sensor, "axes": list(self.axes),
                "parameters": dict(self.parameters), "evidence": dict(self.evidence), "fit": dict(self.fit)}
         if self.confidence is not None:
             out["confidence"] = dict(self.confidence)
+        if self.consistency:
+            out["consistency"] = [c.to_dict() for c in self.consistency]
+        if self.bootstrap is not None:
+            out["bootstrap"] = self.bootstrap.to_dict()
         return out
 
 

@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 from scipy import linalg
 
-from station.diagnose import robust
+from station.diagnose import bootstrap, consistency, robust
 from station.diagnose.candidates import MAX_DELAY_S, delay_regressor
 from station.diagnose.likelihood import RCOND, SensorProblem, Test
 from station.diagnose.registry import LIBRARY, REGISTRY, RIG_STEPS
@@ -50,6 +50,8 @@ TEMPERATURE_R2 = 0.98
 WARMUP = REGISTRY["temperature_bias"].identifiability.base_twin
 #: Prefix of an accepted term that is in the model but named by no finding (an inseparable pair's signal).
 NUISANCE = "~"
+#: Rounds of the checks after the forward selection (robust.py, consistency.py); each may reject effects.
+AUDIT_ROUNDS = 4
 #: Fixed-point rounds of the exact-delay fit (:func:`_refine_delay`).
 DELAY_ROUNDS = 6
 
@@ -92,12 +94,14 @@ def _unique(prob: SensorProblem, best: Test, twin: Test, regs: dict[str, np.ndar
 
 
 def select(baseline: Baseline, *, max_effects: int = 4,
-           candidates: Mapping[str, Collection[str]] | None = None) -> Decision:
+           candidates: Mapping[str, Collection[str]] | None = None, resamples: int = bootstrap.RESAMPLES,
+           seed: int = bootstrap.SEED) -> Decision:
     """Forward selection of candidate effects per sensor (see the module docstring).
 
     ``candidates``: per sensor, the mean candidates to test (None: every one of the library); a recording that
     cannot test some (e.g. a rig-free one, :mod:`station.diagnose.rigfree`) says so itself. ``bias_random_walk``
-    and ``outliers`` are always tested.
+    and ``outliers`` are always tested. ``resamples``: the bootstrap's over segments for each finding's
+    confidence (:mod:`station.diagnose.bootstrap`, seeded with ``seed``; 0: none).
     """
     findings: list[dict[str, Any]] = []
     rejected: list[dict[str, Any]] = []
@@ -214,11 +218,21 @@ def select(baseline: Baseline, *, max_effects: int = 4,
         # checks that hold when the model is wrong (robust.py): drop-one under the dispersion, stand-ins,
         # what stays unexplained; rounds until nothing more is rejected
         confidence: dict[str, dict[str, Any]] = {}
-        for _round in range(3):
+        checks: dict[str, list[consistency.Check]] = {}
+        for _round in range(AUDIT_ROUNDS):
             audit = robust.audit(prob, baseline, names, regs, walk, _fitted_samples(prob, baseline, sd, names, tau))
             confidence = audit.confidence
             gone = {r["effect"] for r in audit.rejected}
             rejected.extend(audit.rejected)
+            if not gone:  # effect-specific consistency (consistency.py): the worst failing finding goes
+                checks, bad, where = consistency.review(
+                    prob, baseline, [n if n in confidence else NUISANCE + n for n in names],
+                    {n: c["quasi_gain_chi2"] for n, c in confidence.items()})
+                if bad is not None:
+                    gone = {bad["effect"]}
+                    rejected.append(bad)
+                if where is not None:  # its structure stays, and no candidate explains it
+                    unexplained.append(where)
             unexplained.extend(audit.unexplained if not gone else [])
             if not gone:
                 break
@@ -230,11 +244,20 @@ def select(baseline: Baseline, *, max_effects: int = 4,
                 prob.k2 = 0.0
             prob.refit_drift()
             mine = [f for f in mine if f["effect"] not in gone]
-            if _round == 2:
+            if _round == AUDIT_ROUNDS - 1:
                 unexplained.extend(robust.audit(prob, baseline, names, regs, walk,
                                                 _fitted_samples(prob, baseline, sd, names, tau)).unexplained)
+        boot = (bootstrap.bootstrap(prob, names, {n: c["threshold"] for n, c in confidence.items()},
+                                    robust.dispersion(prob)[0], resamples=resamples, seed=seed)
+                if names and resamples else {})
         for f in mine:
-            f["confidence"] = confidence.get(f["effect"], {"level": "low"})
+            f["confidence"] = conf = dict(confidence.get(f["effect"], {"level": "low"}))
+            if f["effect"] in boot:  # the level the report states is the bootstrap's (bootstrap.py)
+                conf["drop_one_level"] = conf.get("level")
+                conf["level"] = boot[f["effect"]].level
+                conf["bootstrap_accepted_fraction"] = boot[f["effect"]].accepted_fraction
+                f["bootstrap"] = boot[f["effect"]]
+            f["consistency"] = checks.get(f["effect"]) or consistency.not_checked(f["effect"], sensor)
         findings.extend(mine)
         for t in last.values():
             entry: dict[str, Any] = {"effect": t.effect, "sensor": sensor, "gain": round(t.gain, 3),
@@ -274,7 +297,7 @@ def select(baseline: Baseline, *, max_effects: int = 4,
                 "effect": "outliers", "sensor": sensor, "axes": [AX[k] for k in out.pop("axes")] or list(AX),
                 "parameters": {"rate_per_sample": {"value": out["rate"], "std": out["rate_std"], "unit": "1"}},
                 "evidence": {k: out[k] for k in ("count", "samples", "allowance", "p_value")},
-                "fit": {},
+                "fit": {}, "consistency": consistency.not_checked("outliers", sensor),
             })
         else:
             rejected.append({"effect": "outliers", "sensor": sensor,
