@@ -163,3 +163,12 @@ def test_openaxes(openaxes: dict[str, dict], accel: str) -> None:
     assert g["reason"] == "no significant improvement" and "detectable_from" in g
     assert report["unexplained"] == []
     assert {u["effect"] for u in report["untestable"]} >= {"earth_rotation", "time_offset", "lever_arm"}
+
+
+def test_bootstrap_resamples_reach_the_rig_free_path() -> None:
+    session = _session(simulate_handheld(625, effects=Effects(g_sensitivity=0.02)))
+    without = diagnose(session, resamples=0).report
+    assert _named(without) == {("g_sensitivity", "gyro")}
+    assert "bootstrap" not in without["findings"][0]
+    few = diagnose(session, resamples=12, seed=3).report
+    assert few["findings"][0]["bootstrap"]["resamples"] == 12

@@ -97,7 +97,7 @@ def diagnose(session: Session, *, warmup_tc_s: Mapping[str, tuple[float, float]]
     from station.diagnose import rigfree
 
     if rigfree.wants_rig_free(session):
-        return rigfree.diagnose_rig_free(session, warmup_tc_s=warmup_tc_s)
+        return rigfree.diagnose_rig_free(session, warmup_tc_s=warmup_tc_s, resamples=resamples, seed=seed)
     # the linear algebra is on a few hundred blocks: BLAS threads only spin
     with threadpool_limits(limits=1, user_api="blas"):
         baseline = fit_baseline(session, warmup_tc_s=warmup_tc_s)

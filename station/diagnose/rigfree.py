@@ -218,9 +218,11 @@ def _earth_check(finding: dict[str, Any]) -> tuple[float, float] | None:
 
 
 def diagnose_rig_free(session: Session, *,
-                      warmup_tc_s: Mapping[str, tuple[float, float]] | None = None) -> Diagnosis:
+                      warmup_tc_s: Mapping[str, tuple[float, float]] | None = None,
+                      resamples: int | None = None, seed: int | None = None) -> Diagnosis:
     """Diagnose a rig-free recording (see the module docstring): a :class:`station.diagnose.report.Diagnosis`
     whose report has the keys of ``station-diagnosis/1`` plus ``untestable`` and ``rig_free``.
+    ``resamples``, ``seed``: the bootstrap's, as in :func:`station.diagnose.report.diagnose` (None: its defaults).
 
     Raises :class:`~station.kernel.errors.FitError` when the rig-free fit refuses the recording.
     """
@@ -229,7 +231,8 @@ def diagnose_rig_free(session: Session, *,
     with threadpool_limits(limits=1, user_api="blas"):
         baseline = rig_free_baseline(session, warmup_tc_s=warmup_tc_s)
         candidates, untestable = rig_free_candidates(baseline)
-        decision = select(baseline, candidates=candidates)
+        boot = {k: v for k, v in (("resamples", resamples), ("seed", seed)) if v is not None}
+        decision = select(baseline, candidates=candidates, **boot)
     findings, curves = [], []
     rejected = [r.to_dict() for r in decision.rejected]
     vertical = earth_vertical_radps(session)
