@@ -165,11 +165,15 @@ def diagnose(
     resamples: Annotated[int | None, typer.Option(
         "--resamples", min=0, help="bootstrap resamples over segments for each finding's confidence (0: none; "
         "default: station.diagnose.bootstrap.RESAMPLES)")] = None,
+    progress: Annotated[bool | None, typer.Option(
+        "--progress/--no-progress", help="print the diagnosis's stages to stderr (default: when stderr is a "
+        "terminal); never into stdout")] = None,
 ) -> None:
     """Find the physics the base model misses in a recording, fit it and show the improvement."""
     import warnings
 
     from station.commands.output import check_output
+    from station.commands.progress import stderr_progress
     from station.diagnose.report import diagnose as run_diagnosis
     from station.diagnose.report import save_figure
     from station.fit.boundary import numerics
@@ -183,7 +187,7 @@ def diagnose(
         session = read_session(session_path)
         with warnings.catch_warnings(), numerics(f"diagnosis of {session.serial!r}"):
             warnings.simplefilter("ignore", RuntimeWarning)
-            result = run_diagnosis(session, warmup_tc_s=warmup_tc,
+            result = run_diagnosis(session, warmup_tc_s=warmup_tc, progress=stderr_progress(progress),
                                    **({} if resamples is None else {"resamples": resamples}))
         if plot is not None:
             save_figure(result, plot)

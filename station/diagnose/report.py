@@ -38,6 +38,7 @@ gravity-norm and move-direction RMS, the Earth rate handling); its ``rerun`` is 
 from __future__ import annotations
 
 import os
+import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -47,6 +48,7 @@ from threadpoolctl import threadpool_limits
 
 from station.diagnose.bootstrap import RESAMPLES, SEED
 from station.diagnose.compensation import compensation
+from station.diagnose.progress import DONE, STAGES, Progress, Stage
 from station.diagnose.rerun import FittedEffect, Rerun, rerun
 from station.diagnose.residuals import SENSORS, Baseline, fit_baseline, locate
 from station.diagnose.selection import select
@@ -79,7 +81,7 @@ class Diagnosis:
 
 
 def diagnose(session: Session, *, warmup_tc_s: Mapping[str, tuple[float, float]] | None = None,
-             resamples: int = RESAMPLES, seed: int = SEED) -> Diagnosis:
+             resamples: int = RESAMPLES, seed: int = SEED, progress: Progress | None = None) -> Diagnosis:
     """Diagnose ``session``: which physics the base model (eq. 1 + eq. 3) is missing.
 
     ``warmup_tc_s``: the sensor class's range of eq. 3's T_c (s) per sensor, e.g.
@@ -92,15 +94,32 @@ def diagnose(session: Session, *, warmup_tc_s: Mapping[str, tuple[float, float]]
     ``resamples``: the bootstrap over segments that states each finding's confidence
     (:mod:`station.diagnose.bootstrap`, seeded with ``seed``: same recording, same numbers); 0 leaves it out.
 
+    ``progress``: called with a :class:`~station.diagnose.progress.Stage` as each stage starts and once
+    more when done (see :mod:`station.diagnose.progress`; a rig-free recording's diagnosis tells only its
+    start and its end); None: nothing is told.
+
     Raises :class:`station.kernel.errors.FitError` when the base fit refuses the recording.
     """
     from station.diagnose import rigfree
 
+    t0 = time.perf_counter()
+    n = len(session)
+
+    def tell(index: int) -> None:
+        if progress is not None:
+            name = STAGES[index] if index < len(STAGES) else DONE
+            progress(Stage(index, len(STAGES), name, time.perf_counter() - t0, n))
+
     if rigfree.wants_rig_free(session):
-        return rigfree.diagnose_rig_free(session, warmup_tc_s=warmup_tc_s, resamples=resamples, seed=seed)
+        tell(0)
+        out = rigfree.diagnose_rig_free(session, warmup_tc_s=warmup_tc_s, resamples=resamples, seed=seed)
+        tell(len(STAGES))
+        return out
     # the linear algebra is on a few hundred blocks: BLAS threads only spin
     with threadpool_limits(limits=1, user_api="blas"):
+        tell(0)
         baseline = fit_baseline(session, warmup_tc_s=warmup_tc_s)
+        tell(1)
         decision = select(baseline, resamples=resamples, seed=seed)
         curves = []
         findings = []
@@ -112,6 +131,7 @@ def diagnose(session: Session, *, warmup_tc_s: Mapping[str, tuple[float, float]]
             if f.theta is not None or f.effect == "outliers":
                 fitted.append(FittedEffect(f.effect, f.sensor, np.zeros(0) if f.theta is None else f.theta))
             findings.append(f.to_dict())
+        tell(2)
         try:
             runs: Rerun | None = rerun(baseline, fitted)
         except FitError as exc:
@@ -123,6 +143,7 @@ def diagnose(session: Session, *, warmup_tc_s: Mapping[str, tuple[float, float]]
                 part = runs.finding_part(f["effect"], f["sensor"])
                 if part is not None:
                     f["rerun"] = part
+        tell(3)
         for f, c in zip(findings, compensation(
                 session, [(f["effect"], f["sensor"]) for f in findings], warmup_tc_s=warmup_tc_s),
                         strict=True):
@@ -146,6 +167,7 @@ def diagnose(session: Session, *, warmup_tc_s: Mapping[str, tuple[float, float]]
         },
         "rerun": rerun_section,
     }
+    tell(len(STAGES))
     return Diagnosis(report=report, baseline=baseline, curves=curves, rerun=runs)
 
 

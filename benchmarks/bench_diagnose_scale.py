@@ -1,0 +1,120 @@
+"""Diagnosis time and peak memory against the number of samples (issue 16, "Speed").
+
+One recording per size from the station's simulator (``simulate_session``, seed 3, a 30 mm lever arm so
+the whole chain runs: base fit, selection, simulator re-run, compensation check). The first row is the
+issue's 15-minute 100 Hz case (target < 5 s); the others keep the same 15-minute plan and raise the sample
+rate until the recording holds the wanted number of rows (up to the issue's 4.9 M rows), so the rows
+show how the per-sample parts grow (the block problem has the same blocks at every rate).
+
+Every measurement runs ``station.diagnose.diagnose`` in a fresh subprocess (``--repeats`` of them per
+size, median shown), which loads the recording from an ``.npz`` and reports:
+
+- ``time s``: wall time of ``diagnose`` alone;
+- ``RSS loaded MB``: resident memory after loading the recording (the session's arrays, numpy, scipy);
+- ``peak RSS MB``: ``ru_maxrss`` of the subprocess at the end (the diagnosis's peak; loading is below it);
+- ``tracemalloc MB``: the peak of memory allocated during ``diagnose`` (numpy arrays included), from a
+  separate run with ``tracemalloc`` on (its time is not used).
+
+Run: ``python benchmarks/bench_diagnose_scale.py [--sizes 90300,1e6,4.9e6] [--repeats 3]``
+(``nice`` it on a shared machine; about 10 min with the defaults on 2 cores).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+FIELDS = ("t_s", "segment", "kind", "accel_mps2", "gyro_radps", "temp_degc", "ref_accel_mps2", "ref_gyro_radps")
+BASE_RATE_HZ = 100.0
+
+
+def _make(rows: float, path: Path) -> tuple[int, float, float]:
+    """Simulate the recording with about ``rows`` samples into ``path``: (rows, rate Hz, duration s)."""
+    from station.physics.effects import Effects
+    from station.sim.session_sim import default_plan, simulate_session
+
+    plan = default_plan()
+    base = simulate_session(3, plan=plan).session
+    rate = BASE_RATE_HZ * rows / len(base) if rows > 1.05 * len(base) else BASE_RATE_HZ
+    plan = dataclasses.replace(plan, sample_rate_hz=float(np.round(rate, 1)))
+    s = simulate_session(3, plan=plan, effects=Effects(lever_arm=30.0)).session
+    np.savez(path, **{f: getattr(s, f) for f in FIELDS},
+             metadata=json.dumps(dict(s.metadata)), angles=json.dumps({str(k): v for k, v in s.angles_deg.items()}))
+    return len(s), plan.sample_rate_hz, float(s.t_s[-1] - s.t_s[0])
+
+
+def _measure(path: str, trace: bool) -> None:
+    """Child process: load, diagnose once, print one JSON line."""
+    import resource
+    import tracemalloc
+
+    from station.diagnose import diagnose
+    from station.session.model import Session
+
+    with np.load(path) as z:
+        s = Session(metadata=json.loads(str(z["metadata"])),
+                    angles_deg={int(k): v for k, v in json.loads(str(z["angles"])).items()},
+                    **{f: z[f] for f in FIELDS})
+    rss_loaded = _rss_now_mb()
+    if trace:
+        tracemalloc.start()
+    t0 = time.perf_counter()
+    d = diagnose(s)
+    dt = time.perf_counter() - t0
+    peak = tracemalloc.get_traced_memory()[1] / 2**20 if trace else None
+    maxrss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # Linux: KiB
+    print(json.dumps({"time_s": dt, "rss_loaded_mb": rss_loaded, "maxrss_mb": maxrss, "traced_mb": peak,
+                      "findings": sorted(f"{f['effect']}:{f['sensor']}" for f in d.report["findings"])}))
+
+
+def _rss_now_mb() -> float:
+    with open("/proc/self/statm") as f:
+        return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+
+
+def _child(path: Path, trace: bool) -> dict:
+    out = subprocess.run([sys.executable, __file__, "--child", str(path)] + (["--trace"] if trace else []),
+                         capture_output=True, text=True, check=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sizes", default="90300,300000,1e6,2.5e6,4.9e6",
+                    help="comma-separated sample counts (the smallest is the 15-min 100 Hz plan)")
+    ap.add_argument("--repeats", type=int, default=3, help="timed subprocesses per size (median)")
+    ap.add_argument("--no-trace", action="store_true", help="skip the tracemalloc run")
+    ap.add_argument("--child", help=argparse.SUPPRESS)
+    ap.add_argument("--trace", action="store_true", help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.child:
+        _measure(args.child, args.trace)
+        return
+    sizes = [float(x) for x in args.sizes.split(",")]
+    print(f"{'rows':>9s} {'rate Hz':>8s} {'min':>5s} {'time s':>8s} {'RSS loaded MB':>14s} {'peak RSS MB':>12s} "
+          f"{'tracemalloc MB':>15s}  findings")
+    with tempfile.TemporaryDirectory() as tmp:
+        for k, rows in enumerate(sizes):
+            path = Path(tmp) / f"rec{k}.npz"
+            n, rate, dur = _make(rows, path)
+            runs = [_child(path, False) for _ in range(args.repeats)]
+            traced = None if args.no_trace else _child(path, True)["traced_mb"]
+            med = {key: float(np.median([r[key] for r in runs])) for key in ("time_s", "rss_loaded_mb", "maxrss_mb")}
+            tm = "-" if traced is None else f"{traced:.0f}"
+            print(f"{n:9d} {rate:8.1f} {dur / 60:5.1f} {med['time_s']:8.2f} {med['rss_loaded_mb']:14.0f} "
+                  f"{med['maxrss_mb']:12.0f} {tm:>15s}  {','.join(runs[0]['findings']) or '-'}", flush=True)
+            path.unlink()
+    print(f"median of {args.repeats} subprocess(es) per size; tracemalloc: one more run per size")
+
+
+if __name__ == "__main__":
+    main()
