@@ -9,13 +9,13 @@ show how the per-sample parts grow (the block problem has the same blocks at eve
 Every measurement runs ``station.diagnose.diagnose`` in a fresh subprocess (``--repeats`` of them per
 size, median shown), which loads the recording from an ``.npz`` and reports:
 
-- ``time s``: wall time of ``diagnose`` alone;
+- ``time s``: wall time of ``diagnose`` alone; ``CPU s``: its process CPU time (steadier on a busy machine);
 - ``RSS loaded MB``: resident memory after loading the recording (the session's arrays, numpy, scipy);
 - ``peak RSS MB``: ``ru_maxrss`` of the subprocess at the end (the diagnosis's peak; loading is below it);
-- ``tracemalloc MB``: the peak of memory allocated during ``diagnose`` (numpy arrays included), from a
-  separate run with ``tracemalloc`` on (its time is not used).
+- ``tracemalloc MB`` (with ``--tracemalloc``): the peak of memory allocated during ``diagnose`` (numpy
+  arrays included), from one more run with ``tracemalloc`` on (its time is not used).
 
-Run: ``python benchmarks/bench_diagnose_scale.py [--sizes 90300,1e6,4.9e6] [--repeats 3]``
+Run: ``python benchmarks/bench_diagnose_scale.py [--sizes 9e4,1e6,4.9e6] [--repeats 3] [--tracemalloc]``
 (``nice`` it on a shared machine; about 10 min with the defaults on 2 cores).
 """
 
@@ -35,6 +35,7 @@ import numpy as np
 
 FIELDS = ("t_s", "segment", "kind", "accel_mps2", "gyro_radps", "temp_degc", "ref_accel_mps2", "ref_gyro_radps")
 BASE_RATE_HZ = 100.0
+PLAN_S = 900.0
 
 
 def _make(rows: float, path: Path) -> tuple[int, float, float]:
@@ -43,8 +44,10 @@ def _make(rows: float, path: Path) -> tuple[int, float, float]:
     from station.sim.session_sim import default_plan, simulate_session
 
     plan = default_plan()
-    base = simulate_session(3, plan=plan).session
-    rate = BASE_RATE_HZ * rows / len(base) if rows > 1.05 * len(base) else BASE_RATE_HZ
+    short = simulate_session(3, plan=dataclasses.replace(plan, rest_s=0.0)).session
+    # the rest stretched so that the plan lasts 15 minutes
+    plan = dataclasses.replace(plan, rest_s=PLAN_S - (short.t_s[-1] - short.t_s[0]))
+    rate = rows / PLAN_S if rows > 1.05 * PLAN_S * BASE_RATE_HZ else BASE_RATE_HZ
     plan = dataclasses.replace(plan, sample_rate_hz=float(np.round(rate, 1)))
     s = simulate_session(3, plan=plan, effects=Effects(lever_arm=30.0)).session
     np.savez(path, **{f: getattr(s, f) for f in FIELDS},
@@ -67,12 +70,12 @@ def _measure(path: str, trace: bool) -> None:
     rss_loaded = _rss_now_mb()
     if trace:
         tracemalloc.start()
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     d = diagnose(s)
-    dt = time.perf_counter() - t0
+    dt, cpu = time.perf_counter() - t0, time.process_time() - c0
     peak = tracemalloc.get_traced_memory()[1] / 2**20 if trace else None
     maxrss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # Linux: KiB
-    print(json.dumps({"time_s": dt, "rss_loaded_mb": rss_loaded, "maxrss_mb": maxrss, "traced_mb": peak,
+    print(json.dumps({"time_s": dt, "cpu_s": cpu, "rss_loaded_mb": rss_loaded, "maxrss_mb": maxrss, "traced_mb": peak,
                       "findings": sorted(f"{f['effect']}:{f['sensor']}" for f in d.report["findings"])}))
 
 
@@ -89,10 +92,10 @@ def _child(path: Path, trace: bool) -> dict:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--sizes", default="90300,300000,1e6,2.5e6,4.9e6",
-                    help="comma-separated sample counts (the smallest is the 15-min 100 Hz plan)")
+    ap.add_argument("--sizes", default="9e4,3e5,1e6,2.5e6,4.9e6",
+                    help="comma-separated sample counts (90 000 and fewer: the 15-min plan at 100 Hz)")
     ap.add_argument("--repeats", type=int, default=3, help="timed subprocesses per size (median)")
-    ap.add_argument("--no-trace", action="store_true", help="skip the tracemalloc run")
+    ap.add_argument("--tracemalloc", action="store_true", help="one more run per size with tracemalloc on")
     ap.add_argument("--child", help=argparse.SUPPRESS)
     ap.add_argument("--trace", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
@@ -100,20 +103,24 @@ def main() -> None:
         _measure(args.child, args.trace)
         return
     sizes = [float(x) for x in args.sizes.split(",")]
-    print(f"{'rows':>9s} {'rate Hz':>8s} {'min':>5s} {'time s':>8s} {'RSS loaded MB':>14s} {'peak RSS MB':>12s} "
+    print(f"{'rows':>9s} {'rate Hz':>8s} {'min':>5s} {'time s':>8s} {'CPU s':>8s} {'RSS loaded MB':>14s} "
+          f"{'peak RSS MB':>12s} "
           f"{'tracemalloc MB':>15s}  findings")
     with tempfile.TemporaryDirectory() as tmp:
         for k, rows in enumerate(sizes):
             path = Path(tmp) / f"rec{k}.npz"
             n, rate, dur = _make(rows, path)
             runs = [_child(path, False) for _ in range(args.repeats)]
-            traced = None if args.no_trace else _child(path, True)["traced_mb"]
-            med = {key: float(np.median([r[key] for r in runs])) for key in ("time_s", "rss_loaded_mb", "maxrss_mb")}
+            traced = None if not args.tracemalloc else _child(path, True)["traced_mb"]
+            med = {key: float(np.median([r[key] for r in runs]))
+                   for key in ("time_s", "cpu_s", "rss_loaded_mb", "maxrss_mb")}
             tm = "-" if traced is None else f"{traced:.0f}"
-            print(f"{n:9d} {rate:8.1f} {dur / 60:5.1f} {med['time_s']:8.2f} {med['rss_loaded_mb']:14.0f} "
+            print(f"{n:9d} {rate:8.1f} {dur / 60:5.1f} {med['time_s']:8.2f} {med['cpu_s']:8.2f} "
+                  f"{med['rss_loaded_mb']:14.0f} "
                   f"{med['maxrss_mb']:12.0f} {tm:>15s}  {','.join(runs[0]['findings']) or '-'}", flush=True)
             path.unlink()
-    print(f"median of {args.repeats} subprocess(es) per size; tracemalloc: one more run per size")
+    print(f"median of {args.repeats} subprocess(es) per size" + ("; tracemalloc: one more run per size"
+                                                                 if args.tracemalloc else ""))
 
 
 if __name__ == "__main__":

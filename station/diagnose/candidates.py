@@ -105,11 +105,16 @@ def earth_rate_world(latitude_deg: float, heading_deg: float) -> np.ndarray:
 
 
 def _quat_mul(p: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """Hamilton products ``p q`` of quaternions (n, 4), scalar last (the rotation q, then p)."""
-    pv, pw = p[:, :3], p[:, 3:]
-    qv, qw = q[:, :3], q[:, 3:]
-    return np.concatenate([pw * qv + qw * pv + np.cross(pv, qv), pw * qw - np.sum(pv * qv, axis=1, keepdims=True)],
-                          axis=1)
+    """Hamilton products ``p q`` of quaternions (n, 4), scalar last (the rotation q, then p); written out per
+    component (``np.cross`` on (n, 3) took half the time of the attitude scan)."""
+    px, py, pz, pw = p.T
+    qx, qy, qz, qw = q.T
+    out = np.empty(np.broadcast_shapes(p.shape, q.shape))
+    out[:, 0] = pw * qx + qw * px + py * qz - pz * qy  # pw qv + qw pv + pv x qv
+    out[:, 1] = pw * qy + qw * py + pz * qx - px * qz
+    out[:, 2] = pw * qz + qw * pz + px * qy - py * qx
+    out[:, 3] = pw * qw - (px * qx + py * qy + pz * qz)
+    return out
 
 
 def _quat_matrix(q: np.ndarray) -> np.ndarray:

@@ -231,19 +231,27 @@ def _segment_columns(baseline: Baseline, f: np.ndarray) -> tuple[list[tuple[str,
 
 def _assemble(baseline: Baseline, sd: SensorData, poses: list, column, free_of) -> np.ndarray:
     m = np.nan_to_num(np.asarray(sd.params.misalignment, dtype=float))
-    cols: list[np.ndarray] = []
-    for k in _PAIR_AXES:
+    # the (n, 3, p) array is filled in place, M (f x a) per column: a list of (n, 3) columns stacked and then
+    # multiplied by M held the regressors three times (the largest arrays of a long recording's diagnosis)
+    pairs = [(k, _rotation_axes(up_vector("+" + k))) for k in _PAIR_AXES]
+    others = [_rotation_axes(poses[p][1]) for p in range(len(POSES), len(poses))]
+    z = np.zeros((len(sd.ref), 3, sum(2 * len(ax) for _, ax in pairs) + sum(len(ax) for ax in others)))
+    col = 0
+    for k, axes in pairs:
         ip, im = POSES.index("+" + k), POSES.index("-" + k)
-        ups = [column(i, _rotation_axes(up_vector(POSES[i]))[0]) for i in (ip, im)]
-        both = all(np.any(u) for u in ups)
+        both = all(np.any(column(i, _rotation_axes(up_vector(POSES[i]))[0])) for i in (ip, im))
         free = both and free_of(_AXES.index(k))
-        for a in _rotation_axes(up_vector("+" + k)):
+        for a in axes:
             plus, minus = column(ip, a), column(im, a)
-            cols.append(plus - minus)  # d
-            cols.append(plus + minus if free else np.zeros_like(plus))  # s
-    for p in range(len(POSES), len(poses)):
-        cols.extend(column(p, a) for a in _rotation_axes(poses[p][1]))
-    return np.einsum("nkp,jk->njp", np.stack(cols, axis=2), m)  # M (f x a) per column
+            z[:, :, col] = (plus - minus) @ m.T  # d
+            if free:  # s, else zero
+                z[:, :, col + 1] = (plus + minus) @ m.T
+            col += 2
+    for p, axes in zip(range(len(POSES), len(poses)), others, strict=True):
+        for a in axes:
+            z[:, :, col] = column(p, a) @ m.T
+            col += 1
+    return z
 
 
 #: The two places a pose error can act (:func:`build`): ``rig`` (every time the rig holds the pose, rest included,

@@ -14,6 +14,7 @@ Units: SI (accelerometer m/s^2, gyroscope rad/s, time s, temperature K).
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 from collections.abc import Mapping
@@ -21,6 +22,7 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
+from scipy import sparse
 from scipy.ndimage import uniform_filter1d
 
 from station.fit.calibrate import fit_session, mean_model
@@ -82,14 +84,22 @@ class SensorData:
         tc = np.asarray(tc_s, dtype=float)
         return tc if self.tc_range_s is None else np.clip(tc, *self.tc_range_s)
 
+    @functools.cached_property
+    def _block_sum(self) -> sparse.csr_array:
+        """(m, n) 0/1 matrix summing each block's kept samples (built once per triad)."""
+        idx = np.flatnonzero(self.label >= 0)
+        return sparse.csr_array((np.ones(idx.size), (self.label[idx], idx)), shape=(len(self.t_s), len(self.label)))
+
     def block_mean(self, values: np.ndarray) -> np.ndarray:
-        """Mean of per-sample ``values`` (n, ...) over each block's kept samples, (m, ...)."""
-        sel = self.label >= 0
-        lab = self.label[sel]
-        v = values[sel].reshape(int(sel.sum()), -1)
-        m = len(self.t_s)
-        out = np.stack([np.bincount(lab, weights=v[:, j], minlength=m) for j in range(v.shape[1])], axis=1)
-        return (out / self.count[:, None]).reshape((m, *values.shape[1:]))
+        """Mean of per-sample ``values`` (n, ...) over each block's kept samples, (m, ...).
+
+        One sparse product over the samples: no copy of ``values`` (a candidate's (n, 3, p) regressors are
+        the largest arrays of a diagnosis; selecting the kept rows first copied them whole).
+        """
+        n = len(self.label)
+        v = np.asarray(values, dtype=float).reshape(n, -1)
+        out = self._block_sum @ v
+        return (out / self.count[:, None]).reshape((len(self.t_s), *values.shape[1:]))
 
 
 @dataclass(frozen=True, eq=False)

@@ -119,6 +119,7 @@ def select(baseline: Baseline, *, max_effects: int = 4,
                 else:
                     why = "no data for it" if z is None else "the recording never excites it (all regressors 0)"
                     rejected.append({"effect": name, "sensor": sensor, "reason": f"not testable: {why}"})
+                del z  # per-sample (n, 3, p): not kept alive while the next candidate's are built
         if "time_offset" in regs:
             regs["time_offset"], tau = _refine_delay(prob, baseline, sd, regs["time_offset"])
         else:

@@ -5,7 +5,13 @@ rad/s, s), and every field's description names its unit where it has one.
 """
 
 from station.web.models.common import ErrorDetail, problem
-from station.web.models.diagnosis import DiagnosisFailed, DiagnosisPending, DiagnosisQueueFull, DiagnosisReady
+from station.web.models.diagnosis import (
+    DiagnosisFailed,
+    DiagnosisPending,
+    DiagnosisQueueFull,
+    DiagnosisReady,
+    DiagnosisSummary,
+)
 from station.web.models.params import AllanNoise, CalibrationParameters, TriadCalibration
 from station.web.models.runs import (
     RunAbortAccepted,
@@ -28,7 +34,8 @@ from station.web.models.units import (
 
 __all__ = [
     "AllanNoise", "CalibrationParameters", "DiagnosisFailed", "DiagnosisPending", "DiagnosisQueueFull",
-    "DiagnosisReady", "DispositionEntry", "EepromWriteEntry", "ErrorDetail", "LimitCheckResult", "RigState",
+    "DiagnosisReady", "DiagnosisSummary", "DispositionEntry", "EepromWriteEntry", "ErrorDetail", "LimitCheckResult",
+    "RigState",
     "RunAbortAccepted", "RunAccepted", "RunFilter", "RunSummary", "RunUnitOutcome", "ShiftStats", "SlotStatus",
     "StartRunRequest", "StationStatus", "StepProgress", "TriadCalibration", "UnitFilter", "UnitOverview",
     "UnitRecord", "UnitRunResult", "problem",

@@ -2,10 +2,19 @@
 
 One answer per state of the background diagnosis (see :mod:`station.web.diagnosis`): ready
 (200), pending (202), failed (422: the recording cannot be diagnosed), queue full (503).
+
+A ready answer carries the ``station-diagnosis/1`` report as it is and its typed summary for people
+(:class:`DiagnosisSummary`, what the diagnosis page shows): findings with engineering values, their
+uncertainties and units and the confidence, what stays unexplained and where, effects the recording
+cannot tell apart with the rig step that would, and the candidates tested and rejected. The summary is
+read from the report with every key optional, so a report with more (or fewer) fields still gives one.
 """
 
 from __future__ import annotations
 
+import math
+import re
+from collections.abc import Mapping
 from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, Field
@@ -15,6 +24,176 @@ from station.web.models.common import Serial
 DiagnosedRun = Annotated[str, Field(description="the run whose recording is diagnosed")]
 SessionSha256 = Annotated[str, Field(description="hex SHA-256 of the recording as the run stored it")]
 Reason = Annotated[str, Field(description="why, one line")]
+
+
+Number = float | None
+#: A scalar, per-axis or matrix value (engineering units; null where not finite).
+Values = Number | list[Number] | list[list[Number]]
+
+
+class ParameterValue(BaseModel):
+    """One fitted parameter of a finding (or a detectable size), in engineering units."""
+
+    name: str = Field(description="what the value is: the effect's parameter vector, a derived figure (e.g. "
+                                  "'length_mm') or one pose pair's tilt (e.g. '+-z about x: half-difference')")
+    value: Values = Field(description="the value: scalar, per axis (x, y, z) or a 3x3 matrix, in ``unit``")
+    std: Values = Field(default=None, description="its standard uncertainty, same shape and unit; null: none given")
+    unit: str = Field(default="", description="engineering unit of value and std (e.g. 'mm', 'ms', 'ppm/K', 'deg')")
+
+
+class FindingSummary(BaseModel):
+    """An effect the recording supports."""
+
+    effect: str = Field(description="the candidate effect's name (station.diagnose.registry)")
+    sensor: str = Field(description="'accel' or 'gyro'")
+    axes: list[str] = Field(description="sensor axes the effect acts on")
+    parameters: list[ParameterValue] = Field(description="fitted parameters with uncertainties and units")
+    confidence: str | None = Field(default=None, description="how confident the diagnosis is ('high', 'medium', "
+                                                             "'low'); null: not assessed (e.g. outliers)")
+    quasi_gain_chi2: float | None = Field(default=None, description="chi^2 gain of the finding against the full "
+                                                                    "model with the noise inflated by its "
+                                                                    "dispersion (drop-one test)")
+    threshold_chi2: float | None = Field(default=None, description="the critical chi^2 that gain is compared with")
+    bic_gain: float | None = Field(default=None, description="BIC gain when the effect was added")
+    heldout_before: float | None = Field(default=None, description="error on held-out segments without the effect")
+    heldout_after: float | None = Field(default=None, description="... and with it")
+    compensated: bool | None = Field(default=None, description="whether the station's calibration compensates it; "
+                                                               "null: not checked")
+    calibration_note: str | None = Field(default=None, description="why (not) compensated, one line")
+
+
+class UnexplainedSummary(BaseModel):
+    """Structure the accepted effects leave above the noise that no candidate of the library explains."""
+
+    sensor: str = Field(description="'accel' or 'gyro'")
+    axes: list[str] = Field(description="sensor axes where it is")
+    segment_kinds: list[str] = Field(description="kinds of segment it is in (rest, pose, rate, move)")
+    covariate: str = Field(description="what it follows: a covariate or frequency (e.g. periodic at the rate "
+                                       "table's spin frequency, with amplitudes), or that none was found")
+    excess_chi2: float | None = Field(default=None, description="chi^2 above the noise in those segments")
+    amplitude: list[Number] | None = Field(default=None, description="per-axis amplitude of the periodic part "
+                                                                     "at the spin frequency, in ``unit``")
+    unit: str | None = Field(default=None, description="unit of ``amplitude`` (m/s^2 or deg/s)")
+
+
+class InseparableSummary(BaseModel):
+    """Effects this recording cannot tell apart."""
+
+    effects: list[str] = Field(description="the effects (one of them, or the base model's warm-up, is there)")
+    sensor: str = Field(description="'accel' or 'gyro'")
+    rig_step: str = Field(description="the rig step that would separate them")
+
+
+class RejectionSummary(BaseModel):
+    """A candidate tested and not named."""
+
+    effect: str = Field(description="the candidate (or the inseparable stand-ins, joined by ' / ')")
+    sensor: str = Field(description="'accel' or 'gyro'")
+    reason: str = Field(description="why it is not named, one line")
+    rig_step: str | None = Field(default=None, description="the rig step that would make it identifiable, where "
+                                                           "the recording cannot")
+    detectable_from: ParameterValue | None = Field(
+        default=None, description="the size per axis this recording would have shown (with the power named in "
+                                  "its name), where no significant improvement was the reason")
+
+
+class DiagnosisSummary(BaseModel):
+    """What the diagnosis found, for people: the four lists of the report, typed."""
+
+    findings: list[FindingSummary] = Field(description="effects the recording supports")
+    unexplained: list[UnexplainedSummary] = Field(description="where residual structure stays that no candidate "
+                                                              "explains (findings then do not name a stand-in)")
+    inseparable: list[InseparableSummary] = Field(description="effects this recording cannot tell apart")
+    rejected: list[RejectionSummary] = Field(description="candidates tested and not named")
+
+    @classmethod
+    def of(cls, report: Mapping[str, Any]) -> DiagnosisSummary:
+        """The summary of a ``station-diagnosis/1`` report (entries that are not objects are skipped)."""
+        def items(key: str) -> list[Mapping[str, Any]]:
+            return [x for x in report.get(key) or () if isinstance(x, Mapping)]
+
+        return cls(findings=[_finding(f) for f in items("findings")],
+                   unexplained=[_unexplained(u) for u in items("unexplained")],
+                   inseparable=[InseparableSummary(effects=[str(e) for e in i.get("effects") or ()],
+                                                   sensor=str(i.get("sensor", "")),
+                                                   rig_step=str(i.get("rig_step") or ""))
+                                for i in items("inseparable")],
+                   rejected=[_rejection(r) for r in items("rejected")])
+
+
+_UNIT_SUFFIX = re.compile(r"_(mm|ms|deg|dps|mps2|ppm|k|s|m)$", re.IGNORECASE)
+
+
+def _num(v: Any) -> Any:
+    """Finite floats kept, everything else (NaN, inf, strings) None; nested lists kept as lists."""
+    if isinstance(v, list | tuple):
+        return [_num(x) for x in v]
+    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(float(v)):
+        return None
+    return float(v)
+
+
+def _value(name: str, d: Mapping[str, Any], unit: str = "") -> ParameterValue:
+    return ParameterValue(name=name, value=_num(d.get("value")), std=_num(d.get("std")),
+                          unit=str(d.get("unit") or unit))
+
+
+def _parameters(effect: str, params: Mapping[str, Any]) -> list[ParameterValue]:
+    out = []
+    unit = str(params.get("unit") or "")
+    if "value" in params:
+        out.append(_value(effect, params))
+    for key, v in params.items():
+        if key in ("value", "std", "unit"):
+            continue
+        if isinstance(v, Mapping) and "value" in v:
+            out.append(_value(key, v, unit))
+        elif isinstance(v, Mapping):  # e.g. pose_tilt's pairs: name -> {half_difference: {value, std}, ...}
+            for sub, w in v.items():
+                for part, x in (w.items() if isinstance(w, Mapping) and "value" not in w else [("", w)]):
+                    if isinstance(x, Mapping) and "value" in x:
+                        label = f"{sub}: {part.replace('_', '-')}" if part else f"{key} {sub}"
+                        out.append(_value(label, x, unit))
+        elif isinstance(v, int | float) and not isinstance(v, bool):
+            suffix = _UNIT_SUFFIX.search(key)
+            out.append(ParameterValue(name=key, value=_num(v), unit=suffix.group(1) if suffix else unit))
+    return out
+
+
+def _finding(f: Mapping[str, Any]) -> FindingSummary:
+    conf = f.get("confidence") if isinstance(f.get("confidence"), Mapping) else {}
+    ev = f.get("evidence") if isinstance(f.get("evidence"), Mapping) else {}
+    cal = f.get("calibration") if isinstance(f.get("calibration"), Mapping) else {}
+    params = f.get("parameters") if isinstance(f.get("parameters"), Mapping) else {}
+    effect = str(f.get("effect", ""))
+    return FindingSummary(
+        effect=effect, sensor=str(f.get("sensor", "")), axes=[str(a) for a in f.get("axes") or ()],
+        parameters=_parameters(effect, params), confidence=conf.get("level"),
+        quasi_gain_chi2=_num(conf.get("quasi_gain_chi2")), threshold_chi2=_num(conf.get("threshold")),
+        bic_gain=_num(ev.get("bic_gain")), heldout_before=_num(ev.get("heldout_before")),
+        heldout_after=_num(ev.get("heldout_after")),
+        compensated=cal.get("compensated") if isinstance(cal.get("compensated"), bool) else None,
+        calibration_note=cal.get("note"))
+
+
+def _unexplained(u: Mapping[str, Any]) -> UnexplainedSummary:
+    periodic = u.get("periodic") if isinstance(u.get("periodic"), Mapping) else {}
+    return UnexplainedSummary(
+        sensor=str(u.get("sensor", "")), axes=[str(a) for a in u.get("axes") or ()],
+        segment_kinds=[str(k) for k in u.get("segment_kinds") or ()], covariate=str(u.get("covariate") or ""),
+        excess_chi2=_num(u.get("excess_chi2")),
+        amplitude=_num(periodic["amplitude"]) if isinstance(periodic.get("amplitude"), list) else None,
+        unit=periodic.get("unit"))
+
+
+def _rejection(r: Mapping[str, Any]) -> RejectionSummary:
+    d = r.get("detectable_from")
+    size = None
+    if isinstance(d, Mapping) and "value" in d:
+        power = d.get("power")
+        size = _value("detectable from" + (f" ({100 * power:.0f} % power)" if isinstance(power, float) else ""), d)
+    return RejectionSummary(effect=str(r.get("effect", "")), sensor=str(r.get("sensor", "")),
+                            reason=str(r.get("reason", "")), rig_step=r.get("rig_step"), detectable_from=size)
 
 
 class DiagnosisReady(BaseModel):
@@ -29,6 +208,8 @@ class DiagnosisReady(BaseModel):
                                                "diagnose --json`` prints it: findings with parameters and "
                                                "uncertainties (engineering units named in each), rejected and "
                                                "inseparable effects, where the residual is, the simulator re-run")
+    summary: DiagnosisSummary = Field(description="the report's findings, unexplained structure, inseparable and "
+                                                  "rejected effects, typed (what the diagnosis page shows)")
 
 
 class DiagnosisPending(BaseModel):
@@ -60,4 +241,7 @@ class DiagnosisQueueFull(BaseModel):
     session_sha256: SessionSha256
 
 
-__all__ = ["DiagnosisFailed", "DiagnosisPending", "DiagnosisQueueFull", "DiagnosisReady"]
+__all__ = [
+    "DiagnosisFailed", "DiagnosisPending", "DiagnosisQueueFull", "DiagnosisReady", "DiagnosisSummary", "FindingSummary",
+    "InseparableSummary", "ParameterValue", "RejectionSummary", "UnexplainedSummary",
+]

@@ -1,5 +1,6 @@
-"""The diagnosis of a unit's recordings: ``GET /api/units/{serial}/diagnosis`` and its figure
-``/units/{serial}/diagnosis.svg`` (loaded by the unit page).
+"""The diagnosis of a unit's recordings: ``GET /api/units/{serial}/diagnosis``, its figure
+``/units/{serial}/diagnosis.svg`` (loaded by the unit page) and the diagnosis page ``/units/{serial}/diagnosis``
+(the typed summary, :class:`station.web.models.DiagnosisSummary`, as tables; it reloads itself while pending).
 
 A diagnosis is computed once per recording in the background (:class:`station.web.diagnosis.DiagnosisService`):
 both answer 202 with ``Retry-After`` until it is ready, 422 when the recording cannot be diagnosed and 503 when
@@ -10,14 +11,22 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, Query
-from fastapi.responses import JSONResponse, Response
+from fastapi import APIRouter, Query, Request
+from fastapi.responses import HTMLResponse, JSONResponse, Response
 
 from station.web import plots
 from station.web.context import Web
 from station.web.diagnosis import ERROR, PENDING, DiagnosisBusy
 from station.web.lookup import recording_or_404
-from station.web.models import DiagnosisFailed, DiagnosisPending, DiagnosisQueueFull, DiagnosisReady, problem
+from station.web.models import (
+    DiagnosisFailed,
+    DiagnosisPending,
+    DiagnosisQueueFull,
+    DiagnosisReady,
+    DiagnosisSummary,
+    problem,
+)
+from station.web.templating import templates
 
 #: Seconds a client should wait before asking again for a diagnosis in progress.
 DIAGNOSIS_RETRY_S = 2
@@ -73,7 +82,30 @@ def api_unit_diagnosis(web: Web, serial: str, run_id: RunQuery = None) -> Diagno
         return _json(DiagnosisPending(status=PENDING, **head), 202, {**_RETRY, **_NO_STORE})
     if result.status == ERROR:
         return _json(DiagnosisFailed(status=ERROR, detail=result.error or "", **head), 422, {})
-    return DiagnosisReady(status=result.status, **head, elapsed_s=result.elapsed_s, report=result.report or {})
+    report = result.report or {}
+    return DiagnosisReady(status=result.status, **head, elapsed_s=result.elapsed_s, report=report,
+                          summary=DiagnosisSummary.of(report))
+
+
+@router.get("/units/{serial}/diagnosis", response_class=HTMLResponse, include_in_schema=False)
+def unit_diagnosis_page(request: Request, web: Web, serial: str, run_id: RunQuery = None) -> HTMLResponse:
+    """The diagnosis page: findings, unexplained structure, inseparable and rejected effects as tables."""
+    rec = recording_or_404(web.db, serial, run_id)
+    context = {"serial": serial, "run_id": rec.run_id, "sha": rec.sha256, "retry_s": DIAGNOSIS_RETRY_S,
+               "summary": None, "error": None, "state": PENDING, "elapsed_s": None}
+    try:
+        result = web.diagnoses.get(rec)
+    except DiagnosisBusy as exc:
+        context.update(state="busy", error=str(exc))
+        return templates.TemplateResponse(request, "diagnosis.html", context, status_code=503, headers=_RETRY)
+    if result.status == PENDING:
+        return templates.TemplateResponse(request, "diagnosis.html", context, status_code=202,
+                                          headers={**_RETRY, **_NO_STORE})
+    if result.status == ERROR:
+        context.update(state=ERROR, error=result.error or "")
+        return templates.TemplateResponse(request, "diagnosis.html", context, status_code=422)
+    context.update(state=result.status, summary=DiagnosisSummary.of(result.report or {}), elapsed_s=result.elapsed_s)
+    return templates.TemplateResponse(request, "diagnosis.html", context)
 
 
 def _json(answer: DiagnosisPending | DiagnosisFailed | DiagnosisQueueFull, status: int,
@@ -81,4 +113,4 @@ def _json(answer: DiagnosisPending | DiagnosisFailed | DiagnosisQueueFull, statu
     return JSONResponse(answer.model_dump(mode="json"), status_code=status, headers=headers)
 
 
-__all__ = ["DIAGNOSIS_RETRY_S", "api_unit_diagnosis", "router", "unit_diagnosis_svg"]
+__all__ = ["DIAGNOSIS_RETRY_S", "api_unit_diagnosis", "router", "unit_diagnosis_page", "unit_diagnosis_svg"]
