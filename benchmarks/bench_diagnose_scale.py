@@ -16,7 +16,7 @@ size, median shown), which loads the recording from an ``.npz`` and reports:
   arrays included), from one more run with ``tracemalloc`` on (its time is not used).
 
 Run: ``python benchmarks/bench_diagnose_scale.py [--sizes 9e4,1e6,4.9e6] [--repeats 3] [--tracemalloc]``
-(``nice`` it on a shared machine; about 10 min with the defaults on 2 cores).
+(``nice`` it on a shared machine; about 20 min with the defaults on the shared 2-core machine at load 6-8).
 """
 
 from __future__ import annotations
