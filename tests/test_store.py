@@ -330,7 +330,9 @@ def test_recorder_fed_by_a_simulated_sequence(tmp_path: Path) -> None:
     from station.sequence import SequenceOptions, SequenceRunner
     from station.sim.station_sim import SimStation
 
-    scale = 200.0
+    # 60x: the rig's watchdog (capped at 60 rig s by its 16-bit ms register) is then 1 wall second; at 200x
+    # it was 0.3 s, and a loaded 2-core CI machine once stalled the heartbeat that long (WATCHDOG, run ERROR)
+    scale = 60.0
     plan = RigPlan(sample_rate_hz=50.0, rest_s=120.0, pose_hold_s=5.0,
                    rate_steps=(("x", 100.0), ("y", 100.0), ("z", 100.0)), rate_hold_s=4.0)
     url = f"sqlite:///{tmp_path / 'sim.sqlite'}"

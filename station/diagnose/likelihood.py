@@ -589,12 +589,16 @@ class SensorProblem:
         i, j = settled[:-1], settled[1:]
         dt = sd.t_s[j] - sd.t_s[i]
         d2 = (raw[j] - raw[i]) ** 2  # (pairs, 3)
+        same = sd.segment[i] == sd.segment[j]
         w = self.white[i] + self.white[j]
+        if sd.extra_var is not None:
+            # SensorData.extra_var is one offset per segment (e.g. the horizontal Earth rate in a pose of unknown
+            # heading): it cancels in an increment inside a segment and enters one across a boundary only
+            w = w - np.where(same[:, None], sd.extra_var[i] + sd.extra_var[j], 0.0)
         excess = (d2 - w).sum(axis=1)
         k2_all = max(float(excess.sum()) / max(3.0 * float(dt.sum()), 1e-300), 0.0)
         var = (2.0 * (w + k2_all * dt[:, None]) ** 2).sum(axis=1)
         mid = 0.5 * float(sd.t_s.max())
-        same = sd.segment[i] == sd.segment[j]
         out: dict[str, Any] = {"k2_pooled": k2_all}
         consistent = True
         for name, a in (("halves", sd.t_s[j] <= mid), ("inside_vs_across_segments", same)):
