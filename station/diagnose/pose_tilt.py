@@ -91,11 +91,17 @@ def pose_groups(baseline: Baseline) -> tuple[np.ndarray, list[tuple[str, np.ndar
     ref = np.asarray(session.ref_accel_mps2, dtype=float)
     norm = np.linalg.norm(np.nan_to_num(ref), axis=1)
     in_pose = (session.kind == int(Kind.POSE)) & np.all(np.isfinite(ref), axis=1) & (norm > 0)
+    return _group_directions(ref, norm, np.flatnonzero(in_pose))
+
+
+def _group_directions(ref: np.ndarray, norm: np.ndarray, rows: np.ndarray
+                      ) -> tuple[np.ndarray, list[tuple[str, np.ndarray]]]:
+    """The samples ``rows`` grouped by reference direction (within ALIGN_COS): the six standard poses first,
+    other directions in order of first appearance; (index (n,), -1 outside ``rows``; [(label, up (3,))])."""
     poses: list[tuple[str, np.ndarray]] = [(p, up_vector(p)) for p in POSES]
-    index = np.full(len(session), -1, dtype=np.int64)
-    if not np.any(in_pose):
+    index = np.full(len(ref), -1, dtype=np.int64)
+    if not len(rows):
         return index, poses
-    rows = np.flatnonzero(in_pose)
     unit = ref[rows] / norm[rows, None]
     for i, p in enumerate(POSES):
         index[rows[unit @ up_vector(p) > ALIGN_COS]] = i
@@ -161,20 +167,7 @@ def rig_places(baseline: Baseline) -> tuple[np.ndarray, list[tuple[str, np.ndarr
     held = np.isin(kind, [int(Kind.POSE), int(Kind.REST)])
     still_segs = np.unique(seg[held])
     still = np.isin(seg, still_segs) & ok & np.isin(kind, [int(Kind.POSE), int(Kind.REST), int(Kind.MOVE)])
-    poses: list[tuple[str, np.ndarray]] = [(p, up_vector(p)) for p in POSES]
-    index = np.full(len(session), -1, dtype=np.int64)
-    rows = np.flatnonzero(still)
-    if len(rows):
-        unit = ref[rows] / norm[rows, None]
-        for i, p in enumerate(POSES):
-            index[rows[unit @ up_vector(p) > ALIGN_COS]] = i
-        rest = rows[index[rows] < 0]
-        while len(rest):
-            u = ref[rest[0]] / norm[rest[0]]
-            match = (ref[rest] / norm[rest, None]) @ u > ALIGN_COS
-            index[rest[match]] = len(poses)
-            poses.append((f"pose ({u[0]:+.3f}, {u[1]:+.3f}, {u[2]:+.3f})", u))
-            rest = rest[~match]
+    index, poses = _group_directions(ref, norm, np.flatnonzero(still))
     moves = []
     for a, b, k in _segment_ends(kind, seg):
         if k != int(Kind.MOVE) or seg[a] in still_segs:

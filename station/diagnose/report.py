@@ -51,7 +51,7 @@ from station.diagnose.compensation import compensation
 from station.diagnose.progress import DONE, STAGES, Progress, Stage
 from station.diagnose.rerun import FittedEffect, Rerun, rerun
 from station.diagnose.residuals import SENSORS, Baseline, fit_baseline, locate
-from station.diagnose.selection import select
+from station.diagnose.selection import Decision, select
 from station.kernel.errors import FitError
 from station.session.model import Session
 
@@ -148,12 +148,23 @@ def diagnose(session: Session, *, warmup_tc_s: Mapping[str, tuple[float, float]]
                 session, [(f["effect"], f["sensor"]) for f in findings], warmup_tc_s=warmup_tc_s),
                         strict=True):
             f["calibration"] = c.to_dict()
-    p = baseline.params
     report = {
         "format": FORMAT,
         "serial": session.serial,
         "findings": findings,
         "rejected": [r.to_dict() for r in decision.rejected],
+        **common_sections(baseline, decision),
+        "rerun": rerun_section,
+    }
+    tell(len(STAGES))
+    return Diagnosis(report=report, baseline=baseline, curves=curves, rerun=runs)
+
+
+def common_sections(baseline: Baseline, decision: Decision) -> dict[str, Any]:
+    """The report's sections that every diagnosis path writes the same way: inseparable, unexplained, location,
+    the warm-up T_c range given, and the base fit's residual and noise (engineering units named in the keys)."""
+    p = baseline.params
+    return {
         "inseparable": [i.to_dict() for i in decision.inseparable],
         "unexplained": [u.to_dict() for u in decision.unexplained],
         "location": locate(baseline),
@@ -165,10 +176,7 @@ def diagnose(session: Session, *, warmup_tc_s: Mapping[str, tuple[float, float]]
             "accel_noise_std_mps2": np.round(p.accel.noise_std, 9).tolist(),
             "gyro_noise_std_dps": np.round(np.degrees(p.gyro.noise_std), 9).tolist(),
         },
-        "rerun": rerun_section,
     }
-    tell(len(STAGES))
-    return Diagnosis(report=report, baseline=baseline, curves=curves, rerun=runs)
 
 
 def save_figure(diagnosis: Diagnosis, path: str | os.PathLike[str]) -> None:

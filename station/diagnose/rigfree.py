@@ -38,7 +38,7 @@ from scipy import stats
 from threadpoolctl import threadpool_limits
 
 from station.diagnose.registry import REGISTRY, rig_free_testable
-from station.diagnose.residuals import SENSORS, Baseline, baseline_from_params, locate
+from station.diagnose.residuals import SENSORS, Baseline, baseline_from_params
 from station.diagnose.selection import select
 from station.fit.rigfree import RigFreeOptions, fit_rig_free, is_rig_free
 from station.kernel.constants import EARTH_RATE_RADPS
@@ -226,7 +226,7 @@ def diagnose_rig_free(session: Session, *,
 
     Raises :class:`~station.kernel.errors.FitError` when the rig-free fit refuses the recording.
     """
-    from station.diagnose.report import FORMAT, Diagnosis  # here: report imports this module
+    from station.diagnose.report import FORMAT, Diagnosis, common_sections  # here: report imports this module
 
     with threadpool_limits(limits=1, user_api="blas"):
         baseline = rig_free_baseline(session, warmup_tc_s=warmup_tc_s)
@@ -260,18 +260,8 @@ def diagnose_rig_free(session: Session, *,
         "method": "rig-free",
         "findings": findings,
         "rejected": rejected,
-        "inseparable": [i.to_dict() for i in decision.inseparable],
-        "unexplained": [u.to_dict() for u in decision.unexplained],
         "untestable": [u.to_dict() for u in untestable],
-        "location": locate(baseline),
-        "warmup_tc_range_s": {s: list(sd.tc_range_s) for s in SENSORS
-                              if (sd := baseline.sensor(s)).tc_range_s is not None} or None,
-        "base_fit": {
-            "accel_residual_rms_mps2": np.round(p.accel.residual_rms, 9).tolist(),
-            "gyro_residual_rms_dps": np.round(np.degrees(p.gyro.residual_rms), 9).tolist(),
-            "accel_noise_std_mps2": np.round(p.accel.noise_std, 9).tolist(),
-            "gyro_noise_std_dps": np.round(np.degrees(p.gyro.noise_std), 9).tolist(),
-        },
+        **common_sections(baseline, decision),
         "rig_free": {
             "still_segments": rf.get("still_segments"), "moves": rf.get("moves"),
             "accel_norm_rms_mps2": rf.get("accel_norm_rms_mps2"),
