@@ -211,22 +211,29 @@ def _part_values(name: str, sensor: str, x_rest: np.ndarray, wa: np.ndarray, wb:
     return out[0], out[1]
 
 
+#: The final model's fit under the noise a problem has now: (whitening, whitened data, design, base column count,
+#: coefficients).
+Fitted = tuple[Any, np.ndarray, np.ndarray, int, np.ndarray]
+
+
+def final_fit(prob: Any) -> Fitted:
+    """:data:`Fitted` of ``prob``'s accepted terms under the noise ``prob`` has now."""
+    chols, yw = prob.whitened()
+    x0, nbase = prob.design(chols, prob.accepted)
+    beta, *_ = linalg.lstsq(x0, yw, cond=RCOND, check_finite=False)
+    return chols, yw, x0, nbase, beta
+
+
 def _not_checked(name: str, sensor: str, split: str, reason: str) -> Check:
     return Check(name, sensor, split, critical=float(stats.chi2.isf(ALPHA, 1)), reason=reason)
 
 
-def check_finding(prob: Any, baseline: Any, j: int, name: str, split: str,
-                  fitted: tuple[Any, np.ndarray, np.ndarray, int, np.ndarray] | None = None) -> Check:
+def check_finding(prob: Any, baseline: Any, j: int, name: str, split: str, fitted: Fitted | None = None) -> Check:
     """The consistency check ``split`` of accepted term ``j`` (named ``name``) of ``prob``'s final model; the
-    noise as ``prob`` has it now (the caller inflates it by the dispersion). ``fitted``: the final model's
-    whitening, whitened data, design, base column count and coefficients where the caller has them."""
+    noise as ``prob`` has it now (the caller inflates it by the dispersion). ``fitted``: :func:`final_fit` where
+    the caller has it."""
     sd = prob.sd
-    if fitted is None:
-        chols, yw = prob.whitened()
-        x0, nbase = prob.design(chols, prob.accepted)
-        beta, *_ = linalg.lstsq(x0, yw, cond=RCOND, check_finite=False)
-    else:
-        chols, yw, x0, nbase, beta = fitted
+    chols, yw, x0, nbase, beta = final_fit(prob) if fitted is None else fitted
     col = nbase + sum(a.shape[2] for a in prob.accepted[:j])
     zb = prob.accepted[j]
     p = zb.shape[2]
@@ -269,19 +276,17 @@ def check_finding(prob: Any, baseline: Any, j: int, name: str, split: str,
     return Check(name, sd.sensor, split, chi2, dof, float(stats.chi2.isf(ALPHA, dof)), power, part_a, part_b)
 
 
-def check(prob: Any, baseline: Any, names: list[str]) -> dict[str, list[Check]]:
+def check(prob: Any, baseline: Any, names: list[str], fitted: Fitted | None = None) -> dict[str, list[Check]]:
     """All consistency checks of the accepted findings ``names`` (order of ``prob.accepted``; nuisance terms,
     prefixed ``~``, are not checked), the splits each effect's registry entry names
     (:attr:`station.diagnose.registry.Effect.consistency`), on one sensor's final model under the noise ``prob``
-    has; an effect without checks gets one ``not checked`` entry with the registry's reason."""
+    has (``fitted``: :func:`final_fit` where the caller has it); an effect without checks gets one ``not checked``
+    entry with the registry's reason."""
     out: dict[str, list[Check]] = {}
     targets = [(j, n) for j, n in enumerate(names) if n in REGISTRY]
     if not targets:
         return out
-    chols, yw = prob.whitened()
-    x0, nbase = prob.design(chols, prob.accepted)
-    beta, *_ = linalg.lstsq(x0, yw, cond=RCOND, check_finite=False)
-    fitted = (chols, yw, x0, nbase, beta)
+    fitted = final_fit(prob) if fitted is None else fitted
     for j, name in targets:
         effect = REGISTRY[name]
         if not effect.consistency:
@@ -308,11 +313,12 @@ def review(prob: Any, baseline: Any, names: list[str], gains: dict[str, float] |
     phi, table = robust.dispersion(prob)
     saved = robust._with_inflated_noise(prob, phi)
     try:
-        checks = check(prob, baseline, names)
+        fitted = final_fit(prob)
+        checks = check(prob, baseline, names, fitted)
         worst = failed([c for cs in checks.values() for c in cs])
         where = None
         if worst is not None and (gains or {}).get(worst.effect, 0.0) > 0.0:
-            where = locate(prob, names.index(worst.effect), worst, gains[worst.effect], table)
+            where = locate(prob, names.index(worst.effect), worst, gains[worst.effect], table, fitted)
     finally:
         robust._restore_noise(prob, saved)
     return checks, (rejection(worst) if worst is not None else None), where
@@ -322,12 +328,12 @@ def review(prob: Any, baseline: Any, names: list[str], gains: dict[str, float] |
 LOCATE_SHARE = 0.1
 
 
-def locate(prob: Any, j: int, c: Check, gain: float, table: dict[str, list[float]]) -> robust.Unexplained:
+def locate(prob: Any, j: int, c: Check, gain: float, table: dict[str, list[float]],
+           fitted: Fitted | None = None) -> robust.Unexplained:
     """Where the structure of accepted term ``j``, rejected by check ``c``, lies: the axes and segment kinds
-    holding at least :data:`LOCATE_SHARE` of its whitened fitted signal energy; ``gain``: its chi^2 gain."""
-    chols, yw = prob.whitened()
-    x0, nbase = prob.design(chols, prob.accepted)
-    beta, *_ = linalg.lstsq(x0, yw, cond=RCOND, check_finite=False)
+    holding at least :data:`LOCATE_SHARE` of its whitened fitted signal energy; ``gain``: its chi^2 gain;
+    ``fitted``: :func:`final_fit` where the caller has it."""
+    _, _, x0, nbase, beta = final_fit(prob) if fitted is None else fitted
     col = nbase + sum(a.shape[2] for a in prob.accepted[:j])
     p = prob.accepted[j].shape[2]
     energy = ((x0[:, col:col + p] @ beta[col:col + p]).reshape(3, prob.m) ** 2).T  # (m, 3)
@@ -367,6 +373,7 @@ __all__ = [
     "check",
     "check_finding",
     "failed",
+    "final_fit",
     "locate",
     "not_checked",
     "rejection",

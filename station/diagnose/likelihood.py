@@ -130,13 +130,7 @@ def base_drift(t_s: np.ndarray, sd: SensorData) -> np.ndarray:
     ``exp(-t/T_c')`` on top of the base fit's ``b_drift exp(-t/T_c)`` leaves the base fit's drift in the data
     whenever T_c' moves away from T_c, e.g. when an unmodelled effect distorted the base fit's T_c.)
     """
-    out = np.zeros((len(t_s), 3))
-    tc = np.asarray(sd.params.correlation_time_s, dtype=float)
-    bd = np.asarray(sd.params.bias_drift, dtype=float)
-    for k in range(3):
-        if np.isfinite(tc[k]) and tc[k] > 0 and np.isfinite(bd[k]) and bd[k] != 0.0:
-            out[:, k] = bd[k] * np.exp(-t_s / tc[k])
-    return out
+    return sd.params.warmup_drift(t_s)
 
 
 class SensorProblem:

@@ -101,6 +101,7 @@ def diagnose(session: Session, *, warmup_tc_s: Mapping[str, tuple[float, float]]
     Raises :class:`station.kernel.errors.FitError` when the base fit refuses the recording.
     """
     from station.diagnose import rigfree
+    from station.fit.rigfree import is_rig_free
 
     t0 = time.perf_counter()
     n = len(session)
@@ -110,7 +111,7 @@ def diagnose(session: Session, *, warmup_tc_s: Mapping[str, tuple[float, float]]
             name = STAGES[index] if index < len(STAGES) else DONE
             progress(Stage(index, len(STAGES), name, time.perf_counter() - t0, n))
 
-    if rigfree.wants_rig_free(session):
+    if is_rig_free(session):
         tell(0)
         out = rigfree.diagnose_rig_free(session, warmup_tc_s=warmup_tc_s, resamples=resamples, seed=seed)
         tell(len(STAGES))

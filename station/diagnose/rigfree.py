@@ -40,7 +40,7 @@ from threadpoolctl import threadpool_limits
 from station.diagnose.registry import REGISTRY, rig_free_testable
 from station.diagnose.residuals import SENSORS, Baseline, baseline_from_params
 from station.diagnose.selection import select
-from station.fit.rigfree import RigFreeOptions, fit_rig_free, is_rig_free
+from station.fit.rigfree import RigFreeOptions, fit_rig_free
 from station.kernel.constants import EARTH_RATE_RADPS
 from station.session.model import Kind, Session
 
@@ -48,8 +48,7 @@ if TYPE_CHECKING:
     from station.diagnose.report import Diagnosis
 
 __all__ = ["EARTH_P", "EDGE_S", "Untestable", "diagnose_rig_free", "earth_horizontal_radps", "earth_vertical_radps",
-           "horizontal_earth_var", "rig_free_baseline", "rig_free_candidates", "rig_free_references", "trimmed_kinds",
-           "wants_rig_free"]
+           "horizontal_earth_var", "rig_free_baseline", "rig_free_candidates", "rig_free_references", "trimmed_kinds"]
 
 #: Trimmed from both ends of every still pose before the diagnosis (s): the hand's release and pick-up.
 EDGE_S = 0.5
@@ -83,12 +82,7 @@ def rig_free_references(session: Session, params: Any) -> tuple[np.ndarray, np.n
     gravity direction of still i, in the rig-free fit's frame (eq. 1 inverted with eq. 3's drift removed)."""
     a = params.accel
     m = np.nan_to_num(np.asarray(a.misalignment, dtype=float))
-    drift = np.zeros((len(session), 3))
-    for k in range(3):
-        tc, bd = float(a.correlation_time_s[k]), float(a.bias_drift[k])
-        if math.isfinite(tc) and tc > 0 and bd != 0.0:
-            drift[:, k] = bd * np.exp(-session.t_s / tc)
-    cal = np.linalg.solve(m, (session.accel_mps2 - a.bias_static - drift).T).T
+    cal = np.linalg.solve(m, (session.accel_mps2 - a.bias_static - a.warmup_drift(session.t_s)).T).T
     ref_a = np.full((len(session), 3), np.nan)
     ref_w = np.full((len(session), 3), np.nan)
     dirs = []
@@ -272,8 +266,3 @@ def diagnose_rig_free(session: Session, *,
         "rerun": {"error": "the simulator re-run needs the rig's motion; a hand-held recording's is unknown"},
     }
     return Diagnosis(report=report, baseline=baseline, curves=curves, rerun=None)
-
-
-def wants_rig_free(session: Session) -> bool:
-    """Whether ``station diagnose`` takes the rig-free path for ``session`` (:func:`is_rig_free`)."""
-    return is_rig_free(session)

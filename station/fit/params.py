@@ -158,6 +158,17 @@ class TriadParams:
                 out[f.name] = _to_json_value(value)
         return out
 
+    def warmup_drift(self, t_s: np.ndarray) -> np.ndarray:
+        """Eq. 3's warm-up ``b_drift exp(-t/T_c)`` at the times ``t_s`` (s since power-on), (n, 3), in the triad's
+        unit; zero on axes the fit left unresolved (T_c or b_drift not finite, or b_drift 0)."""
+        t = np.asarray(t_s, dtype=float)
+        out = np.zeros((len(t), 3))
+        for k in range(3):
+            tc, bd = float(self.correlation_time_s[k]), float(self.bias_drift[k])
+            if math.isfinite(tc) and tc > 0 and math.isfinite(bd) and bd != 0.0:
+                out[:, k] = bd * np.exp(-t / tc)
+        return out
+
     @property
     def has_temperature_terms(self) -> bool:
         """Any non-zero temperature coefficient."""
