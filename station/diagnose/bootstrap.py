@@ -68,26 +68,8 @@ def _design(prob: Any, keep: np.ndarray, white: np.ndarray) -> tuple[np.ndarray,
     """Whitened stacked design (base per axis, then the accepted effects) and data on the blocks ``keep``,
     with white block variance ``white`` (m, 3) (0 weight blocks already dropped)."""
     idx = np.flatnonzero(keep)
-    nb = [b.shape[1] for b in prob.base]
-    total = sum(nb)
-    p = sum(a.shape[2] for a in prob.accepted)
-    n = len(idx)
-    x = np.zeros((3 * n, total + p))
-    y = np.zeros(3 * n)
-    col = 0
-    for k in range(3):
-        c = float(prob.q[k]) * prob.gm[k][np.ix_(idx, idx)]
-        if prob.k2:
-            c = c + prob.k2 * prob.tmin[np.ix_(idx, idx)]
-        c[np.diag_indices_from(c)] += white[idx, k]
-        ch = linalg.cholesky(c, lower=True, check_finite=False)
-        rows = slice(k * n, (k + 1) * n)
-        x[rows, col:col + nb[k]] = linalg.solve_triangular(ch, prob.base[k][idx], lower=True, check_finite=False)
-        col += nb[k]
-        if p:
-            z = np.concatenate([a[idx, k, :] for a in prob.accepted], axis=1)
-            x[rows, total:] = linalg.solve_triangular(ch, z, lower=True, check_finite=False)
-        y[rows] = linalg.solve_triangular(ch, prob.y[idx, k], lower=True, check_finite=False)
+    chols, y = prob.whitened(idx, white)
+    x, total = prob.design(chols, prob.accepted, idx)
     return x, y, total
 
 

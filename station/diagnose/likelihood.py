@@ -219,9 +219,17 @@ class SensorProblem:
                 break
 
     # --- covariance ----------------------------------------------------------
-    def chol(self, k: int, q: float, k2: float) -> np.ndarray:
-        c = q * self.gm[k] + k2 * self.tmin
-        c[np.diag_indices_from(c)] += self.white[:, k]
+    def chol(self, k: int, q: float, k2: float, rows: np.ndarray | None = None,
+             white: np.ndarray | None = None) -> np.ndarray:
+        """Cholesky factor of axis ``k``'s block covariance; ``rows``: only those blocks (default all),
+        ``white``: the white block variance (m, 3) to use instead of :attr:`white`."""
+        white = self.white if white is None else white
+        if rows is None:
+            c = q * self.gm[k] + k2 * self.tmin
+            c[np.diag_indices_from(c)] += white[:, k]
+        else:
+            c = q * self.gm[k][np.ix_(rows, rows)] + k2 * self.tmin[np.ix_(rows, rows)]
+            c[np.diag_indices_from(c)] += white[rows, k]
         return linalg.cholesky(c, lower=True, check_finite=False)
 
     def _axis_nll(self, k: int, q: float, k2: float, extra: np.ndarray | None) -> float:
@@ -299,26 +307,34 @@ class SensorProblem:
             self.q[k] = self._profile_q(k, self.k2, self._accepted_axis(k), q_max=q_max)[0]
 
     # --- mean fit ----------------------------------------------------------------
-    def whitened(self) -> tuple[list[np.ndarray], np.ndarray]:
-        chols = [self.chol(k, float(self.q[k]), self.k2) for k in range(3)]
-        yw = np.concatenate([linalg.solve_triangular(chols[k], self.y[:, k], lower=True, check_finite=False)
+    def whitened(self, rows: np.ndarray | None = None,
+                 white: np.ndarray | None = None) -> tuple[list[np.ndarray], np.ndarray]:
+        """Per-axis Cholesky factors and the whitened stacked data; ``rows``, ``white`` as in :meth:`chol`."""
+        chols = [self.chol(k, float(self.q[k]), self.k2, rows, white) for k in range(3)]
+        y = self.y if rows is None else self.y[rows]
+        yw = np.concatenate([linalg.solve_triangular(chols[k], y[:, k], lower=True, check_finite=False)
                              for k in range(3)])
         return chols, yw
 
-    def design(self, chols: list[np.ndarray], blocks: list[np.ndarray]) -> tuple[np.ndarray, int]:
-        """Whitened stacked design: per-axis base columns (block diagonal), then ``blocks`` (m, 3, p) shared."""
+    def design(self, chols: list[np.ndarray], blocks: list[np.ndarray],
+               rows: np.ndarray | None = None) -> tuple[np.ndarray, int]:
+        """Whitened stacked design: per-axis base columns (block diagonal), then ``blocks`` (m, 3, p) shared;
+        ``rows``: only those blocks (the ``chols`` of :meth:`whitened` with the same rows)."""
         nb = [b.shape[1] for b in self.base]
         total_base = sum(nb)
         p = sum(b.shape[2] for b in blocks)
-        x = np.zeros((self.n_rows, total_base + p))
+        m = self.m if rows is None else len(rows)
+        pick = slice(None) if rows is None else rows
+        x = np.zeros((3 * m, total_base + p))
         col = 0
         for k in range(3):
-            rows = slice(k * self.m, (k + 1) * self.m)
-            x[rows, col:col + nb[k]] = linalg.solve_triangular(chols[k], self.base[k], lower=True, check_finite=False)
+            span = slice(k * m, (k + 1) * m)
+            x[span, col:col + nb[k]] = linalg.solve_triangular(chols[k], self.base[k][pick], lower=True,
+                                                               check_finite=False)
             col += nb[k]
             if p:
-                zk = np.concatenate([b[:, k, :] for b in blocks], axis=1)
-                x[rows, total_base:] = linalg.solve_triangular(chols[k], zk, lower=True, check_finite=False)
+                zk = np.concatenate([b[pick, k, :] for b in blocks], axis=1)
+                x[span, total_base:] = linalg.solve_triangular(chols[k], zk, lower=True, check_finite=False)
         return x, total_base
 
     @staticmethod
