@@ -132,3 +132,39 @@ def test_a_mis_modelled_mean_effect_is_not_taken_for_a_random_walk(monkeypatch: 
     walk = [r for r in report["rejected"] if r["effect"] == "bias_random_walk" and "consistency" in r]
     assert walk and "not the same wander" in walk[0]["reason"]
     assert abs(walk[0]["consistency"]["inside_vs_across_segments"]) > 8.0
+
+
+@pytest.mark.parametrize(("seed", "other"), [(508, "earth_rotation"), (524, "g_sensitivity")])
+def test_a_random_walk_is_not_taken_for_a_temperature_bias(seed: int, other: str) -> None:
+    """Development seeds 508 and 524 (a walk beside another effect): the accelerometer's wander passed the
+    temperature bias's test (chi^2 gain 29 and 31 against 25.9), which assumed no walk, and the walk's own test
+    then found nothing left. The temperature bias is now also tested with a random walk allowed in both
+    hypotheses: its gain falls below the threshold, and the walk is named instead."""
+    magnitude = {"earth_rotation": 1.0, "g_sensitivity": 0.02}[other]
+    rec = indepgen.generate(seed, {"bias_random_walk": 3e-4, other: magnitude})
+    report = diagnose(rec.session, warmup_tc_s=TC).report
+    names = {e for e, _ in _named(report)}
+    assert "temperature_bias" not in names
+    assert ("bias_random_walk", "accel") in _named(report) and other in names
+
+
+def test_the_walk_explains_a_wander_but_not_a_temperature_bias() -> None:
+    """``gain_given_walk`` on the temperature bias's block regressor: for a recording holding a walk and no
+    temperature effect (development seed 508) it falls well below the gain without a walk; for a recording holding
+    a temperature bias and no walk (development seed 604) it stays above the threshold."""
+    from station.diagnose.likelihood import SensorProblem
+    from station.diagnose.registry import LIBRARY
+    from station.diagnose.residuals import fit_baseline
+
+    def gains(seed: int, effects: dict[str, float]) -> tuple[float, float, float]:
+        baseline = fit_baseline(indepgen.generate(seed, effects).session, warmup_tc_s=TC)
+        sd = baseline.sensor("accel")
+        prob = SensorProblem(baseline, sd)
+        zb = sd.block_mean(LIBRARY["temperature_bias"].build(baseline, sd))
+        t = prob.test_mean("temperature_bias", zb)
+        return t.gain, prob.gain_given_walk(zb, refit=True), t.threshold
+
+    gain, walked, threshold = gains(508, {"bias_random_walk": 3e-4, "earth_rotation": 1.0})
+    assert gain > threshold > walked
+    gain, walked, threshold = gains(604, {"temperature_bias": 1.0})
+    assert walked > threshold and walked > 0.5 * gain

@@ -79,6 +79,8 @@ WALK_CONSISTENCY_Z = 4.0
 TC_FLOOR_S = 1.0
 #: Candidates that look like the warm-up drift: tested with the drift's T_c re-fitted.
 PROFILE_TC = tuple(e.name for e in EFFECTS if e.identifiability.profile_tc)
+#: Candidates a bias random walk can imitate (a function of time alone): tested with the walk allowed too.
+WANDER_LIKE = tuple(e.name for e in EFFECTS if e.identifiability.wander_like)
 
 #: Per axis of a held-out fold: Cholesky of the training covariance, kriging weights, conditional Cholesky.
 _FoldAxis = tuple[np.ndarray, np.ndarray, np.ndarray | None]
@@ -103,6 +105,8 @@ class Test:
     cov: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     signal: np.ndarray = field(default_factory=lambda: np.zeros(0))  # whitened fitted signal of the effect
     span: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))  # whitened effect columns
+    #: a ``WANDER_LIKE`` candidate's gain with a bias random walk (K^2 profiled) in both hypotheses; nan: not tried
+    gain_given_walk: float = math.nan
 
     @property
     def threshold(self) -> float:
@@ -111,7 +115,13 @@ class Test:
 
     @property
     def passes(self) -> bool:
-        return self.params > 0 and self.gain > self.threshold
+        return self.params > 0 and self.gain > self.threshold and not self.walk_explains
+
+    @property
+    def walk_explains(self) -> bool:
+        """A wander-like candidate that is significant only as long as no random walk is allowed: a bias random
+        walk explains its signal as well (``gain_given_walk`` below the threshold)."""
+        return bool(self.gain_given_walk <= self.threshold)  # False for nan
 
     @property
     def validates(self) -> bool:
@@ -400,6 +410,9 @@ class SensorProblem:
             critical=float(stats.chi2.isf(ALPHA, max(gain_rank, 1))),
             theta=theta, cov=cov, signal=zcols @ theta, span=np.column_stack([x1[:, :nfix], zcols]),
         )
+        if name in WANDER_LIKE and self.k2 == 0.0 and test.passes:
+            # significant without a random walk; is it with one? (only then: the walk's profile is costly)
+            test.gain_given_walk = self.gain_given_walk(zb, refit=saved is not None)
         if test.passes:
             test.heldout_before, test.heldout_after, test.heldout_change_se = self.heldout(zb)
         return test
@@ -541,7 +554,6 @@ class SensorProblem:
 
     def _random_walk_at_current_tc(self) -> Test:
         """:meth:`test_random_walk` at the current T_c."""
-        span = float(self.sd.t_s.max())
         q_max = [self.drift_noise_max(k) for k in range(3)]
         extra = []
         for k in range(3):
@@ -549,31 +561,13 @@ class SensorProblem:
             if np.any(self.d_temp):  # the temperature course is a nuisance term of both hypotheses
                 acc = self.d_temp[:, None] if acc is None else np.column_stack([acc, self.d_temp])
             extra.append(acc)
-        k2_0 = float(np.median(self.white)) / max(span, 1.0)
-        grid = [k2_0 * 10.0 ** e for e in np.arange(-2.0, 3.01, 1.0)]
 
         def constrained_q() -> tuple[list[float], float]:
             out = [self._profile_q(k, 0.0, extra[k], q_max=q_max[k]) for k in range(3)]
             return [q for q, _ in out], sum(v for _, v in out)
 
-        def walk(qs: list[float]) -> tuple[float, float, float]:
-            """(nll, K^2, std of K) with the random walk profiled at the current T_c and q."""
-            def total(k2: float) -> float:
-                return sum(self._axis_nll(k, qs[k], k2, extra[k]) for k in range(3))
-
-            vals = [total(g) for g in grid]
-            i = int(np.argmin(vals))
-            lo, hi = math.log(grid[max(i - 1, 0)]), math.log(grid[min(i + 1, len(grid) - 1)])
-            res = optimize.minimize_scalar(lambda u: total(math.exp(u)), bounds=(lo, hi), method="bounded",
-                                           options={"xatol": 0.2, "maxiter": 10})
-            nll, k2 = (float(res.fun), math.exp(float(res.x))) if res.fun < vals[i] else (vals[i], grid[i])
-            # uncertainty of K from the curvature of the profile in log K^2
-            h = 0.3
-            curv = (total(k2 * math.exp(h)) - 2.0 * nll + total(k2 * math.exp(-h))) / h**2
-            return nll, k2, math.sqrt(k2) * 0.5 / math.sqrt(curv) if curv > 0 else math.nan
-
         qs, nll0 = constrained_q()
-        alt = walk(qs)
+        alt = self._profile_k2(qs, extra)
         best_nll, k2, k_std = alt
         gain = max(0.0, 2.0 * (nll0 - best_nll))
         # K^2 >= 0 sits on the boundary: the null distribution is half chi^2_1
@@ -582,6 +576,61 @@ class SensorProblem:
         return Test(effect="bias_random_walk", sensor=self.sd.sensor, gain=gain, params=1,
                     bic_gain=gain - math.log(self.n_rows), critical=crit, theta=np.array([k]),
                     cov=np.array([[k_std**2]]))
+
+    def _profile_k2(self, qs: list[float], extra: list[np.ndarray | None]) -> tuple[float, float, float]:
+        """(nll, K^2, std of K) with a random walk ``K^2 min(t_i, t_j)`` shared by the three axes profiled at the
+        current T_c and the drift noise ``qs``; ``extra``: per axis the mean columns besides the base terms."""
+        k2_0 = float(np.median(self.white)) / max(float(self.sd.t_s.max()), 1.0)
+        grid = [k2_0 * 10.0 ** e for e in np.arange(-2.0, 3.01, 1.0)]
+
+        def total(k2: float) -> float:
+            return sum(self._axis_nll(k, qs[k], k2, extra[k]) for k in range(3))
+
+        vals = [total(g) for g in grid]
+        i = int(np.argmin(vals))
+        lo, hi = math.log(grid[max(i - 1, 0)]), math.log(grid[min(i + 1, len(grid) - 1)])
+        res = optimize.minimize_scalar(lambda u: total(math.exp(u)), bounds=(lo, hi), method="bounded",
+                                       options={"xatol": 0.2, "maxiter": 10})
+        nll, k2 = (float(res.fun), math.exp(float(res.x))) if res.fun < vals[i] else (vals[i], grid[i])
+        # uncertainty of K from the curvature of the profile in log K^2
+        h = 0.3
+        curv = (total(k2 * math.exp(h)) - 2.0 * nll + total(k2 * math.exp(-h))) / h**2
+        return nll, k2, math.sqrt(k2) * 0.5 / math.sqrt(curv) if curv > 0 else math.nan
+
+    def walk_profiled_nll(self) -> float:
+        """Negative log-likelihood of the current mean model (accepted effects, T_c) with a bias random walk
+        allowed beside eq. 3's drift noise: (q per axis, K^2) profiled jointly by coordinate steps from two
+        starts, the current q (K^2 = 0) and q = 0 (an unbounded q of a fast warm-up and a walk over the whole
+        record trade against each other); never worse than the model as it is. The nuisance hypothesis under
+        which a ``WANDER_LIKE`` candidate is tested as well (:meth:`gain_given_walk`)."""
+        extra = [self._accepted_axis(k) for k in range(3)]
+        best = self.total_nll()
+        for start in ([float(q) for q in self.q], [0.0, 0.0, 0.0]):
+            _, k2, _ = self._profile_k2(start, extra)
+            fits = [self._profile_q(k, k2, extra[k]) for k in range(3)]
+            best = min(best, sum(v for _, v in fits))
+        return best
+
+    def gain_given_walk(self, zb: np.ndarray, *, refit: bool) -> float:
+        """2 x log-likelihood gain of the mean candidate ``zb`` with a bias random walk allowed in the null and
+        the alternative (:meth:`walk_profiled_nll`); ``refit``: each hypothesis's T_c re-fitted first, as in
+        :meth:`test_mean`. The symmetric counterpart of the walk's own test, whose null holds the temperature
+        course: a slow wander is not evidence of a temperature bias, nor a temperature course of a wander."""
+        saved = self._snapshot()
+        try:
+            if refit:
+                self.refit_drift()
+            nll0 = self.walk_profiled_nll()
+            self.accepted.append(zb)
+            try:
+                if refit:
+                    self.refit_drift()
+                nll1 = self.walk_profiled_nll()
+            finally:
+                self.accepted.pop()
+        finally:
+            self._restore(saved)
+        return max(0.0, 2.0 * (nll0 - nll1))
 
     def walk_consistency(self) -> dict[str, Any]:
         """Whether the wander in the current model's block residual is a random walk: the increments of the
@@ -698,5 +747,6 @@ class SensorProblem:
 
 __all__ = [
     "ALPHA", "DRIFT_NOISE_MAX", "FOLDS", "HELDOUT_SE", "PROFILE_TC", "RCOND", "TC_FLOOR_S", "WALK_CONSISTENCY_Z",
+    "WANDER_LIKE",
     "SensorProblem", "Test", "base_drift",
 ]

@@ -132,6 +132,11 @@ class Identifiability:
         rig_free: per sensor, why a rig-free recording (hand-held still poses, no rig reference:
             :mod:`station.fit.rigfree`) cannot test it; a sensor not listed: testable there, as far as the
             recording holds what ``needs`` says.
+        wander_like: a function of time alone, the same in every pose (a temperature bias follows the
+            temperature's slow course): a bias random walk can imitate it, so
+            :meth:`station.diagnose.likelihood.SensorProblem.test_mean` also tests it with a random walk
+            allowed in both hypotheses (the walk's own test has the temperature course as a nuisance term:
+            each is tested given the other).
         family: candidates of one family are forms of the same physics (the odd scale terms ``u|u|`` and
             ``u^3``: a scale nonlinearity odd in the input); where the recording cannot tell the forms apart,
             :mod:`station.diagnose.selection` names the better-fitting form as the finding and lists the others
@@ -143,6 +148,7 @@ class Identifiability:
     profile_tc: bool = False
     base_twin: str | None = None
     rig_free: Mapping[str, str] = field(default_factory=dict)
+    wander_like: bool = False
     family: str | None = None
 
 
@@ -229,7 +235,7 @@ EFFECTS: tuple[Effect, ...] = (
             "a temperature course no warm-up exponential can follow: a climate-chamber cycle (e.g. "
             "+-2 K with a 5 min period) during the session; a ramp is not enough (a slow warm-up "
             "is a ramp too)",
-            profile_tc=True, base_twin="bias_drift (eq. 3 warm-up)"),
+            profile_tc=True, base_twin="bias_drift (eq. 3 warm-up)", wander_like=True),
         simulate=_add("temp_bias"),  # + c dT
         compensation="temperature_bias", consistency=("early_vs_late",),
     ),

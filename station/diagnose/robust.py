@@ -233,10 +233,13 @@ def audit(prob: Any, baseline: Any, names: list[str], regs: dict[str, np.ndarray
                                      "reason": "a stand-in: most of its fitted signal lies where structure stays "
                                                "unexplained (see unexplained)"})
             elif not t.passes:  # (the held-out gate was the forward selection's; here only the significance)
+                why = ("not significant against the full model with the noise inflated by the final model's "
+                       "dispersion per segment kind (misspecification)")
+                if t.walk_explains:
+                    why += (f"; with a bias random walk allowed its gain is {t.gain_given_walk:.3g}: a slow wander "
+                            "explains it as well")
                 out.rejected.append({"effect": name, "sensor": sd.sensor, "gain": round(t.gain, 3),
-                                     "threshold": round(t.threshold, 3),
-                                     "reason": "not significant against the full model with the noise inflated by "
-                                               "the final model's dispersion per segment kind (misspecification)"})
+                                     "threshold": round(t.threshold, 3), "reason": why})
             else:
                 out.confidence[name] = {"level": _confidence(t.gain, t.threshold),
                                         "quasi_gain_chi2": round(t.gain, 2), "threshold": round(t.threshold, 2)}

@@ -52,6 +52,9 @@ WARMUP = REGISTRY["temperature_bias"].identifiability.base_twin
 NUISANCE = "~"
 #: Rounds of the checks after the forward selection (robust.py, consistency.py); each may reject effects.
 AUDIT_ROUNDS = 4
+#: Why a wander-like candidate (a temperature bias) significant without a random walk is not a finding.
+WALK_EXPLAINS = ("significant only while no bias random walk is allowed: with one (K^2 and the drift noise profiled "
+                 "in both hypotheses) its gain is below the threshold, a slow wander explains its signal as well")
 #: Fixed-point rounds of the exact-delay fit (:func:`_refine_delay`).
 DELAY_ROUNDS = 6
 
@@ -266,6 +269,9 @@ def select(baseline: Baseline, *, max_effects: int = 4,
             if t.params == 0:
                 entry["reason"] = "not identifiable with this recording (absorbed by the base model)"
                 entry["rig_step"] = RIG_STEPS[t.effect]
+            elif t.walk_explains:
+                entry["reason"] = WALK_EXPLAINS
+                entry["gain_given_walk"] = round(t.gain_given_walk, 3)
             elif not t.passes:
                 entry["reason"] = "no significant improvement"
                 if t.effect in LIBRARY:
@@ -351,4 +357,4 @@ def _fitted_samples(prob: SensorProblem, baseline: Baseline, sd: SensorData, nam
     return out
 
 
-__all__ = ["COLLINEAR_R2", "NUISANCE", "TEMPERATURE_R2", "Decision", "select"]
+__all__ = ["COLLINEAR_R2", "NUISANCE", "TEMPERATURE_R2", "WALK_EXPLAINS", "Decision", "select"]
