@@ -279,6 +279,9 @@ def select(baseline: Baseline, *, max_effects: int = 4,
             else:
                 entry["reason"] = "worse on held-out segments"
             rejected.append(entry)
+        twin = _wander_or_temperature(last, walk)
+        if twin is not None:
+            inseparable.append({"sensor": sensor, **twin})
         if "temperature_bias" in pool and np.any(baseline.d_temp):
             r2, t_like = prob.temperature_collinearity()
             if r2 > TEMPERATURE_R2:
@@ -313,6 +316,24 @@ def select(baseline: Baseline, *, max_effects: int = 4,
     # the selection works on report entries; its result is typed
     return Decision(tuple(Finding.from_entry(f) for f in findings), tuple(Rejection.from_entry(r) for r in rejected),
                     tuple(Inseparable.from_entry(i) for i in inseparable), tuple(unexplained))
+
+
+def _wander_or_temperature(last: Mapping[str, Test], walk: Test | None) -> dict[str, Any] | None:
+    """A slow course that is significant as a temperature bias while no random walk is allowed, and as a random
+    walk while no temperature course is (each test holds the other as nuisance): the recording holds the structure
+    but cannot name it. The pair's entry (without the sensor), or None."""
+    temp, wander = last.get("temperature_bias"), last.get("bias_random_walk")
+    if walk is not None or temp is None or wander is None or not temp.walk_explains or wander.passes:
+        return None
+    return {"effects": ["temperature_bias", "bias_random_walk"],
+            "evidence": {"temperature_bias": {"gain": round(temp.gain, 2),
+                                              "gain_given_walk": round(temp.gain_given_walk, 2),
+                                              "threshold": round(temp.threshold, 2)},
+                         "bias_random_walk": {"gain_given_temperature": round(wander.gain, 2),
+                                              "threshold": round(wander.threshold, 2)},
+                         "note": "a slow wander: significant as a temperature bias without a random walk, and "
+                                 "not significant as either given the other"},
+            "rig_step": RIG_STEPS["temperature_bias"]}
 
 
 def _refine_delay(
