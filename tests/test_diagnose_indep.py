@@ -168,3 +168,25 @@ def test_the_walk_explains_a_wander_but_not_a_temperature_bias() -> None:
     assert gain > threshold > walked
     gain, walked, threshold = gains(604, {"temperature_bias": 1.0})
     assert walked > threshold and walked > 0.5 * gain
+
+
+def test_a_course_neither_test_names_is_listed_as_wander_or_temperature() -> None:
+    """The pair entry of :func:`station.diagnose.selection._wander_or_temperature`: a temperature bias significant
+    only while no walk is allowed, and a walk not significant given the temperature course, is the inseparable pair
+    (with the rig step that separates them); a walk that was accepted, or a temperature bias the walk does not
+    explain, is not."""
+    from station.diagnose.likelihood import Test
+    from station.diagnose.selection import _wander_or_temperature
+
+    def temp(given_walk: float) -> Test:
+        return Test("temperature_bias", "accel", gain=29.6, params=3, bic_gain=29.6 - 20.9, critical=25.9,
+                    gain_given_walk=given_walk)
+
+    walk = Test("bias_random_walk", "accel", gain=0.0, params=1, bic_gain=-7.0, critical=18.2)
+    pair = _wander_or_temperature({"temperature_bias": temp(24.4), "bias_random_walk": walk}, None)
+    assert pair is not None and pair["effects"] == ["temperature_bias", "bias_random_walk"]
+    assert "climate-chamber" in pair["rig_step"]
+    assert pair["evidence"]["temperature_bias"]["gain_given_walk"] == 24.4
+    assert _wander_or_temperature({"temperature_bias": temp(30.0), "bias_random_walk": walk}, None) is None
+    assert _wander_or_temperature({"temperature_bias": temp(24.4), "bias_random_walk": walk}, walk) is None
+    assert _wander_or_temperature({"temperature_bias": temp(24.4)}, None) is None
