@@ -17,7 +17,11 @@ asked for with ``station fit --rig-free``. Steps (numerics in :mod:`station.fit.
    zero up to Earth rate, which the model leaves in the bias), again with ``fit_axis``: the poses spread
    over the whole recording see the warm-up better than the initial still alone.
 5. Gyroscope M from the rotations between consecutive still segments (RK4 of the calibrated rate
-   over each move, matched to the accelerometer's gravity direction before and after).
+   over each move, matched to the accelerometer's gravity direction before and after). A logger that
+   polls the gyro axis by axis on its own clock reads each axis's sample twice once per beat of the two
+   clocks (:mod:`station.fit.readtiming`); when the record shows such a beat (its selection rule, on exact
+   repeats, not on the fit), each move is integrated on the sensor's own samples: the stale reads
+   dropped, the axes aligned by sample, the sensor's sample period (eq. 3 there).
 6. Held-out validation (:func:`cross_validate`): k-fold leave-poses-out of the gravity norm and of
    the move rotations, reported in ``quality["rig_free"]["cross_validation"]``.
 
@@ -59,6 +63,7 @@ from station.fit.multipos import (
     rough_directions,
 )
 from station.fit.params import ParameterSet, TriadParams
+from station.fit.readtiming import ReadTiming, detect_stale_reads
 from station.kernel.errors import FitError
 from station.session.model import Kind, Segment, Session
 
@@ -88,6 +93,8 @@ class RigFreeOptions:
             direction moves by more than this is refused as a move.
         cv_folds: folds of the leave-poses-out cross-validation (0: none).
         accel_drift: fit the accelerometer's eq. (3) drift jointly (step 3); False: imu_tk's model, no drift.
+        read_timing: look for stale per-axis gyro reads (:func:`station.fit.readtiming.detect_stale_reads`) and,
+            when its selection rule accepts them, integrate the moves on the sensor's samples; False: the reads.
         min_segment_samples: still segments shorter than this are refused.
         outlier_sigma, drift_lr_threshold, max_blocks, tc_range_s: as in the rig fit
             (:class:`~station.fit.calibrate.FitOptions`): ``tc_range_s`` the sensor class's range of eq. 3's T_c
@@ -108,6 +115,7 @@ class RigFreeOptions:
     moving_average_length: int = 40
     tc_range_s: Mapping[str, tuple[float, float]] = field(default_factory=dict)
     accel_drift: bool = True
+    read_timing: bool = True
 
 
 def _still(session: Session) -> list[Segment]:
@@ -277,14 +285,19 @@ def prepare(session: Session, options: RigFreeOptions | None = None) -> tuple[Ri
     means = _means(accel, a_noise.keep, still)
     n_distinct = _check_poses(still, means, session.gravity_mps2, options)
     ts = 1.0 / session.sample_rate_hz
+    with numerics("stale gyro reads (read timing)"):
+        timing = (detect_stale_reads(session.gyro_radps, g_noise.sigma) if options.read_timing
+                  else ReadTiming.off(len(session), "not looked for (read_timing=False)"))
     moves, raw_moves, pairs = [], [], []
     for i in range(len(still) - 1):
         a, b = still[i].stop - 1, still[i + 1].start + 1
-        moves.append(gyro[a:b])
+        # with stale reads: the sensor's samples, their period T_odr = ts * ratio (readtiming eq. 3) folded
+        # into the rate (integrating w * ratio with step ts is integrating w with step T_odr)
+        moves.append(timing.sensor_samples(gyro, a, b) * timing.odr_ratio(0.5 * (a + b)))
         raw_moves.append(session.gyro_radps[a:b])
         pairs.append((i, i + 1))
     extra = {"a_noise": a_noise, "g_noise": g_noise, "a_drift": a_drift, "g_drift": g_drift,
-             "n_distinct": n_distinct, "accel": accel, "gyro": gyro, "raw_moves": raw_moves}
+             "n_distinct": n_distinct, "accel": accel, "gyro": gyro, "raw_moves": raw_moves, "read_timing": timing}
     return RigFreeData(still, means, moves, pairs, ts), extra
 
 
@@ -495,6 +508,22 @@ def _gyro_cov_with_frame(gyr: GyroRotationFit, prep: RigFreeData, accel_fit: _Ac
     return gyr.cov + sens @ cov @ sens.T
 
 
+def _timing_report(t: ReadTiming) -> dict[str, Any]:
+    def num(v: float) -> float | None:
+        return round(float(v), 6) if np.isfinite(v) else None
+
+    return {
+        "selected": t.selected, "reason": t.reason,
+        "period_reads": num(t.period_reads), "period_reads_std": num(t.period_std),
+        "drift_reads_per_cycle2": num(t.drift_reads), "drift_std": num(t.drift_std),
+        "offsets_reads": [num(v) for v in t.offsets], "candidates": t.candidates, "on_grid": t.on_grid,
+        "rayleigh": num(t.rayleigh), "p_value": float(t.p_value), "residual_reads": num(t.residual_reads),
+        "stale_reads": [int(v) for v in t.stale.sum(axis=0)],
+        "model": "stale read of axis i in beat cycle j at read c_i + P j + Q j^2; sensor period = read period "
+                 "* P_j / (P_j - 1), P_j = P + 2 Q j (station.fit.readtiming)",
+    }
+
+
 def _fit(session: Session, options: RigFreeOptions) -> ParameterSet:
     prep, extra = prepare(session, options)
     g = session.gravity_mps2
@@ -586,6 +615,7 @@ def _fit(session: Session, options: RigFreeOptions) -> ParameterSet:
         "accel_block_scale": joint.scale if joint is not None else None,
         "gyro_param_cov": gyro_cov.tolist(),
         "cross_validation": cv,
+        "read_timing": _timing_report(extra["read_timing"]),
     }
     verdict_ok = bool(cv) and cv["accel_norm_rms_mps2"] <= 3.0 * max(acc.rms_mps2, 1e-6) and \
         cv["gyro_direction_rms_deg"] <= 3.0 * max(gyr.rms_deg, 1e-6)
