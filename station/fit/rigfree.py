@@ -68,7 +68,8 @@ from station.kernel.errors import FitError
 from station.session.model import Kind, Segment, Session
 
 __all__ = [
-    "CONVENTION", "FORMAT", "RigFreeData", "RigFreeOptions", "cross_validate", "fit_rig_free", "is_rig_free", "prepare",
+    "CONVENTION", "FORMAT", "Fold", "RigFreeData", "RigFreeOptions", "calibrated_accel", "cross_validate",
+    "fit_rig_free", "folds", "is_rig_free", "prepare", "still_directions",
 ]
 
 #: version of the ``quality["rig_free"]`` section
@@ -314,38 +315,76 @@ def _fit_gyro(prep: RigFreeData, accel: AccelNormFit, pairs: Sequence[int] | Non
     return fit_gyro_rotations([prep.moves[j] for j in sel], prep.ts, ub, ua, initial=initial)
 
 
-def cross_validate(session: Session, prep: RigFreeData, extra: dict[str, Any], options: RigFreeOptions,
-                   full_gyro: np.ndarray) -> dict[str, Any]:
-    """k-fold leave-poses-out: every k-th pose (the rest is never held out) is held out; the accelerometer is
-    fitted to the other still segments as in the full fit (drift of eq. 3 included) and its gravity-norm error
-    on the held-out poses recorded; the gyro is fitted to the moves between two kept segments, with that fold's
-    gravity directions, and its direction error on the moves touching a held-out pose recorded. (The still
-    labels and the gyro bias model come from the whole recording.)"""
-    folds = options.cv_folds
+@dataclass(frozen=True, eq=False)
+class Fold:
+    """One fold of the leave-poses-out cross-validation: ``held`` (still segments held out, bool (m,)), the
+    gravity direction of every still segment from the accelerometer fitted without them (unit vectors (m, 3)),
+    the gravity-norm error of the held-out ones (m/s^2), and the moves to fit on (``train``) and to test."""
+
+    held: np.ndarray
+    u: np.ndarray
+    norm_error_mps2: np.ndarray
+    train: list[int]
+    test: list[int]
+
+
+def folds(session: Session, prep: RigFreeData, extra: dict[str, Any], options: RigFreeOptions) -> list[Fold]:
+    """The accelerometer side of :func:`cross_validate`: every k-th pose held out (k = ``options.cv_folds``, the
+    rest never), the accelerometer fitted to the other still segments as in the full fit (drift of eq. 3
+    included); the moves touching a held-out pose are the fold's test moves, the others its training moves."""
+    k = options.cv_folds
     g = session.gravity_mps2
     keep = extra["a_noise"].keep
-    n = len(prep.still)
     order = np.cumsum([s.kind == Kind.POSE for s in prep.still]) - 1
     is_pose = np.array([s.kind == Kind.POSE for s in prep.still])
-    norm_err = np.full(n, np.nan)
-    dir_err = np.full(len(prep.moves), np.nan)
-    for f in range(folds):
-        held = is_pose & (order % folds == f)
+    out = []
+    for f in range(k):
+        held = is_pose & (order % k == f)
         fold = _fit_accel(session, [s for s, h in zip(prep.still, held, strict=True) if not h], extra, options)
         means = _means(session.accel_mps2 - fold.drift, keep, prep.still)
-        norm_err[held] = norm_residuals(fold.norm.a_matrix, fold.norm.bias, means[held], g)
-        u = _unit(fold.norm.calibrate(means))
-        train = [j for j, (i0, i1) in enumerate(prep.move_pairs) if not (held[i0] or held[i1])]
-        test = [j for j, (i0, i1) in enumerate(prep.move_pairs) if held[i0] or held[i1]]
-        gyr = fit_gyro_rotations([prep.moves[j] for j in train], prep.ts,
-                                 np.array([u[prep.move_pairs[j][0]] for j in train]),
-                                 np.array([u[prep.move_pairs[j][1]] for j in train]), initial=full_gyro)
+        out.append(Fold(
+            held=held, u=_unit(fold.norm.calibrate(means)),
+            norm_error_mps2=norm_residuals(fold.norm.a_matrix, fold.norm.bias, means[held], g),
+            train=[j for j, (i0, i1) in enumerate(prep.move_pairs) if not (held[i0] or held[i1])],
+            test=[j for j, (i0, i1) in enumerate(prep.move_pairs) if held[i0] or held[i1]]))
+    return out
+
+
+def calibrated_accel(session: Session, prep: RigFreeData, extra: dict[str, Any],
+                     options: RigFreeOptions) -> np.ndarray:
+    """The specific force (m/s^2, (n, 3)) of every sample through the accelerometer fitted to all still segments
+    (step 3, its drift of eq. 3 removed)."""
+    fit = _fit_accel(session, prep.still, extra, options)
+    return fit.norm.calibrate(session.accel_mps2 - fit.drift)
+
+
+def still_directions(session: Session, prep: RigFreeData, extra: dict[str, Any],
+                     options: RigFreeOptions) -> np.ndarray:
+    """The gravity direction of every still segment (unit vectors (m, 3)) from the accelerometer fitted to all of
+    them (step 3), as the full fit matches the moves to."""
+    return _unit(_means(calibrated_accel(session, prep, extra, options), extra["a_noise"].keep, prep.still))
+
+
+def cross_validate(session: Session, prep: RigFreeData, extra: dict[str, Any], options: RigFreeOptions,
+                   full_gyro: np.ndarray) -> dict[str, Any]:
+    """k-fold leave-poses-out (:func:`folds`): the accelerometer's gravity-norm error on the held-out poses; the
+    gyro fitted to the moves between two kept segments, with that fold's gravity directions, and its direction
+    error on the moves touching a held-out pose (a move touching two folds keeps the later fold's). (The still
+    labels, the gyro bias model and the read timing come from the whole recording.)"""
+    is_pose = np.array([s.kind == Kind.POSE for s in prep.still])
+    norm_err = np.full(len(prep.still), np.nan)
+    dir_err = np.full(len(prep.moves), np.nan)
+    pairs = np.array(prep.move_pairs)
+    for fold in folds(session, prep, extra, options):
+        norm_err[fold.held] = fold.norm_error_mps2
+        train, test = fold.train, fold.test
+        gyr = fit_gyro_rotations([prep.moves[j] for j in train], prep.ts, fold.u[pairs[train, 0]],
+                                 fold.u[pairs[train, 1]], initial=full_gyro)
         dir_err[test] = direction_errors_deg(gyr.c_matrix, [prep.moves[j] for j in test], prep.ts,
-                                             np.array([u[prep.move_pairs[j][0]] for j in test]),
-                                             np.array([u[prep.move_pairs[j][1]] for j in test]))
+                                             fold.u[pairs[test, 0]], fold.u[pairs[test, 1]])
     norm_err, dir_err = norm_err[is_pose], dir_err[np.isfinite(dir_err)]
     return {
-        "folds": folds,
+        "folds": options.cv_folds,
         "scheme": "every k-th pose held out (k = folds), the rest never; moves touching a held-out pose held out",
         "accel_norm_rms_mps2": float(np.sqrt(np.mean(norm_err**2))),
         "gyro_direction_rms_deg": float(np.sqrt(np.mean(dir_err**2))),
