@@ -7,13 +7,15 @@ twice once per beat period of ``P`` reads (``f_odr / f_read = (P - 1) / P``). Th
 apart in time, so each axis repeats at its own read: x at ``c_x + P j``, y and z a few reads later. Such
 a repeat is harmless at rest but, during a hand move, it adds one extra sample period of that axis's rate
 to the integrated rotation: on the OpenAXES recording (BMI160 read axis by axis over I2C, ``P`` ~ 130
-reads) 0.1-5 deg per move, the ~1 deg floor of the gravity direction after a move.
+reads, 3-15 stale reads per move) 0-2.4 deg per move, RMS 1.06 deg: the ~1 deg floor of the gravity
+direction after a move (``benchmarks/compare_openaxes.py --gyro-study``, section 5b).
 
 Model (the read index ``k``, the beat cycle ``j``)::
 
     k_i(j) = c_i + P j + Q j^2      (1)  stale read of axis i in cycle j (Q: the slow drift of the beat,
                                          e.g. the sensor's oscillator warming up)
-    n_i(k) = k - #{j : k_i(j) <= k}  (2)  the sensor sample read by axis i at read k
+    n_i(k) = k - #{j : k_i(j) <= k}  (2)  the sensor sample read by axis i at read k (j counted from the
+                                         same cycle for every axis, so that the axes stay aligned)
     T_odr = T_read P_j / (P_j - 1),  P_j = P + 2 Q j   (3)  the sensor's sample period at cycle j
 
 Estimation from the data alone (no pose, no reference): a *candidate* is a read whose axis value equals
@@ -24,7 +26,7 @@ sub-harmonics (x 1/5 .. 5) concentrate them too, so (1) is fitted by least squar
 at least 1 read, dropped) from each, and the beat is the grid that holds the most candidates less the stale
 reads it predicts where the axis changes fast and the data show no repeat within 1 read.
 
-**Selection rule** (stated before any fit was compared, and not on the fit's result): the model is used
+**Selection rule** (on the repeats alone, never on the rotation fit's residuals): the model is used
 when at least ``min_candidates`` (10) candidates are found, at least half of them lie within 1 read of
 (1), and the Rayleigh p-value ``exp(-n R^2)``, times the number of independent frequencies searched, is
 below ``p_max`` (1e-6). A recording without stale reads has few candidates and no concentration: not selected.
