@@ -16,11 +16,16 @@ fits it rig-free at the local gravity 9.8128 m/s^2 and at imu_tk's default 9.817
 4. a fair held-out comparison: the published model (imu_tk's: accel ``T K raw - b`` from the gravity
    norm of the still means, gyro bias the initial still's raw mean, gyro M from the rotations with a
    0.01 s step) re-fitted by us in the same leave-poses-out folds as the station's cross-validation,
-   so both held-out errors come from fits that did not see the held-out poses.
+   so both held-out errors come from fits that did not see the held-out poses; for the gyro also the
+   station on the reads as they come (``read_timing=False``) against imu_tk's, and both on the gyro's
+   own samples (the read-timing model of ``station.fit.readtiming``).
 
-``--gyro-study`` prints only the ablation of the gyro fit's choices (section 5): on the BMI160 moves, with the
-published accelerometer's directions, the gyro fitted (C, by the station's RK4 fit) with each gyro bias, each
-integration scheme and each choice of the directions' samples, and the published calibration on the same input.
+``--gyro-study`` prints only the study of the gyro fit (sections 5, 5b, 6): on the BMI160 moves, with the
+published accelerometer's directions, the gyro fitted (C, by the station's RK4 fit) on the reads as they come
+with each gyro bias, each integration scheme and each choice of the directions' samples, and the published
+calibration on the same input (5); the per-move error against the stale gyro reads' rotation (5b); the
+candidate extensions of the gyro model fitted and held out in the station's folds (6,
+``benchmarks/gyro_candidates.py``).
 
 Conventions (shared/real/README.md): accel ``calibrated = T K raw - b`` (bias after the matrix,
 matrices column-major in the list); gyro ``calibrated = M (raw - b)``, the published one
@@ -41,6 +46,7 @@ import numpy as np
 from station.fit.export import openaxes_coefficients
 from station.fit.multipos import direction_errors_deg, fit_accel_norm, fit_gyro_rotations, norm_residuals
 from station.fit.params import ParameterSet
+from station.fit.readtiming import ReadTiming
 from station.fit.rigfree import RigFreeOptions, fit_rig_free
 from station.session.model import Kind, Session
 from station.session.multipos_import import import_openaxes
@@ -93,7 +99,7 @@ def paired_rms_difference(a: np.ndarray, b: np.ndarray, draws: int = 4000, seed:
     return rms(a) - rms(b), float(np.std(d))
 
 
-def imu_tk_cross_validation(session: Session, folds: int = 5) -> dict[str, np.ndarray]:
+def imu_tk_cross_validation(session: Session, folds: int = 5, samples: bool = False) -> dict[str, np.ndarray]:
     """The published model re-fitted per fold, in the folds of the station's ``cross_validate``.
 
     Fold f holds out every pose whose pose number (the rest never) is f modulo ``folds``. The accelerometer's
@@ -101,11 +107,18 @@ def imu_tk_cross_validation(session: Session, folds: int = 5) -> dict[str, np.nd
     the initial still's raw mean (never held out), the gyro ``M`` is fitted to the moves between two kept
     segments with that fold's gravity directions and a fixed 0.01 s step. Held-out errors: the gravity
     norm of the held-out poses, the direction after each move touching a held-out pose (a move touching
-    two folds' poses keeps the later fold's error, as the station's). Also the in-sample fit on all poses."""
+    two folds' poses keeps the later fold's error, as the station's). Also the in-sample fit on all poses.
+    ``samples``: the moves on the gyro's own samples (the station's read-timing model: stale reads dropped, the
+    sensor's period), everything else imu_tk's."""
     still, means, moves_raw = still_and_moves(session)
     rest = [s for s in still if s.kind == Kind.REST]
     bias = session.gyro_radps[rest[0].start:rest[0].stop].mean(axis=0)
     moves = [m - bias for m in moves_raw]
+    if samples:
+        timing = read_timing(session)
+        spans = [(still[i].stop - 1, still[i + 1].start + 1) for i in range(len(still) - 1)]
+        moves = [timing.sensor_samples(session.gyro_radps - bias, a, b) * timing.odr_ratio(0.5 * (a + b))
+                 for a, b in spans]
     is_pose = np.array([s.kind == Kind.POSE for s in still])
     order = np.cumsum(is_pose) - 1
     norm_err = np.full(len(still), np.nan)
@@ -133,6 +146,13 @@ def imu_tk_cross_validation(session: Session, folds: int = 5) -> dict[str, np.nd
         "norm_fitted": norm_residuals(a, b, means, G_TK),
         "direction_fitted": direction_errors_deg(c, moves, PUBLISHED_STEP_S, u[:-1], u[1:]),
     }
+
+
+def read_timing(session: Session) -> ReadTiming:
+    """The station's read-timing model of the session's gyro (as the rig-free fit finds it)."""
+    from station.fit.rigfree import prepare
+
+    return prepare(session)[1]["read_timing"]
 
 
 def _integrate(c: np.ndarray, moves: list[np.ndarray], dt: float, scheme: str) -> np.ndarray:
@@ -227,7 +247,35 @@ def gyro_study() -> int:
         print(f"{'loss: ' + label:<58}{rms(errors(sol.x.reshape(3, 3), moves, ts, ub, ua)):8.4f}")
     fit_t = fit_gyro_rotations(moves, PUBLISHED_STEP_S, ub, ua)
     print(f"{'time base: a fixed 0.01 s step instead of 1/100.054 Hz':<58}{fit_t.rms_deg:8.4f}")
+    stale_study(s, still, fit.c_matrix, gyro - eq3, ub, ua)
+    from benchmarks.gyro_candidates import run
+
+    run(s, imu_tk_cross_validation(s)["direction_held_out"])
     return 0
+
+
+def stale_study(s: Session, still: list, c: np.ndarray, unbiased: np.ndarray, ub: np.ndarray,
+                ua: np.ndarray) -> None:
+    """Section 5b: what the ~1 deg per move is. The gyro's stale reads (station.fit.readtiming) add one sample of
+    an axis's rate to a move once per beat; with the same C, the direction after each move integrated from the
+    reads and from the sensor's samples differ by the stale reads' rotation: compared with the per-move error."""
+    timing = read_timing(s)
+    ts = 1.0 / s.sample_rate_hz
+    spans = [(still[i].stop - 1, still[i + 1].start + 1) for i in range(len(still) - 1)]
+    moves = [unbiased[a:b] for a, b in spans]
+    samples = [timing.sensor_samples(unbiased, a, b) * timing.odr_ratio(0.5 * (a + b)) for a, b in spans]
+    e_reads = direction_errors_deg(c, moves, ts, ub, ua)
+    pred_reads = np.einsum("nji,nj->ni", _integrate(c, moves, ts, "rk4"), ub)
+    pred_samples = np.einsum("nji,nj->ni", _integrate(c, samples, ts, "rk4"), ub)
+    shift = np.degrees(np.arccos(np.clip(np.sum(pred_reads * pred_samples, axis=1), -1.0, 1.0)))
+    stale = np.array([int(timing.stale[a:b].sum()) for a, b in spans])
+    print(f"\n5b. The per-move error and the stale reads: {timing.reason}")
+    print(f"    beat P = {timing.period_reads:.3f} +- {timing.period_std:.3f} reads at the start, drift "
+          f"Q = {timing.drift_reads:.5f} +- {timing.drift_std:.5f} reads/cycle^2, axis offsets "
+          f"{np.round(timing.offsets, 2)} reads, {timing.stale.sum(axis=0)} stale reads per axis")
+    print(f"    per move: {stale.min()}..{stale.max()} stale reads; the direction they move (same C, reads vs "
+          f"samples) {shift.min():.2f}..{shift.max():.2f} deg, RMS {rms(shift):.3f}; the move's error with the "
+          f"reads RMS {rms(e_reads):.3f} deg; correlation {np.corrcoef(shift, e_reads)[0, 1]:.2f}")
 
 
 def main() -> int:
@@ -237,6 +285,7 @@ def main() -> int:
     np.set_printoptions(precision=6, suppress=True)
     fits: dict[tuple[str, float], ParameterSet] = {}
     tk_model: dict[str, ParameterSet] = {}
+    reads: dict[str, ParameterSet] = {}  # the default fit but the gyro's reads as they come
     sessions: dict[str, Session] = {}
     t0 = time.perf_counter()
     for accel in ("adxl355", "bmi160"):
@@ -244,14 +293,16 @@ def main() -> int:
             s = import_openaxes(LOG, accel=accel, gravity_mps2=g)
             sessions[accel] = s
             fits[accel, g] = fit_rig_free(s)
-        tk_model[accel] = fit_rig_free(sessions[accel].replace(metadata={**sessions[accel].metadata,
-                                                                         "gravity_mps2": repr(G_TK)}),
-                                       RigFreeOptions(accel_drift=False))
+        s_tk = sessions[accel].replace(metadata={**sessions[accel].metadata, "gravity_mps2": repr(G_TK)})
+        # imu_tk's model: no accelerometer drift, the gyro's reads as they come (stale reads included)
+        tk_model[accel] = fit_rig_free(s_tk, RigFreeOptions(accel_drift=False, read_timing=False))
+        reads[accel] = fit_rig_free(s_tk, RigFreeOptions(read_timing=False))
     elapsed = time.perf_counter() - t0
     s = sessions["adxl355"]
     print(f"OpenAXES {LOG.name}: {len(s)} samples at {s.sample_rate_hz:.4f} Hz, "
           f"{len(s.segments_of(Kind.REST, Kind.POSE))} still segments ({s.metadata['still_detector']}); "
-          f"6 rig-free fits in {elapsed:.1f} s")
+          f"8 rig-free fits in {elapsed:.1f} s")
+    print(f"gyro read timing: {fits['bmi160', G_TK].quality['rig_free']['read_timing']['reason']}")
 
     # --- 1. coefficients ------------------------------------------------------------------
     names = []
@@ -331,11 +382,15 @@ def main() -> int:
         q = fits[accel, G_TK].quality["rig_free"]
         print(f"{'':<16}{'station (rig-free fit, bias model of eq. 3)':<44}{q['gyro_direction_rms_deg']:8.3f}"
               f"{q['cross_validation']['gyro_direction_rms_deg']:10.3f}")
+        q = reads[accel].quality["rig_free"]
+        print(f"{'':<16}{'station, the reads as they come (no read timing)':<44}{q['gyro_direction_rms_deg']:8.3f}"
+              f"{q['cross_validation']['gyro_direction_rms_deg']:10.3f}")
         q = tk_model[accel].quality["rig_free"]
         print(f"{'':<16}{'station, imu_tk model accelerometer':<44}{q['gyro_direction_rms_deg']:8.3f}"
               f"{q['cross_validation']['gyro_direction_rms_deg']:10.3f}")
         e_pub = direction_errors_deg(m_pub, [m - bw_pub for m in moves], PUBLISHED_STEP_S, u_pub[:-1], u_pub[1:])
-        for label, fit in (("eq. 3", fits[accel, G_TK]), ("imu_tk acc.", tk_model[accel])) * (accel == "bmi160"):
+        for label, fit in (("eq. 3", fits[accel, G_TK]), ("reads", reads[accel]),
+                           ("imu_tk model", tk_model[accel])) * (accel == "bmi160"):
             # (the published gyro M is in the BMI160's frame: with the ADXL355's directions it does not apply)
             d, se = paired_rms_difference(np.array(fit.quality["rig_free"]["gyro_direction_error_deg"]), e_pub)
             print(f"{'':<16}{f'station ({label}) - published, same moves':<44}{d:+8.3f} +- {se:.3f} "
@@ -361,6 +416,17 @@ def main() -> int:
             d, se = paired_rms_difference(ours_out, k * tk[held])
             print(f"{accel:<9}{label:<24}{rms(k * tk[fitted]):14.3f}{rms(k * tk[held]):17.3f}{rms(ours_in):16.3f}"
                   f"{rms(ours_out):18.3f}{f'{d:+.3f} +- {se:.3f}':>20}")
+        # the gyro alone: the station without the read-timing model, and imu_tk's model on the sensor's samples
+        tk_s = imu_tk_cross_validation(sessions[accel], samples=True)
+        q_r = reads[accel].quality["rig_free"]
+        for label, tk_in, tk_out, ours_in, ours_out in (
+                ("  station on the reads", tk["direction_fitted"], tk["direction_held_out"],
+                 q_r["gyro_direction_error_deg"], q_r["cross_validation"]["gyro_direction_error_deg"]),
+                ("  both on the samples", tk_s["direction_fitted"], tk_s["direction_held_out"],
+                 q["gyro_direction_error_deg"], cv["gyro_direction_error_deg"])):
+            d, se = paired_rms_difference(np.array(ours_out), tk_out)
+            print(f"{accel:<9}{label:<24}{rms(tk_in):14.3f}{rms(tk_out):17.3f}{rms(np.array(ours_in)):16.3f}"
+                  f"{rms(np.array(ours_out)):18.3f}{f'{d:+.3f} +- {se:.3f}':>20}")
     return 0
 
 

@@ -63,6 +63,7 @@ def run_unit(seed: int, folder: Path, cv: bool, prior: bool = True) -> dict[str,
     }
     q = params.quality["rig_free"]
     z["_rms"] = np.array([q["accel_norm_rms_mps2"], q["gyro_direction_rms_deg"], q["still_segments"]])
+    z["_read_timing"] = np.array([float(q["read_timing"]["selected"])])
     if cv:
         z["_cv"] = np.array([q["cross_validation"]["accel_norm_rms_mps2"],
                              q["cross_validation"]["gyro_direction_rms_deg"]])
@@ -108,6 +109,8 @@ def main() -> int:
     rms = np.array(out["_rms"])
     print(f"median fitted RMS: gravity norm {1e3 * np.median(rms[:, 0]):.2f} mm/s^2, move direction "
           f"{np.median(rms[:, 1]):.4f} deg; still segments {int(rms[:, 2].min())}..{int(rms[:, 2].max())}")
+    print(f"stale gyro reads (read-timing model) selected on {int(np.sum(out['_read_timing']))} of "
+          f"{len(out['_read_timing'])} units (none planted)")
     if "_cv" in out:
         cvs = np.array(out["_cv"])
         print(f"median held-out RMS: gravity norm {1e3 * np.median(cvs[:, 0]):.2f} mm/s^2, move direction "

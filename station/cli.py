@@ -197,6 +197,9 @@ def _print_rig_free(q: dict[str, object]) -> None:
     typer.echo(f"  move gravity-direction RMS {float(q['gyro_direction_rms_deg']):.3f} deg fitted"  # type: ignore[arg-type]
                + (f", {cv['gyro_direction_rms_deg']:.3f} held out ({cv['folds']}-fold leave-poses-out)"  # type: ignore[index]
                   if cv else ""))
+    timing = q.get("read_timing")
+    if isinstance(timing, dict) and timing.get("selected"):
+        typer.echo(f"  gyro read timing: {timing['reason']}")
 
 
 @app.command()

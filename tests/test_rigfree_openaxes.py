@@ -43,8 +43,11 @@ def fits(sessions: dict[str, Session]) -> dict[str, ParameterSet]:
     return {
         "adxl355": fit_rig_free(sessions["adxl355"]),  # the default, with the cross-validation
         "bmi160": fit_rig_free(sessions["bmi160"], RigFreeOptions(cv_folds=0)),
-        "adxl355 tk": fit_rig_free(sessions["adxl355"], RigFreeOptions(cv_folds=0, accel_drift=False)),
-        "bmi160 tk": fit_rig_free(sessions["bmi160"], RigFreeOptions(cv_folds=0, accel_drift=False)),
+        # imu_tk's model: no accelerometer drift, the gyro's reads integrated as they come (stale reads included)
+        "adxl355 tk": fit_rig_free(sessions["adxl355"], RigFreeOptions(cv_folds=0, accel_drift=False,
+                                                                       read_timing=False)),
+        "bmi160 tk": fit_rig_free(sessions["bmi160"], RigFreeOptions(cv_folds=0, accel_drift=False,
+                                                                     read_timing=False)),
     }
 
 
@@ -94,7 +97,9 @@ def test_gyro_direction_error_as_published_on_the_same_moves(sessions: dict[str,
     published = float(np.sqrt(np.mean(_published_direction_errors(s, still) ** 2)))
     ours = fits["bmi160"].quality["rig_free"]["gyro_direction_rms_deg"]
     assert published == pytest.approx(0.96, abs=0.005)  # issue 17's independent re-computation: 0.96 deg
-    assert ours <= 1.02 * published  # issue target 0.96 deg; see the benchmark's table
+    assert ours <= 0.1  # issue target 0.96 deg: the moves integrated on the gyro's own samples (stale reads out)
+    tk = fits["bmi160 tk"].quality["rig_free"]["gyro_direction_rms_deg"]
+    assert tk <= 1.02 * published  # imu_tk's model on the reads as they come: the published figure
 
 
 def test_gyro_direction_error_not_worse_than_published(sessions: dict[str, Session],
@@ -108,16 +113,28 @@ def test_gyro_direction_error_not_worse_than_published(sessions: dict[str, Sessi
     e_pub = _published_direction_errors(s, still)
     e_ours = np.array(fits["bmi160"].quality["rig_free"]["gyro_direction_error_deg"])
     assert len(e_ours) == len(e_pub) == 38
-    # The station's RMS over the same 38 moves must not be worse than the published calibration's by more than
-    # two standard errors of the paired difference (bootstrap over the moves): the published result, 0.962 deg,
-    # is the bound; the per-move errors of ~1 deg that neither calibration explains set the tolerance.
+    # The station's RMS over the same 38 moves against the published calibration's, with the standard error of
+    # the paired difference (bootstrap over the moves): the published per-move errors of ~1 deg are the gyro's
+    # stale reads (station.fit.readtiming); integrated on the sensor's samples the station is better by far.
     def rms(e: np.ndarray) -> np.ndarray:
         return np.sqrt(np.mean(e**2, axis=-1))
 
     idx = np.random.default_rng(0).integers(0, len(e_pub), size=(4000, len(e_pub)))
     se = float(np.std(rms(e_ours[idx]) - rms(e_pub[idx])))
-    assert 0.002 < se < 0.03
-    assert rms(e_ours) <= rms(e_pub) + 2.0 * se, (rms(e_ours), rms(e_pub), se)
+    assert 0.02 < se < 0.2
+    assert rms(e_ours) <= rms(e_pub) - 5.0 * se, (rms(e_ours), rms(e_pub), se)
+
+
+def test_stale_gyro_reads_found_on_the_openaxes_logger(fits: dict[str, ParameterSet]) -> None:
+    # the BMI160's ODR beats against the logger's reads: each axis repeats a sample once per ~130 reads, y about
+    # 1.8 reads after x and z 1.8 after y (read axis by axis over I2C); found from exact repeats alone
+    for name in ("adxl355", "bmi160"):
+        t = fits[name].quality["rig_free"]["read_timing"]
+        assert t["selected"], t["reason"]
+        assert t["period_reads"] == pytest.approx(130.30, abs=0.05) and t["period_reads_std"] < 0.02
+        assert np.allclose(np.diff(t["offsets_reads"]), 1.8, atol=0.2)
+        assert t["p_value"] < 1e-12 and t["on_grid"] >= 0.5 * t["candidates"]
+        assert fits[name + " tk"].quality["rig_free"]["read_timing"]["selected"] is False
 
 
 def test_cross_validation_is_reported(fits: dict[str, ParameterSet]) -> None:

@@ -17,7 +17,11 @@ asked for with ``station fit --rig-free``. Steps (numerics in :mod:`station.fit.
    zero up to Earth rate, which the model leaves in the bias), again with ``fit_axis``: the poses spread
    over the whole recording see the warm-up better than the initial still alone.
 5. Gyroscope M from the rotations between consecutive still segments (RK4 of the calibrated rate
-   over each move, matched to the accelerometer's gravity direction before and after).
+   over each move, matched to the accelerometer's gravity direction before and after). A logger that
+   polls the gyro axis by axis on its own clock reads each axis's sample twice once per beat of the two
+   clocks (:mod:`station.fit.readtiming`); when the record shows such a beat (its selection rule, on exact
+   repeats, not on the fit), each move is integrated on the sensor's own samples: the stale reads
+   dropped, the axes aligned by sample, the sensor's sample period (eq. 3 there).
 6. Held-out validation (:func:`cross_validate`): k-fold leave-poses-out of the gravity norm and of
    the move rotations, reported in ``quality["rig_free"]["cross_validation"]``.
 
@@ -59,11 +63,13 @@ from station.fit.multipos import (
     rough_directions,
 )
 from station.fit.params import ParameterSet, TriadParams
+from station.fit.readtiming import ReadTiming, detect_stale_reads
 from station.kernel.errors import FitError
 from station.session.model import Kind, Segment, Session
 
 __all__ = [
-    "CONVENTION", "FORMAT", "RigFreeData", "RigFreeOptions", "cross_validate", "fit_rig_free", "is_rig_free", "prepare",
+    "CONVENTION", "FORMAT", "Fold", "RigFreeData", "RigFreeOptions", "calibrated_accel", "cross_validate",
+    "fit_rig_free", "folds", "is_rig_free", "prepare", "still_directions",
 ]
 
 #: version of the ``quality["rig_free"]`` section
@@ -88,6 +94,8 @@ class RigFreeOptions:
             direction moves by more than this is refused as a move.
         cv_folds: folds of the leave-poses-out cross-validation (0: none).
         accel_drift: fit the accelerometer's eq. (3) drift jointly (step 3); False: imu_tk's model, no drift.
+        read_timing: look for stale per-axis gyro reads (:func:`station.fit.readtiming.detect_stale_reads`) and,
+            when its selection rule accepts them, integrate the moves on the sensor's samples; False: the reads.
         min_segment_samples: still segments shorter than this are refused.
         outlier_sigma, drift_lr_threshold, max_blocks, tc_range_s: as in the rig fit
             (:class:`~station.fit.calibrate.FitOptions`): ``tc_range_s`` the sensor class's range of eq. 3's T_c
@@ -108,6 +116,7 @@ class RigFreeOptions:
     moving_average_length: int = 40
     tc_range_s: Mapping[str, tuple[float, float]] = field(default_factory=dict)
     accel_drift: bool = True
+    read_timing: bool = True
 
 
 def _still(session: Session) -> list[Segment]:
@@ -277,14 +286,19 @@ def prepare(session: Session, options: RigFreeOptions | None = None) -> tuple[Ri
     means = _means(accel, a_noise.keep, still)
     n_distinct = _check_poses(still, means, session.gravity_mps2, options)
     ts = 1.0 / session.sample_rate_hz
+    with numerics("stale gyro reads (read timing)"):
+        timing = (detect_stale_reads(session.gyro_radps, g_noise.sigma) if options.read_timing
+                  else ReadTiming.off(len(session), "not looked for (read_timing=False)"))
     moves, raw_moves, pairs = [], [], []
     for i in range(len(still) - 1):
         a, b = still[i].stop - 1, still[i + 1].start + 1
-        moves.append(gyro[a:b])
+        # with stale reads: the sensor's samples, their period T_odr = ts * ratio (readtiming eq. 3) folded
+        # into the rate (integrating w * ratio with step ts is integrating w with step T_odr)
+        moves.append(timing.sensor_samples(gyro, a, b) * timing.odr_ratio(0.5 * (a + b)))
         raw_moves.append(session.gyro_radps[a:b])
         pairs.append((i, i + 1))
     extra = {"a_noise": a_noise, "g_noise": g_noise, "a_drift": a_drift, "g_drift": g_drift,
-             "n_distinct": n_distinct, "accel": accel, "gyro": gyro, "raw_moves": raw_moves}
+             "n_distinct": n_distinct, "accel": accel, "gyro": gyro, "raw_moves": raw_moves, "read_timing": timing}
     return RigFreeData(still, means, moves, pairs, ts), extra
 
 
@@ -301,38 +315,76 @@ def _fit_gyro(prep: RigFreeData, accel: AccelNormFit, pairs: Sequence[int] | Non
     return fit_gyro_rotations([prep.moves[j] for j in sel], prep.ts, ub, ua, initial=initial)
 
 
-def cross_validate(session: Session, prep: RigFreeData, extra: dict[str, Any], options: RigFreeOptions,
-                   full_gyro: np.ndarray) -> dict[str, Any]:
-    """k-fold leave-poses-out: every k-th pose (the rest is never held out) is held out; the accelerometer is
-    fitted to the other still segments as in the full fit (drift of eq. 3 included) and its gravity-norm error
-    on the held-out poses recorded; the gyro is fitted to the moves between two kept segments, with that fold's
-    gravity directions, and its direction error on the moves touching a held-out pose recorded. (The still
-    labels and the gyro bias model come from the whole recording.)"""
-    folds = options.cv_folds
+@dataclass(frozen=True, eq=False)
+class Fold:
+    """One fold of the leave-poses-out cross-validation: ``held`` (still segments held out, bool (m,)), the
+    gravity direction of every still segment from the accelerometer fitted without them (unit vectors (m, 3)),
+    the gravity-norm error of the held-out ones (m/s^2), and the moves to fit on (``train``) and to test."""
+
+    held: np.ndarray
+    u: np.ndarray
+    norm_error_mps2: np.ndarray
+    train: list[int]
+    test: list[int]
+
+
+def folds(session: Session, prep: RigFreeData, extra: dict[str, Any], options: RigFreeOptions) -> list[Fold]:
+    """The accelerometer side of :func:`cross_validate`: every k-th pose held out (k = ``options.cv_folds``, the
+    rest never), the accelerometer fitted to the other still segments as in the full fit (drift of eq. 3
+    included); the moves touching a held-out pose are the fold's test moves, the others its training moves."""
+    k = options.cv_folds
     g = session.gravity_mps2
     keep = extra["a_noise"].keep
-    n = len(prep.still)
     order = np.cumsum([s.kind == Kind.POSE for s in prep.still]) - 1
     is_pose = np.array([s.kind == Kind.POSE for s in prep.still])
-    norm_err = np.full(n, np.nan)
-    dir_err = np.full(len(prep.moves), np.nan)
-    for f in range(folds):
-        held = is_pose & (order % folds == f)
+    out = []
+    for f in range(k):
+        held = is_pose & (order % k == f)
         fold = _fit_accel(session, [s for s, h in zip(prep.still, held, strict=True) if not h], extra, options)
         means = _means(session.accel_mps2 - fold.drift, keep, prep.still)
-        norm_err[held] = norm_residuals(fold.norm.a_matrix, fold.norm.bias, means[held], g)
-        u = _unit(fold.norm.calibrate(means))
-        train = [j for j, (i0, i1) in enumerate(prep.move_pairs) if not (held[i0] or held[i1])]
-        test = [j for j, (i0, i1) in enumerate(prep.move_pairs) if held[i0] or held[i1]]
-        gyr = fit_gyro_rotations([prep.moves[j] for j in train], prep.ts,
-                                 np.array([u[prep.move_pairs[j][0]] for j in train]),
-                                 np.array([u[prep.move_pairs[j][1]] for j in train]), initial=full_gyro)
+        out.append(Fold(
+            held=held, u=_unit(fold.norm.calibrate(means)),
+            norm_error_mps2=norm_residuals(fold.norm.a_matrix, fold.norm.bias, means[held], g),
+            train=[j for j, (i0, i1) in enumerate(prep.move_pairs) if not (held[i0] or held[i1])],
+            test=[j for j, (i0, i1) in enumerate(prep.move_pairs) if held[i0] or held[i1]]))
+    return out
+
+
+def calibrated_accel(session: Session, prep: RigFreeData, extra: dict[str, Any],
+                     options: RigFreeOptions) -> np.ndarray:
+    """The specific force (m/s^2, (n, 3)) of every sample through the accelerometer fitted to all still segments
+    (step 3, its drift of eq. 3 removed)."""
+    fit = _fit_accel(session, prep.still, extra, options)
+    return fit.norm.calibrate(session.accel_mps2 - fit.drift)
+
+
+def still_directions(session: Session, prep: RigFreeData, extra: dict[str, Any],
+                     options: RigFreeOptions) -> np.ndarray:
+    """The gravity direction of every still segment (unit vectors (m, 3)) from the accelerometer fitted to all of
+    them (step 3), as the full fit matches the moves to."""
+    return _unit(_means(calibrated_accel(session, prep, extra, options), extra["a_noise"].keep, prep.still))
+
+
+def cross_validate(session: Session, prep: RigFreeData, extra: dict[str, Any], options: RigFreeOptions,
+                   full_gyro: np.ndarray) -> dict[str, Any]:
+    """k-fold leave-poses-out (:func:`folds`): the accelerometer's gravity-norm error on the held-out poses; the
+    gyro fitted to the moves between two kept segments, with that fold's gravity directions, and its direction
+    error on the moves touching a held-out pose (a move touching two folds keeps the later fold's). (The still
+    labels, the gyro bias model and the read timing come from the whole recording.)"""
+    is_pose = np.array([s.kind == Kind.POSE for s in prep.still])
+    norm_err = np.full(len(prep.still), np.nan)
+    dir_err = np.full(len(prep.moves), np.nan)
+    pairs = np.array(prep.move_pairs)
+    for fold in folds(session, prep, extra, options):
+        norm_err[fold.held] = fold.norm_error_mps2
+        train, test = fold.train, fold.test
+        gyr = fit_gyro_rotations([prep.moves[j] for j in train], prep.ts, fold.u[pairs[train, 0]],
+                                 fold.u[pairs[train, 1]], initial=full_gyro)
         dir_err[test] = direction_errors_deg(gyr.c_matrix, [prep.moves[j] for j in test], prep.ts,
-                                             np.array([u[prep.move_pairs[j][0]] for j in test]),
-                                             np.array([u[prep.move_pairs[j][1]] for j in test]))
+                                             fold.u[pairs[test, 0]], fold.u[pairs[test, 1]])
     norm_err, dir_err = norm_err[is_pose], dir_err[np.isfinite(dir_err)]
     return {
-        "folds": folds,
+        "folds": options.cv_folds,
         "scheme": "every k-th pose held out (k = folds), the rest never; moves touching a held-out pose held out",
         "accel_norm_rms_mps2": float(np.sqrt(np.mean(norm_err**2))),
         "gyro_direction_rms_deg": float(np.sqrt(np.mean(dir_err**2))),
@@ -495,6 +547,22 @@ def _gyro_cov_with_frame(gyr: GyroRotationFit, prep: RigFreeData, accel_fit: _Ac
     return gyr.cov + sens @ cov @ sens.T
 
 
+def _timing_report(t: ReadTiming) -> dict[str, Any]:
+    def num(v: float) -> float | None:
+        return round(float(v), 6) if np.isfinite(v) else None
+
+    return {
+        "selected": t.selected, "reason": t.reason,
+        "period_reads": num(t.period_reads), "period_reads_std": num(t.period_std),
+        "drift_reads_per_cycle2": num(t.drift_reads), "drift_std": num(t.drift_std),
+        "offsets_reads": [num(v) for v in t.offsets], "candidates": t.candidates, "on_grid": t.on_grid,
+        "rayleigh": num(t.rayleigh), "p_value": float(t.p_value), "residual_reads": num(t.residual_reads),
+        "stale_reads": [int(v) for v in t.stale.sum(axis=0)],
+        "model": "stale read of axis i in beat cycle j at read c_i + P j + Q j^2; sensor period = read period "
+                 "* P_j / (P_j - 1), P_j = P + 2 Q j (station.fit.readtiming)",
+    }
+
+
 def _fit(session: Session, options: RigFreeOptions) -> ParameterSet:
     prep, extra = prepare(session, options)
     g = session.gravity_mps2
@@ -586,6 +654,7 @@ def _fit(session: Session, options: RigFreeOptions) -> ParameterSet:
         "accel_block_scale": joint.scale if joint is not None else None,
         "gyro_param_cov": gyro_cov.tolist(),
         "cross_validation": cv,
+        "read_timing": _timing_report(extra["read_timing"]),
     }
     verdict_ok = bool(cv) and cv["accel_norm_rms_mps2"] <= 3.0 * max(acc.rms_mps2, 1e-6) and \
         cv["gyro_direction_rms_deg"] <= 3.0 * max(gyr.rms_deg, 1e-6)
