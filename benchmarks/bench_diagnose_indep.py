@@ -10,7 +10,7 @@ Seeds: development used 0-999; the report seeds start at ``--base`` (default 100
 set on development seeds only.
 
 Run: ``python benchmarks/bench_diagnose_indep.py [--base 10000] [--per 3] [--nulls 20] [--pairs 25]
-[--outside 4] [--speed]``
+[--outside 4] [--speed] [--walk N]``
 """
 
 from __future__ import annotations
@@ -72,10 +72,16 @@ def main() -> None:
     ap.add_argument("--pairs", type=int, default=25)
     ap.add_argument("--outside", type=int, default=4, help="recordings per outside-library physics")
     ap.add_argument("--speed", action="store_true", help="only the timing rows")
+    ap.add_argument("--walk", type=int, default=0, metavar="N",
+                    help="only the random-walk study: N recordings from --base, a walk alone or beside each other "
+                         "library effect in turn (is the wander taken for a temperature bias?)")
     args = ap.parse_args()
     tc = warmup_tc()
     if args.speed:
         speed(tc)
+        return
+    if args.walk:
+        walk_study(args.base, args.walk, tc)
         return
     rows: list[tuple[str, dict[str, float], int]] = []
     seed = args.base
@@ -159,6 +165,24 @@ def main() -> None:
         print(f"outside library {label}: reported unexplained at the right place with no findings "
               f"{outside_ok[label]}/{stats[label]['n']}")
     print(f"diagnosis time: median {np.median(times):.2f} s, max {max(times):.2f} s over {len(times)} recordings")
+
+
+def walk_study(base: int, n: int, tc: dict | None) -> None:
+    """A bias random walk alone, then beside each other library effect in turn (seeds ``base``..): per recording the
+    names, the false ones; in total the false findings and the recordings whose walk was named."""
+    others = [None, *[e for e in [*SINGLE, "time_offset"] if e != "bias_random_walk"]]
+    false_total = walk_named = 0
+    for i in range(n):
+        seed, other = base + i, others[i % len(others)]
+        effects = {"bias_random_walk": SINGLE["bias_random_walk"], **({other: SINGLE.get(other, 5.0)} if other else {})}
+        named, insep, _unexplained, dt, _n, forms = run(seed, effects, tc)
+        false = {x for x in named - set(effects) if not forms.get(x, set()) & set(effects)}
+        false_total += len(false)
+        walk_named += "bias_random_walk" in named
+        print(f"  seed {seed}: truth {sorted(effects)} named {sorted(named) or '-'}"
+              f"{' inseparable ' + str(sorted(insep)) if insep else ''}"
+              f"{' FALSE ' + str(sorted(false)) if false else ''} ({dt:.1f} s)", flush=True)
+    print(f"random-walk study, seeds {base}-{base + n - 1}: false findings {false_total}, walk named {walk_named}/{n}")
 
 
 def speed(tc: dict | None) -> None:

@@ -60,6 +60,8 @@ def test_the_registry_is_the_only_list_of_names() -> None:
     assert set(rerun.SIMULATED) | set(rerun.STOCHASTIC) <= set(NAMES)
     assert set(rerun.SIMULATED) == {e.name for e in EFFECTS if e.simulate is not None}
     assert set(likelihood.PROFILE_TC) == {e.name for e in EFFECTS if e.identifiability.profile_tc}
+    assert set(likelihood.WANDER_LIKE) == {e.name for e in EFFECTS if e.identifiability.wander_like}
+    assert likelihood.WANDER_LIKE == ("temperature_bias",)
     assert candidates.LIBRARY is registry.LIBRARY and candidates.RIG_STEPS is registry.RIG_STEPS
     # no other module of the diagnosis holds a table (tuple, list, set, dict) naming two or more effects
     for path in sorted(DIAGNOSE.glob("*.py")):

@@ -35,7 +35,7 @@ from scipy import linalg
 
 from station.diagnose import bootstrap, consistency, robust
 from station.diagnose.candidates import MAX_DELAY_S, delay_regressor
-from station.diagnose.likelihood import RCOND, SensorProblem, Test
+from station.diagnose.likelihood import RCOND, WANDER_LIKE, SensorProblem, Test
 from station.diagnose.registry import LIBRARY, REGISTRY, RIG_STEPS
 from station.diagnose.reporting import AX, detectable_from, finding, outlier_test
 from station.diagnose.residuals import SENSORS, Baseline, SensorData
@@ -52,6 +52,8 @@ WARMUP = REGISTRY["temperature_bias"].identifiability.base_twin
 NUISANCE = "~"
 #: Rounds of the checks after the forward selection (robust.py, consistency.py); each may reject effects.
 AUDIT_ROUNDS = 4
+#: The candidate that is a wander of the bias (block covariance, not a mean term).
+WALK = "bias_random_walk"
 #: Why a wander-like candidate (a temperature bias) significant without a random walk is not a finding.
 WALK_EXPLAINS = ("significant only while no bias random walk is allowed: with one (K^2 and the drift noise profiled "
                  "in both hypotheses) its gain is below the threshold, a slow wander explains its signal as well")
@@ -319,21 +321,25 @@ def select(baseline: Baseline, *, max_effects: int = 4,
 
 
 def _wander_or_temperature(last: Mapping[str, Test], walk: Test | None) -> dict[str, Any] | None:
-    """A slow course that is significant as a temperature bias while no random walk is allowed, and as a random
-    walk while no temperature course is (each test holds the other as nuisance): the recording holds the structure
-    but cannot name it. The pair's entry (without the sensor), or None."""
-    temp, wander = last.get("temperature_bias"), last.get("bias_random_walk")
-    if walk is not None or temp is None or wander is None or not temp.walk_explains or wander.passes:
+    """A slow course that is significant as a wander-like candidate (a temperature bias) while no random walk is
+    allowed, and not as a random walk while the temperature course is a nuisance term (each test holds the other):
+    the recording holds the structure but cannot name it. The pair's entry (without the sensor), or None."""
+    wander = last.get(WALK)
+    if walk is not None or wander is None or wander.passes:
         return None
-    return {"effects": ["temperature_bias", "bias_random_walk"],
-            "evidence": {"temperature_bias": {"gain": round(temp.gain, 2),
-                                              "gain_given_walk": round(temp.gain_given_walk, 2),
-                                              "threshold": round(temp.threshold, 2)},
-                         "bias_random_walk": {"gain_given_temperature": round(wander.gain, 2),
-                                              "threshold": round(wander.threshold, 2)},
-                         "note": "a slow wander: significant as a temperature bias without a random walk, and "
-                                 "not significant as either given the other"},
-            "rig_step": RIG_STEPS["temperature_bias"]}
+    for name in WANDER_LIKE:
+        course = last.get(name)
+        if course is None or not course.walk_explains:
+            continue
+        return {"effects": [name, WALK],
+                "evidence": {name: {"gain": round(course.gain, 2), "gain_given_walk": round(course.gain_given_walk, 2),
+                                    "threshold": round(course.threshold, 2)},
+                             WALK: {"gain_given_temperature": round(wander.gain, 2),
+                                    "threshold": round(wander.threshold, 2)},
+                             "note": "a slow wander: significant as a temperature bias without a random walk, and "
+                                     "not significant as either given the other"},
+                "rig_step": RIG_STEPS[name]}
+    return None
 
 
 def _refine_delay(
