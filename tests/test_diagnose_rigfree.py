@@ -163,6 +163,11 @@ def test_openaxes(openaxes: dict[str, dict], accel: str) -> None:
     assert g["reason"] == "no significant improvement" and "detectable_from" in g
     assert report["unexplained"] == []
     assert {u["effect"] for u in report["untestable"]} >= {"earth_rotation", "time_offset", "lever_arm"}
+    # the base fit's stale per-axis gyro reads (station.fit.readtiming) reach the report: the logger's beat of
+    # ~130 reads, and with it the moves' direction error at a few hundredths of a degree
+    timing = report["rig_free"]["read_timing"]
+    assert timing["selected"] is True and timing["period_reads"] == pytest.approx(130.3, abs=0.1)
+    assert report["rig_free"]["gyro_direction_rms_deg"] < 0.1
 
 
 def test_bootstrap_resamples_reach_the_rig_free_path() -> None:

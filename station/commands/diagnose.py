@@ -45,6 +45,9 @@ def _print_text(report: dict[str, Any]) -> None:
         typer.echo(f"  base: rig-free fit, {rf['still_segments']} still segments, {rf['moves']} moves; gravity-norm "
                    f"RMS {rf['accel_norm_rms_mps2'] * 1e3:.2f} mm/s^2, direction after each move "
                    f"{rf['gyro_direction_rms_deg']:.3f} deg RMS")
+        if (timing := rf.get("read_timing")) and timing.get("selected"):
+            # found and modelled by the base fit (station.fit.readtiming): the logger's, not the sensor's physics
+            typer.echo(f"  base fit found in the gyro's read timing: {timing['reason']}")
     if findings:
         typer.echo(f"  {'effect':24s} {'sensor':6s} {'axes':4s} {'confidence':10s} value (unit)")
     for f in findings:
