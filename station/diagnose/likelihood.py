@@ -599,10 +599,10 @@ class SensorProblem:
 
     def walk_profiled_nll(self) -> float:
         """Negative log-likelihood of the current mean model (accepted effects, T_c) with a bias random walk
-        allowed beside eq. 3's drift noise: (q per axis, K^2) profiled jointly by coordinate steps from two
-        starts, the current q (K^2 = 0) and q = 0 (an unbounded q of a fast warm-up and a walk over the whole
-        record trade against each other); never worse than the model as it is. The nuisance hypothesis under
-        which a ``WANDER_LIKE`` candidate is tested as well (:meth:`gain_given_walk`)."""
+        allowed beside eq. 3's drift noise: from each of two starts, the current q and q = 0 (an unbounded q of a
+        fast warm-up and a walk over the whole record trade against each other), K^2 profiled at that q, then q
+        per axis profiled at that K^2; the best of these and of the model as it is (K^2 = 0). The nuisance
+        hypothesis under which a ``WANDER_LIKE`` candidate is tested as well (:meth:`gain_given_walk`)."""
         extra = [self._accepted_axis(k) for k in range(3)]
         best = self.total_nll()
         for start in ([float(q) for q in self.q], [0.0, 0.0, 0.0]):
