@@ -71,11 +71,16 @@ def published(accel: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarra
     return a, PUBLISHED[off + 9:off + 12], PUBLISHED[24:33].reshape(3, 3, order="F"), PUBLISHED[33:36]
 
 
+def move_spans(still: list) -> list[tuple[int, int]]:
+    """(start, stop) sample range of each move between consecutive still segments, as the fit cuts them."""
+    return [(still[i].stop - 1, still[i + 1].start + 1) for i in range(len(still) - 1)]
+
+
 def still_and_moves(session: Session) -> tuple[list, np.ndarray, list[np.ndarray]]:
     """The still segments, their raw accelerometer means, the raw gyro over each move (as the fit cuts them)."""
     still = session.segments_of(Kind.REST, Kind.POSE)
     means = np.array([session.accel_mps2[s.start:s.stop].mean(axis=0) for s in still])
-    moves = [session.gyro_radps[still[i].stop - 1:still[i + 1].start + 1] for i in range(len(still) - 1)]
+    moves = [session.gyro_radps[a:b] for a, b in move_spans(still)]
     return still, means, moves
 
 
@@ -116,9 +121,8 @@ def imu_tk_cross_validation(session: Session, folds: int = 5, samples: bool = Fa
     moves = [m - bias for m in moves_raw]
     if samples:
         timing = read_timing(session)
-        spans = [(still[i].stop - 1, still[i + 1].start + 1) for i in range(len(still) - 1)]
-        moves = [timing.sensor_samples(session.gyro_radps - bias, a, b) * timing.odr_ratio(0.5 * (a + b))
-                 for a, b in spans]
+        spans = move_spans(still)
+        moves = [timing.move_rates(session.gyro_radps - bias, a, b) for a, b in spans]
     is_pose = np.array([s.kind == Kind.POSE for s in still])
     order = np.cumsum(is_pose) - 1
     norm_err = np.full(len(still), np.nan)
@@ -186,7 +190,7 @@ def gyro_study() -> int:
     prep, extra = prepare(s)
     still, ts, gyro, acc = prep.still, prep.ts, s.gyro_radps, s.accel_mps2
     a_pub, b_pub, m_pub, bw_pub = published("bmi160")
-    spans = [(still[i].stop - 1, still[i + 1].start + 1) for i in range(len(still) - 1)]
+    spans = move_spans(still)
     eq3 = gyro - extra["gyro"]  # the station's bias curve b_stat + b_drift exp(-t/T_c)
     means = np.array([gyro[x.start:x.stop].mean(axis=0) for x in still])
 
@@ -248,7 +252,7 @@ def gyro_study() -> int:
     fit_t = fit_gyro_rotations(moves, PUBLISHED_STEP_S, ub, ua)
     print(f"{'time base: a fixed 0.01 s step instead of 1/100.054 Hz':<58}{fit_t.rms_deg:8.4f}")
     stale_study(s, still, fit.c_matrix, gyro - eq3, ub, ua)
-    from benchmarks.gyro_candidates import run
+    from gyro_candidates import run  # beside this script (its folder is sys.path[0] when run as a script)
 
     run(s, imu_tk_cross_validation(s)["direction_held_out"])
     return 0
@@ -261,9 +265,9 @@ def stale_study(s: Session, still: list, c: np.ndarray, unbiased: np.ndarray, ub
     reads and from the sensor's samples differ by the stale reads' rotation: compared with the per-move error."""
     timing = read_timing(s)
     ts = 1.0 / s.sample_rate_hz
-    spans = [(still[i].stop - 1, still[i + 1].start + 1) for i in range(len(still) - 1)]
+    spans = move_spans(still)
     moves = [unbiased[a:b] for a, b in spans]
-    samples = [timing.sensor_samples(unbiased, a, b) * timing.odr_ratio(0.5 * (a + b)) for a, b in spans]
+    samples = [timing.move_rates(unbiased, a, b) for a, b in spans]
     e_reads = direction_errors_deg(c, moves, ts, ub, ua)
     pred_reads = np.einsum("nji,nj->ni", _integrate(c, moves, ts, "rk4"), ub)
     pred_samples = np.einsum("nji,nj->ni", _integrate(c, samples, ts, "rk4"), ub)

@@ -109,6 +109,14 @@ class ReadTiming:
         return out
 
 
+    def move_rates(self, data: np.ndarray, start: int, stop: int) -> np.ndarray:
+        """The rates (m, 3) to integrate over reads ``start:stop`` with the *read* period as the step: the sensor's
+        samples (:meth:`sensor_samples`) times ``T_odr / T_read`` at the move's middle (eq. 3; integrating
+        ``w ratio`` with step ``T_read`` is integrating ``w`` with step ``T_odr``). The reads themselves when not
+        selected."""
+        return self.sensor_samples(data, start, stop) * self.odr_ratio(0.5 * (start + stop))
+
+
 def _candidates(y: np.ndarray, sigma: np.ndarray, step_sigma: float) -> tuple[np.ndarray, np.ndarray]:
     """(read index k, axis i) of exact repeats ``y[k, i] == y[k-1, i]`` while ``|y[k+1, i] - y[k-1, i]|`` is large."""
     same = y[1:-1] == y[:-2]

@@ -292,9 +292,7 @@ def prepare(session: Session, options: RigFreeOptions | None = None) -> tuple[Ri
     moves, raw_moves, pairs = [], [], []
     for i in range(len(still) - 1):
         a, b = still[i].stop - 1, still[i + 1].start + 1
-        # with stale reads: the sensor's samples, their period T_odr = ts * ratio (readtiming eq. 3) folded
-        # into the rate (integrating w * ratio with step ts is integrating w with step T_odr)
-        moves.append(timing.sensor_samples(gyro, a, b) * timing.odr_ratio(0.5 * (a + b)))
+        moves.append(timing.move_rates(gyro, a, b))  # with stale reads: the sensor's samples (readtiming)
         raw_moves.append(session.gyro_radps[a:b])
         pairs.append((i, i + 1))
     extra = {"a_noise": a_noise, "g_noise": g_noise, "a_drift": a_drift, "g_drift": g_drift,
