@@ -7,8 +7,9 @@ station fault) as one line on stderr and a non-zero exit code, never a traceback
 from __future__ import annotations
 
 import sys
+from collections.abc import Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated
+from typing import TYPE_CHECKING, Annotated, Any
 
 import numpy as np
 import typer
@@ -67,7 +68,7 @@ def _print_params(params: object) -> None:
     from rich.console import Console
     from rich.table import Table
 
-    from station.fit.params import ParameterSet
+    from station.kernel.parameters import ParameterSet
 
     assert isinstance(params, ParameterSet)
     console = Console()
@@ -78,22 +79,28 @@ def _print_params(params: object) -> None:
         for ax in "xyz":
             table.add_column(ax, justify="right")
 
+        triad = "accel" if tri is params.accel else "gyro"
+
         def row(
-            label: str, v: np.ndarray, s: np.ndarray, k: float = scale, fmt: str = "{:.6f}", table: Table = table
+            label: str, v: np.ndarray, s: np.ndarray, k: float = scale, fmt: str = "{:.6f}", table: Table = table,
+            parameter: str = "", triad: str = triad,
         ) -> None:
             cells = []
-            for a, b in zip(v, s, strict=True):
+            for i, (a, b) in enumerate(zip(v, s, strict=True)):
                 if not np.isfinite(a):
                     cells.append("unresolved")
+                elif parameter and not params.quality.is_determined(triad, parameter, i):
+                    cells.append("not determined (see below)")
                 else:
                     cells.append(f"{fmt.format(a * k)} ± {fmt.format(b * k)}")
             table.add_row(label, *cells)
 
         for i, ax in enumerate("xyz"):
             row(f"M row {ax}", tri.misalignment[i], tri.misalignment_std[i], 1.0)
-        row("bias static", tri.bias_static, tri.bias_static_std)
-        row("bias drift", tri.bias_drift, tri.bias_drift_std)
-        row("T_c (s)", tri.correlation_time_s, tri.correlation_time_s_std, 1.0, "{:.1f}")
+        row("bias static", tri.bias_static, tri.bias_static_std, parameter="bias_static")
+        row("bias drift", tri.bias_drift, tri.bias_drift_std, parameter="bias_drift")
+        row("T_c (s)", tri.correlation_time_s, tri.correlation_time_s_std, 1.0, "{:.1f}",
+            parameter="correlation_time_s")
         row("noise std", tri.noise_std, tri.noise_std_std)
         row("residual rms", tri.residual_rms, np.zeros(3))
         for j in range(tri.temp_bias_coeff.shape[1]):  # the temperature terms (station-params/2), where fitted
@@ -104,24 +111,32 @@ def _print_params(params: object) -> None:
                 row(f"T scale ppm/K^{j + 1}", tri.temp_scale_coeff[:, j], tri.temp_scale_coeff_std[:, j], 1e6,
                     "{:.3f}")
         console.print(table)
+    for u in params.quality.undetermined:
+        console.print(f"{u.triad} {'xyz'[u.axis]} {_PARAMETER_LABELS[u.parameter]}: not determined ({u.reason})")
+    if params.quality.undetermined:
+        notes = params.device_values()[1]
+        console.print("an EEPROM image or export of this set uses instead: " + "; ".join(notes))
     note = params.thermal
     if note.fitted:
         console.print(f"temperature terms fitted about T_ref = {params.reference_temperature_degc:.2f} degC "
                       f"(temperature span {note.span_k:.1f} K); orders {note.orders}")
     elif note.status != "absent":
         console.print(f"temperature terms: {note.status}: {note.reason}")
-    nl = params.quality.get("scale_nonlinearity")
-    if isinstance(nl, dict):
-        if nl.get("status") == "fitted":
+    nl = params.quality.scale_nonlinearity
+    if nl is not None:
+        if nl.fitted:
             k = params.gyro.scale_nonlinearity
             k_std = params.gyro.scale_nonlinearity_std
             parts = [f"{a} {100 * k[i] * REF_RATE_RADPS:+.4f} +- {100 * k_std[i] * REF_RATE_RADPS:.4f} %"
-                     for i, a in enumerate("xyz") if a in nl.get("axes", [])]
+                     for i, a in enumerate("xyz") if a in nl.axes]
             console.print("gyro scale nonlinearity u + k u|u| fitted (relative error k|u| at 200 deg/s): "
                           + ", ".join(parts))
         else:
-            console.print(f"gyro scale nonlinearity: {nl.get('status')}: {nl.get('reason')}")
+            console.print(f"gyro scale nonlinearity: {nl.status}: {nl.reason}")
 
+
+#: How ``station fit`` names the parameters whose determinability the fit states.
+_PARAMETER_LABELS = {"bias_static": "bias static", "bias_drift": "bias drift", "correlation_time_s": "T_c"}
 
 #: The rate at which ``station fit`` states the gyro nonlinearity as a relative scale error (200 deg/s, rad/s).
 REF_RATE_RADPS = float(np.radians(200.0))
@@ -152,6 +167,7 @@ def fit(
     the leave-poses-out cross-validation): the parameters are printed, and stderr names what failed.
     """
     from station.fit.calibrate import FitOptions, fit_session
+    from station.fit.determinability import assess
     from station.fit.goodness import EXIT_GOODNESS, summary
     from station.fit.rigfree import RigFreeOptions, fit_rig_free, is_rig_free
     from station.kernel.limits_file import load_limits
@@ -162,7 +178,8 @@ def fit(
             raise StationError(f"--thermal {thermal!r}: expected auto, off or require")
         if scale_nonlinearity not in ("auto", "off"):
             raise StationError(f"--scale-nonlinearity {scale_nonlinearity!r}: expected auto or off")
-        tc_range = dict(load_limits(limits).correlation_time_s) if limits is not None else {}
+        limits_file = load_limits(limits) if limits is not None else None
+        tc_range = dict(limits_file.correlation_time_s) if limits_file is not None else {}
         session = read_session(session_path)
         free = rig_free or is_rig_free(session)
         if free and g_sensitivity:
@@ -172,6 +189,8 @@ def fit(
         params = (fit_rig_free(session, RigFreeOptions(tc_range_s=tc_range)) if free
                   else fit_session(session, FitOptions(g_sensitivity=g_sensitivity, tc_range_s=tc_range,
                                                        thermal=thermal, scale_nonlinearity=scale_nonlinearity)))
+        if limits_file is not None:  # the b_stat rule needs the limit ranges' widths
+            params = assess(params, params.quality.record_end_s, limits_file.product)
     except StationError as exc:
         raise fail(exc) from None
     if as_json:
@@ -179,23 +198,23 @@ def fit(
     else:
         _print_params(params)
         if free:
-            _print_rig_free(params.quality["rig_free"])
-    verdict = params.quality["goodness_of_fit"]
-    if not verdict["passed"]:
-        reason = verdict.get("note", "") if free else summary(verdict)
+            _print_rig_free(params.quality.rig_free or {})
+    verdict = params.quality.goodness_of_fit
+    if verdict is not None and not verdict.passed:
+        reason = verdict.note if free else summary(verdict)
         typer.echo(f"error: not a calibration: the fit fails its goodness-of-fit test: {reason}", err=True)
         raise typer.Exit(EXIT_GOODNESS)
 
 
-def _print_rig_free(q: dict[str, object]) -> None:
+def _print_rig_free(q: Mapping[str, Any]) -> None:
     cv = q.get("cross_validation") or {}
     typer.echo(f"rig-free fit ({q['convention']})")
     typer.echo(f"  {q['still_segments']} still segments ({q['distinct_poses']} distinct orientations), "
                f"{q['moves']} moves; gravity {q['gravity_mps2']} m/s^2")
-    typer.echo(f"  gravity-norm RMS {1e3 * float(q['accel_norm_rms_mps2']):.2f} mm/s^2 fitted"  # type: ignore[arg-type]
-               + (f", {1e3 * cv['accel_norm_rms_mps2']:.2f} held out" if cv else ""))  # type: ignore[index]
-    typer.echo(f"  move gravity-direction RMS {float(q['gyro_direction_rms_deg']):.3f} deg fitted"  # type: ignore[arg-type]
-               + (f", {cv['gyro_direction_rms_deg']:.3f} held out ({cv['folds']}-fold leave-poses-out)"  # type: ignore[index]
+    typer.echo(f"  gravity-norm RMS {1e3 * float(q['accel_norm_rms_mps2']):.2f} mm/s^2 fitted"
+               + (f", {1e3 * cv['accel_norm_rms_mps2']:.2f} held out" if cv else ""))
+    typer.echo(f"  move gravity-direction RMS {float(q['gyro_direction_rms_deg']):.3f} deg fitted"
+               + (f", {cv['gyro_direction_rms_deg']:.3f} held out ({cv['folds']}-fold leave-poses-out)"
                   if cv else ""))
     timing = q.get("read_timing")
     if isinstance(timing, dict) and timing.get("selected"):
@@ -221,7 +240,7 @@ def correct(
     from station.commands.output import check_output
     from station.correct.session_correct import correct_session
     from station.eeprom.image import CalibrationImage, check_writable
-    from station.fit.params import ParameterSet
+    from station.kernel.parameters import ParameterSet
     from station.session import read_session, write_session
 
     try:

@@ -26,8 +26,8 @@ ALLOWED: dict[str, set[str]] = {
     # pure numerics and physics: arrays in, frozen results out
     "session": {"kernel"},
     "fit": {"kernel", "session"},
-    "correct": {"kernel", "session", "fit"},
-    "physics": {"kernel", "session", "fit"},
+    "correct": {"kernel", "session"},
+    "physics": {"kernel", "session"},
     "diagnose": {"kernel", "session", "fit", "correct", "physics"},
     # what the Modbus devices share: URL parsing, the pymodbus transport, the heartbeat
     "modbus": {"kernel"},
@@ -35,12 +35,12 @@ ALLOWED: dict[str, set[str]] = {
     "rig": {"kernel", "modbus"},
     "chamber": {"kernel", "modbus"},
     "sensor": {"kernel"},
-    "eeprom": {"kernel", "fit", "sensor"},
+    "eeprom": {"kernel", "sensor"},
     # the sequence: steps, runner, records, limits, gates, provisioning, on-rig verification
     "sequence": {"kernel", "session", "fit", "correct", "rig", "chamber", "sensor", "eeprom"},
     # subscribers to the records
-    "store": {"kernel", "fit", "eeprom", "sequence"},
-    "terminal": {"kernel", "fit", "sequence"},
+    "store": {"kernel", "eeprom", "sequence"},
+    "terminal": {"kernel", "sequence"},
     "web": NUMERICS | {"eeprom", "sequence", "store"},
     # the composition root, its one-run-per-rig lock, and the command line
     "rig_lock": {"kernel", "store"},
@@ -176,3 +176,4 @@ def test_the_package_graph_has_no_cycle() -> None:
 )
 def test_the_checker_finds_imports_the_wrong_way(module: str, source: str, expected: list[str]) -> None:
     assert violations([(module, source, False)]) == sorted(expected)
+

@@ -19,8 +19,8 @@ from typing import TYPE_CHECKING, Annotated, Any, TypeVar
 import numpy as np
 import typer
 
-from station.fit.params import ParameterSet, TriadParams
 from station.kernel.errors import StationError
+from station.kernel.parameters import ParameterSet, TriadParams
 
 if TYPE_CHECKING:
     from station.eeprom.image import CalibrationImage

@@ -170,8 +170,8 @@ def export_command(
 ) -> None:
     """Write a parameter set in imu_tk's convention or as OpenAXES's coefficient list."""
     from station.commands.output import check_output
-    from station.fit.export import imu_tk_document, openaxes_text
-    from station.fit.params import ParameterSet
+    from station.fit.export import export_notes, imu_tk_document, openaxes_text
+    from station.kernel.parameters import ParameterSet
 
     try:
         if fmt not in ("imu-tk", "openaxes"):
@@ -185,6 +185,8 @@ def export_command(
             text = imu_tk_document(sets[0])
         else:
             text = openaxes_text(sets)
+        for note in (n for p in sets for n in export_notes(p)):
+            typer.echo(f"note: {note}", err=True)
         if output is None:
             sys.stdout.write(text)
         else:

@@ -54,7 +54,7 @@ import numpy as np
 from scipy.linalg.blas import dgemm
 
 from station.correct.streaming import CorrectionConstants, compensate_extended
-from station.fit.params import ParameterSet
+from station.kernel.parameters import ParameterSet
 
 DEFAULT_CHUNK_ROWS = 16384
 _ROW_BLOCK = 64  # chunk rows are a multiple of this

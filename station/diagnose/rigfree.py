@@ -247,7 +247,7 @@ def diagnose_rig_free(session: Session, *,
         entry["calibration"] = {"compensated": False, "note": "not assessed on a rig-free recording"}
         findings.append(entry)
     p = baseline.params
-    rf = p.quality.get("rig_free", {})
+    rf = p.quality.rig_free or {}
     report = {
         "format": FORMAT,
         "serial": session.serial,

@@ -33,8 +33,8 @@ from typing import ClassVar
 
 import numpy as np
 
-from station.fit.params import AllanCoefficients, ParameterSet, ThermalFit, TriadParams
 from station.kernel.errors import FormatError, UnsupportedVersionError
+from station.kernel.parameters import AllanCoefficients, ParameterSet, ThermalFit, TriadParams
 
 MAGIC = b"SCAL"
 LAYOUT_VERSION = 1  # the layout of an image without the effects of layout 2 (byte for byte as before)
@@ -137,7 +137,7 @@ class TriadImage:
 
 @dataclass(frozen=True, eq=False)
 class EffectsImage:
-    """What layout 2 adds: the compensable effects beyond eq. (1) (see :mod:`station.fit.params`).
+    """What layout 2 adds: the compensable effects beyond eq. (1) (see :mod:`station.kernel.parameters`).
 
     Attributes:
         reference_temperature_degc: T_ref of the temperature terms (degC); NaN when they are all zero.
@@ -290,7 +290,13 @@ class CalibrationImage:
         update_count: int = 1,
         params_id_bytes: bytes | None = None,
     ) -> CalibrationImage:
-        """The image of ``params``; ``calibration_time`` defaults to now (UTC)."""
+        """The image of ``params``; ``calibration_time`` defaults to now (UTC).
+
+        The image holds :meth:`ParameterSet.device_values`: an axis whose drift the recording cannot determine
+        gets the bias at the end of the recording as a constant bias (:func:`image_notes` says which).
+        """
+        params_id_bytes = params_id_bytes if params_id_bytes is not None else params_id(params)
+        params, _ = params.device_values()
         when = calibration_time if calibration_time is not None else datetime.now(UTC)
         if when.tzinfo is None:
             raise ImageContentError("calibration time must be timezone-aware")
@@ -298,7 +304,7 @@ class CalibrationImage:
         us = (when - epoch) // _ONE_US
         return cls(
             serial=params.serial,
-            params_id=params_id_bytes if params_id_bytes is not None else params_id(params),
+            params_id=params_id_bytes,
             station_id=station_id,
             calibration_time_us=int(us),
             update_count=update_count,
@@ -380,6 +386,11 @@ class CalibrationImage:
             and np.array_equal(self.g_sensitivity, other.g_sensitivity, equal_nan=True)
             and (self.effects.same_as(other.effects) if self.effects is not None else other.effects is None)
         )
+
+
+def image_notes(params: ParameterSet) -> tuple[str, ...]:
+    """Where an image of ``params`` holds other values than the set (see :meth:`CalibrationImage.from_params`)."""
+    return params.device_values()[1]
 
 
 def run_image(params: ParameterSet, station_id: str, run_started_at: datetime) -> CalibrationImage:

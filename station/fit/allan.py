@@ -36,8 +36,8 @@ from typing import Literal
 import numpy as np
 from scipy.optimize import nnls
 
-from station.fit.params import AllanCoefficients
 from station.kernel.errors import FitError
+from station.kernel.parameters import AllanCoefficients
 
 NoiseType = Literal["white", "flicker", "random_walk"]
 

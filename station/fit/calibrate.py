@@ -30,8 +30,8 @@ from station.fit.blocks import Blocks, block_exp_mean, make_blocks
 from station.fit.boundary import numerics
 from station.fit.checks import check_session
 from station.fit.consistency import check_rotations
+from station.fit.determinability import assess
 from station.fit.goodness import TriadResidual, goodness_of_fit
-from station.fit.params import MAX_TEMP_ORDER, AllanCoefficients, ParameterSet, ThermalFit, TriadParams
 from station.fit.thermal import (
     assess_temperature,
     axis_regressors,
@@ -40,6 +40,17 @@ from station.fit.thermal import (
     temperature_columns,
 )
 from station.kernel.errors import FitError
+from station.kernel.parameters import (
+    MAX_TEMP_ORDER,
+    AllanCoefficients,
+    FitQuality,
+    GoodnessOfFit,
+    NonlinearityNote,
+    ParameterSet,
+    ResidualFigures,
+    ThermalFit,
+    TriadParams,
+)
 from station.session.model import Kind, Session
 
 AXES = "xyz"
@@ -68,7 +79,7 @@ class FitOptions:
             from the record alone.
         thermal: the temperature terms (bias and scale polynomials in ``T - T_ref`` per output axis,
             :mod:`station.fit.thermal`): ``'auto'`` fits them when the recording's temperature course
-            separates them from the warm-up (else :class:`~station.fit.params.ThermalFit` says why not,
+            separates them from the warm-up (else :class:`~station.kernel.parameters.ThermalFit` says why not,
             status ``'not_separable'``), ``'require'`` refuses (FitError) a recording that cannot separate
             them, ``'off'`` (the default: eq. 1 alone, as every caller before issue 18 expects, e.g. the
             diagnosis's base model) never. ``station fit`` uses ``'auto'``.
@@ -406,17 +417,16 @@ def _allan(session: Session, residual: np.ndarray, keep: np.ndarray) -> AllanCoe
     return AllanCoefficients(**{n: np.array(v) for n, v in vals.items()})
 
 
-def _quality(
-    session: Session, name: str, residual: np.ndarray, runs: list[tuple[int, int, int]], keep: np.ndarray
-) -> dict[str, Any]:
+def _residual_figures(residual: np.ndarray, runs: list[tuple[int, int, int]], keep: np.ndarray) -> ResidualFigures:
     rms_seg = {}
     parts = []
     for seg, a, b in runs:
         r = residual[a:b][keep[a:b]]
         parts.append(r)
-        rms_seg[str(seg)] = np.sqrt(np.mean(r**2, axis=0)).round(9).tolist()
+        rms_seg[str(seg)] = tuple(np.sqrt(np.mean(r**2, axis=0)).round(9).tolist())
     allr = np.concatenate(parts)
-    return {"rms": np.sqrt(np.mean(allr**2, axis=0)).round(9).tolist(), "segments": rms_seg, "samples": len(allr)}
+    return ResidualFigures(rms=tuple(np.sqrt(np.mean(allr**2, axis=0)).round(9).tolist()), segments=rms_seg,
+                           samples=len(allr))
 
 
 def _sample_design(n: int, ref: np.ndarray | None, force: np.ndarray | None) -> np.ndarray:
@@ -580,20 +590,18 @@ def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
     # --- residuals, noise figures and quality ----------------------------------
     a_res = session.accel_mps2 - mean_model(a, session.t_s, session.ref_accel_mps2, session.ref_accel_mps2, dt)
     g_res = session.gyro_radps - mean_model(g, session.t_s, g_ref, session.ref_accel_mps2, dt)
-    quality = {
-        "accel": _quality(session, "accel", a_res, a_runs, a_noise.keep),
-        "gyro": _quality(session, "gyro", g_res, g_runs, g_noise.keep),
-        "gyro_scale_method": gyro_method,
-        "outliers": {"accel": a_noise.outliers.tolist(), "gyro": g_noise.outliers.tolist()},
-        "drift_likelihood_ratio": {
-            "accel": [round(f.lr, 3) for f in a_tri.fits],
-            "gyro": [round(f.lr, 3) for f in g_tri.fits],
+    quality = FitQuality(
+        accel=_residual_figures(a_res, a_runs, a_noise.keep),
+        gyro=_residual_figures(g_res, g_runs, g_noise.keep),
+        gyro_scale_method=gyro_method,
+        outliers={"accel": tuple(a_noise.outliers.tolist()), "gyro": tuple(g_noise.outliers.tolist())},
+        drift_likelihood_ratio={
+            "accel": tuple(round(f.lr, 3) for f in a_tri.fits),
+            "gyro": tuple(round(f.lr, 3) for f in g_tri.fits),
         },
-    }
-    if angle_report:
-        quality["known_angle"] = angle_report
-    if nonlin_note is not None:
-        quality["scale_nonlinearity"] = nonlin_note
+        known_angle=angle_report or None,
+        scale_nonlinearity=None if nonlin_note is None else NonlinearityNote.from_dict(nonlin_note),
+    )
     deg = float(np.degrees(1.0))
     n = len(session)
     a_design = _sample_design(n, session.ref_accel_mps2, None)
@@ -607,11 +615,12 @@ def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
             dt, session.ref_accel_mps2, _top(thermal_note, "accel"))])
         g_design = np.column_stack([g_design, temperature_columns(
             dt, g_ref if gyro_method == "rate" else None, _top(thermal_note, "gyro"))])
-    quality["goodness_of_fit"] = goodness_of_fit(session, [
+    verdict = goodness_of_fit(session, [
         _triad_residual("accel", a_res, a_design, a_runs, a_noise, a_tri, a_blocks, 1.0, "m/s^2",
                         (0.5 * (session.meta_float("reference_tolerance_mps2") or 0.0)) ** 2),
         _triad_residual("gyro", g_res, g_design, g_runs, g_noise, g_tri, g_blocks, deg, "deg/s"),
     ], angle_report or None)
+    quality = replace(quality, goodness_of_fit=GoodnessOfFit.from_dict(verdict))
 
     def triad(
         p: dict[str, np.ndarray], noise: _Noise, res: np.ndarray, runs: list[tuple[int, int, int]]
@@ -628,7 +637,7 @@ def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
             **p,
         )
 
-    return ParameterSet(
+    params = ParameterSet(
         serial=session.serial,
         sample_period_s=ts,
         moving_average_length=options.moving_average_length,
@@ -646,6 +655,7 @@ def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
                if options.tc_range_s else {}),
         },
     )
+    return assess(params, float(session.t_s[-1]))
 
 
 __all__ = ["FitOptions", "block_exp_mean", "fit_session", "mean_model"]

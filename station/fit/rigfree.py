@@ -49,6 +49,7 @@ from station.fit.blocks import make_blocks
 from station.fit.boundary import numerics
 from station.fit.calibrate import _allan, _noise
 from station.fit.checks import check_finite, check_time
+from station.fit.determinability import assess
 from station.fit.multipos import (
     _UPPER,
     AccelJointFit,
@@ -62,9 +63,9 @@ from station.fit.multipos import (
     norm_residuals,
     rough_directions,
 )
-from station.fit.params import ParameterSet, TriadParams
 from station.fit.readtiming import ReadTiming, detect_stale_reads
 from station.kernel.errors import FitError
+from station.kernel.parameters import FitQuality, GoodnessOfFit, ParameterSet, ResidualFigures, TriadParams
 from station.session.model import Kind, Segment, Session
 
 __all__ = [
@@ -656,19 +657,18 @@ def _fit(session: Session, options: RigFreeOptions) -> ParameterSet:
     }
     verdict_ok = bool(cv) and cv["accel_norm_rms_mps2"] <= 3.0 * max(acc.rms_mps2, 1e-6) and \
         cv["gyro_direction_rms_deg"] <= 3.0 * max(gyr.rms_deg, 1e-6)
-    quality: dict[str, Any] = {
-        "rig_free": report,
-        "gyro_scale_method": "rig-free",
-        "goodness_of_fit": {
-            "format": "station-goodness/1", "passed": verdict_ok, "failed": [] if verdict_ok else ["rig-free cv"],
-            "tests": [],
+    quality = FitQuality(
+        rig_free=report,
+        gyro_scale_method="rig-free",
+        goodness_of_fit=GoodnessOfFit(passed=verdict_ok, failed=() if verdict_ok else ("rig-free cv",), report={
+            "format": "station-goodness/1", "tests": [],
             "note": "rig-free fit: judged by leave-poses-out cross-validation (held-out RMS within 3x the fitted "
                     "RMS for the gravity norm and the move rotations)",
-        },
-        "accel": {"rms": accel.residual_rms.round(9).tolist()},
-        "gyro": {"rms": gyro.residual_rms.round(9).tolist()},
-    }
-    return ParameterSet(
+        }),
+        accel=ResidualFigures(rms=tuple(accel.residual_rms.round(9).tolist())),
+        gyro=ResidualFigures(rms=tuple(gyro.residual_rms.round(9).tolist())),
+    )
+    params = ParameterSet(
         serial=session.serial,
         sample_period_s=1.0 / session.sample_rate_hz,
         moving_average_length=options.moving_average_length,
@@ -684,3 +684,4 @@ def _fit(session: Session, options: RigFreeOptions) -> ParameterSet:
             "gravity_mps2": g,
         },
     )
+    return assess(params, float(session.t_s[-1]))

@@ -18,7 +18,7 @@ split them. The terms are fitted only when the plan moves the temperature: the s
 block-mean temperature spans at least ``min_temperature_span_k``, and what is left of it after the
 best warm-up shape ``a + b exp(-t/tau)`` over any tau (2 s to 50 record spans; a ramp is the long-tau
 limit) is taken out has an RMS of at least ``min_temperature_independent_k``. Otherwise the result says
-so (:class:`~station.fit.params.ThermalFit`, status ``not_separable``) and the fit is eq. 1 as before.
+so (:class:`~station.kernel.parameters.ThermalFit`, status ``not_separable``) and the fit is eq. 1 as before.
 
 **Order** (:data:`ORDER_RULE`): backward elimination by Wald tests at the full model's (T_c, q).
 """
@@ -31,7 +31,7 @@ import numpy as np
 
 from station.fit.axis_ml import AxisFit, _inverse, _Problem
 from station.fit.blocks import Blocks, block_exp_mean, make_blocks
-from station.fit.params import MAX_TEMP_ORDER, ThermalFit
+from station.kernel.parameters import MAX_TEMP_ORDER, ThermalFit
 from station.session.model import Session
 
 ORDER_RULE = (
