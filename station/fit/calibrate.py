@@ -126,7 +126,9 @@ class FitOptions:
 
 
 @dataclass(frozen=True)
-class _Noise:
+class NoiseEstimate:
+    """A triad's white noise (:func:`white_noise`), shared with the rig-free fit."""
+
     sigma: np.ndarray  # (3,) white-noise std per sample
     sigma_std: np.ndarray  # (3,)
     keep: np.ndarray  # (n,) bool: not an outlier on any axis
@@ -141,7 +143,9 @@ def _settled_runs(session: Session, kinds: tuple[Kind, ...], ref: np.ndarray) ->
     return runs
 
 
-def _noise(session: Session, data: np.ndarray, runs: list[tuple[int, int, int]], outlier_sigma: float) -> _Noise:
+def white_noise(
+    session: Session, data: np.ndarray, runs: list[tuple[int, int, int]], outlier_sigma: float
+) -> NoiseEstimate:
     """White-noise std from first differences within settled runs (robust to outliers), and outlier flags."""
     keep = np.ones(len(session), dtype=bool)
     diffs: list[np.ndarray] = []
@@ -169,7 +173,7 @@ def _noise(session: Session, data: np.ndarray, runs: list[tuple[int, int, int]],
     sigma = dc.std(axis=0) / np.sqrt(2.0)
     # differences of white noise: lag-1 correlation -1/2 inflates the variance of the estimate by 1.5
     sigma_std = sigma * np.sqrt(1.5 / (2.0 * max(len(dc) - 1, 1)))
-    return _Noise(sigma=sigma, sigma_std=sigma_std, keep=keep, outliers=outliers)
+    return NoiseEstimate(sigma=sigma, sigma_std=sigma_std, keep=keep, outliers=outliers)
 
 
 @dataclass(frozen=True)
@@ -195,7 +199,7 @@ def _fit_triad(
     data: np.ndarray,
     ref: np.ndarray,
     runs: list[tuple[int, int, int]],
-    noise: _Noise,
+    noise: NoiseEstimate,
     options: FitOptions,
     *,
     with_ref: bool,
@@ -250,7 +254,7 @@ def _fit_triad_thermal(
     data: np.ndarray,
     ref: np.ndarray,
     runs: list[tuple[int, int, int]],
-    noise: _Noise,
+    noise: NoiseEstimate,
     options: FitOptions,
     *,
     with_ref: bool,
@@ -318,7 +322,7 @@ def _fit_triad_thermal(
 
 
 def _thermal_triad(
-    session: Session, data: np.ndarray, ref: np.ndarray, runs: list[tuple[int, int, int]], noise: _Noise,
+    session: Session, data: np.ndarray, ref: np.ndarray, runs: list[tuple[int, int, int]], noise: NoiseEstimate,
     options: FitOptions, first: _TriadLinear, *, with_ref: bool, g_sens: bool, triad: str, dt: np.ndarray,
 ) -> tuple[_TriadLinear, Blocks, dict[str, np.ndarray], tuple[list[int], list[int]]]:
     """Two passes: orders chosen with M^ from the fit without temperature terms, then refitted with M^ from
@@ -397,7 +401,7 @@ def mean_model(
     return out
 
 
-def _allan(session: Session, residual: np.ndarray, keep: np.ndarray) -> AllanCoefficients:
+def residual_allan(session: Session, residual: np.ndarray, keep: np.ndarray) -> AllanCoefficients:
     """IEEE 952 coefficients from the longest still segment's residual."""
     still = session.segments_of(Kind.REST) or session.segments_of(Kind.POSE)
     seg = max(still, key=len)
@@ -439,7 +443,7 @@ def _sample_design(n: int, ref: np.ndarray | None, force: np.ndarray | None) -> 
 
 
 def _triad_residual(
-    name: str, res: np.ndarray, design: np.ndarray, runs: list[tuple[int, int, int]], noise: _Noise,
+    name: str, res: np.ndarray, design: np.ndarray, runs: list[tuple[int, int, int]], noise: NoiseEstimate,
     tri: _TriadLinear, blocks: Blocks, scale: float, unit: str, reference_var: float = 0.0,
 ) -> TriadResidual:
     return TriadResidual(
@@ -468,9 +472,9 @@ def _top(note: ThermalFit, triad: str) -> int:
 
 
 def _gyro_nonlinearity(
-    session: Session, g_ref: np.ndarray, g_runs: list[tuple[int, int, int]], g_noise: _Noise, options: FitOptions,
-    g: dict[str, np.ndarray], g_tri: _TriadLinear, g_blocks: Blocks, *, rate: bool, dt: np.ndarray | None,
-    orders: tuple[list[int], list[int]] | None,
+    session: Session, g_ref: np.ndarray, g_runs: list[tuple[int, int, int]], g_noise: NoiseEstimate,
+    options: FitOptions, g: dict[str, np.ndarray], g_tri: _TriadLinear, g_blocks: Blocks, *, rate: bool,
+    dt: np.ndarray | None, orders: tuple[list[int], list[int]] | None,
 ) -> tuple[dict[str, np.ndarray], _TriadLinear, Blocks, dict[str, Any]]:
     """The gyro refitted with ``k u|u|`` on the axes that identify it and keep it (see
     :attr:`FitOptions.scale_nonlinearity`): two passes, the regressor's M^ from the previous one. Returns the
@@ -521,7 +525,7 @@ def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
     # --- accelerometer: rest + poses -----------------------------------------
     a_runs = _settled_runs(session, (Kind.REST, Kind.POSE), session.ref_accel_mps2)
     with numerics("accelerometer fit (rest and poses)"):
-        a_noise = _noise(session, session.accel_mps2, a_runs, options.outlier_sigma)
+        a_noise = white_noise(session, session.accel_mps2, a_runs, options.outlier_sigma)
         a_tri, a_blocks = _fit_triad(session, session.accel_mps2, session.ref_accel_mps2, a_runs, a_noise, options,
                               with_ref=True, g_sens=False, triad="accel")
     a = _unpack(a_tri)
@@ -535,7 +539,7 @@ def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
         g_runs = _settled_runs(session, (Kind.REST, Kind.POSE), static_ref)
         g_ref = static_ref
     with numerics(f"gyroscope fit ({'rest, poses and rate steps' if gyro_method == 'rate' else 'rest and poses'})"):
-        g_noise = _noise(session, session.gyro_radps, g_runs, options.outlier_sigma)
+        g_noise = white_noise(session, session.gyro_radps, g_runs, options.outlier_sigma)
         g_tri, g_blocks = _fit_triad(session, session.gyro_radps, g_ref, g_runs, g_noise, options,
                               with_ref=gyro_method == "rate", g_sens=options.g_sensitivity, triad="gyro")
     g = _unpack(g_tri)
@@ -623,7 +627,7 @@ def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
     quality = replace(quality, goodness_of_fit=GoodnessOfFit.from_dict(verdict))
 
     def triad(
-        p: dict[str, np.ndarray], noise: _Noise, res: np.ndarray, runs: list[tuple[int, int, int]]
+        p: dict[str, np.ndarray], noise: NoiseEstimate, res: np.ndarray, runs: list[tuple[int, int, int]]
     ) -> TriadParams:
         mask = np.zeros(len(session), dtype=bool)
         for _, s0, s1 in runs:
@@ -632,7 +636,7 @@ def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
         return TriadParams(
             noise_std=noise.sigma,
             noise_std_std=noise.sigma_std,
-            allan=_allan(session, res, noise.keep),
+            allan=residual_allan(session, res, noise.keep),
             residual_rms=np.sqrt(np.mean(res[mask] ** 2, axis=0)),
             **p,
         )

@@ -47,11 +47,11 @@ from station import __version__
 from station.fit.axis_ml import AxisFit, fit_axis
 from station.fit.blocks import make_blocks
 from station.fit.boundary import numerics
-from station.fit.calibrate import _allan, _noise
+from station.fit.calibrate import residual_allan, white_noise
 from station.fit.checks import check_finite, check_time
 from station.fit.determinability import assess
 from station.fit.multipos import (
-    _UPPER,
+    UPPER_TRIANGLE,
     AccelJointFit,
     AccelNormFit,
     GyroRotationFit,
@@ -272,8 +272,8 @@ def prepare(session: Session, options: RigFreeOptions | None = None) -> tuple[Ri
                        "label them (station import ... runs the still detector)")
     runs = _runs(still)
     with numerics("noise of the still segments"):
-        a_noise = _noise(session, session.accel_mps2, runs, options.outlier_sigma)
-        g_noise = _noise(session, session.gyro_radps, runs, options.outlier_sigma)
+        a_noise = white_noise(session, session.accel_mps2, runs, options.outlier_sigma)
+        g_noise = white_noise(session, session.gyro_radps, runs, options.outlier_sigma)
     rest = [s for s in still if s.kind == Kind.REST]
     with numerics("accelerometer warm-up (eq. 3) over the initial still"):
         a_drift = (_fit_drift(session, session.accel_mps2, _runs(rest[:1]), a_noise.keep, a_noise.sigma, options,
@@ -429,12 +429,12 @@ def _a_param_cov(m: np.ndarray, b: np.ndarray, cov9: np.ndarray) -> np.ndarray:
     """Covariance of (A00, A01, A02, A11, A12, A22, b) with A = M^-1 from that of (M00, ..., M22, b): linear."""
     def f(x: np.ndarray) -> np.ndarray:
         mm = np.zeros((3, 3))
-        for k, (i, j) in enumerate(_UPPER):
+        for k, (i, j) in enumerate(UPPER_TRIANGLE):
             mm[i, j] = x[k]
         a = np.linalg.inv(mm)
-        return np.array([a[i, j] for i, j in _UPPER] + list(x[6:9]))
+        return np.array([a[i, j] for i, j in UPPER_TRIANGLE] + list(x[6:9]))
 
-    x0 = np.array([m[i, j] for i, j in _UPPER] + list(b))
+    x0 = np.array([m[i, j] for i, j in UPPER_TRIANGLE] + list(b))
     jac = np.empty((9, 9))
     for k in range(9):
         h = 1e-7 * max(1.0, abs(x0[k]))
@@ -494,7 +494,7 @@ def _fit_accel(session: Session, still: list[Segment], extra: dict[str, Any], op
     a_matrix = np.linalg.inv(joint.misalignment)
     resid = norm_residuals(a_matrix, joint.bias, means, g)
     norm = AccelNormFit(a_matrix=a_matrix, bias=joint.bias,
-                        params=np.array([a_matrix[i, j] for i, j in _UPPER] + list(joint.bias)),
+                        params=np.array([a_matrix[i, j] for i, j in UPPER_TRIANGLE] + list(joint.bias)),
                         cov=_a_param_cov(joint.misalignment, joint.bias, joint.cov[:9, :9]), residual_mps2=resid,
                         scale_mps2=float(np.sqrt(np.sum(resid**2) / max(len(resid) - 9, 1))), gravity_mps2=g)
     return _AccelResult(norm, joint, drift)
@@ -513,13 +513,13 @@ def _gyro_cov_with_frame(gyr: GyroRotationFit, prep: RigFreeData, accel_fit: _Ac
     if joint is not None:
         free = np.flatnonzero(joint.tc_free)
         t_seg = [session.t_s[s.start:s.stop][keep[s.start:s.stop]] for s in prep.still]
-        x0 = np.concatenate([[joint.misalignment[i, j] for i, j in _UPPER], joint.bias, joint.drift,
+        x0 = np.concatenate([[joint.misalignment[i, j] for i, j in UPPER_TRIANGLE], joint.bias, joint.drift,
                              np.log(joint.tc_s[free])])
         cov = joint.cov
 
         def directions(x: np.ndarray) -> np.ndarray:
             m = np.zeros((3, 3))
-            for k, (i, j) in enumerate(_UPPER):
+            for k, (i, j) in enumerate(UPPER_TRIANGLE):
                 m[i, j] = x[k]
             tc = joint.tc_s.copy()
             tc[free] = np.exp(x[12:])
@@ -614,14 +614,14 @@ def _fit(session: Session, options: RigFreeOptions) -> ParameterSet:
     else:
         accel_terms = {
             "misalignment": np.linalg.inv(acc.a_matrix),
-            "misalignment_std": _inverse_std(acc.a_matrix, acc.cov[:6, :6], _UPPER),
+            "misalignment_std": _inverse_std(acc.a_matrix, acc.cov[:6, :6], UPPER_TRIANGLE),
             "bias_static": acc.bias, "bias_static_std": np.sqrt(np.diag(acc.cov)[6:9]),
             **_drift_params(None),
         }
     accel = TriadParams(
         **accel_terms,
         noise_std=a_noise.sigma, noise_std_std=a_noise.sigma_std,
-        allan=_allan(session, a_res, a_noise.keep),
+        allan=residual_allan(session, a_res, a_noise.keep),
         residual_rms=np.sqrt(np.mean(a_res[mask & a_noise.keep] ** 2, axis=0)),
     )
     g_par = _drift_params(g_drift)
@@ -631,7 +631,7 @@ def _fit(session: Session, options: RigFreeOptions) -> ParameterSet:
         bias_static_std=np.array([np.sqrt(max(f.beta_cov[0, 0], 0.0)) for f in g_drift]),
         **g_par,
         noise_std=g_noise.sigma, noise_std_std=g_noise.sigma_std,
-        allan=_allan(session, g_res, g_noise.keep),
+        allan=residual_allan(session, g_res, g_noise.keep),
         residual_rms=np.sqrt(np.mean(g_res[mask & g_noise.keep] ** 2, axis=0)),
     )
     report = {

@@ -148,7 +148,7 @@ class Provisioner(Protocol):
 
 
 @dataclass
-class _Verdict:
+class UnitVerdict:
     outcome: Outcome | None = None
     message: str = ""
     measurements: list[Measured] = field(default_factory=list)
@@ -256,7 +256,7 @@ class SequenceRunner:
         channels = [
             UnitChannel(k, url, s, clock) for k, (url, s) in enumerate(zip(self.sensor_urls, self.sensors, strict=True))
         ]
-        verdicts = [_Verdict() for _ in channels]
+        verdicts = [UnitVerdict() for _ in channels]
         self._emit(
             RunStarted(
                 self.run_id, self.started_at.isoformat(), t_start, self.station, self.rig_name,
@@ -334,7 +334,7 @@ class SequenceRunner:
         self._emit(RigReading(self.run_id, state.t_s, state.roll_deg, state.pitch_deg, state.yaw_deg, state.rate_dps,
                               flags, state.fault_code))
 
-    def _run_steps(self, fx: Fixture, verdicts: list[_Verdict], reconnects0: int) -> None:
+    def _run_steps(self, fx: Fixture, verdicts: list[UnitVerdict], reconnects0: int) -> None:
         for step in self.steps:
             if not fx.active:
                 log.warning("run %s: no unit left to measure; stopping before '%s'", self.run_id, step.name)
@@ -361,7 +361,7 @@ class SequenceRunner:
             self._emit(StepFinished(self.run_id, step.index, step.name, self.clock.now(), self.clock.now() - t0,
                                     not problems, len(fx.active), "; ".join(problems)))
 
-    def _apply_report(self, fx: Fixture, step: Step, report: StepReport, verdicts: list[_Verdict]) -> list[str]:
+    def _apply_report(self, fx: Fixture, step: Step, report: StepReport, verdicts: list[UnitVerdict]) -> list[str]:
         """Emit the step's measurements; end units with a sensor fault (ERROR) or a failed gate."""
         problems: list[str] = []
         for unit in fx.units:
@@ -387,7 +387,7 @@ class SequenceRunner:
                 problems.append(f"slot {unit.slot}: {text}")
         return problems
 
-    def _admit_units(self, fx: Fixture, verdicts: list[_Verdict]) -> None:
+    def _admit_units(self, fx: Fixture, verdicts: list[UnitVerdict]) -> None:
         """The retest policy, before anything moves: identify every unit and end the ones it refuses.
 
         A refused unit is REFUSED (not tested, nothing written to it, not counted as an attempt); a
@@ -408,7 +408,7 @@ class SequenceRunner:
                 unit.identity = ident
                 self._end_unit(fx, unit, v, Outcome.REFUSED, f"refused by the retest policy: {reason}")
 
-    def _end_unit(self, fx: Fixture, unit: UnitChannel, v: _Verdict, outcome: Outcome, message: str) -> None:
+    def _end_unit(self, fx: Fixture, unit: UnitChannel, v: UnitVerdict, outcome: Outcome, message: str) -> None:
         unit.active = False
         v.outcome, v.message = outcome, message
         fx.pool.submit(unit.stop_stream)  # not on the rig's critical path: a silent sensor takes a while
@@ -460,7 +460,7 @@ class SequenceRunner:
     def _finish_units(
         self,
         channels: list[UnitChannel],
-        verdicts: list[_Verdict],
+        verdicts: list[UnitVerdict],
         aborted: bool,
         run_message: str,
         completed: bool,
@@ -525,7 +525,7 @@ class SequenceRunner:
             results = self._provision(results)
         return results
 
-    def _check_unit_limits(self, unit: UnitChannel, v: _Verdict, params: ParameterSet) -> None:
+    def _check_unit_limits(self, unit: UnitChannel, v: UnitVerdict, params: ParameterSet) -> None:
         checks = check_limits(params, self.limits)
         goodness = params.quality.goodness_of_fit
         if goodness is not None:
@@ -540,7 +540,7 @@ class SequenceRunner:
     def _save(
         self,
         unit: UnitChannel,
-        v: _Verdict,
+        v: UnitVerdict,
         session: Session | None,
         text: str | None,
         params: ParameterSet | None,
@@ -581,12 +581,12 @@ class SequenceRunner:
                 out.append(r)
             except UnitRejected as exc:
                 self._emit_verify(r, exc.checks)
-                out.append(_replace_outcome(r, Outcome.FAIL, f"verification failed: {exc}"))
+                out.append(replace_outcome(r, Outcome.FAIL, f"verification failed: {exc}"))
             except StationError as exc:  # a link fault, or an image the writer refused: the station's fault
-                out.append(_replace_outcome(r, Outcome.ERROR, f"provisioning failed: {exc}"))
+                out.append(replace_outcome(r, Outcome.ERROR, f"provisioning failed: {exc}"))
             except KeyboardInterrupt:
                 stop = True
-                out.append(_replace_outcome(r, Outcome.ABORTED, f"{self.abort_reason} during provisioning"))
+                out.append(replace_outcome(r, Outcome.ABORTED, f"{self.abort_reason} during provisioning"))
         return out
 
 
@@ -624,6 +624,6 @@ def unit_verdict(checks: Sequence[Measurement], limits: ProductLimits) -> tuple[
     return Outcome.PASS, ""
 
 
-def _replace_outcome(r: UnitResult, outcome: Outcome, message: str) -> UnitResult:
+def replace_outcome(r: UnitResult, outcome: Outcome, message: str) -> UnitResult:
     return UnitResult(r.slot, r.url, r.serial, outcome, message, r.session, r.params, r.session_path, r.params_path,
                       r.measurements)

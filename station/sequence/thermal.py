@@ -47,9 +47,9 @@ from station.sequence.runner import (
     RunResult,
     SequenceRunner,
     UnitResult,
-    _replace_outcome,
-    _Verdict,
 )
+from station.sequence.runner import UnitVerdict as _Verdict
+from station.sequence.runner import replace_outcome as _replace_outcome
 from station.sequence.steps import (
     STEP_FUNCTIONS,
     Fixture,
