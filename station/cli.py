@@ -19,8 +19,32 @@ from station.kernel.errors import StationError
 if TYPE_CHECKING:
     from station.compose import StationConfig
 
-app = typer.Typer(add_completion=False, no_args_is_help=True, help="IMU end-of-line calibration station.")
-import_app = typer.Typer(no_args_is_help=True, help="Convert recordings made elsewhere into session CSV v1.")
+#: Help text is Markdown: docstrings reflow by paragraph and ``code`` shows as code, not as literal backticks.
+MARKUP = "markdown"
+
+
+def _hide_flag_types() -> None:
+    """typer (0.29) prints every option's value type in the help, ``<bool>`` also for a flag, which takes no
+    value; keep the type for options that take one."""
+    import typer.core
+
+    shown = typer.core.TyperOption.display_type_rich
+    if getattr(shown, "station_hides_flags", False):
+        return
+
+    def display_type_rich(self: typer.core.TyperOption, ctx: Any) -> str | None:
+        return None if self.is_flag else shown(self, ctx)
+
+    display_type_rich.station_hides_flags = True  # type: ignore[attr-defined]  # a marker on a function object
+    typer.core.TyperOption.display_type_rich = display_type_rich  # type: ignore[method-assign]  # typer has no
+    # setting for it: the help's type column comes from this method only
+
+
+_hide_flag_types()
+app = typer.Typer(add_completion=False, no_args_is_help=True, rich_markup_mode=MARKUP,
+                  help="IMU end-of-line calibration station.")
+import_app = typer.Typer(no_args_is_help=True, rich_markup_mode=MARKUP,
+                         help="Convert recordings made elsewhere into session CSV v1.")
 app.add_typer(import_app, name="import")
 
 
@@ -248,7 +272,7 @@ def correct(
         params = ParameterSet.read(params_path)
         session = read_session(session_path)
         image = CalibrationImage.from_params(params, "correct", datetime.now(UTC))
-        check_writable(image, (session.sample_rate_hz,))  # type: ignore[arg-type]
+        check_writable(image, (session.sample_rate_hz,))
         if params.serial != session.serial and not force:
             raise StationError(f"{params_path} holds the parameters of serial {params.serial!r}, the recording is of "
                                f"{session.serial!r} (--force to apply them anyway)")
@@ -317,7 +341,7 @@ def station_config(
     """The station's configuration from ``--config`` and the command's options (the options win)."""
     from station.compose import StationConfig
 
-    given = {k: v for k, v in overrides.items() if v is not None}
+    given: dict[str, Any] = {k: v for k, v in overrides.items() if v is not None}
     if rig is not None:
         given["rig_url"] = rig
     if sensor:
@@ -326,7 +350,7 @@ def station_config(
         return StationConfig.from_file(config, **given)
     if "rig_url" not in given or "sensor_urls" not in given:
         raise StationError("give the rig and sensors (--rig and --sensor) or a station configuration (--config)")
-    return StationConfig(**given)  # type: ignore[arg-type]
+    return StationConfig(**given)
 
 
 @app.command("run")

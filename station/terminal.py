@@ -6,7 +6,7 @@ import math
 import time
 from typing import Any
 
-from rich.console import Console, Group, RenderableType
+from rich.console import Console, Group, JustifyMethod, RenderableType
 from rich.live import Live
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
@@ -156,9 +156,11 @@ def summary_table(result: RunResult) -> Table:
 def provisioning_table(provisioner: EepromProvisioner) -> Table:
     """One row per provisioned unit: EEPROM slot and update count, write attempts, verification residuals."""
     table = Table(title="EEPROM write and verification of the corrected output")
-    for name, justify in (("serial", "left"), ("slot #", "left"), ("tries", "right"), ("accel err\n(m/s²)", "right"),
-                          ("gyro err\n(deg/s)", "right"), ("rate err\n(deg/s)", "right"), ("verified", "left")):
-        table.add_column(name, justify=justify)  # type: ignore[arg-type]
+    columns: tuple[tuple[str, JustifyMethod], ...] = (
+        ("serial", "left"), ("slot #", "left"), ("tries", "right"), ("accel err\n(m/s²)", "right"),
+        ("gyro err\n(deg/s)", "right"), ("rate err\n(deg/s)", "right"), ("verified", "left"))
+    for name, justify in columns:
+        table.add_column(name, justify=justify)
     for serial, rec in provisioner.records.items():
         v = rec.verification
         cells = ["", "", "", "not run"]

@@ -27,7 +27,8 @@ if TYPE_CHECKING:
 
 T = TypeVar("T")
 
-eeprom_app = typer.Typer(no_args_is_help=True, help="Calibration images in the unit's EEPROM.")
+eeprom_app = typer.Typer(no_args_is_help=True, rich_markup_mode="markdown",
+                         help="Calibration images in the unit's EEPROM.")
 
 
 def _fail(exc: StationError | str, code: int = 2) -> typer.Exit:

@@ -10,11 +10,14 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from station.kernel.errors import StationError
+
+if TYPE_CHECKING:
+    from station.session.still import StillOptions
 
 WindowOption = Annotated[float, typer.Option("--still-window", help="still detector: moving window (s)")]
 ThresholdOption = Annotated[float, typer.Option(
@@ -46,7 +49,7 @@ def _fail(exc: StationError) -> typer.Exit:
     return typer.Exit(2)
 
 
-def _still_options(window: float, threshold: float, min_still: float, initial: float, rate: float) -> object:
+def _still_options(window: float, threshold: float, min_still: float, initial: float, rate: float) -> StillOptions:
     from station.session.still import StillOptions
 
     return StillOptions(window_s=window, threshold=threshold, min_still_s=min_still, initial_still_s=initial,
@@ -91,7 +94,7 @@ def import_openaxes_command(
         g, extra = _gravity(gravity, latitude, height, 9.8128)
         session = import_openaxes(log, accel=accel.lower(), gravity_mps2=g, serial=serial,
                                   still=_still_options(still_window, still_threshold, min_still, initial_still,
-                                                       still_rate))  # type: ignore[arg-type]
+                                                       still_rate))
         session = session.replace(metadata={**session.metadata, **extra})
         write_session(session, output)
     except StationError as exc:
@@ -151,7 +154,7 @@ def import_imu_tk_command(
                                 gyro_lsb_per_radps=gyro_lsb_per_radps, accel_offset_lsb=a_off, gyro_offset_lsb=g_off,
                                 gravity_mps2=g, serial=serial,
                                 still=_still_options(still_window, still_threshold, min_still, initial_still,
-                                                     still_rate))  # type: ignore[arg-type]
+                                                     still_rate))
         session = session.replace(metadata={**session.metadata, **extra})
         write_session(session, output)
     except StationError as exc:

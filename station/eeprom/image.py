@@ -29,7 +29,7 @@ import struct
 import zlib
 from dataclasses import dataclass, replace
 from datetime import UTC, datetime
-from typing import ClassVar
+from typing import ClassVar, cast
 
 import numpy as np
 
@@ -125,7 +125,8 @@ class TriadImage:
 
     @classmethod
     def from_values(cls, v: tuple[float, ...]) -> TriadImage:
-        return cls(np.reshape(v[0:9], (3, 3)), v[9:12], v[12:15], v[15:18], v[18:21])
+        a = np.asarray(v, dtype=float)
+        return cls(np.reshape(a[0:9], (3, 3)), a[9:12], a[12:15], a[15:18], a[18:21])
 
     def same_as(self, other: TriadImage) -> bool:
         """Bitwise equal (NaN equals NaN)."""
@@ -364,11 +365,11 @@ class CalibrationImage:
             gyro=triad(self.gyro, self.g_sensitivity),
             source={"kind": "eeprom image", "params_id": self.params_id.hex(), "station": self.station_id,
                     "update_count": self.update_count, "layout_version": self.layout_version},
-            **({} if fx is None else {
-                "reference_temperature_degc": fx.reference_temperature_degc, "time_offset_s": fx.time_offset_s,
-                "thermal": ThermalFit("fitted" if np.any(fx.temp_bias != 0) or np.any(fx.temp_scale != 0)
-                                      else "absent", "from the EEPROM image"),
-            }),
+            reference_temperature_degc=math.nan if fx is None else fx.reference_temperature_degc,
+            time_offset_s=0.0 if fx is None else fx.time_offset_s,
+            thermal=ThermalFit() if fx is None else ThermalFit(
+                "fitted" if np.any(fx.temp_bias != 0) or np.any(fx.temp_scale != 0) else "absent",
+                "from the EEPROM image"),
         )
 
     def same_as(self, other: CalibrationImage) -> bool:
@@ -448,7 +449,7 @@ class ImageRefused(ImageContentError):
     """An image the station will not write: its content would make the firmware refuse it or miscorrect."""
 
 
-def image_problems(img: CalibrationImage, rates_hz: tuple[int, ...] | None = None) -> list[str]:
+def image_problems(img: CalibrationImage, rates_hz: tuple[float, ...] | None = None) -> list[str]:
     """Why the unit's firmware could not use ``img`` to correct sensibly; empty when it can.
 
     Checked: every value finite (an unresolved T_c is NaN by design); each M invertible, with
@@ -504,7 +505,7 @@ def image_problems(img: CalibrationImage, rates_hz: tuple[int, ...] | None = Non
     return out
 
 
-def check_writable(img: CalibrationImage, rates_hz: tuple[int, ...] | None = None) -> None:
+def check_writable(img: CalibrationImage, rates_hz: tuple[float, ...] | None = None) -> None:
     """Raise :class:`ImageRefused` (one line, the first problems) unless ``img`` is usable (:func:`image_problems`)."""
     problems = image_problems(img, rates_hz)
     if problems:
@@ -541,7 +542,7 @@ def image_length(data: bytes) -> int:
     """The total length an image starting at ``data`` claims (checks magic and version first)."""
     if len(data) < MIN_HEADER:
         raise ImageLengthError(f"{len(data)} bytes are too few for an image header ({MIN_HEADER})")
-    magic, version, length = struct.unpack_from("<4sHH", data)
+    magic, version, length = cast(tuple[bytes, int, int], struct.unpack_from("<4sHH", data))
     if magic != MAGIC:
         raise ImageMagicError(f"no calibration image: magic {magic!r}, expected {MAGIC!r}")
     if version not in LAYOUT_VERSIONS:
@@ -681,7 +682,11 @@ def select_image(slots: list[SlotState], serial: str | None = None) -> SlotState
     valid = [s for s in slots if s.image is not None and (serial is None or s.image.serial == serial)]
     if not valid:
         return None
-    return max(valid, key=lambda s: (s.image.update_count, -s.layout.base, -s.slot))  # type: ignore[union-attr]
+    def newest(s: SlotState) -> tuple[int, int, int]:
+        assert s.image is not None  # valid slots only
+        return s.image.update_count, -s.layout.base, -s.slot
+
+    return max(valid, key=newest)
 
 
 def next_write(slots: list[SlotState]) -> tuple[int, int]:

@@ -33,7 +33,7 @@ from station.kernel.clock import Clock
 from station.kernel.errors import FormatError
 from station.sensor.base import ProtocolSensor
 from station.sensor.commands import BootEvent, Command, Reply, decode_reply, encode_command
-from station.sensor.frames import FrameParser, FrameType, ParserStats, decode_sample_payloads
+from station.sensor.frames import Frame, FrameParser, FrameType, ParserStats, decode_sample_payloads
 from station.sensor.protocol import (
     CrcStormError,
     SampleBlock,
@@ -156,9 +156,9 @@ class SerialSensor(ProtocolSensor):
             self._update_crc_window(n_frames - last_frames, n_crc - last_crc)
             last_frames, last_crc = n_frames, n_crc
 
-    def _dispatch(self, frame: object) -> None:
+    def _dispatch(self, frame: Frame) -> None:
         try:
-            reply = decode_reply(frame)  # type: ignore[arg-type]
+            reply = decode_reply(frame)
         except FormatError:
             self._counts["stray"] += 1
             return

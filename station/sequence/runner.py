@@ -492,7 +492,7 @@ class SequenceRunner:
         if to_fit:
             assert self._fixture is not None
             futures: dict[int, Future[ParameterSet]] = {
-                k: self._fixture.pool.submit(self._fit_one, sessions[k]) for k in to_fit  # type: ignore[arg-type]
+                k: self._fixture.pool.submit(self._fit_one, s) for k in to_fit if (s := sessions[k]) is not None
             }
             try:
                 wait(futures.values())
@@ -503,14 +503,14 @@ class SequenceRunner:
                 if aborted and not fut.done():
                     v.outcome, v.message = Outcome.ABORTED, f"{self.abort_reason} during the fit"
                     continue
-                exc = fut.exception()
-                if isinstance(exc, FitError):
-                    v.outcome, v.message = Outcome.FAIL, f"fit refused the recording: {exc}"
-                elif exc is not None:
-                    raise exc
+                error = fut.exception()
+                if isinstance(error, FitError):
+                    v.outcome, v.message = Outcome.FAIL, f"fit refused the recording: {error}"
+                elif error is not None:
+                    raise error
                 else:
-                    params[k] = fut.result()
-                    self._check_unit_limits(channels[k], v, params[k])  # type: ignore[arg-type]
+                    fitted = params[k] = fut.result()
+                    self._check_unit_limits(channels[k], v, fitted)
         results: list[UnitResult] = []
         for k, (unit, v) in enumerate(zip(channels, verdicts, strict=True)):
             if v.outcome is None:

@@ -195,7 +195,7 @@ def target_lines(errors: dict[tuple[int, str], CheckErrors]) -> list[str]:
 def _without_thermal(options: FitOptions) -> FitOptions | None:
     """The fit's options with its thermal model switched off (None: the fit has no thermal model)."""
     names = {f.name for f in fields(FitOptions)}
-    return replace(options, thermal="off") if "thermal" in names else None  # type: ignore[call-arg]
+    return replace(options, thermal="off") if "thermal" in names else None
 
 
 def _thermal_note(params: Any) -> tuple[bool, str]:

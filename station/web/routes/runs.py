@@ -7,7 +7,7 @@ configured token they always answer 401 (read-only by default). They go through 
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, Depends, HTTPException, Query, Request, Response
 
@@ -17,7 +17,7 @@ from station.web.listing import PAGED, CursorError, list_runs, next_page
 from station.web.models import RunAbortAccepted, RunAccepted, RunFilter, RunSummary, StartRunRequest, problem
 
 router = APIRouter(tags=["runs"])
-UNAUTHORIZED = {401: problem("missing or wrong bearer token (or no token configured)")}
+UNAUTHORIZED: dict[int | str, dict[str, Any]] = {401: problem("missing or wrong bearer token (or no token configured)")}
 
 
 @router.get("/api/runs", response_model=list[RunSummary], responses=PAGED)
