@@ -9,7 +9,7 @@ from __future__ import annotations
 import sys
 from collections.abc import Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 import numpy as np
 import typer
@@ -20,24 +20,23 @@ if TYPE_CHECKING:
     from station.compose import StationConfig
 
 #: Help text is Markdown: docstrings reflow by paragraph and ``code`` shows as code, not as literal backticks.
-MARKUP = "markdown"
+MARKUP: Literal["markdown"] = "markdown"
 
 
 def _hide_flag_types() -> None:
     """typer (0.29) prints every option's value type in the help, ``<bool>`` also for a flag, which takes no
-    value; keep the type for options that take one."""
+    value; keep the type for options that take one. (Once per process: the station's apps share typer's class.)"""
     import typer.core
 
     shown = typer.core.TyperOption.display_type_rich
-    if getattr(shown, "station_hides_flags", False):
+    if shown.__name__ == "display_type_without_flags":
         return
 
-    def display_type_rich(self: typer.core.TyperOption, ctx: Any) -> str | None:
+    def display_type_without_flags(self: typer.core.TyperOption, ctx: Any) -> str | None:
         return None if self.is_flag else shown(self, ctx)
 
-    display_type_rich.station_hides_flags = True  # type: ignore[attr-defined]  # a marker on a function object
-    typer.core.TyperOption.display_type_rich = display_type_rich  # type: ignore[method-assign]  # typer has no
-    # setting for it: the help's type column comes from this method only
+    # typer has no setting for it: the help's type column comes from this method only
+    typer.core.TyperOption.display_type_rich = display_type_without_flags  # type: ignore[method-assign]
 
 
 _hide_flag_types()
