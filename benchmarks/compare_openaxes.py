@@ -46,7 +46,7 @@ import numpy as np
 from station.fit.export import openaxes_coefficients
 from station.fit.multipos import direction_errors_deg, fit_accel_norm, fit_gyro_rotations, norm_residuals
 from station.fit.readtiming import ReadTiming
-from station.fit.rigfree import RigFreeOptions, fit_rig_free
+from station.fit.rigfree_fit import RigFreeOptions, fit_rig_free
 from station.kernel.parameters import ParameterSet
 from station.session.model import Kind, Session
 from station.session.multipos_import import import_openaxes
@@ -154,7 +154,7 @@ def imu_tk_cross_validation(session: Session, folds: int = 5, samples: bool = Fa
 
 def read_timing(session: Session) -> ReadTiming:
     """The station's read-timing model of the session's gyro (as the rig-free fit finds it)."""
-    from station.fit.rigfree import prepare
+    from station.fit.rigfree_fit import prepare
 
     return prepare(session)[1]["read_timing"]
 
@@ -184,7 +184,7 @@ def _integrate(c: np.ndarray, moves: list[np.ndarray], dt: float, scheme: str) -
 
 def gyro_study() -> int:
     """Section 5: which of the gyro fit's choices moves the direction RMS (BMI160 moves, published accel)."""
-    from station.fit.rigfree import prepare
+    from station.fit.rigfree_fit import prepare
 
     s = import_openaxes(LOG, accel="bmi160", gravity_mps2=G_TK)
     prep, extra = prepare(s)

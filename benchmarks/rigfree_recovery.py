@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from station.fit.rigfree import RigFreeOptions, fit_rig_free
+from station.fit.rigfree_fit import RigFreeOptions, fit_rig_free
 from station.kernel.errors import StationError
 from station.kernel.sensor_class import TABLE1
 from station.session.multipos_import import import_imu_tk

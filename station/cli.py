@@ -50,7 +50,7 @@ app.add_typer(import_app, name="import")
 def _add_subapps() -> None:
     from station.commands.diagnose import diagnose as diagnose_command
     from station.commands.eeprom import eeprom_app
-    from station.commands.rigfree import export_command, import_imu_tk_command, import_openaxes_command
+    from station.commands.interchange import export_command, import_imu_tk_command, import_openaxes_command
     from station.commands.units import units_app
 
     app.add_typer(eeprom_app, name="eeprom")
@@ -137,8 +137,11 @@ def _print_params(params: object) -> None:
     for u in params.quality.undetermined:
         console.print(f"{u.triad} {'xyz'[u.axis]} {_PARAMETER_LABELS[u.parameter]}: not determined ({u.reason})")
     if params.quality.undetermined:
-        notes = params.device_values()[1]
-        console.print("an EEPROM image or export of this set uses instead: " + "; ".join(notes))
+        from station.eeprom.image import image_notes
+        from station.fit.export import export_notes
+
+        for line in (*image_notes(params), *(f"an export writes {n}" for n in export_notes(params))):
+            console.print(line)
     note = params.thermal
     if note.fitted:
         console.print(f"temperature terms fitted about T_ref = {params.reference_temperature_degc:.2f} degC "
@@ -192,7 +195,7 @@ def fit(
     from station.fit.calibrate import FitOptions, fit_session
     from station.fit.determinability import assess
     from station.fit.goodness import EXIT_GOODNESS, summary
-    from station.fit.rigfree import RigFreeOptions, fit_rig_free, is_rig_free
+    from station.fit.rigfree_fit import RigFreeOptions, fit_rig_free, is_rig_free
     from station.kernel.limits_file import load_limits
     from station.session import read_session
 

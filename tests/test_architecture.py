@@ -311,9 +311,9 @@ def test_the_cycle_checker_on_made_up_modules(sources: dict[str, str], expected:
 @pytest.mark.parametrize(
     ("module", "source", "expected"),
     [
-        ("station.fit.rigfree", "from station.fit.calibrate import _allan, _noise, fit_session",
-         ["station.fit.rigfree imports station.fit.calibrate._allan",
-          "station.fit.rigfree imports station.fit.calibrate._noise"]),
+        ("station.fit.rigfree_fit", "from station.fit.calibrate import _allan, _noise, fit_session",
+         ["station.fit.rigfree_fit imports station.fit.calibrate._allan",
+          "station.fit.rigfree_fit imports station.fit.calibrate._noise"]),
         ("station.fit.x", "def f():\n    from .axis_ml import _Problem",
          ["station.fit.x imports station.fit.axis_ml._Problem"]),
         ("station.fit.x", "from station import __version__\nfrom station.fit.axis_ml import AxisFit", []),

@@ -73,43 +73,50 @@ def test_the_rule_on_made_up_numbers() -> None:
         ("bias_static", 1)]
 
 
-def test_device_values_fall_back_to_the_bias_at_the_end_of_the_recording() -> None:
+def test_an_export_falls_back_to_the_bias_at_the_end_of_the_recording() -> None:
     tri = _triad([0.1, -0.155, 0.2], [0.02, 0.187, 0.01], [60.0, 1392.0, 40.0], [5.0, 400.0, 55.0])
     params = assess(_params(tri), 237.0)
     assert params.quality.determinability_rule == RULE and params.quality.record_end_s == 237.0
-    device, notes = params.device_values()
-    # x untouched; y (b_stat not determined): constant bias b_stat + b_drift exp(-t_end/T_c), no drift, T_c
-    # unresolved, uncertainty not stated; z (only T_c and b_drift): b_stat as fitted, without the warm-up term
-    assert device.accel.bias_static[0] == 0.1 and device.accel.correlation_time_s[0] == 60.0
-    assert device.accel.bias_static[1] == pytest.approx(-0.155 + 0.187 * math.exp(-237.0 / 1392.0), rel=1e-12)
-    assert math.isnan(device.accel.bias_static_std[1])
-    assert device.accel.bias_static[2] == 0.2 and device.accel.bias_static_std[2] == 0.001
-    for k in (1, 2):
-        assert device.accel.bias_drift[k] == 0.0 and math.isnan(device.accel.correlation_time_s[k])
-    assert len(notes) == 2 and notes[0].startswith("accel y: the bias at the end of the recording (t = 237.0 s)")
-    assert notes[1] == "accel z: b_stat 0.2 without the warm-up term (correlation_time_s, bias_drift not determined)"
+    const, notes = params.constant_bias_values()
+    # y (b_stat not determined): constant bias b_stat + b_drift exp(-t_end/T_c), no drift, T_c unresolved,
+    # uncertainty not stated; x and z (b_stat determined) unchanged
+    assert const.accel.bias_static[1] == pytest.approx(-0.155 + 0.187 * math.exp(-237.0 / 1392.0), rel=1e-12)
+    assert math.isnan(const.accel.bias_static_std[1]) and const.accel.bias_drift[1] == 0.0
+    assert math.isnan(const.accel.correlation_time_s[1])
+    for k in (0, 2):
+        assert const.accel.bias_static[k] == tri.bias_static[k] and const.accel.correlation_time_s[k] == \
+            tri.correlation_time_s[k]
+    end = -0.155 + 0.187 * math.exp(-237.0 / 1392.0)
+    assert notes == (f"accel y: the bias at the end of the recording (t = 237.0 s), {end:.6g}, instead of "
+                     "b_stat -0.155 (not determined)",)
+    assert export_notes(params) == notes
     # the set's own numbers are unchanged (flagged, not replaced)
     assert params.accel.bias_static[1] == -0.155
     # no end time stated: refused rather than guessed
     no_end = replace(params, quality=replace(params.quality, record_end_s=math.nan))
     with pytest.raises(FormatError, match="no recording end time"):
-        no_end.device_values()
+        no_end.constant_bias_values()
     # nothing undetermined: the set itself
     clean = assess(_params(_triad([0.1] * 3, [0.01] * 3, [60.0] * 3, [5.0] * 3)), 600.0)
-    assert clean.quality.undetermined == () and clean.device_values() == (clean, ())
+    assert clean.quality.undetermined == () and clean.constant_bias_values() == (clean, ())
+    assert image_notes(clean) == ()
 
 
-def test_the_image_and_the_exports_use_the_stated_rule() -> None:
+def test_the_image_keeps_the_fitted_curve_and_says_so_and_the_exports_use_the_rule() -> None:
     tri = _triad([0.1, -0.155, 0.2], [0.02, 0.187, 0.01], [60.0, 1392.0, 40.0], [5.0, 400.0, 55.0])
     params = assess(_params(tri), 237.0)
     img = CalibrationImage.from_params(params, "st-1", datetime(2026, 1, 1, tzinfo=UTC))
-    device, notes = params.device_values()
-    assert np.array_equal(img.accel.bias_static, device.accel.bias_static)
-    assert np.isnan(img.accel.correlation_time_s[1]) and img.accel.bias_drift[1] == 0.0
-    assert image_notes(params) == notes and export_notes(params) == notes[:1]  # an export has no warm-up term
+    # the image: the fitted warm-up curve (what the recording determines over its length), every axis
+    assert np.array_equal(img.accel.bias_static, tri.bias_static)
+    assert np.array_equal(img.accel.correlation_time_s, tri.correlation_time_s)
+    assert np.array_equal(img.accel.bias_drift, tri.bias_drift)
+    notes = image_notes(params)
+    assert [n.split(":")[0] for n in notes] == ["accel y", "accel z"]
+    assert "the image holds the fitted warm-up curve, determined over the recording's 237.0 s" in notes[0]
+    # the exports: the bias at the end of the recording on y, its uncertainty not stated
     terms = imu_tk_terms(params)["accel"]
-    assert terms["bias_after_matrix"][1] == pytest.approx(device.accel.bias_static[1])
-    assert np.isnan(terms["bias_after_matrix_std"][1])  # the fallback's uncertainty is not stated
+    assert terms["bias_after_matrix"][1] == pytest.approx(params.constant_bias_values()[0].accel.bias_static[1])
+    assert np.isnan(terms["bias_after_matrix_std"][1])
 
 
 # --- JSON: typed quality round trip, old files, unknown versions --------------------------------------------------
@@ -198,7 +205,7 @@ def test_station_fit_prints_not_determined_and_the_json_says_so(tmp_path: Path) 
     assert r.exit_code == 0, r.output
     assert "not determined (see below)" in r.output
     assert "T_c: not determined (T_c " in r.output
-    assert "an EEPROM image or export of this set uses instead:" in r.output
+    assert "the image holds the fitted warm-up curve" in r.output
     r = runner.invoke(app, ["fit", str(path), "--json"])
     d = json.loads(r.stdout)
     assert d["quality"]["determinability"]["rule"] == RULE

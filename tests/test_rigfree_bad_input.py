@@ -11,7 +11,7 @@ from scipy.spatial.transform import Rotation
 from typer.testing import CliRunner
 
 from station.cli import app
-from station.fit.rigfree import fit_rig_free
+from station.fit.rigfree_fit import fit_rig_free
 from station.physics.effects import Effects
 from station.session import write_session
 from station.session.model import Kind, Session

@@ -15,7 +15,7 @@ import pytest
 
 from station.fit.export import openaxes_coefficients
 from station.fit.multipos import direction_errors_deg
-from station.fit.rigfree import RigFreeOptions, fit_rig_free, is_rig_free
+from station.fit.rigfree_fit import RigFreeOptions, fit_rig_free, is_rig_free
 from station.kernel.parameters import ParameterSet
 from station.session.model import Kind, Session
 from station.session.multipos_import import import_openaxes

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from station.fit.readtiming import detect_stale_reads
-from station.fit.rigfree import RigFreeOptions, fit_rig_free
+from station.fit.rigfree_fit import RigFreeOptions, fit_rig_free
 from station.kernel.sensor_class import TABLE1
 from station.session.multipos_import import import_imu_tk
 from station.sim.handheld import HandheldResult, counts_with_offsets, simulate_handheld

@@ -16,7 +16,7 @@ from typer.testing import CliRunner
 from station.cli import app
 from station.fit.export import export_notes, imu_tk_terms, openaxes_coefficients
 from station.fit.multipos import integrate_moves
-from station.fit.rigfree import RigFreeOptions, fit_rig_free, is_rig_free
+from station.fit.rigfree_fit import RigFreeOptions, fit_rig_free, is_rig_free
 from station.kernel.parameters import ParameterSet
 from station.kernel.sensor_class import TABLE1
 from station.session.model import Kind
@@ -156,7 +156,7 @@ def test_import_fit_export_on_the_command_line(tmp_path: Path) -> None:
     # the list is (T K) column-major, bias after the matrix, gyro matrix column-major, gyro bias
     # the biases: the set's device values (an axis whose drift the recording cannot determine gets the bias at
     # the end of the recording, and the command says so on stderr)
-    device = params.device_values()[0]
+    device = params.constant_bias_values()[0]
     assert all(f"note: {n}" in r.stderr for n in export_notes(params))
     tk = values[:9].reshape(3, 3, order="F")
     assert np.allclose(tk, np.linalg.inv(params.accel.misalignment), atol=1e-7)

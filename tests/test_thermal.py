@@ -446,7 +446,7 @@ def test_order_chosen_by_the_data(plateau_fit: tuple) -> None:
 
 def test_temperature_levels_and_order_caps() -> None:
     """The polynomial order is capped by the temperature levels the data hold (two plateaus: order 1)."""
-    from station.fit.thermal import temperature_levels
+    from station.fit.temperature_terms import temperature_levels
 
     two_plateaus = np.concatenate([10.0 + np.linspace(0, 2.5, 50), 40.0 + np.linspace(0, 4.0, 50)])
     assert temperature_levels(two_plateaus) == 2

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 
 from station.kernel.errors import StationError
-from station.store.url import ENV_VAR
+from station.store.default_url import ENV_VAR
 
 if TYPE_CHECKING:  # the database code loads only when a command runs
     pass

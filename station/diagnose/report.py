@@ -88,7 +88,7 @@ def diagnose(session: Session, *, warmup_tc_s: Mapping[str, tuple[float, float]]
     ``LimitsFile.correlation_time_s``; see :func:`station.diagnose.residuals.fit_baseline`. None: the
     recording alone decides T_c (a temperature bias then often cannot be told from the warm-up).
 
-    A rig-free recording (hand-held poses without references, :func:`station.fit.rigfree.is_rig_free`) is
+    A rig-free recording (hand-held poses without references, :func:`station.fit.rigfree_fit.is_rig_free`) is
     diagnosed by :func:`station.diagnose.rigfree.diagnose_rig_free` (its report adds ``untestable``).
 
     ``resamples``: the bootstrap over segments that states each finding's confidence
@@ -101,7 +101,7 @@ def diagnose(session: Session, *, warmup_tc_s: Mapping[str, tuple[float, float]]
     Raises :class:`station.kernel.errors.FitError` when the base fit refuses the recording.
     """
     from station.diagnose import rigfree
-    from station.fit.rigfree import is_rig_free
+    from station.fit.rigfree_fit import is_rig_free
 
     t0 = time.perf_counter()
     n = len(session)

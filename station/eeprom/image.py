@@ -293,11 +293,10 @@ class CalibrationImage:
     ) -> CalibrationImage:
         """The image of ``params``; ``calibration_time`` defaults to now (UTC).
 
-        The image holds :meth:`ParameterSet.device_values`: an axis whose drift the recording cannot determine
-        gets the bias at the end of the recording as a constant bias (:func:`image_notes` says which).
+        The image holds the fitted warm-up curve ``b_stat + b_drift exp(-t/T_c)`` also where the recording
+        cannot determine the three on their own (:func:`image_notes` says where): Algorithm 1 applies it from
+        every power-on, and over the recording's length the curve is what the data determine.
         """
-        params_id_bytes = params_id_bytes if params_id_bytes is not None else params_id(params)
-        params, _ = params.device_values()
         when = calibration_time if calibration_time is not None else datetime.now(UTC)
         if when.tzinfo is None:
             raise ImageContentError("calibration time must be timezone-aware")
@@ -305,7 +304,7 @@ class CalibrationImage:
         us = (when - epoch) // _ONE_US
         return cls(
             serial=params.serial,
-            params_id=params_id_bytes,
+            params_id=params_id_bytes if params_id_bytes is not None else params_id(params),
             station_id=station_id,
             calibration_time_us=int(us),
             update_count=update_count,
@@ -390,8 +389,16 @@ class CalibrationImage:
 
 
 def image_notes(params: ParameterSet) -> tuple[str, ...]:
-    """Where an image of ``params`` holds other values than the set (see :meth:`CalibrationImage.from_params`)."""
-    return params.device_values()[1]
+    """One line per axis with parameters the recording cannot determine: the image holds their fitted warm-up
+    curve (see :meth:`CalibrationImage.from_params`), determined over the recording's length, not beyond it."""
+    q = params.quality
+    out = []
+    for name in ("accel", "gyro"):
+        for k in sorted({u.axis for u in q.undetermined if u.triad == name}):
+            which = ", ".join(u.parameter for u in q.undetermined if (u.triad, u.axis) == (name, k))
+            out.append(f"{name} {'xyz'[k]}: the image holds the fitted warm-up curve, determined over the recording's "
+                       f"{q.record_end_s:.1f} s after power-on, not beyond ({which} not determined on their own)")
+    return tuple(out)
 
 
 def run_image(params: ParameterSet, station_id: str, run_started_at: datetime) -> CalibrationImage:

@@ -32,7 +32,7 @@ from station.fit.checks import check_session
 from station.fit.consistency import check_rotations
 from station.fit.determinability import assess
 from station.fit.goodness import TriadResidual, goodness_of_fit
-from station.fit.thermal import (
+from station.fit.temperature_terms import (
     assess_temperature,
     axis_regressors,
     order_caps,
@@ -78,7 +78,7 @@ class FitOptions:
             prior on T_c (the limits file's ``correlation_time_s``); a triad without one is fitted
             from the record alone.
         thermal: the temperature terms (bias and scale polynomials in ``T - T_ref`` per output axis,
-            :mod:`station.fit.thermal`): ``'auto'`` fits them when the recording's temperature course
+            :mod:`station.fit.temperature_terms`): ``'auto'`` fits them when the recording's temperature course
             separates them from the warm-up (else :class:`~station.kernel.parameters.ThermalFit` says why not,
             status ``'not_separable'``), ``'require'`` refuses (FitError) a recording that cannot separate
             them, ``'off'`` (the default: eq. 1 alone, as every caller before issue 18 expects, e.g. the
@@ -265,7 +265,7 @@ def _fit_triad_thermal(
     orders: tuple[list[int], list[int]] | None = None,
     nonlin_m: np.ndarray | None = None,
 ) -> tuple[_TriadLinear, Blocks, dict[str, np.ndarray], tuple[list[int], list[int]]]:
-    """The triad fit with the temperature terms (:mod:`station.fit.thermal`), orders chosen or given.
+    """The triad fit with the temperature terms (:mod:`station.fit.temperature_terms`), orders chosen or given.
 
     Returns the fits, the blocks, the temperature coefficients with their stds (``temp_bias_coeff``,
     ``temp_scale_coeff``, ``*_std``, each (3, 3)) and the (bias, scale) orders per axis.
@@ -384,7 +384,7 @@ def mean_model(
     p: dict[str, np.ndarray], t_s: np.ndarray, ref: np.ndarray, force: np.ndarray, dt: np.ndarray | None = None
 ) -> np.ndarray:
     """The fitted eq. (1) without noise: M ref + b_stat + b_drift exp(-t/T_c) (+ G force), and with ``dt``
-    (T - T_ref per sample, K) the temperature terms of :mod:`station.fit.thermal`."""
+    (T - T_ref per sample, K) the temperature terms of :mod:`station.fit.temperature_terms`."""
     lin = np.nan_to_num(ref) @ p["misalignment"].T
     out = lin + p["bias_static"]
     k_nl = p.get("scale_nonlinearity")

@@ -15,7 +15,8 @@ flagged instead of printed (:class:`~station.kernel.parameters.Undetermined`):
   width of its limit range (no verdict on it can mean anything).
 
 The rule uses only the fit's own numbers, the record length and the limits when given; it is not tuned on
-any recording. A device image or an export then uses :meth:`ParameterSet.device_values`'s stated fallback.
+any recording. An export then uses :meth:`ParameterSet.constant_bias_values`'s stated fallback; an EEPROM image
+keeps the fitted warm-up curve and says so (:func:`station.eeprom.image.image_notes`).
 """
 
 from __future__ import annotations

@@ -19,7 +19,7 @@ Each number carries a standard uncertainty where the parameter set has one (line
 through the inverse; from the full covariance of a rig-free fit when it is in ``quality``).
 
 An axis whose b_stat the recording cannot determine (``quality.determinability``) is exported with the
-rule of :meth:`~station.kernel.parameters.ParameterSet.device_values`: the bias at the end of the recording,
+rule of :meth:`~station.kernel.parameters.ParameterSet.constant_bias_values`: the bias at the end of the recording,
 its uncertainty not stated (NaN, ``null``); :func:`export_notes` says which axes, and the imu_tk document
 carries the same notes under ``convention.undetermined``.
 """
@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from station.kernel.errors import FormatError
-from station.kernel.parameters import AXES, ParameterSet
+from station.kernel.parameters import ParameterSet
 
 __all__ = ["IMU_TK_FORMAT", "export_notes", "imu_tk_document", "imu_tk_terms", "openaxes_coefficients", "openaxes_text"]
 
@@ -57,7 +57,7 @@ def imu_tk_terms(params: ParameterSet) -> dict[str, dict[str, np.ndarray]]:
         raise FormatError("the parameter set has unresolved misalignment elements; nothing to export")
     out: dict[str, dict[str, np.ndarray]] = {}
     rig_free = params.quality.rig_free or {}
-    params = params.device_values()[0]
+    params = params.constant_bias_values()[0]
     a_tk, a_tk_std = _inv_with_std(params.accel.misalignment, np.nan_to_num(params.accel.misalignment_std))
     b = params.accel.bias_static
     bias_after = a_tk @ b
@@ -125,10 +125,9 @@ def imu_tk_document(params: ParameterSet) -> str:
 
 
 def export_notes(params: ParameterSet) -> tuple[str, ...]:
-    """What an export writes differently from the set's own numbers: one line per axis whose bias the recording
+    """What an export writes differently from the set's own numbers: one line per axis whose b_stat the recording
     cannot determine (the bias at the end of the recording is exported instead); empty when none."""
-    keys = tuple(f"{u.triad} {AXES[u.axis]}:" for u in params.quality.undetermined if u.parameter == "bias_static")
-    return tuple(n for n in params.device_values()[1] if n.startswith(keys)) if keys else ()
+    return params.constant_bias_values()[1]
 
 
 def openaxes_coefficients(param_sets: Sequence[ParameterSet]) -> tuple[np.ndarray, np.ndarray]:

@@ -24,7 +24,7 @@ Every estimate carries a standard uncertainty (``*_std``, same unit). An estimat
 that the recording cannot resolve is NaN in memory and ``null`` in JSON; an estimate that the fit computed
 but the recording cannot determine (e.g. a correlation time far beyond the record's length) keeps its number
 and is flagged in :attr:`FitQuality.undetermined` (``quality.determinability`` in JSON), so that no reader
-prints it as a result (:meth:`ParameterSet.device_values` states the rule a device image uses instead).
+prints it as a result (:meth:`ParameterSet.constant_bias_values` states the rule an export uses instead).
 """
 
 from __future__ import annotations
@@ -419,7 +419,7 @@ class FitQuality:
         determinability_rule: the rule that decided :attr:`undetermined` (``''``: not assessed, e.g. an old file).
         undetermined: the parameters the recording cannot determine.
         record_end_s: time since power-on of the recording's last sample (s; NaN: not stated), where
-            :meth:`ParameterSet.device_values` evaluates the bias of an axis whose drift is not determined.
+            :meth:`ParameterSet.constant_bias_values` evaluates the bias of an axis whose b_stat is not determined.
         extra: sections this software does not know (kept for the round trip), read-only JSON.
     """
 
@@ -577,46 +577,41 @@ class ParameterSet:
     def has_nonlinearity(self) -> bool:
         return bool(np.any(self.accel.scale_nonlinearity != 0) or np.any(self.gyro.scale_nonlinearity != 0))
 
-    def device_values(self) -> tuple[ParameterSet, tuple[str, ...]]:
-        """The set a device holds (an EEPROM image, an export), and one note per axis where it differs from this set.
+    def constant_bias_values(self) -> tuple[ParameterSet, tuple[str, ...]]:
+        """The set with one constant bias per axis where b_stat is not determined (for a consumer that holds a
+        constant bias only: the exports), and one note per such axis.
 
-        Rule, per axis with parameters the recording cannot determine (:attr:`FitQuality.undetermined`):
+        Rule: where the recording cannot determine b_stat (:attr:`FitQuality.undetermined`; T_c beyond the
+        recording), the fitted bias at the end of the recording, ``b_stat + b_drift exp(-t_end/T_c)`` (what the
+        recording last saw), with b_drift 0 and T_c unresolved (NaN), instead of an extrapolated asymptote; its
+        uncertainty is not stated (NaN: the fit gives no covariance to combine). Other axes unchanged. Raises
+        :class:`FormatError` when an axis needs the rule but the set does not state the recording's end time
+        (refused rather than guessed).
 
-        * b_stat not determined: the fitted bias at the end of the recording, ``b_stat + b_drift exp(-t_end/T_c)``
-          (what the recording last saw), as a constant bias, with b_drift 0 and T_c unresolved (NaN) instead of an
-          extrapolated decay; its uncertainty is not stated (NaN: the fit gives no covariance to combine);
-        * only T_c or b_drift not determined (the decay settles within the recording): b_stat as fitted, without
-          the warm-up term (b_drift 0, T_c unresolved).
-
-        Without undetermined parameters: the set itself and no notes. Raises :class:`FormatError` when b_stat
-        needs the rule but the set does not state the recording's end time (refused rather than guessed).
+        A device that applies Algorithm 1 keeps the fitted warm-up curve instead (the recording determines the
+        curve over its length, after every power-on; see :mod:`station.eeprom.image`).
         """
         triads: dict[str, TriadParams] = {}
         notes: list[str] = []
         for name, tri in (("accel", self.accel), ("gyro", self.gyro)):
-            flags = [u for u in self.quality.undetermined if u.triad == name]
-            if not flags:
+            axes = sorted({u.axis for u in self.quality.undetermined
+                           if u.triad == name and u.parameter == "bias_static"})
+            if not axes:
                 triads[name] = tri
                 continue
             b_stat, b_drift = tri.bias_static.copy(), tri.bias_drift.copy()
             tc, b_stat_std = tri.correlation_time_s.copy(), tri.bias_static_std.copy()
             b_drift_std, tc_std = tri.bias_drift_std.copy(), tri.correlation_time_s_std.copy()
-            for k in sorted({u.axis for u in flags}):
-                which = ", ".join(u.parameter for u in flags if u.axis == k)
-                if any(u.parameter == "bias_static" and u.axis == k for u in flags):
-                    t_end = self.quality.record_end_s
-                    if not math.isfinite(t_end):
-                        raise FormatError(f"{name} {AXES[k]}: b_stat not determined and no recording end time to "
-                                          "evaluate the bias at: no device values")
-                    b_stat[k] = float(tri.bias_static[k]) + float(tri.warmup_drift(np.array([t_end]))[0, k])
-                    b_stat_std[k] = math.nan
-                    notes.append(f"{name} {AXES[k]}: the bias at the end of the recording (t = {t_end:.1f} s), "
-                                 f"{b_stat[k]:.6g}, as a constant bias ({which} not determined)")
-                else:
-                    notes.append(f"{name} {AXES[k]}: b_stat {b_stat[k]:.6g} without the warm-up term "
-                                 f"({which} not determined)")
+            t_end = self.quality.record_end_s
+            for k in axes:
+                if not math.isfinite(t_end):
+                    raise FormatError(f"{name} {AXES[k]}: b_stat not determined and no recording end time to "
+                                      "evaluate the bias at: no constant bias")
+                b_stat[k] = float(tri.bias_static[k]) + float(tri.warmup_drift(np.array([t_end]))[0, k])
+                b_stat_std[k] = b_drift_std[k] = tc_std[k] = math.nan
                 b_drift[k], tc[k] = 0.0, math.nan
-                b_drift_std[k] = tc_std[k] = math.nan
+                notes.append(f"{name} {AXES[k]}: the bias at the end of the recording (t = {t_end:.1f} s), "
+                             f"{b_stat[k]:.6g}, instead of b_stat {float(tri.bias_static[k]):.6g} (not determined)")
             triads[name] = replace(tri, bias_static=b_stat, bias_static_std=b_stat_std, bias_drift=b_drift,
                                    bias_drift_std=b_drift_std, correlation_time_s=tc, correlation_time_s_std=tc_std)
         if not notes:

@@ -41,7 +41,7 @@ from station.sensor.protocol import (
     SensorNak,
     SensorTimeout,
 )
-from station.sensor.url import parse_sensor_url
+from station.sensor.serial_url import parse_sensor_url
 
 _T_SAMPLE = int(FrameType.SAMPLE)
 _T_REPLY = (int(FrameType.ACK), int(FrameType.NAK))
@@ -279,7 +279,7 @@ def open_sensor(
 ) -> SerialSensor:
     """Open the sensor at ``url`` (``serial:///dev/ttyUSB0?baud=921600``, ``serial:///dev/pts/N``).
 
-    Input already waiting on the port is discarded. Raises :class:`~station.sensor.url.SensorUrlError`
+    Input already waiting on the port is discarded. Raises :class:`~station.sensor.serial_url.SensorUrlError`
     for a bad URL and :class:`SensorLinkError` when the port cannot be opened.
     """
     where = parse_sensor_url(url)

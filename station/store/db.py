@@ -27,8 +27,8 @@ from sqlalchemy.exc import ArgumentError, SQLAlchemyError
 from sqlalchemy.orm import Session, sessionmaker
 
 from station.kernel.datafiles import data_path
+from station.store.default_url import DEFAULT_URL, ENV_VAR
 from station.store.opening import DatabaseRefused, StoreError, check_schema, check_url
-from station.store.url import DEFAULT_URL, ENV_VAR
 
 """The default database: a SQLite file in the working directory."""
 
