@@ -170,7 +170,7 @@ def check_errors(session: Any, params: Any, skip_s: float = 1.5) -> CheckErrors:
 
 
 def target_lines(errors: dict[tuple[int, str], CheckErrors]) -> list[str]:
-    """The issue's targets per unit with temperature effects: corrected errors with the thermal model within
+    """The thermal demo's targets per unit with temperature effects: corrected errors with the thermal model within
     2x of the reference unit's (no temperature effects) and at least 10x better than without the model."""
     refs = [e for (_, label), e in errors.items() if label == "reference"]
     if not refs:
