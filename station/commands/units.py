@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import sys
 from collections.abc import Callable
+from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
@@ -132,3 +133,45 @@ def units_disposition(
 
     _query(db, record_disposition, serial, decision, operator=operator, note=reason)
     typer.echo(f"recorded disposition {decision!r} for {serial}")
+
+
+@units_app.command("certificate")
+def units_certificate(
+    serial: Annotated[str, typer.Argument(help="the unit's serial number")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="file to write: *.pdf or *.html")],
+    run: Annotated[str | None, typer.Option("--run", help="the run (default: the unit's newest run with a verdict "
+                                                          "and a parameter set)")] = None,
+    db: DbOption = None,
+) -> None:
+    """Write the unit's calibration certificate (PDF or HTML, by the output's suffix).
+
+    Parameters with expanded uncertainties (k = 2) and their verdicts, the verification on the rig, the limits
+    file's name, version and SHA-256, the decision rule (ISO 14253-1 guard bands), station, rig, operator, lot,
+    date (local time with zone), the verdict, and the SHA-256 of the stored parameter set (recomputed from the
+    database; a record that does not match it is refused). Exit 2: unknown unit or run, or refused.
+    """
+    from station.commands.output import check_output
+    from station.store.certificate import unit_certificate
+
+    suffix = output.suffix.lower()
+    try:
+        check_output(output, suffix=suffix if suffix in (".pdf", ".html") else ".pdf", what="certificate")
+    except StationError as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(2) from None
+    cert = _query(db, unit_certificate, serial, run)
+    if suffix == ".html":
+        from station.store.certificate_html import certificate_html
+
+        data = certificate_html(cert).encode("utf-8")
+    else:
+        from station.store.certificate_pdf import certificate_pdf
+
+        data = certificate_pdf(cert)
+    try:
+        output.write_bytes(data)
+    except OSError as exc:
+        typer.echo(f"error: cannot write {output}: {exc.strerror or exc}", err=True)
+        raise typer.Exit(2) from None
+    typer.echo(f"wrote {output}: certificate of {cert.serial}, run {cert.run_id}, verdict {cert.verdict}, "
+               f"parameter set sha256 {cert.params_sha256}")
