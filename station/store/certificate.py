@@ -321,7 +321,8 @@ def unit_certificate(db: Database, serial: str, run_id: str | None = None, *,
     computed = hashlib.sha256(text.encode("utf-8")).hexdigest()
     if computed != stored_sha:
         raise CertificateRecordError(f"the stored parameter set of {serial!r} in run {run_fields[0]} does not "
-                                     f"match its recorded SHA-256 ({stored_sha[:16]}... recorded, {computed[:16]}... computed): "
+                                     f"match its recorded SHA-256 ({stored_sha[:16]}... recorded, {computed[:16]}... "
+                                     "computed): "
                                      "the record was altered; no certificate is issued")
     params = ParameterSet.from_json(text)
     (rid, run_outcome, rig, host, operator, lot, started, finished, software, seq_v, seq_h, lim_v, lim_h) = run_fields
