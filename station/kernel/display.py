@@ -189,9 +189,10 @@ def local_time(when: datetime | str | None, *, seconds: bool = True) -> str:
         return NOT_DETERMINED
     if isinstance(when, str):
         try:
-            when = datetime.fromisoformat(when)
+            parsed = datetime.fromisoformat(when)
         except ValueError:
             return when
+        when = parsed
     if when.tzinfo is None:
         when = when.replace(tzinfo=UTC)
     local = when.astimezone()
