@@ -154,6 +154,8 @@ def format_number(x: float | None, decimals: int | None = None, *, sign: bool = 
     """``x`` in fixed notation: with ``decimals`` places, else four significant digits; "—" if not finite."""
     if x is None or not math.isfinite(x):
         return NOT_DETERMINED
+    if x == 0 and decimals is None:
+        return "+0" if sign else "0"
     if decimals is None:
         decimals = _decimals_for(x, 4)
     text = f"{x:+.{decimals}f}" if sign else f"{x:.{decimals}f}"
