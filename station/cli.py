@@ -299,7 +299,8 @@ def import_imucal(
 
 ConfigOption = Annotated[
     Path | None, typer.Option("--config", help="station configuration file (TOML, station-config/1): rig, sensors, "
-                                                "station, db, limits, out, scale, operator; options given here win")
+                                                "station, db, limits, out, scale, operator, lot; options given here "
+                                                "win")
 ]
 LimitsOption = Annotated[
     Path | None, typer.Option("--limits", help="limits file (default: fixtures/limits/default.toml)")
@@ -340,6 +341,9 @@ def run_station(
     name: Annotated[str | None, typer.Option("--station", help="station id for the records and images")] = None,
     db: DbOption = None,
     operator: Annotated[str | None, typer.Option(help="operator name for the records")] = None,
+    lot: Annotated[str | None, typer.Option("--lot", help="production lot of the units, recorded with the run "
+                                                          "(quality page filter, certificate); overrides the "
+                                                          "configuration's lot")] = None,
     chamber: Annotated[str | None, typer.Option("--chamber", help="climate chamber URL (modbus-tcp://HOST:PORT): "
                                                 "run the thermal plan (plateaus 5/15/25/45 degC, verification at "
                                                 "35 degC) instead of the room-temperature sequence")] = None,
@@ -362,6 +366,7 @@ def run_station(
     from rich.console import Console
 
     from station.compose import Station, abort_on_signals
+    from station.kernel.display import limits_identity
     from station.kernel.plan import default_plan
     from station.kernel.thermal_plan import default_thermal_plan
     from station.sequence.runner import SequenceRunner
@@ -379,13 +384,15 @@ def run_station(
     console = Console()
     try:
         cfg = station_config(config, rig, sensor, station_id=name, db_url=db, out_dir=out, clock_scale=scale,
-                             plan=plan, operator=operator, limits_path=limits, provision=True,
+                             plan=plan, operator=operator, lot=lot, limits_path=limits, provision=True,
                              chamber_url=chamber, thermal=thermal)
         display = ProgressDisplay(console, list(cfg.sensor_urls), cfg.clock_scale)
         with abort_on_signals(lambda: runners[-1] if runners else None):
             station = Station(cfg, subscribers=[display])
+            lim = station.limits
             console.print(f"station {cfg.station_id}: database {station.recorder.db.url if station.recorder else '-'}, "
-                          f"limits {station.limits.name} {station.limits.version}")
+                          f"limits {limits_identity(f'{lim.name} {lim.version}', lim.sha256)}"
+                          + (f", lot {cfg.lot}" if cfg.lot else ""), soft_wrap=True)
             with display:
                 result = station.run(on_runner=runners.append)
     except StationError as exc:

@@ -96,7 +96,8 @@ class Measurement:
         where = {Verdict.FAIL: "outside", Verdict.INCONCLUSIVE: "straddles"}.get(self.verdict, "within")
         lo = d.value(self.low) if math.isfinite(self.low) else None
         hi = d.value(self.high) if math.isfinite(self.high) else None
-        bounds = f"[{format_number(lo) if lo is not None else '-inf'}, {format_number(hi) if hi is not None else 'inf'}]"
+        low = format_number(lo) if lo is not None else "-inf"
+        bounds = f"[{low}, {format_number(hi) if hi is not None else 'inf'}]"
         what = f" ({d.label})" if d.quantity in ("scale_error", "cross_axis") else ""
         return f"{self.name}{what} = {value} {where} {bounds}{' ' + d.unit if d.unit else ''}"
 

@@ -264,8 +264,8 @@ def show_unit(db: Database, serial: str) -> UnitDetail | None:
             rec = s.scalar(select(SessionRecording).where(SessionRecording.run_unit_id == ru.id))
             runs.append(UnitRun(
                 run.run_uid, station_name, ru.slot, ru.outcome, ru.message, run.outcome, _iso(run.started_at),
-                _iso(run.finished_at), run.operator, run.lot or "", run.software_version, run.limits_version, run.limits_hash,
-                run.sequence_version, run.sequence_hash, len(checks),
+                _iso(run.finished_at), run.operator, run.lot or "", run.software_version, run.limits_version,
+                run.limits_hash, run.sequence_version, run.sequence_hash, len(checks),
                 tuple(f"{c.step}:{c.name}" for c in checks if not c.passed),
                 rec.path if rec else None, rec.sha256 if rec else None,
             ))
