@@ -184,3 +184,22 @@ def test_an_altered_record_gets_no_certificate(tmp_path: Path, store: dict[str, 
     res = CliRunner().invoke(app, ["units", "certificate", store["params"].serial, "-o", str(tmp_path / "x.pdf"),
                                    "--db", url])
     assert res.exit_code == 2 and "record was altered" in res.output
+
+
+def test_quality_page_and_csv_in_the_display_convention(client: TestClient, store: dict[str, Any]) -> None:
+    """The capability CSV and table give the certificate's units (ppm, mg, deg/s); the API stays SI."""
+    import csv
+
+    params: ParameterSet = store["params"]
+    rows = {r["name"]: r for r in csv.DictReader(io.StringIO(client.get("/quality/capability.csv").text))}
+    m = rows["accel.M.xx"]
+    assert m["unit"] == "ppm" and float(m["mean"]) == pytest.approx((params.accel.misalignment[0, 0] - 1) * 1e6)
+    b = rows["gyro.bias_static.y"]
+    assert b["unit"] == "deg/s" and float(b["mean"]) == pytest.approx(math.degrees(params.gyro.bias_static[1]))
+    a = rows["accel.bias_static.z"]
+    assert a["unit"] == "mg" and float(a["mean"]) == pytest.approx(params.accel.bias_static[2] / MG)
+    api = {c["name"]: c for c in client.get("/api/quality/capability").json()}
+    assert api["accel.M.xx"]["unit"] == "1" and api["accel.M.xx"]["mean"] == pytest.approx(
+        params.accel.misalignment[0, 0])
+    page = client.get("/quality").text
+    assert f"table1-default 2.0.0, sha256 {store['limits'].sha256[:12]}" in page  # the limits filter names the hash

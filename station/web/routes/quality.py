@@ -15,8 +15,9 @@ from fastapi import APIRouter, HTTPException, Query, Request
 from fastapi.responses import HTMLResponse, Response
 from sqlalchemy import select
 
+from station.kernel.display import display_of_check, limits_identity
 from station.store import quality as q
-from station.store.models import QualityDaily, QualityYield
+from station.store.models import QualityDaily, QualityYield, Run
 from station.store.models import Station as StationRow
 from station.store.spc import RULES
 from station.web import charts
@@ -96,6 +97,38 @@ def _choices(web: Web) -> dict[str, list[str]]:
         }
 
 
+def _limits_labels(web: Web, versions: list[str]) -> dict[str, str]:
+    """Each limits version as people see it: name, version and the content hash of the file(s) recorded under it.
+
+    Two different files recorded under one name and version (an edited file) are named as such."""
+    hashes: dict[str, list[str]] = {}
+    with web.db.transaction() as s:
+        for version, digest in s.execute(select(Run.limits_version, Run.limits_hash).distinct()
+                                         .where(Run.limits_version.in_(versions))):
+            hashes.setdefault(version, []).append(digest or "")
+    out = {}
+    for v in versions:
+        found = sorted(set(hashes.get(v, [])))
+        if len(found) > 1:
+            out[v] = f"{v}: {len(found)} different files (sha256 " + ", ".join(h[:12] for h in found) + ")"
+        else:
+            out[v] = limits_identity(v, found[0] if found else "")
+    return out
+
+
+def _displayed(c: CapabilityEntry) -> CapabilityEntry:
+    """The entry in the display convention (station/kernel/display.py): values and spreads in the quantity's
+    engineering unit (a scale factor as its error in ppm); the capability indices are unit-free."""
+    d = display_of_check(c.name, c.unit)
+
+    def v(x: float | None) -> float | None:
+        return d.value(x)
+
+    return c.model_copy(update={"unit": d.unit, "mean": v(c.mean), "low": v(c.low), "high": v(c.high),
+                                "min": v(c.min), "max": v(c.max), "sigma_within": d.spread(c.sigma_within),
+                                "sigma_overall": d.spread(c.sigma_overall)})
+
+
 @router.get("/quality", response_class=HTMLResponse, include_in_schema=False)
 def quality_page(request: Request, web: Web, query: Filters) -> HTMLResponse:
     cal = query.calendar(web.shifts)
@@ -109,12 +142,13 @@ def quality_page(request: Request, web: Web, query: Filters) -> HTMLResponse:
     days = tables["day"].rows
     trend = charts.yield_trend_svg([r.group for r in days], [r.first_pass_yield for r in days],
                                    [r.final_yield for r in days])
+    choices = _choices(web)
     params = request.query_params
     qs = "&".join(f"{k}={v}" for k, v in params.multi_items() if v)
     return templates.TemplateResponse(request, "quality.html", {
-        "query": query, "qs": qs, "tables": tables, "caps": caps, "svgs": svgs, "trend": trend,
-        "rules": RULES, "cpk_target": CPK_TARGET, "shifts": cal.text(), "definitions": DEFINITIONS,
-        "choices": _choices(web), "unit_label": unit_label,
+        "query": query, "qs": qs, "tables": tables, "caps": [_displayed(c) for c in caps], "svgs": svgs,
+        "trend": trend, "rules": RULES, "cpk_target": CPK_TARGET, "shifts": cal.text(), "definitions": DEFINITIONS,
+        "choices": choices, "limits_labels": _limits_labels(web, choices["limits"]), "unit_label": unit_label,
         "flagged": flagged,
     })
 
@@ -154,7 +188,7 @@ def quality_yield_csv(web: Web, query: Filters, by: ByQuery = "station") -> Resp
 
 @router.get("/quality/capability.csv", include_in_schema=False)
 def quality_capability_csv(web: Web, query: Filters) -> Response:
-    caps = _capability(web, query)
+    caps = [_displayed(c) for c in _capability(web, query)]  # the display convention (the API stays SI)
     fields = [f for f in CapabilityEntry.model_fields if f != "rules"]
     return _csv("capability", fields, [[getattr(c, f) for f in fields] for c in caps])
 
