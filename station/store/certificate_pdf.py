@@ -70,10 +70,11 @@ def certificate_pdf(cert: Certificate) -> bytes:
         ("software", cert.software_version or "-"),
         ("sequence", f"{cert.sequence_version or '-'}, sha256 {cert.sequence_hash or '-'}"),
         ("limits file", f"{cert.limits_version or '-'}, sha256 {cert.limits_hash or '-'}"),
-        ("local gravity", f"{cert.gravity_mps2:.5f} m/s^2" if cert.gravity_mps2 else "-"),
         ("sample period", f"{cert.sample_period_s * 1000:.4g} ms"),
         ("parameter set", f"{cert.params_format}, sha256 {cert.params_sha256}"),
     ]
+    if cert.gravity_mps2:
+        facts.insert(-2, ("local gravity", f"{cert.gravity_mps2:.5f} m/s^2"))
     if cert.reference_temperature_degc == cert.reference_temperature_degc:
         facts.insert(-1, ("reference temperature", f"{cert.reference_temperature_degc:.2f} degC"))
     if cert.eeprom_image_sha256:
