@@ -115,3 +115,32 @@ def test_lot_is_a_cli_option(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(station.sim.demo, "run_demo", demo_stub)
     out = RUN.invoke(app, ["demo", "--lot", "LOT-43"])
     assert out.exit_code == 2 and seen["demo"] == "LOT-43"
+
+
+def test_a_unit_scrapped_during_its_run_is_not_provisioned() -> None:
+    """The retest gate is asked again before the image is written: a unit scrapped while it was measured
+    gets no image (REFUSED), the others are provisioned."""
+    from station.compose import Station, StationConfig
+    from station.kernel.plan import default_plan
+    from station.sim.fakes import FakeStation
+
+    plan = default_plan()  # the production plan: the simulated units pass it
+    asked: dict[str, int] = {}
+
+    with FakeStation(2, 200.0, 0, plan=plan) as sim:
+        scrapped = sim.units[0].truth.serial
+
+        def admit(serial: str, run_id: str) -> str | None:
+            asked[serial] = asked.get(serial, 0) + 1
+            return f"{serial} was scrapped" if serial == scrapped and asked[serial] > 1 else None
+
+        config = StationConfig(sim.rig_url, tuple(sim.sensor_urls), station_id="pytest", record=False, out_dir=None,
+                               plan=plan, rig_options=sim.rig_client_options(), provision=True)
+        station = Station(config, clock=sim.clock, admit=admit)
+        result = station.run()
+    by_serial = {u.serial: u for u in result.units}
+    assert by_serial[scrapped].outcome == Outcome.REFUSED and "was scrapped" in by_serial[scrapped].message
+    assert station.provisioner is not None and scrapped not in station.provisioner.records
+    other = next(s for s in by_serial if s != scrapped)
+    assert asked == {scrapped: 2, other: 2}  # at admission and again before provisioning
+    assert other in station.provisioner.records  # the other unit's image was written (its verification is its own)
