@@ -203,3 +203,7 @@ def test_quality_page_and_csv_in_the_display_convention(client: TestClient, stor
         params.accel.misalignment[0, 0])
     page = client.get("/quality").text
     assert f"table1-default 2.0.0, sha256 {store['limits'].sha256[:12]}" in page  # the limits filter names the hash
+    hist = client.get("/quality/histogram/accel.bias_static.z.svg").text
+    assert "accel.bias_static.z (mg)" in hist
+    chart = client.get("/quality/control/gyro.M.xx.svg").text
+    assert "gyro.M.xx (ppm) daily mean" in chart

@@ -79,7 +79,11 @@ class Display:
 
     def value(self, si: float | None) -> float | None:
         """The SI value in the display unit (None stays None)."""
-        return None if si is None else (float(si) + self.offset) * self.scale
+        return None if si is None else self.convert(si)
+
+    def convert(self, si: float) -> float:
+        """The SI value in the display unit."""
+        return (float(si) + self.offset) * self.scale
 
     def spread(self, si: float | None) -> float | None:
         """An uncertainty, a standard deviation or a difference in the display unit (no offset)."""

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import csv
 import io
+from dataclasses import replace
 from typing import Annotated
 
 from fastapi import APIRouter, HTTPException, Query, Request
@@ -116,6 +117,27 @@ def _limits_labels(web: Web, versions: list[str]) -> dict[str, str]:
     return out
 
 
+def _displayed_chart(pc: q.ParameterChart) -> q.ParameterChart:
+    """The chart in the display convention (values with the quantity's offset, sigmas without)."""
+    d = display_of_check(pc.name, pc.unit)
+
+    def v(x: float | None) -> float | None:
+        return d.value(x)
+
+    ch = pc.chart
+    points = tuple(replace(p, mean=d.convert(p.mean), s=d.spread(p.s), lcl=v(p.lcl), ucl=v(p.ucl),
+                           s_lcl=d.spread(p.s_lcl), s_ucl=d.spread(p.s_ucl)) for p in ch.points)
+    chart = replace(ch, center=d.convert(ch.center), sigma_within=d.spread(ch.sigma_within), points=points)
+    return replace(pc, unit=d.unit, low=v(pc.low), high=v(pc.high), chart=chart)
+
+
+def _displayed_histogram(h: q.Histogram) -> q.Histogram:
+    d = display_of_check(h.name, h.unit)
+    return replace(h, unit=d.unit, lo=d.convert(h.lo), hi=d.convert(h.hi), mean=d.convert(h.mean),
+                   sigma=d.spread(h.sigma), low=d.value(h.low),
+                   high=d.value(h.high))
+
+
 def _displayed(c: CapabilityEntry) -> CapabilityEntry:
     """The entry in the display convention (station/kernel/display.py): values and spreads in the quantity's
     engineering unit (a scale factor as its error in ppm); the capability indices are unit-free."""
@@ -138,7 +160,7 @@ def quality_page(request: Request, web: Web, query: Filters) -> HTMLResponse:
     caps = _capability(web, query, rules)
     flagged = [c for c in caps if c.rules or (c.cpk is not None and c.cpk < CPK_TARGET)]
     shown = {c.name for c in flagged}
-    svgs = {c.name: charts.control_chart_svg(c) for c in chart_list if c.name in shown}
+    svgs = {c.name: charts.control_chart_svg(_displayed_chart(c)) for c in chart_list if c.name in shown}
     days = tables["day"].rows
     trend = charts.yield_trend_svg([r.group for r in days], [r.first_pass_yield for r in days],
                                    [r.final_yield for r in days])
@@ -158,7 +180,8 @@ def quality_histogram_svg(web: Web, name: str, query: Filters) -> Response:
     h = q.histogram(web.db, name, query.filter())
     if h is None:
         raise HTTPException(404, f"no values of {name} in the selection")
-    return Response(charts.histogram_svg(h), media_type="image/svg+xml", headers={"Cache-Control": "max-age=30"})
+    return Response(charts.histogram_svg(_displayed_histogram(h)), media_type="image/svg+xml",
+                    headers={"Cache-Control": "max-age=30"})
 
 
 @router.get("/quality/control/{name}.svg", include_in_schema=False)
@@ -166,7 +189,7 @@ def quality_control_svg(web: Web, name: str, query: Filters) -> Response:
     found = q.control_charts(web.db, query.filter(), [name])
     if not found:
         raise HTTPException(404, f"no values of {name} in the selection")
-    return Response(charts.control_chart_svg(found[0]), media_type="image/svg+xml",
+    return Response(charts.control_chart_svg(_displayed_chart(found[0])), media_type="image/svg+xml",
                     headers={"Cache-Control": "max-age=30"})
 
 
