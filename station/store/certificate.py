@@ -22,7 +22,7 @@ import numpy as np
 from sqlalchemy import select
 
 from station.fit.params import ParameterSet, TriadParams
-from station.kernel.display import Display, display_of_check
+from station.kernel.display import Display, display_for, display_of_check, format_number
 from station.kernel.errors import StationError
 from station.kernel.limits import GUARD_BAND
 from station.kernel.limits_file import LimitsFile, load_limits
@@ -93,8 +93,6 @@ class CertificateParameter:
         hi = self.display.value(self.high_si) if self.high_si is not None else None
         if lo is None and hi is None:
             return ""
-        from station.kernel.display import format_number
-
         return f"[{format_number(lo)}, {format_number(hi)}] {self.display.unit}".rstrip()
 
 
@@ -115,8 +113,6 @@ class CertificateResult:
         return self.display.format(self.value_si)
 
     def shown_limits(self) -> str:
-        from station.kernel.display import format_number
-
         lo = self.display.value(self.low_si) if self.low_si is not None and math.isfinite(self.low_si) else None
         hi = self.display.value(self.high_si) if self.high_si is not None and math.isfinite(self.high_si) else None
         return f"[{format_number(lo)}, {format_number(hi)}] {self.display.unit}".rstrip()
@@ -215,12 +211,8 @@ def _triad_rows(key: str, group: str, t: TriadParams) -> list[tuple[str, str, fl
 
 def _display(name: str, si_unit: str) -> Display:
     if si_unit == "rad/s/(m/s^2)":
-        from station.kernel.display import display_for
-
         return display_for("g_sensitivity")
     if si_unit == "1/(rad/s)":
-        from station.kernel.display import display_for
-
         return display_for("nonlinearity")
     return display_of_check(name, si_unit)
 
