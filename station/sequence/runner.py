@@ -573,6 +573,11 @@ class SequenceRunner:
             if r.outcome != Outcome.PASS or stop:
                 out.append(r)
                 continue
+            reason = self.admit(r.serial, self.run_id) if self.admit is not None else None
+            if reason:  # e.g. scrapped while it was measured: no image is written into a refused unit
+                out.append(_replace_outcome(r, Outcome.REFUSED, f"not provisioned, refused by the retest policy: "
+                                                                f"{reason}"))
+                continue
             try:
                 checks = self.provisioner.provision(r, self.sensors[r.slot], self.started_at)
                 self._emit_verify(r, checks or ())

@@ -77,6 +77,9 @@ def demo(
     thermal: Annotated[bool, typer.Option("--thermal", help="thermal calibration in a simulated climate chamber: "
                                           "plateaus at 5/15/25/45 degC, verification at 35 degC; the last unit has "
                                           "no temperature effects (the reference)")] = False,
+    lot: Annotated[str | None, typer.Option("--lot", help="production lot of the units, recorded with the run "
+                                                          "(quality page filter, certificate)")] = None,
+    operator: Annotated[str | None, typer.Option(help="operator name for the records")] = None,
 ) -> None:
     """Simulated rig + N sensors, the whole sequence, fit, limits, summary: the station end to end.
 
@@ -92,9 +95,10 @@ def demo(
     try:
         if thermal:
             result, _ = run_thermal_demo(units, scale or THERMAL_SCALE, seed, out, db_url=db, record=True,
-                                         limits_path=limits)
+                                         limits_path=limits, lot=lot or "", operator=operator or "")
         else:
-            result = run_demo(units, scale or DEMO_SCALE, seed, out, db_url=db, record=True, limits_path=limits)
+            result = run_demo(units, scale or DEMO_SCALE, seed, out, db_url=db, record=True, limits_path=limits,
+                              lot=lot or "", operator=operator or "")
     except StationError as exc:
         raise fail(exc) from None
     raise typer.Exit(result.outcome.exit_code)
