@@ -30,6 +30,7 @@ from station.fit.calibrate import FitOptions
 from station.kernel.clock import Clock, SimClock, WallClock
 from station.kernel.errors import StationError
 from station.kernel.limits_file import LimitsFile, load_limits
+from station.kernel.nest_frames import NestCalibration
 from station.kernel.plan import RigPlan, default_plan
 from station.kernel.thermal_plan import ThermalPlan
 from station.rig import open_rig, rig_client_options
@@ -83,6 +84,9 @@ class StationConfig:
             :func:`~station.chamber.chamber_client_options` for ``clock_scale``).
         thermal: run this thermal plan (its ``base`` becomes ``plan``) in the chamber instead of the plain
             sequence; with ``provision`` the corrected output is verified at its ``verify_degc``.
+        rig_key: the rig's name for its nest calibrations (None: ``rig_url``).
+        nest_calibration: take each unit's references into its sensor frame with the rig's newest nest
+            calibration in the database (:mod:`station.kernel.nest_frames`); the plain sequence only.
     """
 
     rig_url: str
@@ -102,6 +106,13 @@ class StationConfig:
     chamber_url: str | None = None
     chamber_options: Mapping[str, Any] | None = None
     thermal: ThermalPlan | None = None
+    rig_key: str | None = None
+    nest_calibration: bool = True
+
+    @property
+    def nest_rig(self) -> str:
+        """The key the rig's nest calibrations are stored under."""
+        return self.rig_key if self.rig_key else self.rig_url
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "sensor_urls", tuple(self.sensor_urls))
@@ -122,7 +133,8 @@ class StationConfig:
         """A station configuration file (TOML, ``format = "station-config/1"``); ``overrides`` win.
 
         Keys: ``rig`` (URL), ``sensors`` (list of URLs), ``station`` (id), ``db`` (URL), ``limits``
-        (path, relative to the file), ``out`` (directory, relative to the file), ``scale``, ``operator``, ``lot``.
+        (path, relative to the file), ``out`` (directory, relative to the file), ``scale``, ``operator``, ``lot``,
+        ``rig_key`` (the rig's name for its nest calibrations; default the rig URL).
         Unknown keys are refused, as in a limits file.
         """
         try:
@@ -133,7 +145,8 @@ class StationConfig:
             raise ConfigError(f"{path}: not valid TOML: {exc}") from None
         if data.get("format") != CONFIG_FORMAT:
             raise ConfigError(f"{path}: format {data.get('format')!r}; this station reads {CONFIG_FORMAT!r}")
-        known = {"format", "rig", "sensors", "station", "db", "limits", "out", "scale", "operator", "lot"}
+        known = {"format", "rig", "sensors", "station", "db", "limits", "out", "scale", "operator", "lot",
+                 "rig_key"}
         extra = sorted(set(data) - known)
         if extra:
             raise ConfigError(f"{path}: unknown key(s) {', '.join(extra)}")
@@ -154,7 +167,7 @@ class StationConfig:
         kw: dict[str, Any] = {
             "rig_url": text("rig"), "sensor_urls": tuple(sensors), "station_id": text("station") or "station",
             "db_url": text("db"), "clock_scale": float(scale), "operator": text("operator") or "",
-            "lot": text("lot") or "",
+            "lot": text("lot") or "", "rig_key": text("rig_key"),
         }
         if text("limits"):
             kw["limits_path"] = base / str(data["limits"])
@@ -376,12 +389,21 @@ class Station:
         c = self.config
         return c.rig_options if c.rig_options is not None else rig_client_options(self.clock.scale)
 
-    def _provisioner(self, hw: Hardware) -> EepromProvisioner | None:
+    def nests(self) -> NestCalibration | None:
+        """The rig's newest nest calibration in the database (None: none, not recording, or switched off)."""
+        if not self.config.nest_calibration or self.recorder is None:
+            return None
+        from station.store.nest_records import latest_nest_calibration
+
+        return latest_nest_calibration(self.recorder.db, self.config.nest_rig)
+
+    def _provisioner(self, hw: Hardware, nests: NestCalibration | None = None) -> EepromProvisioner | None:
         if not self.config.provision:
             return None
         plan = self.config.plan
         verifier = RigVerifier(hw.rig, self.clock, self.limits.verification, gravity_mps2=plan.gravity_mps2,
-                               sample_rate_hz=int(plan.sample_rate_hz), options=self.options)
+                               sample_rate_hz=int(plan.sample_rate_hz), options=self.options, nests=nests,
+                               sensors=hw.sensors)
         return EepromProvisioner(self.config.station_id, verifier=verifier, on_record=self.on_provision)
 
     def _verifier(self, hw: Hardware) -> RigVerifier:
@@ -428,12 +450,13 @@ class Station:
                     return runner.run()
                 finally:
                     chamber.close()
-            self.provisioner = self._provisioner(hw)
+            nests = self.nests()
+            self.provisioner = self._provisioner(hw, nests)
             runner = SequenceRunner(
                 hw.rig, hw.sensors, self.clock, plan=c.plan, options=self.options, limits=self.limits.product,
                 out_dir=c.out_dir, station=c.station_id, rig_name=hw.rig_name, sensor_urls=list(c.sensor_urls),
                 subscribers=self.subscribers, provisioner=self.provisioner, admit=self.admit,
-                fit_options=self.fit_options,
+                fit_options=self.fit_options, nests=nests,
             )
             if on_runner is not None:
                 on_runner(runner)

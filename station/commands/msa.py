@@ -63,7 +63,9 @@ def study_report(db_url: str | None, *, lot: str | None = None, runs: tuple[str,
         assert isinstance(v, StudyValue)
         return f"nest {v.nest + 1}" if by == "nest" else (v.rig if by == "rig" else (v.operator or "(none)"))
 
-    points = [StudyPoint(v.parameter, v.unit, v.serial, appraiser(v), v.value, v.low, v.high) for v in values]
+    # the product parameters; the fit-quality checks (fit.*) judge a recording, not a characteristic of the part
+    points = [StudyPoint(v.parameter, v.unit, v.serial, appraiser(v), v.value, v.low, v.high) for v in values
+              if not v.parameter.startswith("fit.")]
     return analyse(points, by=by, level=level)
 
 

@@ -57,11 +57,15 @@ def run_study(
     limits_path: Path | None = None,
     station_id: str = "msa-sim",
     on_run: Callable[[int, int, RunResult], None] | None = None,
+    nest_calibration: bool = True,
+    out_dir: Path | None = Path("msa-out"),
 ) -> list[RunResult]:
     """Run every run of the study on the in-process simulated station, recording into ``db_url``.
 
     ``on_run(k, total, result)`` after each run. The retest policy does not apply: a study measures
-    the same parts again on purpose.
+    the same parts again on purpose. ``nest_calibration``: apply the rig's newest nest calibration in the
+    database (as every production run does). ``out_dir``: where the sessions and parameter files go (the
+    records keep the parameter sets, which a nest calibration reads).
     """
     plan = plan if plan is not None else default_plan()
     runs = design.schedule()
@@ -72,8 +76,8 @@ def run_study(
                          nest_errors_deg=nest_errors_deg) as sim:
             config = StationConfig(
                 sim.rig_url, tuple(sim.sensor_urls), station_id=station_id, db_url=db_url, record=True,
-                limits_path=limits_path, out_dir=None, clock_scale=scale, plan=plan, lot=lot,
-                rig_options=sim.rig_client_options(),
+                limits_path=limits_path, out_dir=out_dir, clock_scale=scale, plan=plan, lot=lot,
+                rig_options=sim.rig_client_options(), nest_calibration=nest_calibration,
             )
             station = Station(config, clock=sim.clock, options=SequenceOptions(), admit=lambda *_: None)
             result = station.run()
@@ -81,3 +85,45 @@ def run_study(
         if on_run is not None:
             on_run(k, len(runs), result)
     return results
+
+
+REFERENCE_KEY = 10_000
+"""The reference unit's identity among the simulated units of a seed (far from the parts' 0 .. parts-1)."""
+
+
+def run_nest_calibration(
+    nests: int,
+    db_url: str,
+    *,
+    seed: int = 0,
+    scale: float = 120.0,
+    plan: RigPlan | None = None,
+    nest_errors_deg: Sequence[Sequence[float]] | None = None,
+    limits_path: Path | None = None,
+    station_id: str = "msa-sim",
+    on_run: Callable[[int, int, RunResult], None] | None = None,
+    out_dir: Path | None = Path("msa-out"),
+) -> tuple[str, list[RunResult]]:
+    """Run the reference unit once in every nest (the other nests hold parts), recorded in ``db_url``.
+
+    Returns the reference unit's serial and the runs; ``station nest-cal estimate`` (or
+    :func:`station.commands.nest_cal.estimate_from_records`) then fits the nests from them.
+    """
+    plan = plan if plan is not None else default_plan()
+    results: list[RunResult] = []
+    serial = ""
+    for j in range(nests):
+        keys = [REFERENCE_KEY if i == j else 20_000 + i for i in range(nests)]
+        with FakeStation(nests, scale, seed, name=station_id, plan=plan, unit_keys=keys, noise_index=1000 + j,
+                         nest_errors_deg=nest_errors_deg) as sim:
+            serial = sim.units[j].truth.serial
+            config = StationConfig(
+                sim.rig_url, tuple(sim.sensor_urls), station_id=station_id, db_url=db_url, record=True,
+                limits_path=limits_path, out_dir=out_dir, clock_scale=scale, plan=plan, lot="nest-calibration",
+                rig_options=sim.rig_client_options(), nest_calibration=False,
+            )
+            result = Station(config, clock=sim.clock, options=SequenceOptions(), admit=lambda *_: None).run()
+        results.append(result)
+        if on_run is not None:
+            on_run(j, nests, result)
+    return serial, results

@@ -280,6 +280,23 @@ class RigLock(Base):
     since: Mapped[datetime] = mapped_column(DateTime(timezone=True))
 
 
+class NestCalibrationRecord(Base):
+    """A rig's nest calibration (format ``station-nests/1``): ``version`` counts up per ``rig`` key; the
+    newest applies to every later run on that rig. ``body`` is the JSON as saved, ``sha256`` its hash."""
+
+    __tablename__ = "nest_calibrations"
+    __table_args__ = (UniqueConstraint("rig", "version"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    rig: Mapped[str] = mapped_column(String(300), index=True)
+    version: Mapped[int] = mapped_column(Integer)
+    reference_serial: Mapped[str] = mapped_column(String(100))
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
+    format: Mapped[str] = mapped_column(String(40))
+    body: Mapped[str] = mapped_column(Text)
+    sha256: Mapped[str] = mapped_column(String(64))
+
+
 class Disposition(Base):
     """A person's decision about a unit (e.g. 'retest', 'scrap', 'rework'); it resets the attempt count."""
 
