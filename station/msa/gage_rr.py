@@ -173,7 +173,8 @@ def _satterthwaite_ci(terms: Sequence[tuple[float, float, float]], level: float)
         return 0.0, 0.0, 0.0
     nu = est**2 / denom
     alpha = 1.0 - level
-    high = math.sqrt(nu * est / stats.chi2.ppf(alpha / 2.0, nu))
+    q_low = float(stats.chi2.ppf(alpha / 2.0, nu))
+    high = math.sqrt(nu * est / q_low) if q_low > 0 else math.inf  # a fraction of a degree of freedom: unbounded
     if var <= 0:
         return 0.0, 0.0, high
     low = math.sqrt(nu * var / stats.chi2.ppf(1.0 - alpha / 2.0, nu))
