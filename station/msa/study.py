@@ -85,7 +85,7 @@ class StudyReport:
                                     "pct_total_variation": num(c.pct_total),
                                     "pct_contribution": num(c.pct_contribution),
                                     "pct_tolerance": num(c.pct_tolerance), "std_ci_low": c.ci_low,
-                                    "std_ci_high": c.ci_high} for c in g.components],
+                                    "std_ci_high": num(c.ci_high)} for c in g.components],
                 })
             out.append(entry)
         return {"format": FORMAT, "by": self.by, "parts": list(self.parts), "appraisers": list(self.appraisers),
