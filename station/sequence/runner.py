@@ -367,8 +367,14 @@ class SequenceRunner:
                                     not problems, len(fx.active), "; ".join(problems)))
 
     def _apply_report(self, fx: Fixture, step: Step, report: StepReport, verdicts: list[_Verdict]) -> list[str]:
-        """Emit the step's measurements; end units with a sensor fault (ERROR) or a failed gate."""
+        """Emit the step's measurements; end units with a sensor fault (ERROR) or a failed gate.
+
+        A physics gate that every measured unit of the step fails (two units or more) is a common cause, the
+        rig or the station's timing, not the units: those units end ERROR, which the retest policy does not
+        count, with the gate named.
+        """
         problems: list[str] = []
+        common = common_cause(report)
         for unit in fx.units:
             v = verdicts[unit.slot]
             if unit.slot in report.errors:
@@ -386,8 +392,11 @@ class SequenceRunner:
             failed = [g for g in gates if not g.passed]
             if failed:
                 link = [g for g in failed if g.link]
-                outcome = Outcome.ERROR if link else Outcome.FAIL
+                outcome = Outcome.ERROR if link or common else Outcome.FAIL
                 text = "; ".join(g.describe() for g in (link or failed))
+                if common and not link:
+                    text = (f"station fault: every unit failed {', '.join(sorted(common))} in this step "
+                            f"(the rig or the station's timing, not the unit): {text}")
                 self._end_unit(fx, unit, v, outcome, f"step '{step.name}': {text}")
                 problems.append(f"slot {unit.slot}: {text}")
         return problems
@@ -594,6 +603,15 @@ class SequenceRunner:
                 stop = True
                 out.append(_replace_outcome(r, Outcome.ABORTED, f"{self.abort_reason} during provisioning"))
         return out
+
+
+def common_cause(report: StepReport) -> set[str]:
+    """Physics gates that every unit measured in a step failed (empty below two measured units)."""
+    measured = [gates for gates in report.gates.values() if gates]
+    if len(measured) < 2:
+        return set()
+    failed = [{g.name for g in gates if not g.passed and not g.link} for gates in measured]
+    return set.intersection(*failed)
 
 
 def recording_verdict(params: ParameterSet) -> tuple[Outcome, str] | None:
