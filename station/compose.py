@@ -29,6 +29,7 @@ from station.chamber import chamber_client_options, open_chamber
 from station.fit.calibrate import FitOptions
 from station.kernel.clock import Clock, SimClock, WallClock
 from station.kernel.errors import StationError
+from station.kernel.golden import GoldenCheck
 from station.kernel.limits_file import LimitsFile, load_limits
 from station.kernel.nest_frames import NestCalibration
 from station.kernel.plan import RigPlan, default_plan
@@ -87,6 +88,10 @@ class StationConfig:
         rig_key: the rig's name for its nest calibrations (None: ``rig_url``).
         nest_calibration: take each unit's references into its sensor frame with the rig's newest nest
             calibration in the database (:mod:`station.kernel.nest_frames`); the plain sequence only.
+        golden: ``"off"``, or ``"per-shift"``: production units are admitted only after a golden unit passed its
+            check on this station in the current shift, and never after a golden check failed
+            (:mod:`station.kernel.golden`); every golden unit a run measures is checked and recorded.
+        shifts: the shift calendar (``"A=06:00,B=14:00,C=22:00"``, UTC starts) for ``golden``.
     """
 
     rig_url: str
@@ -108,6 +113,8 @@ class StationConfig:
     thermal: ThermalPlan | None = None
     rig_key: str | None = None
     nest_calibration: bool = True
+    golden: str = "off"
+    shifts: str = "A=06:00,B=14:00,C=22:00"
 
     @property
     def nest_rig(self) -> str:
@@ -127,6 +134,8 @@ class StationConfig:
             raise ConfigError("a station needs at least one sensor URL")
         if not (math.isfinite(self.clock_scale) and self.clock_scale > 0):
             raise ConfigError(f"clock scale must be a positive number, got {self.clock_scale!r}")
+        if self.golden not in ("off", "per-shift"):
+            raise ConfigError(f"golden {self.golden!r}: 'off' or 'per-shift'")
 
     @classmethod
     def from_file(cls, path: Path, **overrides: Any) -> StationConfig:
@@ -134,7 +143,8 @@ class StationConfig:
 
         Keys: ``rig`` (URL), ``sensors`` (list of URLs), ``station`` (id), ``db`` (URL), ``limits``
         (path, relative to the file), ``out`` (directory, relative to the file), ``scale``, ``operator``, ``lot``,
-        ``rig_key`` (the rig's name for its nest calibrations; default the rig URL).
+        ``rig_key`` (the rig's name for its nest calibrations; default the rig URL), ``golden`` ("off" or
+        "per-shift") and ``shifts`` (the shift calendar, e.g. "A=06:00,B=14:00,C=22:00").
         Unknown keys are refused, as in a limits file.
         """
         try:
@@ -146,7 +156,7 @@ class StationConfig:
         if data.get("format") != CONFIG_FORMAT:
             raise ConfigError(f"{path}: format {data.get('format')!r}; this station reads {CONFIG_FORMAT!r}")
         known = {"format", "rig", "sensors", "station", "db", "limits", "out", "scale", "operator", "lot",
-                 "rig_key"}
+                 "rig_key", "golden", "shifts"}
         extra = sorted(set(data) - known)
         if extra:
             raise ConfigError(f"{path}: unknown key(s) {', '.join(extra)}")
@@ -169,6 +179,9 @@ class StationConfig:
             "db_url": text("db"), "clock_scale": float(scale), "operator": text("operator") or "",
             "lot": text("lot") or "", "rig_key": text("rig_key"),
         }
+        for key in ("golden", "shifts"):
+            if text(key):
+                kw[key] = text(key)
         if text("limits"):
             kw["limits_path"] = base / str(data["limits"])
         if text("out"):
@@ -375,7 +388,19 @@ class Station:
             from station.store.queries import retest_gate
 
             admit = retest_gate(self.recorder.db, self.limits.retest.max_attempts)
+        if config.golden == "per-shift":
+            if self.recorder is None:
+                raise ConfigError("golden = 'per-shift' needs the database (record = true)")
+            from station.store.golden_records import golden_gate
+            from station.store.quality import QualityFilterError, ShiftCalendar
+
+            try:
+                calendar = ShiftCalendar.parse(config.shifts)
+            except QualityFilterError as exc:
+                raise ConfigError(str(exc)) from None
+            admit = golden_gate(self.recorder.db, config.station_id, calendar, inner=admit)
         self.admit = admit
+        self.golden_checks: list[GoldenCheck] = []  # the last run's golden-unit checks
         if on_provision is None and self.recorder is not None:
             on_provision = self.recorder.provisioned
         self.on_provision = on_provision
@@ -460,7 +485,29 @@ class Station:
             )
             if on_runner is not None:
                 on_runner(runner)
-            return runner.run()
+            result = runner.run()
+        self._check_golden_units(result)
+        return result
+
+    def _check_golden_units(self, result: RunResult) -> None:
+        """Judge every registered golden unit the run fitted against its references, and record it."""
+        self.golden_checks = []
+        if self.recorder is None:
+            return
+        from station.kernel.golden import check_golden
+        from station.sequence.limits import check_limits
+        from station.store.golden_records import golden_units, record_golden_check
+
+        goldens = golden_units(self.recorder.db)
+        for r in result.units:
+            if r.serial not in goldens or r.params is None:
+                continue
+            version, golden = goldens[r.serial]
+            measured = {m.name: m.value for m in check_limits(r.params, self.limits.product)}
+            check = check_golden(golden, measured)
+            record_golden_check(self.recorder.db, check, station=self.config.station_id, version=version,
+                                run_uid=result.run_id, slot=r.slot)
+            self.golden_checks.append(check)
 
 
 __all__ = [
