@@ -18,7 +18,7 @@ power cycle.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, Self
 
@@ -80,6 +80,7 @@ class SimulatedStation:
             the same units fresh noise, as a repeat measurement does).
         nest_errors_deg: the rig's configuration: per nest, its mounting error as a small rotation vector
             (deg, about the nest's x, y, z) from the sensor frame to the nest frame; None: perfect nests.
+        truth_change: ``(slot, truth) -> truth`` applied to every drawn unit, e.g. a unit that has aged.
     """
 
     def __init__(
@@ -99,6 +100,7 @@ class SimulatedStation:
         unit_keys: Sequence[int] | None = None,
         noise_index: int = 0,
         nest_errors_deg: Sequence[Sequence[float]] | None = None,
+        truth_change: Callable[[int, UnitTruth], UnitTruth] | None = None,
     ) -> None:
         if units < 1:
             raise ValueError("a simulated station needs at least one unit")
@@ -119,6 +121,7 @@ class SimulatedStation:
         if len(self.unit_keys) != self.n_units:
             raise ValueError(f"unit_keys names {len(self.unit_keys)} units for {self.n_units} slots")
         self.noise_index = int(noise_index)
+        self.truth_change = truth_change
         self.nest_errors_deg = [tuple(float(v) for v in e) for e in nest_errors_deg] if nest_errors_deg else []
 
     @property
@@ -156,6 +159,8 @@ class SimulatedStation:
                 if self.noise_index:
                     _, imu_ss, fault_ss = np.random.SeedSequence(self.seed, spawn_key=(key, self.noise_index)).spawn(3)
                 truth = draw_unit(self.sensor_class, np.random.default_rng(unit_ss))
+                if self.truth_change is not None:
+                    truth = self.truth_change(k, truth)
                 effects = self.effects
                 if k < len(self.unit_effects) and self.unit_effects[k] is not None:
                     effects = self.unit_effects[k]
