@@ -26,11 +26,17 @@ app.add_typer(import_app, name="import")
 def _add_subapps() -> None:
     from station.commands.diagnose import diagnose as diagnose_command
     from station.commands.eeprom import eeprom_app
+    from station.commands.golden import golden_app
+    from station.commands.msa import msa_app
+    from station.commands.nest_cal import nest_app
     from station.commands.rigfree import export_command, import_imu_tk_command, import_openaxes_command
     from station.commands.units import units_app
 
     app.add_typer(eeprom_app, name="eeprom")
     app.add_typer(units_app, name="units")
+    app.add_typer(msa_app, name="msa")
+    app.add_typer(nest_app, name="nest-cal")
+    app.add_typer(golden_app, name="golden")
     app.command(name="diagnose")(diagnose_command)
     app.command(name="export")(export_command)
     import_app.command("openaxes")(import_openaxes_command)
