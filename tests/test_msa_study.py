@@ -32,9 +32,9 @@ def study(tmp_path_factory: pytest.TempPathFactory) -> tuple[str, Path]:
     db = f"sqlite:///{tmp / 'msa.sqlite'}"
     design = StudyDesign(3, 2, 2, seed=5)
     run_study(design, db, "before", scale=120.0, plan=PLAN, nest_errors_deg=ERRORS, out_dir=tmp / "out")
-    serial, _ = run_nest_calibration(2, db, seed=5, scale=120.0, plan=PLAN, nest_errors_deg=ERRORS,
-                                     out_dir=tmp / "out")
-    estimate_from_records(db, "fake-rig://msa-sim", serial)
+    serial, _, _ = run_nest_calibration(2, db, seed=5, scale=120.0, plan=PLAN, nest_errors_deg=ERRORS,
+                                        out_dir=tmp / "out")
+    estimate_from_records(db, "fake-rig://msa-sim", serial)  # relative: the datum is the mean nest
     run_study(design, db, "after", scale=120.0, plan=PLAN, nest_errors_deg=ERRORS, out_dir=tmp / "out")
     return db, tmp
 

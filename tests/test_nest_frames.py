@@ -70,3 +70,25 @@ def test_estimate_recovers_relative_nest_rotations() -> None:
     assert max(cal.agreement_deg) < 1e-9  # the same mount seen by both triads, no noise
     with pytest.raises(FitError, match="nest 2"):
         estimate_nest_calibration("rig", "REF", {0: per[0], 2: per[2]})
+
+
+def test_estimate_is_exact_for_large_tilts_and_absolute_with_a_reference() -> None:
+    rng = np.random.default_rng(12)
+    theta = np.radians(rng.normal(0, 0.7, (4, 3)))  # tilts up to ~1.5 deg, a common part included
+    m_a = np.eye(3) + rng.normal(0, 0.01, (3, 3))
+    m_w = np.eye(3) + rng.normal(0, 0.003, (3, 3))
+    std = np.full((3, 3), 1e-5)
+    per = {j: NestFits(TriadFit(m_a @ rotation_matrix(theta[j]).T, std),
+                       TriadFit(m_w @ rotation_matrix(theta[j]).T, std)) for j in range(4)}
+    absolute = estimate_nest_calibration("rig", "REF", per, NestFits(TriadFit(m_a, std), TriadFit(m_w, std)))
+    assert absolute.datum == "reference"
+    assert np.allclose(np.array(absolute.rotations_deg), np.degrees(theta), atol=1e-9)
+    relative = estimate_nest_calibration("rig", "REF", per)
+    assert relative.datum == "mean nest"
+    rel = np.array(relative.rotations_deg)
+    assert np.allclose(rel.sum(axis=0), 0.0, atol=1e-9)
+    # the relative rotations between nests are exact: R_j R_k^T from the estimate equals the truth's
+    for j in range(1, 4):
+        est = rotation_matrix(np.radians(rel[j])) @ rotation_matrix(np.radians(rel[0])).T
+        true = rotation_matrix(theta[j]) @ rotation_matrix(theta[0]).T
+        assert np.allclose(est, true, atol=1e-12)

@@ -9,8 +9,9 @@ per nest as a rotation vector; :meth:`NestCalibration.to_sensor_frame` turns a r
 sensor frame before the fit.
 
 Only relative tilts can be measured with a reference unit whose own M is unknown: the calibration's
-datum is the mean nest (the rotation vectors sum to zero). A tilt common to all nests stays in every
-unit's M, as it does on any rig whose nests are not measured against an external reference.
+datum is then the mean nest (the rotation vectors sum to zero), and a tilt common to all nests stays in
+every unit's M. With the reference unit's M from a calibration elsewhere (a laboratory's) the tilts are
+absolute (``datum``: ``"reference"``).
 
 Saved as JSON, format ``station-nests/1``; :func:`nest_calibration_from_json` refuses other formats.
 """
@@ -66,6 +67,8 @@ class NestCalibration:
         rotations_std_deg: their standard uncertainties (deg), per nest and axis.
         agreement_deg: per nest the angle between the accelerometer's and the gyroscope's estimate (deg):
             both see the same mount, so a large value says the reference unit or the fit misbehaved.
+        datum: ``"mean nest"`` (relative tilts) or ``"reference"`` (absolute: the reference unit's own M was
+            known from a calibration elsewhere).
     """
 
     rig: str
@@ -75,6 +78,7 @@ class NestCalibration:
     rotations_deg: tuple[tuple[float, float, float], ...]
     rotations_std_deg: tuple[tuple[float, float, float], ...]
     agreement_deg: tuple[float, ...]
+    datum: str = "mean nest"
 
     @property
     def nests(self) -> int:
@@ -111,6 +115,7 @@ class NestCalibration:
             "rotations_deg": [list(r) for r in self.rotations_deg],
             "rotations_std_deg": [list(r) for r in self.rotations_std_deg],
             "agreement_deg": list(self.agreement_deg),
+            "datum": self.datum,
         }
 
     def to_json_text(self) -> str:
@@ -141,4 +146,5 @@ def nest_calibration_from_json(data: Mapping[str, Any]) -> NestCalibration:
         rig=str(data.get("rig", "")), version=int(data.get("version", 0)),
         reference_serial=str(data.get("reference_serial", "")), created_at=str(data.get("created_at", "")),
         rotations_deg=rot, rotations_std_deg=std, agreement_deg=tuple(float(a) for a in agree),
+        datum=str(data.get("datum", "mean nest")),
     )

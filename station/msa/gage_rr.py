@@ -177,7 +177,8 @@ def _satterthwaite_ci(terms: Sequence[tuple[float, float, float]], level: float)
     high = math.sqrt(nu * est / q_low) if q_low > 0 else math.inf  # a fraction of a degree of freedom: unbounded
     if var <= 0:
         return 0.0, 0.0, high
-    low = math.sqrt(nu * var / stats.chi2.ppf(1.0 - alpha / 2.0, nu))
+    q_high = float(stats.chi2.ppf(1.0 - alpha / 2.0, nu))
+    low = math.sqrt(nu * var / q_high) if q_high > 0 else 0.0
     return var, low, high
 
 

@@ -190,9 +190,9 @@ def msa_simulate(
         typer.echo(f"nests' mounting errors (deg, x/y/z): {errors}", err=True)
         if nest_cal:
             typer.echo(f"nest calibration: the reference unit in each of {nests} nests", err=True)
-            serial, _ = run_nest_calibration(nests, db_url, seed=seed, scale=scale,
+            serial, _, lab = run_nest_calibration(nests, db_url, seed=seed, scale=scale,
                                              nest_errors_deg=errors, station_id=station_id, on_run=progress)
-            cal = estimate_from_records(db_url, rig_key, serial)
+            cal = estimate_from_records(db_url, rig_key, serial, reference=lab)
             for line in describe(cal):
                 typer.echo(line, err=True)
         typer.echo(f"study: {parts} parts x {nests} nests x {repeats} repeats = "

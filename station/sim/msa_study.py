@@ -103,20 +103,27 @@ def run_nest_calibration(
     station_id: str = "msa-sim",
     on_run: Callable[[int, int, RunResult], None] | None = None,
     out_dir: Path | None = Path("msa-out"),
-) -> tuple[str, list[RunResult]]:
+) -> tuple[str, list[RunResult], Path | None]:
     """Run the reference unit once in every nest (the other nests hold parts), recorded in ``db_url``.
 
-    Returns the reference unit's serial and the runs; ``station nest-cal estimate`` (or
-    :func:`station.commands.nest_cal.estimate_from_records`) then fits the nests from them.
+    Returns the reference unit's serial, the runs, and its "laboratory calibration": the simulated unit's
+    true parameter set written to ``out_dir/reference-lab.json`` (None without ``out_dir``), which a real
+    line would have from a calibration elsewhere; ``station nest-cal estimate [--reference-params FILE]``
+    (:func:`station.commands.nest_cal.estimate_from_records`) then fits the nests from the runs.
     """
     plan = plan if plan is not None else default_plan()
     results: list[RunResult] = []
     serial = ""
+    lab: Path | None = None
     for j in range(nests):
         keys = [REFERENCE_KEY if i == j else 20_000 + i for i in range(nests)]
         with FakeStation(nests, scale, seed, name=station_id, plan=plan, unit_keys=keys, noise_index=1000 + j,
                          nest_errors_deg=nest_errors_deg) as sim:
             serial = sim.units[j].truth.serial
+            if out_dir is not None and lab is None:
+                out_dir.mkdir(parents=True, exist_ok=True)
+                lab = out_dir / "reference-lab.json"
+                lab.write_text(sim.units[j].truth.as_parameter_set(1.0 / plan.sample_rate_hz).to_json())
             config = StationConfig(
                 sim.rig_url, tuple(sim.sensor_urls), station_id=station_id, db_url=db_url, record=True,
                 limits_path=limits_path, out_dir=out_dir, clock_scale=scale, plan=plan, lot="nest-calibration",
@@ -126,4 +133,4 @@ def run_nest_calibration(
         results.append(result)
         if on_run is not None:
             on_run(j, nests, result)
-    return serial, results
+    return serial, results, lab
