@@ -17,7 +17,8 @@ def test_a_drifting_golden_unit_is_caught_where_the_rules_predict(tmp_path: Path
     plan = RigPlan(rest_s=120.0, pose_hold_s=15.0, rate_hold_s=6.0)
     drift = 1.0  # registered repeatabilities per shift
     r = run_drifting_golden(f"sqlite:///{tmp_path / 'g.sqlite'}", seed=7, shifts=8, drift_sigmas=drift,
-                            scale=120.0, plan=plan, out_dir=tmp_path / "runs")
+                            scale=120.0, plan=plan, out_dir=tmp_path / "runs",
+                            station_id="golden-test")
     pred = predicted_detection(drift, 8, trials=2000)
     lo, hi = np.percentile(pred, [2.5, 97.5])
     assert r.first_signal_shift is not None

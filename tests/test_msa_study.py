@@ -31,11 +31,14 @@ def study(tmp_path_factory: pytest.TempPathFactory) -> tuple[str, Path]:
     tmp = tmp_path_factory.mktemp("msa")
     db = f"sqlite:///{tmp / 'msa.sqlite'}"
     design = StudyDesign(3, 2, 2, seed=5)
-    run_study(design, db, "before", scale=120.0, plan=PLAN, nest_errors_deg=ERRORS, out_dir=tmp / "out")
+    sid = "msa-test"  # its own rig (lock and nest-calibration key)
+    run_study(design, db, "before", scale=120.0, plan=PLAN, nest_errors_deg=ERRORS, out_dir=tmp / "out",
+              station_id=sid)
     serial, _, _ = run_nest_calibration(2, db, seed=5, scale=120.0, plan=PLAN, nest_errors_deg=ERRORS,
-                                        out_dir=tmp / "out")
-    estimate_from_records(db, "fake-rig://msa-sim", serial)  # relative: the datum is the mean nest
-    run_study(design, db, "after", scale=120.0, plan=PLAN, nest_errors_deg=ERRORS, out_dir=tmp / "out")
+                                        out_dir=tmp / "out", station_id=sid)
+    estimate_from_records(db, f"fake-rig://{sid}", serial)  # relative: the datum is the mean nest
+    run_study(design, db, "after", scale=120.0, plan=PLAN, nest_errors_deg=ERRORS, out_dir=tmp / "out",
+              station_id=sid)
     return db, tmp
 
 
@@ -76,3 +79,26 @@ def test_msa_report_command(study: tuple[str, Path]) -> None:
     assert (tmp / "s.csv").read_text().startswith("format,parameter")
     refused = runner.invoke(app, ["msa", "report", "--db", db])
     assert refused.exit_code == 2 and "choose the study's runs" in refused.output
+
+
+def test_msa_page_and_api(study: tuple[str, Path]) -> None:
+    from fastapi.testclient import TestClient
+
+    from station.web.app import create_app
+
+    db, _ = study
+    with TestClient(create_app(db)) as client:
+        api = client.get("/api/msa", params={"lot": "before"})
+        assert api.status_code == 200
+        body = api.json()
+        assert body["format"] == "station-msa/1" and body["appraisers"] == ["nest 1", "nest 2"]
+        gyro_xz = next(p for p in body["parameters"] if p["parameter"] == "gyro.M.xz")
+        av = next(c for c in gyro_xz["components"] if c["name"] == "reproducibility")
+        assert av["std"] > 1e-3  # the nests' tilt, in SI
+        assert client.get("/api/msa", params={"lot": "no-such-lot"}).status_code == 404
+        page = client.get("/msa", params={"lot": "before", "parameter": "gyro.M.xz"})
+        assert page.status_code == 200 and "gyro.M.xz" in page.text and "unacceptable" in page.text
+        for kind in ("components", "ranges", "parts"):
+            svg = client.get(f"/msa/plots/{kind}.svg", params={"lot": "before", "parameter": "gyro.M.xz"})
+            assert svg.status_code == 200 and svg.text.startswith("<svg")
+        assert client.get("/msa").status_code == 200

@@ -70,28 +70,35 @@ def study_report(db_url: str | None, *, lot: str | None = None, runs: tuple[str,
 
 
 def print_report(report: StudyReport) -> None:
-    """The study as a table on the terminal."""
+    """The study as a table on the terminal, standard deviations in the display convention's units."""
     from rich.console import Console
     from rich.table import Table
 
+    from station.kernel.display import Display, display_of_check, format_number
+
     console = Console(width=None if sys.stdout.isatty() else 160)
     console.print(f"Gage R&R by ANOVA: {len(report.parts)} parts x {len(report.appraisers)} {report.by}s "
-                  f"({', '.join(report.appraisers)}); intervals {100 * report.level:.0f} % two-sided")
+                  f"({', '.join(report.appraisers)}); intervals {100 * report.level:.0f} % two-sided; "
+                  "EV repeatability, AV reproducibility, GRR both, PV part variation (standard deviations)")
     table = Table()
     for col in ("parameter", "unit", "r", "EV", "AV", "GRR", "PV", "%GRR tol", "%GRR TV", "ndc", "verdict"):
         table.add_column(col, justify="left" if col in ("parameter", "unit", "verdict") else "right")
     for p in report.parameters:
         g = p.study
+        d = display_of_check(p.parameter, p.unit)
         if g is None:
-            table.add_row(p.parameter, p.unit, "", "", "", "", "", "", "", "", f"not analysed: {p.reason}")
+            table.add_row(p.parameter, d.unit, "", "", "", "", "", "", "", "", f"not analysed: {p.reason}")
             continue
 
         def pct(x: float | None) -> str:
             return "" if x is None or not math.isfinite(x) else f"{x:.1f}"
 
+        def sd(x: float, d: Display = d) -> str:
+            return format_number(d.spread(x))
+
         table.add_row(
-            p.parameter, p.unit, str(g.repeats), f"{g.repeatability.std:.3g}", f"{g.reproducibility.std:.3g}",
-            f"{g.grr.std:.3g}", f"{g.part.std:.3g}", pct(g.grr.pct_tolerance), pct(g.grr.pct_total),
+            p.parameter, d.unit, str(g.repeats), sd(g.repeatability.std), sd(g.reproducibility.std),
+            sd(g.grr.std), sd(g.part.std), pct(g.grr.pct_tolerance), pct(g.grr.pct_total),
             str(g.ndc) if g.determined else "n/a",
             g.verdict + ("" if g.ndc_adequate or not g.determined else " (ndc < 5)"),
         )

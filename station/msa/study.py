@@ -38,7 +38,8 @@ class StudyPoint:
 class ParameterStudy:
     """The study of one parameter: the ANOVA result, or why there is none (``reason``).
 
-    ``dropped``: measurements left out to balance the design (the newest repeats of fuller cells).
+    ``dropped``: measurements left out to balance the design (the newest repeats of fuller cells);
+    ``cells``: the values analysed, per (part, appraiser), oldest first.
     """
 
     parameter: str
@@ -46,6 +47,7 @@ class ParameterStudy:
     study: GageStudy | None
     reason: str | None
     dropped: int
+    cells: tuple[tuple[str, str, tuple[float, ...]], ...] = ()
 
     @property
     def pct_grr(self) -> float | None:
@@ -154,8 +156,9 @@ def _one(name: str, pts: Sequence[StudyPoint], level: float) -> ParameterStudy:
             p_list.append(p)
             a_list.append(a)
             y.append(v)
+    kept = tuple(sorted((p, a, tuple(v[:r])) for (p, a), v in cells.items()))
     try:
         study = gage_rr(p_list, a_list, y, tolerance=tolerance, level=level)
     except StudyDesignError as exc:
-        return ParameterStudy(name, unit, None, str(exc), dropped)
-    return ParameterStudy(name, unit, study, None, dropped)
+        return ParameterStudy(name, unit, None, str(exc), dropped, kept)
+    return ParameterStudy(name, unit, study, None, dropped, kept)

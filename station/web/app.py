@@ -42,11 +42,11 @@ from station.store.quality import ShiftCalendar
 from station.web.context import WebContext
 from station.web.diagnosis import DiagnosisService
 from station.web.openapi import StationAPI
-from station.web.routes import certificate, diagnosis, population, quality, runs, status, units
+from station.web.routes import certificate, diagnosis, msa, population, quality, runs, status, units
 from station.web.state import LiveStatus
 
 ROUTERS = (status.router, runs.router, units.router, certificate.router, diagnosis.router, population.router,
-           quality.router)
+           quality.router, msa.router)
 
 
 @asynccontextmanager
