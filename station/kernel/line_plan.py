@@ -1,0 +1,60 @@
+"""The calibration line's plan: how long a unit soaks in the rack, and what the rig does after.
+
+In a line the warm-up of eq. 3 is observed in a powered soak rack (a rest in a fixed, unknown
+orientation, logged from power-on) and only the poses and rate steps run on the rig. A
+:class:`LinePlan` holds both parts: ``rack_s`` of rest from power-on, at most ``max_transfer_s``
+to move the still-powered unit from its rack slot to the rig, then ``rig`` (a
+:class:`~station.kernel.plan.RigPlan` whose ``rest_s`` is the short rest the rig itself holds).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from station.kernel.plan import PlanError, RigPlan
+
+#: Format of a line plan written to a file (``station-line-plan/1``).
+LINE_PLAN_FORMAT = "station-line-plan/1"
+
+
+def line_rig_plan() -> RigPlan:
+    """The rig part of the default line: no rest, six 20 s poses, +-100 deg/s about each axis held 6 s."""
+    return RigPlan(
+        rest_s=0.0,
+        pose_hold_s=20.0,
+        rate_steps=tuple((axis, sign * 100.0) for axis in "xyz" for sign in (1.0, -1.0)),
+        rate_hold_s=6.0,
+    )
+
+
+@dataclass(frozen=True)
+class LinePlan:
+    """A soak in the rack, then the rig.
+
+    Attributes:
+        rack_s: rest logged in the rack from power-on (s); long enough for the gyro's T_c
+            (Table 1: 1030-3760 s) to show.
+        max_transfer_s: longest time (sensor seconds) between the rack's last sample and the rig's
+            first that still counts as one power-on (the unit must stay powered while it moves).
+        rig: what the rig does.
+    """
+
+    rack_s: float = 3600.0
+    max_transfer_s: float = 1800.0
+    rig: RigPlan = field(default_factory=line_rig_plan)
+
+    def __post_init__(self) -> None:
+        if not self.rack_s > 0:
+            raise PlanError(f"line plan: rack_s must be > 0, got {self.rack_s!r}")
+        if not self.max_transfer_s > 0:
+            raise PlanError(f"line plan: max_transfer_s must be > 0, got {self.max_transfer_s!r}")
+        if not self.rig.poses or not self.rig.rate_steps:
+            raise PlanError("line plan: the rig part needs poses and rate steps (M and b_stat come from the rig)")
+
+
+def default_line_plan() -> LinePlan:
+    """One hour in the rack, then :func:`line_rig_plan`."""
+    return LinePlan()
+
+
+__all__ = ["LINE_PLAN_FORMAT", "LinePlan", "default_line_plan", "line_rig_plan"]
