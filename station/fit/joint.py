@@ -57,7 +57,7 @@ from station.session.model import Kind, Session
 
 #: Metadata keys the line's recordings carry (see :func:`check_power`).
 WALL_KEY = "wall_clock_at_start_s"
-BOOT_KEY = "boot_id"
+BOOT_KEY = "boot_count"
 #: Offset added to the rig's segment indices in the merged recording (rack segments keep theirs).
 _RIG_SEGMENT_OFFSET = 1_000_000
 #: First rack run length (s); each later run is twice as long (see the module docstring).
@@ -101,7 +101,7 @@ def check_power(
 ) -> PowerContinuity:
     """Did the unit stay powered from the rack's first sample to the rig's last?
 
-    Interrupted when the serials differ, the sensor's power-on counter (``boot_id``) changed, the
+    Interrupted when the serials differ, the sensor's power-on counter (``boot_count``) changed, the
     sensor time restarted (the rig's first sample is not after the rack's last: a counter reset), the
     sensor time between the two recordings disagrees with the station's clock (``wall_clock_at_start_s``
     of both; allowed: ``clock_slack_s`` plus ``clock_tolerance`` of the gap, the sensor's clock error),

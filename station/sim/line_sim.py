@@ -10,7 +10,7 @@ power-on, as a real unit's two recordings do.
 power-on of the same unit (its sensor time restarts at 0, its warm-up starts again).
 
 Each recording carries ``wall_clock_at_start_s`` (POSIX seconds of its first sample, on the station's
-clock) and ``boot_id`` (the sensor's power-on counter); :func:`station.fit.joint.check_power` reads them.
+clock) and ``boot_count`` (the sensor's power-on counter); :func:`station.fit.joint.check_power` reads them.
 """
 
 from __future__ import annotations
@@ -94,17 +94,17 @@ def simulate_line(
         res = simulate_session(seed, plan=whole, sensor_class=sensor_class, unit=unit)
         s = res.session
         t0_rig = plan.rack_s + transfer_s
-        rack = _cut(s, s.t_s < plan.rack_s, wall_clock_at_start_s=repr(POWER_ON_WALL_S), boot_id="1")
+        rack = _cut(s, s.t_s < plan.rack_s, wall_clock_at_start_s=repr(POWER_ON_WALL_S), boot_count="1")
         # the rig's own short rest (if any) keeps its reference; its segment index stays that of the long rest
-        rig_s = _cut(s, s.t_s >= t0_rig, wall_clock_at_start_s=repr(POWER_ON_WALL_S + t0_rig), boot_id="1")
+        rig_s = _cut(s, s.t_s >= t0_rig, wall_clock_at_start_s=repr(POWER_ON_WALL_S + t0_rig), boot_count="1")
         return LineSim(_unknown(rack), rig_s, res.truth, rack_up, False, (res,))
     first = simulate_session(seed, plan=replace(rig, rest_pose=rack_up, rest_s=plan.rack_s, poses=(),
                                                 rate_steps=()), sensor_class=sensor_class, unit=unit)
     second = simulate_session(seed + 1_000_003, plan=rig, sensor_class=sensor_class, unit=first.truth)
     s1 = first.session
-    rack = _cut(s1, s1.t_s < plan.rack_s, wall_clock_at_start_s=repr(POWER_ON_WALL_S), boot_id="1")
+    rack = _cut(s1, s1.t_s < plan.rack_s, wall_clock_at_start_s=repr(POWER_ON_WALL_S), boot_count="1")
     rig_s = _cut(second.session, np.ones(len(second.session), dtype=bool), serial=s1.serial,
-                 wall_clock_at_start_s=repr(POWER_ON_WALL_S + plan.rack_s + transfer_s), boot_id="2")
+                 wall_clock_at_start_s=repr(POWER_ON_WALL_S + plan.rack_s + transfer_s), boot_count="2")
     return LineSim(_unknown(rack), rig_s, first.truth, rack_up, True, (first, second))
 
 
