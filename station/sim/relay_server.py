@@ -11,7 +11,6 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from types import SimpleNamespace
 
 from pymodbus.constants import ExcCodes
 from pymodbus.server import ModbusTcpServer
@@ -71,7 +70,8 @@ class SimulatedRelayBoard(ThreadedModbusServer):
     """The relay board on Modbus/TCP (127.0.0.1, a free port by default)."""
 
     _role = "relay board"
-    _map = SimpleNamespace(HOLDING_START=0, HOLDING_COUNT=0, STATE_START=0, STATE_COUNT=reg.IR_COUNT)
+    _map = reg  # the base's register-block glue is not used: _device and _action are the board's own
+    model: RelayBoardModel
 
     def __init__(self, channels: int = 64, host: str = "127.0.0.1", port: int = 0, *, unit: int = 1,
                  on_switch: Callable[[int, bool], None] | None = None) -> None:
