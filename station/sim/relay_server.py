@@ -11,6 +11,8 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from types import ModuleType
+from typing import ClassVar
 
 from pymodbus.constants import ExcCodes
 from pymodbus.server import ModbusTcpServer
@@ -70,7 +72,7 @@ class SimulatedRelayBoard(ThreadedModbusServer):
     """The relay board on Modbus/TCP (127.0.0.1, a free port by default)."""
 
     _role = "relay board"
-    _map = reg  # the base's register-block glue is not used: _device and _action are the board's own
+    _map: ClassVar[ModuleType] = reg  # the base's register-block glue is not used: _device and _action are the board's own
     model: RelayBoardModel
 
     def __init__(self, channels: int = 64, host: str = "127.0.0.1", port: int = 0, *, unit: int = 1,
