@@ -72,7 +72,8 @@ class SimulatedRelayBoard(ThreadedModbusServer):
     """The relay board on Modbus/TCP (127.0.0.1, a free port by default)."""
 
     _role = "relay board"
-    _map: ClassVar[ModuleType] = reg  # the base's register-block glue is not used: _device and _action are the board's own
+    #: the base's register-block glue is unused: _device and _action are the board's own
+    _map: ClassVar[ModuleType] = reg
     model: RelayBoardModel
 
     def __init__(self, channels: int = 64, host: str = "127.0.0.1", port: int = 0, *, unit: int = 1,
