@@ -34,6 +34,7 @@ ALLOWED: dict[str, set[str]] = {
     # hardware behind protocols, selected by URL scheme
     "rig": {"kernel", "modbus"},
     "chamber": {"kernel", "modbus"},
+    "rack": {"kernel", "modbus"},
     "sensor": {"kernel"},
     "eeprom": {"kernel", "fit", "sensor"},
     # the sequence: steps, runner, records, limits, gates, provisioning, on-rig verification
@@ -42,6 +43,8 @@ ALLOWED: dict[str, set[str]] = {
     "store": {"kernel", "fit", "eeprom", "sequence"},
     "terminal": {"kernel", "fit", "sequence"},
     "web": NUMERICS | {"eeprom", "sequence", "store"},
+    # the calibration line's roles: the soak rack's logging and recordings, the rig role's joint fit
+    "line": {"kernel", "session", "fit", "sensor", "rack", "store"},
     # the composition root, its one-run-per-rig lock, and the command line
     "rig_lock": {"kernel", "store"},
     "compose": {"kernel", "session", "fit", "rig", "chamber", "sensor", "sequence", "store", "rig_lock"},
@@ -49,7 +52,7 @@ ALLOWED: dict[str, set[str]] = {
     "cli": NUMERICS | {"rig", "chamber", "sensor", "eeprom", "sequence", "store", "terminal", "web", "compose",
                        "commands", "rig_lock"},
     # simulated peers: the kernel, the physics and the wire formats they speak; never the station above
-    "sim": NUMERICS | {"rig", "chamber", "sensor", "eeprom"},
+    "sim": NUMERICS | {"rig", "chamber", "rack", "sensor", "eeprom"},
     "__init__": set(),
 }
 # the simulator's own applications (the demo and its commands) sit on top of everything

@@ -95,6 +95,39 @@ def _wall_start(session: Session) -> float:
     return value if math.isfinite(value) else math.nan
 
 
+def power_continuity(
+    *, rack_serial: str, rig_serial: str, rack_boot: str | None, rig_boot: str | None, rack_end_s: float,
+    rack_end_clock_s: float, rig_start_s: float, rig_start_clock_s: float, max_transfer_s: float = 1800.0,
+    clock_tolerance: float = 1e-3, clock_slack_s: float = 2.0,
+) -> PowerContinuity:
+    """The rules of :func:`check_power` on plain numbers: the rack's last sample (sensor time ``rack_end_s``,
+    station clock ``rack_end_clock_s``) and the rig's first (``rig_start_s``, ``rig_start_clock_s``; NaN clock
+    values skip the clock comparison), the power-on counters (None: unknown). The rig role also uses it
+    before it runs anything: the unit's current uptime and boot count against its rack recording."""
+    gap = float(rig_start_s - rack_end_s)
+    wall_gap = float(rig_start_clock_s - rack_end_clock_s)
+
+    def broken(reason: str) -> PowerContinuity:
+        return PowerContinuity(False, reason, gap, wall_gap)
+
+    if rack_serial != rig_serial:
+        return broken(f"the recordings are of two units ({rack_serial!r} in the rack, {rig_serial!r} on the rig)")
+    if rack_boot is not None and rig_boot is not None and rack_boot != rig_boot:
+        return broken(f"power-on counter changed between rack and rig ({rack_boot} -> {rig_boot}): the unit lost power")
+    if not gap > 0:
+        return broken(f"sensor time restarted: the rig's first sample ({rig_start_s:.3f} s since power-on) is not "
+                      f"after the rack's last ({rack_end_s:.3f} s): the unit lost power")
+    if math.isfinite(wall_gap):
+        allowed = clock_slack_s + clock_tolerance * abs(wall_gap)
+        if abs(gap - wall_gap) > allowed:
+            return broken(f"sensor time and station clock disagree between rack and rig (sensor {gap:.1f} s, "
+                          f"station {wall_gap:.1f} s, allowed +-{allowed:.1f} s): the unit lost power or its "
+                          "counter jumped")
+    if gap > max_transfer_s:
+        return broken(f"transfer from rack to rig took {gap:.0f} s (limit {max_transfer_s:.0f} s)")
+    return PowerContinuity(True, "", gap, wall_gap)
+
+
 def check_power(
     rack: Session, rig: Session, *, max_transfer_s: float = 1800.0, clock_tolerance: float = 1e-3,
     clock_slack_s: float = 2.0,
@@ -107,30 +140,13 @@ def check_power(
     of both; allowed: ``clock_slack_s`` plus ``clock_tolerance`` of the gap, the sensor's clock error),
     or the transfer took longer than ``max_transfer_s``.
     """
-    gap = float(rig.t_s[0] - rack.t_s[-1]) if len(rig) and len(rack) else math.nan
-    w_rack, w_rig = _wall_start(rack), _wall_start(rig)
-    wall_gap = (w_rig + 0.0) - (w_rack + float(rack.t_s[-1] - rack.t_s[0])) if len(rack) else math.nan
-
-    def broken(reason: str) -> PowerContinuity:
-        return PowerContinuity(False, reason, gap, wall_gap)
-
-    if rack.serial != rig.serial:
-        return broken(f"the recordings are of two units ({rack.serial!r} in the rack, {rig.serial!r} on the rig)")
-    b_rack, b_rig = _meta(rack, BOOT_KEY), _meta(rig, BOOT_KEY)
-    if b_rack is not None and b_rig is not None and b_rack != b_rig:
-        return broken(f"power-on counter changed between rack and rig ({b_rack} -> {b_rig}): the unit lost power")
-    if not gap > 0:
-        return broken(f"sensor time restarted: the rig's first sample ({rig.t_s[0]:.3f} s since power-on) is not "
-                      f"after the rack's last ({rack.t_s[-1]:.3f} s): the unit lost power")
-    if math.isfinite(wall_gap):
-        allowed = clock_slack_s + clock_tolerance * abs(wall_gap)
-        if abs(gap - wall_gap) > allowed:
-            return broken(f"sensor time and station clock disagree between rack and rig (sensor {gap:.1f} s, "
-                          f"station {wall_gap:.1f} s, allowed +-{allowed:.1f} s): the unit lost power or its "
-                          "counter jumped")
-    if gap > max_transfer_s:
-        return broken(f"transfer from rack to rig took {gap:.0f} s (limit {max_transfer_s:.0f} s)")
-    return PowerContinuity(True, "", gap, wall_gap)
+    if not len(rack) or not len(rig):
+        return PowerContinuity(False, "an empty recording", math.nan, math.nan)
+    return power_continuity(
+        rack_serial=rack.serial, rig_serial=rig.serial, rack_boot=_meta(rack, BOOT_KEY), rig_boot=_meta(rig, BOOT_KEY),
+        rack_end_s=float(rack.t_s[-1]), rack_end_clock_s=_wall_start(rack) + float(rack.t_s[-1] - rack.t_s[0]),
+        rig_start_s=float(rig.t_s[0]), rig_start_clock_s=_wall_start(rig), max_transfer_s=max_transfer_s,
+        clock_tolerance=clock_tolerance, clock_slack_s=clock_slack_s)
 
 
 def _rack_runs(rack: Session, offset: int) -> list[tuple[int, int, int]]:
@@ -316,4 +332,4 @@ def _fit_joint(rack: Session, rig: Session, options: FitOptions, max_transfer_s:
     )
 
 
-__all__ = ["BOOT_KEY", "WALL_KEY", "PowerContinuity", "check_power", "fit_joint"]
+__all__ = ["BOOT_KEY", "WALL_KEY", "PowerContinuity", "check_power", "fit_joint", "power_continuity"]
