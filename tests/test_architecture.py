@@ -44,7 +44,7 @@ ALLOWED: dict[str, set[str]] = {
     "terminal": {"kernel", "fit", "sequence"},
     "web": NUMERICS | {"eeprom", "sequence", "store"},
     # the calibration line's roles: the soak rack's logging and recordings, the rig role's joint fit
-    "line": {"kernel", "session", "fit", "sensor", "rack", "store"},
+    "line": {"kernel", "session", "fit", "sensor", "rack", "sequence", "store"},
     # the composition root, its one-run-per-rig lock, and the command line
     "rig_lock": {"kernel", "store"},
     "compose": {"kernel", "session", "fit", "rig", "chamber", "sensor", "sequence", "store", "rig_lock"},

@@ -3,13 +3,16 @@ ptys, recordings in the database found by serial, and the rig role's plan choice
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+
 import numpy as np
 import pytest
-from sqlalchemy import create_engine, update
+from sqlalchemy import Engine, create_engine, update
 from sqlalchemy.orm import Session as DbSession
+from sqlalchemy.pool import StaticPool
 
 from station.fit.calibrate import FitOptions
-from station.line.recordings import RackRecordingError, latest_rack_recording, save_rack_recording
+from station.line.recordings import DatabaseArchive, RackRecordingError, latest_rack_recording, save_rack_recording
 from station.line.rigrole import FULL, LINE, choose_plan, fit_line_unit
 from station.line.soak import SoakRack
 from station.rack.board import RelayBoard, RelayBoardError
@@ -21,12 +24,17 @@ from station.store.models import Base, RackRecording
 
 
 @pytest.fixture
-def db() -> DbSession:
-    engine = create_engine("sqlite://")
-    Base.metadata.create_all(engine)  # the rack_recordings table alone is what these tests use
+def engine() -> Iterator[Engine]:
+    eng = create_engine("sqlite://", poolclass=StaticPool)
+    Base.metadata.create_all(eng)  # the rack_recordings table alone is what these tests use
+    yield eng
+    eng.dispose()
+
+
+@pytest.fixture
+def db(engine: Engine) -> Iterator[DbSession]:
     with DbSession(engine) as session:
         yield session
-    engine.dispose()
 
 
 def test_relay_board_switches_confirms_and_counts_its_own_power_loss() -> None:
@@ -52,7 +60,10 @@ def test_relay_board_switches_confirms_and_counts_its_own_power_loss() -> None:
             board.power(1, True)
 
 
-def test_the_rack_logs_each_unit_from_power_on_and_the_rig_role_finds_it_by_serial(db: DbSession) -> None:
+def test_the_rack_logs_each_unit_from_power_on_and_the_rig_role_finds_it_by_serial(
+    db: DbSession, engine: Engine
+) -> None:
+    archive = DatabaseArchive(lambda: DbSession(engine))
     with SimRack(3, scale=100.0, seed=11) as rack:
         board = RelayBoard(rack.board_url)
         sensors = [open_sensor(u, rack.clock) for u in rack.sensor_urls]
@@ -78,7 +89,7 @@ def test_the_rack_logs_each_unit_from_power_on_and_the_rig_role_finds_it_by_seri
             # still powered: the rig role gives it the line's short plan
             rack.clock.sleep(30.0)
             status = sensors[1].status()
-            decision = choose_plan(db, unit.serial, boot_count=status.boot_count, uptime_s=status.uptime_s,
+            decision = choose_plan(archive, unit.serial, boot_count=status.boot_count, uptime_s=status.uptime_s,
                                    clock_now_s=rack.clock.now())
             assert decision.plan == LINE and decision.reason == ""
             # power lost on the way: the full plan, and the record says why
@@ -86,13 +97,13 @@ def test_the_rack_logs_each_unit_from_power_on_and_the_rig_role_finds_it_by_seri
             board.power(1, True)
             rack.clock.sleep(2.0)
             status = sensors[1].status()
-            decision = choose_plan(db, unit.serial, boot_count=status.boot_count, uptime_s=status.uptime_s,
+            decision = choose_plan(archive, unit.serial, boot_count=status.boot_count, uptime_s=status.uptime_s,
                                    clock_now_s=rack.clock.now())
             assert decision.plan == FULL and "power-on counter changed" in decision.reason
-            decision = choose_plan(db, unit.serial, boot_count=None, uptime_s=status.uptime_s,
+            decision = choose_plan(archive, unit.serial, boot_count=None, uptime_s=status.uptime_s,
                                    clock_now_s=rack.clock.now(), on_interruption="back to rack")
             assert decision.plan == "back to rack" and "sensor time restarted" in decision.reason
-            assert choose_plan(db, "NOT-SOAKED", boot_count=1, uptime_s=10.0, clock_now_s=0.0).plan == FULL
+            assert choose_plan(archive, "NOT-SOAKED", boot_count=1, uptime_s=10.0, clock_now_s=0.0).plan == FULL
         finally:
             for s in sensors:
                 s.close()

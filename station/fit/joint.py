@@ -58,6 +58,7 @@ from station.session.model import Kind, Session
 #: Metadata keys the line's recordings carry (see :func:`check_power`).
 WALL_KEY = "wall_clock_at_start_s"
 BOOT_KEY = "boot_count"
+OFFSET_KEY = "clock_offset_s"
 #: Offset added to the rig's segment indices in the merged recording (rack segments keep theirs).
 _RIG_SEGMENT_OFFSET = 1_000_000
 #: First rack run length (s); each later run is twice as long (see the module docstring).
@@ -87,12 +88,17 @@ def _meta(session: Session, key: str) -> str | None:
 
 
 def _wall_start(session: Session) -> float:
-    text = _meta(session, WALL_KEY)
-    try:
-        value = float(text) if text is not None else math.nan
-    except ValueError:
-        return math.nan
-    return value if math.isfinite(value) else math.nan
+    """Station clock at the first sample: ``wall_clock_at_start_s``, or ``clock_offset_s`` (station clock minus
+    sensor time, what the sequence's clock sync measures) plus the first sample's sensor time; NaN if neither."""
+    for key, plus in ((WALL_KEY, 0.0), (OFFSET_KEY, float(session.t_s[0]) if len(session) else math.nan)):
+        text = _meta(session, key)
+        try:
+            value = float(text) + plus if text is not None else math.nan
+        except ValueError:
+            value = math.nan
+        if math.isfinite(value):
+            return value
+    return math.nan
 
 
 def power_continuity(
@@ -332,4 +338,4 @@ def _fit_joint(rack: Session, rig: Session, options: FitOptions, max_transfer_s:
     )
 
 
-__all__ = ["BOOT_KEY", "WALL_KEY", "PowerContinuity", "check_power", "fit_joint", "power_continuity"]
+__all__ = ["BOOT_KEY", "OFFSET_KEY", "WALL_KEY", "PowerContinuity", "check_power", "fit_joint", "power_continuity"]

@@ -11,8 +11,11 @@ from __future__ import annotations
 
 import gzip
 import hashlib
+import threading
+from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import UTC, datetime
+from typing import Protocol
 
 from sqlalchemy import select
 from sqlalchemy.orm import Session as DbSession
@@ -88,4 +91,57 @@ def latest_rack_recording(db: DbSession, serial: str) -> StoredRackRecording | N
     return StoredRackRecording(row.id, parse_session(csv), row.sha256, row.slot, row.station)
 
 
-__all__ = ["CODEC", "RackRecordingError", "StoredRackRecording", "latest_rack_recording", "save_rack_recording"]
+class RackArchive(Protocol):
+    """Where the rack puts its recordings and the rig role finds them by serial."""
+
+    def save(self, session: Session, *, station: str, slot: int) -> str: ...
+
+    def latest(self, serial: str) -> StoredRackRecording | None: ...
+
+
+class DatabaseArchive:
+    """The line's database (``rack_recordings``): every station of the line reads what the rack wrote."""
+
+    def __init__(self, sessions: Callable[[], DbSession]) -> None:
+        self._sessions = sessions
+
+    def save(self, session: Session, *, station: str, slot: int) -> str:
+        with self._sessions() as db:
+            sha = save_rack_recording(db, session, station=station, slot=slot)
+            db.commit()
+        return sha
+
+    def latest(self, serial: str) -> StoredRackRecording | None:
+        with self._sessions() as db:
+            return latest_rack_recording(db, serial)
+
+
+class MemoryArchive:
+    """Recordings in this process only (a simulation, a test): the same bytes and checks as the database's."""
+
+    def __init__(self) -> None:
+        self._rows: dict[str, list[tuple[bytes, str, int, str]]] = {}
+        self._lock = threading.Lock()
+
+    def save(self, session: Session, *, station: str, slot: int) -> str:
+        csv = format_session(session).encode("utf-8")
+        sha = hashlib.sha256(csv).hexdigest()
+        with self._lock:
+            self._rows.setdefault(session.serial, []).append((gzip.compress(csv, mtime=0), sha, slot, station))
+        return sha
+
+    def latest(self, serial: str) -> StoredRackRecording | None:
+        with self._lock:
+            rows = self._rows.get(serial)
+            if not rows:
+                return None
+            data, sha, slot, station = rows[-1]
+            n = len(rows)
+        csv = gzip.decompress(data)
+        if hashlib.sha256(csv).hexdigest() != sha:
+            raise RackRecordingError(f"rack recording of {serial!r}: its bytes do not match their SHA-256")
+        return StoredRackRecording(n, parse_session(csv), sha, slot, station)
+
+
+__all__ = ["CODEC", "DatabaseArchive", "MemoryArchive", "RackArchive", "RackRecordingError", "StoredRackRecording",
+           "latest_rack_recording", "save_rack_recording"]

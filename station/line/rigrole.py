@@ -1,29 +1,37 @@
-"""The rig role of the line: which plan a unit gets, and the fit over its rack and rig recordings.
+"""The rig role of the line: which plan a unit gets, the rig run without a power cycle, the joint fit.
 
-Before anything moves, :func:`choose_plan` looks up the unit's rack recording by serial
-(:func:`station.line.recordings.latest_rack_recording`) and compares it with what the unit reports now
-(its boot count, its uptime on the station clock) by the rules of :func:`station.fit.joint.power_continuity`:
+Before anything moves, :func:`choose_plan` looks up the unit's rack recording by serial (a
+:class:`~station.line.recordings.RackArchive`) and compares it with what the unit reports now (its boot
+count, its uptime on the station clock) by the rules of :func:`station.fit.joint.power_continuity`:
 
-* ``line``: one power-on since the rack's first sample: the short rig plan, then :func:`fit_line_unit`;
+* ``line``: one power-on since the rack's first sample: the short rig plan, then the joint fit;
 * otherwise the unit gets the ``full`` rig plan (warm-up on the rig, as without a rack) or goes ``back to
   the rack`` (``on_interruption``), and :class:`LineDecision` says why (no rack recording, a changed
   boot count, a sensor time that restarted or disagrees with the station clock, a transfer too long).
 
-After the rig recording, :func:`fit_line_unit` checks the same again on the recordings themselves
-(:func:`station.fit.joint.check_power`) and fits both together (:func:`station.fit.joint.fit_joint`).
+:class:`LineRigRunner` is the sequence runner for the line's units: the units keep the power they had in
+the rack (:class:`KeepPowered`: the rest step's power cycle becomes a check that the unit did not reboot),
+each recording carries the station clock's offset from the unit's sensor time (``clock_offset_s``), a unit
+whose plan is not ``line`` is refused before anything moves with its decision's reason, and each unit is
+fitted over its rack and rig recordings together (:func:`fit_line_unit`).
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
-
-from sqlalchemy.orm import Session as DbSession
+from typing import Any
 
 from station.fit.calibrate import FitOptions
-from station.fit.joint import BOOT_KEY, check_power, fit_joint, power_continuity
+from station.fit.joint import BOOT_KEY, OFFSET_KEY, check_power, fit_joint, power_continuity
 from station.fit.params import ParameterSet
-from station.line.recordings import StoredRackRecording, latest_rack_recording
+from station.kernel.clock import Clock
+from station.kernel.errors import FitError, HardwareError
+from station.line.recordings import RackArchive, StoredRackRecording
+from station.sensor.protocol import Sensor
+from station.sequence.capture import UnitChannel
+from station.sequence.runner import SequenceRunner
 from station.session.model import Session
 
 #: what a unit gets
@@ -56,14 +64,14 @@ def _wall(session: Session) -> float:
 
 
 def choose_plan(
-    db: DbSession, serial: str, *, boot_count: int | None, uptime_s: float, clock_now_s: float,
+    archive: RackArchive, serial: str, *, boot_count: int | None, uptime_s: float, clock_now_s: float,
     max_transfer_s: float = 1800.0, on_interruption: str = FULL,
 ) -> LineDecision:
     """The plan for ``serial`` from its rack recording and what the unit reports now (boot count, uptime read
     at station clock ``clock_now_s``)."""
     if on_interruption not in ON_INTERRUPTION:
         raise ValueError(f"on_interruption must be one of {ON_INTERRUPTION}, got {on_interruption!r}")
-    stored = latest_rack_recording(db, serial)
+    stored = archive.latest(serial)
     if stored is None:
         return LineDecision(serial, FULL, "no rack recording of this unit", None)
     rack = stored.session
@@ -87,4 +95,70 @@ def fit_line_unit(rack: Session, rig: Session, options: FitOptions | None = None
     return params
 
 
-__all__ = ["BACK_TO_RACK", "FULL", "LINE", "LineDecision", "choose_plan", "fit_line_unit"]
+class KeepPowered:
+    """A sensor client whose ``power_cycle`` keeps the unit's power: the line's units arrive powered from the rack,
+    and a power cycle would restart the warm-up the rack observed. It checks instead that the unit did not reboot
+    since it was wrapped (its boot count); everything else is the wrapped client's."""
+
+    def __init__(self, sensor: Sensor) -> None:
+        self._sensor = sensor
+        self._boot_count = sensor.status().boot_count
+
+    def power_cycle(self, boot_timeout_s: float | None = None) -> None:
+        now = self._sensor.status().boot_count
+        if now != self._boot_count:
+            raise HardwareError(f"the unit rebooted on the rig (boot count {self._boot_count} -> {now}): its rack "
+                                "recording no longer shares its time base")
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._sensor, name)
+
+
+class LineRigRunner(SequenceRunner):
+    """The sequence runner for units that soaked in the rack (see the module docstring).
+
+    Args are :class:`~station.sequence.runner.SequenceRunner`'s (``sensors`` are wrapped in :class:`KeepPowered`),
+    plus ``archive`` (where the rack recordings are), ``max_transfer_s`` and ``on_interruption``.
+    """
+
+    def __init__(self, rig: Any, sensors: Sequence[Sensor], clock: Clock, *, archive: RackArchive,
+                 max_transfer_s: float = 1800.0, on_interruption: str = FULL, **kwargs: Any) -> None:
+        self.archive = archive
+        self.max_transfer_s = float(max_transfer_s)
+        self.decisions: dict[str, LineDecision] = {}
+        wrapped: list[Sensor] = []
+        for s in sensors:
+            serial = s.identify().serial
+            status = s.status()
+            self.decisions[serial] = choose_plan(archive, serial, boot_count=status.boot_count,
+                                                 uptime_s=status.uptime_s, clock_now_s=clock.now(),
+                                                 max_transfer_s=max_transfer_s, on_interruption=on_interruption)
+            wrapped.append(KeepPowered(s))  # type: ignore[arg-type]
+        outer = kwargs.pop("admit", None)
+
+        def admit(serial: str, run_id: str) -> str | None:
+            d = self.decisions.get(serial)
+            if d is None:
+                return "not identified before the run"
+            if d.plan != LINE:
+                return f"{d.plan}: {d.reason}"
+            return outer(serial, run_id) if outer is not None else None
+
+        super().__init__(rig, wrapped, clock, admit=admit, **kwargs)
+
+    def _metadata(self, unit: UnitChannel) -> dict[str, str]:
+        meta = super()._metadata(unit)
+        offset = getattr(unit, "offset_s", None)
+        if offset is not None and math.isfinite(offset):
+            meta[OFFSET_KEY] = repr(float(offset))
+        return meta
+
+    def _fit_one(self, session: Session) -> ParameterSet:
+        stored = self.archive.latest(session.serial)
+        if stored is None:
+            raise FitError("no rack recording of this unit")
+        return fit_line_unit(stored.session, session, self.fit_options, max_transfer_s=self.max_transfer_s)
+
+
+__all__ = ["BACK_TO_RACK", "FULL", "LINE", "KeepPowered", "LineDecision", "LineRigRunner", "choose_plan",
+           "fit_line_unit"]

@@ -77,8 +77,16 @@ def demo(
     thermal: Annotated[bool, typer.Option("--thermal", help="thermal calibration in a simulated climate chamber: "
                                           "plateaus at 5/15/25/45 degC, verification at 35 degC; the last unit has "
                                           "no temperature effects (the reference)")] = False,
+    line: Annotated[bool, typer.Option("--line", help="the calibration line: the units soak in a simulated rack "
+                                       "(relay board on Modbus/TCP) from power-on, go powered to the rig for the "
+                                       "short plan, and are fitted over both recordings")] = False,
+    rack_s: Annotated[float, typer.Option("--rack-s", min=60.0, help="with --line: rest in the rack from power-on "
+                                          "(simulated s)")] = 1200.0,
 ) -> None:
     """Simulated rig + N sensors, the whole sequence, fit, limits, summary: the station end to end.
+
+    With ``--line`` the warm-up is observed in a simulated soak rack and only the poses and rate steps run on
+    the rig; it prints ``rig time per unit``.
 
     With ``--thermal`` a simulated climate chamber (Modbus/TCP) joins: the units carry temperature bias and
     scale coefficients, are calibrated at four temperatures and verified at a fifth, and a table compares
@@ -87,10 +95,12 @@ def demo(
     Exit code: 0 all PASS, 1 a unit FAILed, 2 ERROR (station fault), 3 a unit REFUSED by the retest
     policy, 4 a unit to RETEST (inconclusive verdict), 130 ABORTED (Ctrl-C, SIGTERM, SIGHUP).
     """
-    from station.sim.demo import DEMO_SCALE, THERMAL_SCALE, run_demo, run_thermal_demo
+    from station.sim.demo import DEMO_SCALE, THERMAL_SCALE, run_demo, run_line_demo, run_thermal_demo
 
     try:
-        if thermal:
+        if line:
+            result = run_line_demo(units, rack_s, seed, limits_path=limits)
+        elif thermal:
             result, _ = run_thermal_demo(units, scale or THERMAL_SCALE, seed, out, db_url=db, record=True,
                                          limits_path=limits)
         else:

@@ -116,6 +116,110 @@ def run_demo(
 
 
 
+# --- the line demo: warm-up in a soak rack, poses and rates on the rig ---------------------------------
+
+LINE_UNITS = 2
+LINE_RACK_S = 1200.0
+#: total sample frames per wall second the simulated sensors may produce (sets the clock scale)
+LINE_MAX_FRAMES = 12000.0
+
+
+def run_line_demo(
+    units: int = LINE_UNITS,
+    rack_s: float = LINE_RACK_S,
+    seed: int = 0,
+    *,
+    transfer_s: float = 30.0,
+    console: Console | None = None,
+    limits_path: Path | None = None,
+    max_frames: float = LINE_MAX_FRAMES,
+) -> RunResult:
+    """The calibration line, simulated: ``units`` units soak ``rack_s`` in a rack (relay board on Modbus/TCP,
+    sensors on ptys, each still in its slot's orientation), are carried powered to the rig (``transfer_s``), run
+    the line's short rig plan there and are fitted over both recordings; prints the run and
+    ``rig time per unit: <seconds> s`` (simulated seconds of rig time divided by the units).
+
+    The rack's recordings go to an in-process archive (the same compressed bytes and SHA-256 checks as the
+    database's ``rack_recordings``). The clock scale is chosen so the sensors send at most ``max_frames`` frames
+    per wall second.
+    """
+    from station.kernel.clock import SimClock
+    from station.kernel.limits_file import load_limits
+    from station.kernel.line_plan import line_rig_plan
+    from station.line.recordings import MemoryArchive
+    from station.line.rigrole import LineRigRunner
+    from station.line.soak import SoakRack
+    from station.rack.board import RelayBoard
+    from station.rig import open_rig
+    from station.sensor import open_sensor
+    from station.sim.rack_sim import StaticMount
+    from station.sim.relay_server import SimulatedRelayBoard
+
+    console = console if console is not None else Console()
+    wall0 = time.monotonic()
+    plan = replace(line_rig_plan(), rest_s=5.0)
+    scale = max(1.0, min(300.0, max_frames / (units * plan.sample_rate_hz)))
+    limits = load_limits(limits_path)
+    with SimStation(units, scale, seed, plan=plan, clock=SimClock(scale)) as sim:
+        rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(10_000,)))
+        for u in sim.units:
+            u.sensor.power_off()  # the rack's relay powers it
+            tilt = np.radians(rng.uniform(-20.0, 20.0, size=3))
+            u.source.rig = StaticMount(*tilt)  # still in its rack slot, an orientation nobody measured
+
+        def switch(slot: int, on: bool) -> None:
+            sensor = sim.units[slot].sensor
+            sensor.power_on() if on else sensor.power_off()
+
+        archive = MemoryArchive()
+        sensors = [open_sensor(url, sim.clock) for url in sim.sensor_urls]
+        try:
+            with SimulatedRelayBoard(units, on_switch=switch) as board_sim, RelayBoard(board_sim.url) as board:
+                console.print(f"soak rack: relay board at {board_sim.url}, {units} unit(s) on "
+                              f"{', '.join(u.sensor.device for u in sim.units)}; clock x{scale:g}; "
+                              f"{rack_s:g} s from power-on")
+                soaked = SoakRack(board, sensors, sim.clock, sample_rate_hz=int(plan.sample_rate_hz),
+                                  gravity_mps2=plan.gravity_mps2, station="demo-rack").soak(range(units), rack_s)
+                for r in soaked:
+                    if r.session is not None:
+                        sha = archive.save(r.session, station="demo-rack", slot=r.slot)
+                        console.print(f"  slot {r.slot}: {r.serial} {len(r.session)} samples, sha256 {sha[:12]}")
+                    else:
+                        console.print(f"  slot {r.slot}: {r.serial or '?'} no recording: {r.error}")
+                # carried to the rig, still powered (the relay stays on: the unit's supply travels with it)
+                sim.clock.sleep(transfer_s)
+                for u in sim.units:
+                    u.source.rig = sim.rig
+                rig = open_rig(sim.rig_url, sim.clock, **sim.rig_client_options())
+                try:
+                    runner = LineRigRunner(
+                        rig, sensors, sim.clock, archive=archive, plan=plan,
+                        options=SequenceOptions().for_scale(scale), limits=limits.product, station="demo-line",
+                        fit_options=FitOptions(tc_range_s=dict(limits.correlation_time_s)),
+                    )
+                    for serial, d in runner.decisions.items():
+                        console.print(f"  {serial}: {d.plan}{' (' + d.reason + ')' if d.reason else ''}")
+                    display = ProgressDisplay(console, [u.truth.serial for u in sim.units], scale)
+                    runner.subscribe(display)
+                    with display:
+                        result = runner.run()
+                finally:
+                    rig.close()
+        finally:
+            for s_ in sensors:
+                s_.close()
+    console.print(summary_table(result))
+    for u in result.units:
+        if u.params is not None:
+            line = u.params.quality.get("line", {})
+            tc = u.params.gyro.correlation_time_s
+            console.print(f"  {u.serial}: rack {line.get('rack_span_s', 0):.0f} s + rig; gyro T_c "
+                          f"{', '.join('-' if not np.isfinite(v) else f'{v:.0f}' for v in tc)} s")
+    console.print(f"rig time per unit: {result.sequence_s / max(units, 1):.0f} s")
+    console.print(f"line demo finished in {time.monotonic() - wall0:.1f} s wall time")
+    return result
+
+
 # --- the thermal demo ---------------------------------------------------------------------------------
 
 THERMAL_SCALE = 120.0
