@@ -209,11 +209,11 @@ def run_line_demo(
             for s_ in sensors:
                 s_.close()
     console.print(summary_table(result))
-    for r in result.units:
-        if r.params is not None:
-            line = r.params.quality.get("line", {})
-            tc = r.params.gyro.correlation_time_s
-            console.print(f"  {r.serial}: rack {line.get('rack_span_s', 0):.0f} s + rig; gyro T_c "
+    for unit in result.units:
+        if unit.params is not None:
+            line = unit.params.quality.get("line", {})
+            tc = unit.params.gyro.correlation_time_s
+            console.print(f"  {unit.serial}: rack {line.get('rack_span_s', 0):.0f} s + rig; gyro T_c "
                           f"{', '.join('-' if not np.isfinite(v) else f'{v:.0f}' for v in tc)} s")
     console.print(f"rig time per unit: {result.sequence_s / max(units, 1):.0f} s")
     console.print(f"line demo finished in {time.monotonic() - wall0:.1f} s wall time")
