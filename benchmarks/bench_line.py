@@ -3,8 +3,8 @@
 Two parts, one command, one table each:
 
 1. **Rig time per unit** at N = 1, 4, 16 units on one rig, for the full plan (300 s power-on
-   rest, six 30 s poses, 18 rate steps of 12 s) and the line's rig part (a 5 s rest, six 20 s
-   poses, +-100 deg/s about each axis held 6 s): the real station code on a simulated clock
+   rest, six 30 s poses, 18 rate steps of 12 s) and the line's rig part (a 2 s rest, six 25 s
+   poses, +-100 deg/s about each axis held 3 s: :func:`station.kernel.line_plan.line_rig_plan`): the real station code on a simulated clock
    (:func:`bench_sequence.run_one`: a simulated Modbus rig on 127.0.0.1, sensors on ptys), rig time
    = station-clock seconds from start until the rig is confirmed at rest, divided by N.
 
@@ -57,7 +57,7 @@ from station.sim.session_sim import simulate_session
 _DEG = 180.0 / math.pi
 
 
-def line_rig(rest_s: float = 5.0) -> RigPlan:
+def line_rig(rest_s: float = 2.0) -> RigPlan:
     """The line's rig part as the sequence runs it: a short rest first (the runner's first step)."""
     return replace(line_rig_plan(), rest_s=rest_s)
 

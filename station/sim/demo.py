@@ -157,7 +157,7 @@ def run_line_demo(
 
     console = console if console is not None else Console()
     wall0 = time.monotonic()
-    plan = replace(line_rig_plan(), rest_s=5.0)
+    plan = replace(line_rig_plan(), rest_s=2.0)
     scale = max(1.0, min(300.0, max_frames / (units * plan.sample_rate_hz)))
     limits = load_limits(limits_path)
     with SimStation(units, scale, seed, plan=plan, clock=SimClock(scale)) as sim:
