@@ -133,6 +133,7 @@ def run_line_demo(
     console: Console | None = None,
     limits_path: Path | None = None,
     max_frames: float = LINE_MAX_FRAMES,
+    interrupt: Sequence[int] = (),
 ) -> RunResult:
     """The calibration line, simulated: ``units`` units soak ``rack_s`` in a rack (relay board on Modbus/TCP,
     sensors on ptys, each still in its slot's orientation), are carried powered to the rig (``transfer_s``), run
@@ -141,7 +142,8 @@ def run_line_demo(
 
     The rack's recordings go to an in-process archive (the same compressed bytes and SHA-256 checks as the
     database's ``rack_recordings``). The clock scale is chosen so the sensors send at most ``max_frames`` frames
-    per wall second.
+    per wall second, and at most the plain demo's ``DEMO_SCALE``. The units of the slots in ``interrupt`` lose power on the way to the rig: the rig role
+    refuses them (they get the full plan or go back to the rack) and says why.
     """
     from station.kernel.clock import SimClock
     from station.kernel.limits_file import load_limits
@@ -158,7 +160,7 @@ def run_line_demo(
     console = console if console is not None else Console()
     wall0 = time.monotonic()
     plan = replace(line_rig_plan(), rest_s=2.0)
-    scale = max(1.0, min(300.0, max_frames / (units * plan.sample_rate_hz)))
+    scale = max(1.0, min(DEMO_SCALE, max_frames / (units * plan.sample_rate_hz)))
     limits = load_limits(limits_path)
     with SimStation(units, scale, seed, plan=plan, clock=SimClock(scale)) as sim:
         rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(10_000,)))
@@ -187,7 +189,11 @@ def run_line_demo(
                     else:
                         console.print(f"  slot {r.slot}: {r.serial or '?'} no recording: {r.error}")
                 # carried to the rig, still powered (the relay stays on: the unit's supply travels with it)
+                for slot in interrupt:
+                    sim.units[slot].sensor.power_off()
                 sim.clock.sleep(transfer_s)
+                for slot in interrupt:
+                    sim.units[slot].sensor.power_on()
                 for u in sim.units:
                     u.source.rig = sim.rig
                 rig = open_rig(sim.rig_url, sim.clock, **sim.rig_client_options())
