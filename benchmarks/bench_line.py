@@ -4,7 +4,8 @@ Two parts, one command, one table each:
 
 1. **Rig time per unit** at N = 1, 4, 16 units on one rig, for the full plan (300 s power-on
    rest, six 30 s poses, 18 rate steps of 12 s) and the line's rig part (a 2 s rest, six 25 s
-   poses, +-100 deg/s about each axis held 3 s: :func:`station.kernel.line_plan.line_rig_plan`): the real station code on a simulated clock
+   poses, +-100 deg/s about each axis held 3 s: :func:`station.kernel.line_plan.line_rig_plan`): the real station
+   code on a simulated clock
    (:func:`bench_sequence.run_one`: a simulated Modbus rig on 127.0.0.1, sensors on ptys), rig time
    = station-clock seconds from start until the rig is confirmed at rest, divided by N.
 
@@ -197,7 +198,8 @@ def main() -> None:
         print("\n| plan | " + " | ".join(f"N={n}" for n in args.rig_units) + " |")
         print("|---|" + "---|" * len(args.rig_units))
         for name in ("full", "line"):
-            cells = [f"{float(r['rig_s']) / int(r['n']):.0f} s" for r in rows if r["plan"] == name]  # type: ignore[call-overload]
+            cells = [f"{float(r['rig_s']) / int(r['n']):.0f} s"  # type: ignore[call-overload]
+                     for r in rows if r["plan"] == name]
             print(f"| {name} | " + " | ".join(cells) + " |")
         print()
 

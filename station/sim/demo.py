@@ -142,7 +142,8 @@ def run_line_demo(
 
     The rack's recordings go to an in-process archive (the same compressed bytes and SHA-256 checks as the
     database's ``rack_recordings``). The clock scale is chosen so the sensors send at most ``max_frames`` frames
-    per wall second, and at most the plain demo's ``DEMO_SCALE``. The units of the slots in ``interrupt`` lose power on the way to the rig: the rig role
+    per wall second, and at most the plain demo's ``DEMO_SCALE``. The units of the slots in ``interrupt`` lose power
+    on the way to the rig: the rig role
     refuses them (they get the full plan or go back to the rack) and says why.
     """
     from station.kernel.clock import SimClock
