@@ -146,8 +146,9 @@ def rig_times(units: list[int], scale: float, max_frames: float) -> list[dict[st
             finally:
                 bench_sequence.default_plan = original  # type: ignore[assignment]
             rows.append({"plan": name, **r})
+            note = " of a fit of the rig recording alone (this runner has no rack recording)" if name == "line" else ""
             print(f"  {name:5s} N={n:2d}: rig {float(r['rig_s']):7.1f} s, per unit {float(r['rig_s']) / n:6.1f} s, "
-                  f"{r['outcome']} ({float(r['wall_s']):.0f} s wall)", flush=True)
+                  f"{r['outcome']}{note} ({float(r['wall_s']):.0f} s wall)", flush=True)
     return rows
 
 
