@@ -9,7 +9,9 @@ to move the still-powered unit from its rack slot to the rig, then ``rig`` (a
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import json
+from dataclasses import asdict, dataclass, field, fields
+from typing import Any
 
 from station.kernel.plan import PlanError, RigPlan
 
@@ -60,9 +62,48 @@ class LinePlan:
             raise PlanError("line plan: the rig part needs poses and rate steps (M and b_stat come from the rig)")
 
 
+def line_plan_to_json(plan: LinePlan) -> str:
+    """The plan as a versioned JSON document (``format``: :data:`LINE_PLAN_FORMAT`)."""
+    rig = asdict(plan.rig)
+    rig["rate_steps"] = [list(step) for step in plan.rig.rate_steps]
+    return json.dumps({"format": LINE_PLAN_FORMAT, "rack_s": plan.rack_s, "max_transfer_s": plan.max_transfer_s,
+                       "rig": rig}, indent=2, sort_keys=True)
+
+
+def line_plan_from_json(text: str) -> LinePlan:
+    """Read a plan written by :func:`line_plan_to_json`; refuses (:class:`PlanError`) another format or version,
+    unknown keys and values the plan does not accept."""
+    try:
+        doc: Any = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise PlanError(f"line plan: not JSON ({exc})") from None
+    if not isinstance(doc, dict) or doc.get("format") != LINE_PLAN_FORMAT:
+        found = doc.get("format") if isinstance(doc, dict) else None
+        raise PlanError(f"line plan: format {found!r} is not {LINE_PLAN_FORMAT!r}")
+    rig = doc.get("rig")
+    if not isinstance(rig, dict):
+        raise PlanError("line plan: 'rig' must be a table of the rig plan's fields")
+    known = {f.name for f in fields(RigPlan)}
+    unknown = sorted(set(rig) - known) + sorted(set(doc) - {"format", "rack_s", "max_transfer_s", "rig"})
+    if unknown:
+        raise PlanError(f"line plan: unknown key(s) {', '.join(unknown)}")
+    try:
+        rig_kwargs = dict(rig)
+        if "rate_steps" in rig_kwargs:
+            rig_kwargs["rate_steps"] = tuple((str(a), float(r)) for a, r in rig_kwargs["rate_steps"])
+        for key in ("poses", "rate_flip"):
+            if key in rig_kwargs:
+                rig_kwargs[key] = tuple(rig_kwargs[key])
+        return LinePlan(rack_s=float(doc.get("rack_s", 3600.0)),
+                        max_transfer_s=float(doc.get("max_transfer_s", 1800.0)), rig=RigPlan(**rig_kwargs))
+    except (TypeError, ValueError) as exc:
+        raise PlanError(f"line plan: {exc}") from None
+
+
 def default_line_plan() -> LinePlan:
     """One hour in the rack, then :func:`line_rig_plan`."""
     return LinePlan()
 
 
-__all__ = ["LINE_PLAN_FORMAT", "LinePlan", "default_line_plan", "line_rig_plan"]
+__all__ = ["LINE_PLAN_FORMAT", "LinePlan", "default_line_plan", "line_plan_from_json", "line_plan_to_json",
+           "line_rig_plan"]

@@ -1,0 +1,44 @@
+"""The line plan: its rig part, its versioned file."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import pytest
+
+from station.kernel.line_plan import (
+    LINE_PLAN_FORMAT,
+    LinePlan,
+    default_line_plan,
+    line_plan_from_json,
+    line_plan_to_json,
+)
+from station.kernel.plan import PlanError
+
+
+def test_the_plan_file_round_trips_and_carries_its_format() -> None:
+    plan = replace(default_line_plan(), rack_s=2700.0)
+    text = line_plan_to_json(plan)
+    assert json.loads(text)["format"] == LINE_PLAN_FORMAT
+    back = line_plan_from_json(text)
+    assert back == plan
+    assert back.rig.poses == ("+z", "+x", "+y", "-x", "-y", "-z")
+    assert back.rig.rate_steps == plan.rig.rate_steps
+
+
+def test_unknown_formats_keys_and_values_are_refused() -> None:
+    doc = json.loads(line_plan_to_json(default_line_plan()))
+    with pytest.raises(PlanError, match="format"):
+        line_plan_from_json(json.dumps({**doc, "format": "station-line-plan/2"}))
+    with pytest.raises(PlanError, match="unknown key"):
+        line_plan_from_json(json.dumps({**doc, "rig": {**doc["rig"], "pose_hold": 3}}))
+    with pytest.raises(PlanError, match="rack_s"):
+        line_plan_from_json(json.dumps({**doc, "rack_s": -1}))
+    with pytest.raises(PlanError, match="unknown pose"):
+        line_plan_from_json(json.dumps({**doc, "rig": {**doc["rig"], "poses": ["+w"]}}))
+
+
+def test_a_line_needs_poses_and_rate_steps_on_the_rig() -> None:
+    with pytest.raises(PlanError, match="poses and rate steps"):
+        LinePlan(rig=replace(default_line_plan().rig, rate_steps=()))
