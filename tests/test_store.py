@@ -67,7 +67,7 @@ from station.store.recorder import DispositionError, sha256_file
 TABLES = {
     "stations", "fixture_slots", "units", "runs", "run_units", "step_timings", "limit_checks",
     "parameter_sets", "session_recordings", "eeprom_writes", "dispositions", "rig_locks",
-    "quality_parameters", "quality_results", "quality_values", "quality_daily", "quality_yield",
+    "quality_parameters", "quality_results", "quality_values", "quality_daily", "quality_yield", "rack_recordings",
 }
 
 
