@@ -153,8 +153,52 @@ def sim(
         typer.echo("stopped")
 
 
+def plan(
+    limits: Annotated[Path | None, typer.Option("--limits", help="limits file (default: fixtures/limits/default.toml)")]
+    = None,
+    out: Annotated[Path, typer.Option(help="where the plan file goes")] = Path("line-plan.json"),
+    rig_units: Annotated[int, typer.Option("--rig-units", min=1, max=64, help="units per rig run")] = 16,
+    rack_slots: Annotated[int, typer.Option("--rack-slots", min=1, max=64, help="slots of the soak rack")] = 64,
+    units: Annotated[int, typer.Option("--units", min=1, max=20, help="simulated units per candidate")] = 3,
+    match_full: Annotated[float | None, typer.Option("--match-full", min=1.0, help="also keep the median stated "
+                                                     "std of M and b_stat within this factor of the full rig "
+                                                     "plan's on the same units")] = None,
+) -> None:
+    """The shortest line plan (rig part and rack time) whose predicted accuracy meets the limits file.
+
+    Each candidate is predicted from the joint fit's stated uncertainties on simulated units of the sensor
+    class; prints every candidate, the chosen plan's rig time, units per hour of rig, rack and line, and writes
+    the plan file (``station-line-plan/1``).
+    """
+    from station.kernel.limits_file import load_limits
+    from station.kernel.line_plan import line_plan_to_json
+    from station.sim.plan_design import design, throughput
+
+    try:
+        lim = load_limits(limits)
+        best, tried = design(lim, seeds=tuple(range(31, 31 + units)), match_full=match_full)
+    except StationError as exc:
+        raise fail(exc) from None
+    typer.echo("rack s | pose hold s | rig s (predicted) | largest stated std / limit | gyro T_c resolved | meets")
+    for c in tried:
+        worst = ", ".join(f"{k} {v:.2f}" for k, v in c.worst.items())
+        typer.echo(f"{c.plan.rack_s:6.0f} | {c.plan.rig.pose_hold_s:11.0f} | {c.rig_s:17.0f} | {worst} | "
+                   f"{'yes' if c.gyro_tc_resolved else 'no'} | {'yes' if c.meets else 'no'}")
+    if best is None:
+        typer.echo("no candidate meets the limits")
+        raise typer.Exit(1)
+    t = throughput(best, rig_units, rack_slots)
+    out.write_text(line_plan_to_json(best.plan) + "\n")
+    typer.echo(f"chosen: rack {best.plan.rack_s:.0f} s, poses {best.plan.rig.pose_hold_s:.0f} s; rig time per run "
+               f"{best.rig_s:.0f} s, per unit at N={rig_units} {t.rig_per_unit_s:.0f} s")
+    typer.echo(f"units/h: rig {t.rig_units_per_h:.0f}, rack ({rack_slots} slots) {t.rack_units_per_h:.0f}, "
+               f"line {t.line_units_per_h:.0f}")
+    typer.echo(f"wrote {out}")
+
+
 def register(app: typer.Typer) -> None:
-    """Add ``simulate``, ``demo`` and ``sim`` to the ``station`` command."""
+    """Add ``simulate``, ``demo``, ``sim`` and ``plan`` to the ``station`` command."""
     app.command()(simulate)
     app.command()(demo)
     app.command()(sim)
+    app.command()(plan)
