@@ -42,11 +42,13 @@ from station.kernel.clock import Clock
 from station.kernel.errors import FitError, HardwareError, StationError, UnitRejected
 from station.kernel.limits import ProductLimits, table1_limits
 from station.kernel.measurement import Measurement, Verdict
+from station.kernel.nest_frames import NestCalibration
 from station.kernel.plan import RigPlan, default_plan
 from station.rig.protocol import Rig, RigState
 from station.sensor.protocol import Sensor
 from station.sequence.capture import UnitChannel, build_session
 from station.sequence.limits import check_limits
+from station.sequence.nest_correction import in_sensor_frame
 from station.sequence.options import SequenceOptions
 from station.sequence.records import (
     Measured,
@@ -175,6 +177,8 @@ class SequenceRunner:
         station, rig_name: names for records and session metadata.
         sensor_urls: for records and results (default ``slotN``).
         subscribers: called with every record, in order, from the thread calling :meth:`run`.
+        nests: the rig's nest calibration: each unit's references are taken into its sensor frame before
+            the session is saved and fitted (:mod:`station.sequence.nest_correction`); None: perfect nests.
     """
 
     def __init__(
@@ -194,6 +198,7 @@ class SequenceRunner:
         rig_name: str = "rig",
         sensor_urls: Sequence[str] | None = None,
         subscribers: Sequence[Subscriber] = (),
+        nests: NestCalibration | None = None,
     ) -> None:
         if not sensors:
             raise ValueError("a run needs at least one sensor")
@@ -210,6 +215,7 @@ class SequenceRunner:
         self.station = station
         self.rig_name = rig_name
         self.sensor_urls = list(sensor_urls) if sensor_urls is not None else [f"slot{k}" for k in range(len(sensors))]
+        self.nests = nests
         self.steps: list[Step] = plan_steps(self.plan)
         self._subscribers: list[Subscriber] = list(subscribers)
         self._records: list[Record] = []
@@ -361,8 +367,14 @@ class SequenceRunner:
                                     not problems, len(fx.active), "; ".join(problems)))
 
     def _apply_report(self, fx: Fixture, step: Step, report: StepReport, verdicts: list[_Verdict]) -> list[str]:
-        """Emit the step's measurements; end units with a sensor fault (ERROR) or a failed gate."""
+        """Emit the step's measurements; end units with a sensor fault (ERROR) or a failed gate.
+
+        A physics gate that every measured unit of the step fails (two units or more) is a common cause, the
+        rig or the station's timing, not the units: those units end ERROR, which the retest policy does not
+        count, with the gate named.
+        """
         problems: list[str] = []
+        common = common_cause(report)
         for unit in fx.units:
             v = verdicts[unit.slot]
             if unit.slot in report.errors:
@@ -380,8 +392,11 @@ class SequenceRunner:
             failed = [g for g in gates if not g.passed]
             if failed:
                 link = [g for g in failed if g.link]
-                outcome = Outcome.ERROR if link else Outcome.FAIL
+                outcome = Outcome.ERROR if link or common else Outcome.FAIL
                 text = "; ".join(g.describe() for g in (link or failed))
+                if common and not link:
+                    text = (f"station fault: every unit failed {', '.join(sorted(common))} in this step "
+                            f"(the rig or the station's timing, not the unit): {text}")
                 self._end_unit(fx, unit, v, outcome, f"step '{step.name}': {text}")
                 problems.append(f"slot {unit.slot}: {text}")
         return problems
@@ -477,6 +492,8 @@ class SequenceRunner:
                 v.outcome, v.message = Outcome.ERROR, run_message or "the unit was not measured"
             try:
                 built = build_session(unit, self.plan.gravity_mps2, self._metadata(unit))
+                if built is not None:
+                    built = in_sensor_frame(built, self.nests, unit.slot)
                 # fit exactly what is saved: re-fitting the CSV reproduces the parameter set
                 text = format_session(built) if built is not None else None
                 texts.append(text)
@@ -573,6 +590,11 @@ class SequenceRunner:
             if r.outcome != Outcome.PASS or stop:
                 out.append(r)
                 continue
+            reason = self.admit(r.serial, self.run_id) if self.admit is not None else None
+            if reason:  # e.g. scrapped while it was measured: no image is written into a refused unit
+                out.append(_replace_outcome(r, Outcome.REFUSED, f"not provisioned, refused by the retest policy: "
+                                                                f"{reason}"))
+                continue
             try:
                 checks = self.provisioner.provision(r, self.sensors[r.slot], self.started_at)
                 self._emit_verify(r, checks or ())
@@ -586,6 +608,15 @@ class SequenceRunner:
                 stop = True
                 out.append(_replace_outcome(r, Outcome.ABORTED, f"{self.abort_reason} during provisioning"))
         return out
+
+
+def common_cause(report: StepReport) -> set[str]:
+    """Physics gates that every unit measured in a step failed (empty below two measured units)."""
+    measured = [gates for gates in report.gates.values() if gates]
+    if len(measured) < 2:
+        return set()
+    failed = [{g.name for g in gates if not g.passed and not g.link} for gates in measured]
+    return set.intersection(*failed)
 
 
 def recording_verdict(params: ParameterSet) -> tuple[Outcome, str] | None:

@@ -154,4 +154,22 @@ def yield_trend_svg(labels: Sequence[str], fpy: Sequence[float | None], final: S
     return "".join(out)
 
 
-__all__ = ["control_chart_svg", "histogram_svg", "yield_trend_svg"]
+#: the drawing helpers the other chart modules (e.g. :mod:`station.web.msa_charts`) share
+fmt_tick, frame, scale, yticks = _fmt, _frame, _scale, _yticks
+
+__all__ = [
+    "FONT",
+    "MB",
+    "ML",
+    "MR",
+    "MT",
+    "H",
+    "W",
+    "control_chart_svg",
+    "fmt_tick",
+    "frame",
+    "histogram_svg",
+    "scale",
+    "yield_trend_svg",
+    "yticks",
+]
