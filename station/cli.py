@@ -30,6 +30,7 @@ def _add_subapps() -> None:
     from station.commands.msa import msa_app
     from station.commands.nest_cal import nest_app
     from station.commands.rigfree import export_command, import_imu_tk_command, import_openaxes_command
+    from station.commands.roles import line_app
     from station.commands.units import units_app
 
     app.add_typer(eeprom_app, name="eeprom")
@@ -37,6 +38,7 @@ def _add_subapps() -> None:
     app.add_typer(msa_app, name="msa")
     app.add_typer(nest_app, name="nest-cal")
     app.add_typer(golden_app, name="golden")
+    app.add_typer(line_app, name="line")
     app.command(name="diagnose")(diagnose_command)
     app.command(name="export")(export_command)
     import_app.command("openaxes")(import_openaxes_command)

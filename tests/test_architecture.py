@@ -50,7 +50,8 @@ ALLOWED: dict[str, set[str]] = {
     # the composition root, its one-run-per-rig lock, and the command line
     "rig_lock": {"kernel", "store"},
     "compose": {"kernel", "session", "fit", "rig", "chamber", "sensor", "sequence", "store", "rig_lock"},
-    "commands": NUMERICS | {"rig", "chamber", "sensor", "eeprom", "sequence", "store", "compose", "rig_lock"},
+    "commands": NUMERICS | {"rig", "chamber", "rack", "sensor", "eeprom", "sequence", "store", "compose", "rig_lock",
+                            "line"},
     "cli": NUMERICS | {"rig", "chamber", "sensor", "eeprom", "sequence", "store", "terminal", "web", "compose",
                        "commands", "rig_lock"},
     # simulated peers: the kernel, the physics and the wire formats they speak; never the station above
