@@ -75,7 +75,7 @@ def test_the_rack_logs_each_unit_from_power_on_and_the_rig_role_finds_it_by_seri
                 s = u.session
                 assert s is not None
                 assert np.all(np.isnan(s.ref_accel_mps2)) and np.all(np.isnan(s.ref_gyro_radps))
-                assert 59.9 <= s.duration_s <= 60.0 and s.t_s[0] < 5.0  # from just after power-on
+                assert 59.9 <= s.duration_s <= 60.0 and 0.0 < s.t_s[0] < 60.0  # sensor time since its power-on
                 # at rest in the slot: gravity in an unknown direction, raw (Table 1: scale to 2 %, bias to 0.17 m/s^2)
                 assert np.linalg.norm(s.accel_mps2.mean(axis=0)) == pytest.approx(9.80665, abs=0.4)
                 save_rack_recording(db, s, station="rack-1", slot=u.slot)
