@@ -113,6 +113,7 @@ def rig_command(
                     options=SequenceOptions().for_scale(scale), limits=lim.product, out_dir=out, station=station,
                     fit_options=FitOptions(tc_range_s=dict(lim.correlation_time_s)),
                     max_transfer_s=line_plan.max_transfer_s, on_interruption=BACK_TO_RACK if back_to_rack else FULL,
+                    clock_slack_s=2.0 + 0.2 * scale,  # a simulated clock's round trips take `scale` times longer
                 )
                 for serial, d in runner.decisions.items():
                     typer.echo(f"{serial}: {d.plan}{' (' + d.reason + ')' if d.reason else ''}")

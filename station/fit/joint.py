@@ -227,7 +227,7 @@ def _fit_triad(
 
 def fit_joint(
     rack: Session, rig: Session, options: FitOptions | None = None, *, max_transfer_s: float = 1800.0,
-    max_blocks: int = 140,
+    max_blocks: int = 140, clock_slack_s: float = 2.0,
 ) -> ParameterSet:
     """Fit eq. 1 with eq. 3's drift to a unit's rack rest and rig recording together.
 
@@ -241,16 +241,16 @@ def fit_joint(
     """
     opts = options or FitOptions()
     with threadpool_limits(limits=1, user_api="blas"), numerics(f"joint fit of {rig.serial!r}"):
-        return _fit_joint(rack, rig, opts, max_transfer_s, max_blocks)
+        return _fit_joint(rack, rig, opts, max_transfer_s, max_blocks, clock_slack_s)
 
 
 def _fit_joint(rack: Session, rig: Session, options: FitOptions, max_transfer_s: float,
-               max_blocks: int) -> ParameterSet:
+               max_blocks: int, clock_slack_s: float) -> ParameterSet:
     check_time(rack)
     check_finite(rack)
     if not rack.segments_of(Kind.REST, Kind.POSE):
         raise FitError("the rack recording has no rest segment")
-    power = check_power(rack, rig, max_transfer_s=max_transfer_s)
+    power = check_power(rack, rig, max_transfer_s=max_transfer_s, clock_slack_s=clock_slack_s)
     if not power.continuous:
         raise FitError(f"rack and rig recordings are not one power-on: {power.reason}")
     gyro_method = check_session(rig, min_pose_samples=options.min_pose_samples)

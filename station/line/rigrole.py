@@ -65,10 +65,10 @@ def _wall(session: Session) -> float:
 
 def choose_plan(
     archive: RackArchive, serial: str, *, boot_count: int | None, uptime_s: float, clock_now_s: float,
-    max_transfer_s: float = 1800.0, on_interruption: str = FULL,
+    max_transfer_s: float = 1800.0, on_interruption: str = FULL, clock_slack_s: float = 2.0,
 ) -> LineDecision:
     """The plan for ``serial`` from its rack recording and what the unit reports now (boot count, uptime read
-    at station clock ``clock_now_s``)."""
+    at station clock ``clock_now_s``); ``clock_slack_s``: see :func:`~station.fit.joint.check_power`."""
     if on_interruption not in ON_INTERRUPTION:
         raise ValueError(f"on_interruption must be one of {ON_INTERRUPTION}, got {on_interruption!r}")
     stored = archive.latest(serial)
@@ -79,18 +79,18 @@ def choose_plan(
         rack_serial=rack.serial, rig_serial=serial, rack_boot=rack.metadata.get(BOOT_KEY),
         rig_boot=None if boot_count is None else str(boot_count), rack_end_s=float(rack.t_s[-1]),
         rack_end_clock_s=_wall(rack) + float(rack.t_s[-1] - rack.t_s[0]), rig_start_s=float(uptime_s),
-        rig_start_clock_s=float(clock_now_s), max_transfer_s=max_transfer_s)
+        rig_start_clock_s=float(clock_now_s), max_transfer_s=max_transfer_s, clock_slack_s=clock_slack_s)
     if not power.continuous:
         return LineDecision(serial, on_interruption, power.reason, stored)
     return LineDecision(serial, LINE, "", stored)
 
 
 def fit_line_unit(rack: Session, rig: Session, options: FitOptions | None = None, *,
-                  max_transfer_s: float = 1800.0) -> ParameterSet:
+                  max_transfer_s: float = 1800.0, clock_slack_s: float = 2.0) -> ParameterSet:
     """The joint fit of one unit's rack and rig recordings (refused with the reason when they are not one
     power-on: :class:`~station.kernel.errors.FitError`)."""
-    power = check_power(rack, rig, max_transfer_s=max_transfer_s)
-    params = fit_joint(rack, rig, options, max_transfer_s=max_transfer_s)
+    power = check_power(rack, rig, max_transfer_s=max_transfer_s, clock_slack_s=clock_slack_s)
+    params = fit_joint(rack, rig, options, max_transfer_s=max_transfer_s, clock_slack_s=clock_slack_s)
     params.source["line"] = {"transfer_s": round(power.sensor_gap_s, 6)}
     return params
 
@@ -118,21 +118,28 @@ class LineRigRunner(SequenceRunner):
     """The sequence runner for units that soaked in the rack (see the module docstring).
 
     Args are :class:`~station.sequence.runner.SequenceRunner`'s (``sensors`` are wrapped in :class:`KeepPowered`),
-    plus ``archive`` (where the rack recordings are), ``max_transfer_s`` and ``on_interruption``.
+    plus ``archive`` (where the rack recordings are), ``max_transfer_s``, ``on_interruption`` and ``clock_slack_s``
+    (the allowed disagreement of sensor time and station clock, s; a simulated clock's command round trips take
+    its scale times longer in its seconds).
     """
 
     def __init__(self, rig: Any, sensors: Sequence[Sensor], clock: Clock, *, archive: RackArchive,
-                 max_transfer_s: float = 1800.0, on_interruption: str = FULL, **kwargs: Any) -> None:
+                 max_transfer_s: float = 1800.0, on_interruption: str = FULL, clock_slack_s: float = 2.0,
+                 **kwargs: Any) -> None:
         self.archive = archive
         self.max_transfer_s = float(max_transfer_s)
+        self.clock_slack_s = float(clock_slack_s)
         self.decisions: dict[str, LineDecision] = {}
         wrapped: list[Sensor] = []
         for s in sensors:
             serial = s.identify().serial
+            t_a = clock.now()
             status = s.status()
+            t_b = clock.now()
             self.decisions[serial] = choose_plan(archive, serial, boot_count=status.boot_count,
-                                                 uptime_s=status.uptime_s, clock_now_s=clock.now(),
-                                                 max_transfer_s=max_transfer_s, on_interruption=on_interruption)
+                                                 uptime_s=status.uptime_s, clock_now_s=0.5 * (t_a + t_b),
+                                                 max_transfer_s=max_transfer_s, on_interruption=on_interruption,
+                                                 clock_slack_s=clock_slack_s)
             wrapped.append(KeepPowered(s))  # type: ignore[arg-type]
         outer = kwargs.pop("admit", None)
 
@@ -157,7 +164,8 @@ class LineRigRunner(SequenceRunner):
         stored = self.archive.latest(session.serial)
         if stored is None:
             raise FitError("no rack recording of this unit")
-        return fit_line_unit(stored.session, session, self.fit_options, max_transfer_s=self.max_transfer_s)
+        return fit_line_unit(stored.session, session, self.fit_options, max_transfer_s=self.max_transfer_s,
+                             clock_slack_s=self.clock_slack_s)
 
 
 __all__ = ["BACK_TO_RACK", "FULL", "LINE", "KeepPowered", "LineDecision", "LineRigRunner", "choose_plan",

@@ -112,9 +112,10 @@ class SoakRack:
         serial = ""
         try:
             serial = sensor.identify().serial
+            t_a = self.clock.now()
             before = sensor.status()
-            clock_at_status = self.clock.now()
-            power_on_clock = clock_at_status - before.uptime_s  # station clock at the unit's power-on
+            t_b = self.clock.now()
+            power_on_clock = 0.5 * (t_a + t_b) - before.uptime_s  # station clock at the unit's power-on
             sensor.start_stream(self.sample_rate_hz)
             block = sensor.read_samples(duration_s=rack_s, timeout_s=rack_s + 30.0)
             sensor.stop_stream()

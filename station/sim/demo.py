@@ -207,6 +207,7 @@ def run_line_demo(
                         rig, sensors, sim.clock, archive=archive, plan=plan,
                         options=SequenceOptions().for_scale(scale), limits=limits.product, station="demo-line",
                         fit_options=FitOptions(tc_range_s=dict(limits.correlation_time_s)),
+                        clock_slack_s=2.0 + 0.2 * scale,  # command round trips take `scale` times longer here
                     )
                     for serial, d in runner.decisions.items():
                         console.print(f"  {serial}: {d.plan}{' (' + d.reason + ')' if d.reason else ''}")
