@@ -329,8 +329,14 @@ def run_station(
     chamber: Annotated[str | None, typer.Option("--chamber", help="climate chamber URL (modbus-tcp://HOST:PORT): "
                                                 "run the thermal plan (plateaus 5/15/25/45 degC, verification at "
                                                 "35 degC) instead of the room-temperature sequence")] = None,
+    yes: Annotated[bool, typer.Option("--yes", "-y", help="confirm the station's prompts (load, close the lid, "
+                                      "unload) without waiting for Enter: CI, a fixture loaded by a robot")] = False,
 ) -> None:
     """Run the calibration sequence against any rig and sensors (real ones, or `station sim`).
+
+    The station prompts at the terminal before the rig moves (load the units into their nests, close the lid)
+    and after the verdicts (unload, each nest with its verdict); Enter confirms, n and Enter cancels (ABORTED,
+    nothing moved). Without a terminal on stdin give ``--yes``: otherwise the run ends ERROR before anything moves.
 
     With ``--chamber`` the thermal plan runs in that climate chamber (``station sim --chamber`` serves one):
     soaks gated on the units' own temperatures, the poses and rate steps at every plateau, the corrected
@@ -350,8 +356,9 @@ def run_station(
     from station.compose import Station, abort_on_signals
     from station.kernel.plan import default_plan
     from station.kernel.thermal_plan import default_thermal_plan
+    from station.sequence.prompts import AutoConfirm
     from station.sequence.runner import SequenceRunner
-    from station.terminal import ProgressDisplay, summary_table
+    from station.terminal import ProgressDisplay, TerminalOperator, summary_table
 
     thermal = default_thermal_plan() if chamber else None
     plan = thermal.base if thermal is not None else default_plan()
@@ -368,8 +375,9 @@ def run_station(
                              plan=plan, operator=operator, limits_path=limits, provision=True,
                              chamber_url=chamber, thermal=thermal)
         display = ProgressDisplay(console, list(cfg.sensor_urls), cfg.clock_scale)
+        prompter = AutoConfirm("--yes") if yes else TerminalOperator(console, cfg.operator)
         with abort_on_signals(lambda: runners[-1] if runners else None):
-            station = Station(cfg, subscribers=[display])
+            station = Station(cfg, subscribers=[display], prompter=prompter)
             console.print(f"station {cfg.station_id}: database {station.recorder.db.url if station.recorder else '-'}, "
                           f"limits {station.limits.name} {station.limits.version}")
             with display:
