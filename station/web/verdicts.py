@@ -36,7 +36,7 @@ class Missed:
 
     def words(self) -> str:
         def num(x: float) -> str:
-            return f"{x:.3g}".replace("-", "−")
+            return f"{x:.4g}".replace("-", "−")
 
         unit = f" {self.unit}" if self.unit else ""
         if math.isinf(self.low):
