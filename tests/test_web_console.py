@@ -161,3 +161,38 @@ def test_every_page_links_the_console(setup: dict[str, Any]) -> None:
     for path in ("/", "/units", "/quality", "/operator", "/units/GOOD-0001"):
         r = c.get(path)
         assert r.status_code == 200 and '<a href="/operator">operator</a>' in r.text, path
+
+
+def test_time_remaining_comes_from_the_plan() -> None:
+    from station.sequence.records import StepFinished, StepStarted
+
+    live = LiveStatus()
+    live(RunStarted("r", "2026-11-21T10:00:00+00:00", 0.0, "st", "rig", ("a",), ("rest", "pose +z", "pose -z"),
+                    (300.0, 30.0, 30.0)))
+    s = live.status(with_store=False)
+    assert s.remaining_s == pytest.approx(360.0) and "rig motion not measured yet" in s.remaining_basis
+    assert s.slots[0].state == "reading serial…" and s.slots[0].serial == ""
+    live(StepStarted("r", 0, "rest", "rest", 0.0, 300.0))
+    s = live.status(with_store=False)
+    # the plan's holds, not the current step's 300 s for every step to come (which said 900 s)
+    assert s.remaining_s == pytest.approx(360.0) and s.slots[0].state == "measuring"
+    live(StepFinished("r", 0, "rest", 310.0, 310.0, True, 1))
+    s = live.status(with_store=False)
+    assert s.remaining_s == pytest.approx(30.0 + 30.0 + 2 * 10.0)
+    assert s.remaining_basis == "the plan's capture times + rig motion 10 s per step (mean of 1 finished step(s))"
+
+
+def test_the_verdict_in_plain_words() -> None:
+    from station.kernel.measurement import Measurement
+    from station.sequence.records import Measured
+
+    live = LiveStatus()
+    live(RunStarted("r", "2026-11-21T10:00:00+00:00", 0.0, "st", "rig", ("a", "b"), ("rest",), (300.0,)))
+    live(Measured("r", 0, "A-1", "limits", Measurement("gyro.bias_static.x", 0.01, "rad/s", -0.00873, 0.00873,
+                                                       False)))
+    live(UnitFinished("r", 0, "A-1", Outcome.FAIL, "out of limits (t1): gyro.bias_static.x = 0.01 rad/s outside ..."))
+    live(UnitFinished("r", 1, "B-2", Outcome.ERROR, "step 'rest': SerialTimeout: no answer"))
+    s = live.status(with_store=False)
+    assert s.slots[0].reason == ("Bad unit: gyroscope static bias x is 0.573 °/s, allowed −0.5002 to 0.5002 °/s. "
+                                 "Put it in the reject bin.")
+    assert s.slots[1].reason.startswith("Not the unit's fault: the station had a problem (step 'rest': SerialTimeout")
