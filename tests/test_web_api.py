@@ -299,8 +299,10 @@ def test_unit_page_plots_and_population(client: TestClient, store: dict[str, Any
     assert client.get("/units/NO-SUCH-UNIT").status_code == 404
     hostile = client.get("/units/%3Cscript%3Ealert(1)")
     assert hostile.status_code == 404 and "<script>alert" not in hostile.text and "&lt;script&gt;" in hostile.text
-    pop = client.get("/population")
-    assert pop.status_code == 200 and "/population/plots/accel.bias_static.x.svg" in pop.text
+    pop = client.get("/population")  # the quality page's histograms, counted by the database
+    assert pop.status_code == 200 and "/quality/histogram/accel.bias_static.x.svg" in pop.text
+    old = client.get("/population/plots/accel.bias_static.x.svg", follow_redirects=False)
+    assert old.status_code == 308 and old.headers["location"] == "/quality/histogram/accel.bias_static.x.svg"
     h = client.get("/population/plots/accel.bias_static.x.svg")
     assert h.status_code == 200 and "n=2" in h.text  # BAD-1 and the real unit
     assert client.get("/population/plots/nope.svg").status_code == 404
