@@ -36,8 +36,8 @@ class SignIn(BaseModel):
 
     name: str = Field(min_length=1, max_length=60, pattern=r"^[^\x00-\x1f<>]+$",
                       description="the operator's name (or badge number), recorded on every run they start")
-    role: Role = Field("operator", description="operator, technician or engineer")
-    token: str | None = Field(None, max_length=200,
+    role: Role = Field(default="operator", description="operator, technician or engineer")
+    token: str | None = Field(default=None, max_length=200,
                               description="the station's token: needed when signing in from another computer than "
                                           "the station's own (never shown by any page)")
 
@@ -46,8 +46,8 @@ class SignedInOperator(BaseModel):
     """The operator signed in on this browser."""
 
     signed_in: bool = Field(description="someone is signed in")
-    name: str = Field("", description="their name ('' when nobody is)")
-    role: str = Field("", description="their role ('' when nobody is)")
+    name: str = Field(default="", description="their name ('' when nobody is)")
+    role: str = Field(default="", description="their role ('' when nobody is)")
 
 
 class ScanRequest(BaseModel):
