@@ -196,3 +196,13 @@ def test_the_verdict_in_plain_words() -> None:
     assert s.slots[0].reason == ("Bad unit: gyroscope static bias x is 0.573 °/s, allowed −0.5002 to 0.5002 °/s. "
                                  "Put it in the reject bin.")
     assert s.slots[1].reason.startswith("Not the unit's fault: the station had a problem (step 'rest': SerialTimeout")
+
+
+def test_an_inconclusive_check_in_plain_words() -> None:
+    from station.kernel.measurement import Measurement
+    from station.web.verdicts import Missed, plain_reason
+
+    m = Measurement("accel.bias_static.z", -0.1694, "m/s^2", -0.17, 0.026, False, 0.00044, inconclusive=True, k=2.0)
+    assert plain_reason("FAIL", "inconclusive ...", (Missed.of(m),)) == (
+        "Bad unit: accelerometer static bias z is −0.1694 m/s², too close to its limits (−0.17 to 0.026 m/s²) to be "
+        "sure. Put it in the reject bin.")

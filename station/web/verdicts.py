@@ -45,8 +45,9 @@ class Missed:
             allowed = f"at least {num(self.low)}{unit}"
         else:
             allowed = f"{num(self.low)} to {num(self.high)}{unit}"
-        close = " (too close to the limit to be sure)" if self.inconclusive else ""
-        return f"{self.label} is {num(self.value)}{unit}, allowed {allowed}{close}"
+        if self.inconclusive:  # inside, but its uncertainty reaches over the limit
+            return f"{self.label} is {num(self.value)}{unit}, too close to its limits ({allowed}) to be sure"
+        return f"{self.label} is {num(self.value)}{unit}, allowed {allowed}"
 
 
 def plain_reason(outcome: str, message: str, missed: tuple[Missed, ...] = ()) -> str:
