@@ -324,6 +324,8 @@ class LiveStatus:
             holds = sum(lv.hold_by_kind.get(_kind_of(name), lv.step_hold_s) for name in future)
             basis = "capture times of the steps seen so far"
         motion = overhead * len(future)
+        if lv.steps_done >= len(lv.steps):
+            return 0.0, "the rig's steps are done; the fit, the limits and writing the units are not in the estimate"
         if n_done:
             basis += f" + rig motion {overhead:.0f} s per step (mean of {n_done} finished step(s))"
         else:
