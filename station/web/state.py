@@ -319,13 +319,13 @@ class LiveStatus:
         future = lv.steps[first:]
         if len(lv.holds_s) == len(lv.steps):
             holds = sum(lv.holds_s[first:])
-            basis = "the plan's capture times"
+            basis = "estimated from the plan's capture times"
         else:  # a start that did not carry the plan: the hold of the last step of the same kind
             holds = sum(lv.hold_by_kind.get(_kind_of(name), lv.step_hold_s) for name in future)
-            basis = "capture times of the steps seen so far"
+            basis = "estimated from the capture times of the steps seen so far"
         motion = overhead * len(future)
         if lv.steps_done >= len(lv.steps):
-            return 0.0, "the rig's steps are done; the fit, the limits and writing the units are not in the estimate"
+            return 0.0, "the rig's steps are done; the fit, the limits and writing the units are not estimated"
         if n_done:
             basis += f" + rig motion {overhead:.0f} s per step (mean of {n_done} finished step(s))"
         else:

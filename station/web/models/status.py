@@ -106,8 +106,8 @@ class StationStatus(BaseModel):
     progress: float = Field(description="fraction of the plan's steps finished (1)")
     remaining_s: float | None = Field(description="estimated time until the run ends (station clock s); null when not "
                                                   "running")
-    remaining_basis: str = Field(default="", description="how ``remaining_s`` was estimated, in words (the plan's "
-                                                         "capture times, the rig motion measured so far)")
+    remaining_basis: str = Field(default="", description="how ``remaining_s`` was estimated, in words (the "
+                                                         "plan's capture times, the rig motion measured so far)")
     slots: list[SlotStatus] = Field(description="one tile per fixture slot")
     rig_state: RigState | None = Field(description="the rig's last reading in this run; null before the first")
     shift: ShiftStats | None = Field(description="the current shift's figures; null without a database (or "
