@@ -98,6 +98,7 @@ def demo(
     Exit code: 0 all PASS, 1 a unit FAILed, 2 ERROR (station fault), 3 a unit REFUSED by the retest
     policy, 4 a unit to RETEST (inconclusive verdict), 130 ABORTED (Ctrl-C, SIGTERM, SIGHUP).
     """
+    from station.sequence.prompts import AutoConfirm
     from station.sim.demo import DEMO_SCALE, THERMAL_SCALE, run_demo, run_line_demo, run_thermal_demo
 
     try:
@@ -106,11 +107,14 @@ def demo(
         elif thermal:
             result, _ = run_thermal_demo(units, scale or THERMAL_SCALE, seed, out, db_url=db, record=True,
                                          limits_path=limits, lot=lot or "", operator=operator or "")
-        else:
+        else:  # the simulated fixture loads itself: its prompts are shown and confirmed at once
             result = run_demo(units, scale or DEMO_SCALE, seed, out, db_url=db, record=True, limits_path=limits,
-                              lot=lot or "", operator=operator or "")
+                              lot=lot or "", operator=operator or "", prompter=AutoConfirm("the demo"))
     except StationError as exc:
         raise fail(exc) from None
+    except KeyboardInterrupt:
+        typer.echo("aborted before the run started; nothing was moved or written", err=True)
+        raise typer.Exit(130) from None
     raise typer.Exit(result.outcome.exit_code)
 
 

@@ -14,6 +14,9 @@ a summary table and the verification residuals.
 
 At the default clock scale (30 simulated seconds per wall second) the sequence
 takes about 30 s of wall time; fits and set-up add a few seconds per unit.
+
+SIGTERM and SIGHUP do what Ctrl-C does, as in ``station run`` (:func:`station.compose.abort_on_signals`): the
+run ends ABORTED with the signal's name, the rig at rest, every unit's result recorded (none UNFINISHED).
 """
 
 from __future__ import annotations
@@ -27,16 +30,17 @@ from typing import Any
 import numpy as np
 from rich.console import Console
 
-from station.compose import Station, StationConfig
+from station.compose import Station, StationConfig, abort_on_signals
 from station.fit.calibrate import FitOptions
 from station.kernel.display import limits_identity
 from station.kernel.plan import RigPlan, default_plan
 from station.kernel.thermal_plan import ThermalPlan
 from station.physics.effects import Effects
 from station.sequence.options import SequenceOptions
+from station.sequence.prompts import Operator
 from station.sequence.provision import ProvisionRecord
 from station.sequence.records import Record
-from station.sequence.runner import RunResult
+from station.sequence.runner import RunResult, SequenceRunner
 from station.sim.firmware import install_firmware
 from station.sim.station_sim import SimStation
 from station.terminal import ProgressDisplay, provisioning_table, summary_table
@@ -65,6 +69,7 @@ def run_demo(
     admit: Callable[[str, str], str | None] | None = None,
     lot: str = "",
     operator: str = "",
+    prompter: Operator | None = None,
 ) -> RunResult:
     """Start the simulated station, run the sequence for ``units`` units at clock ``scale``, print, return.
 
@@ -88,11 +93,17 @@ def run_demo(
         on_provision: called with each unit's EEPROM write and verification record.
         admit: the retest policy (see :class:`~station.sequence.runner.SequenceRunner`).
         lot, operator: the production lot and the operator recorded with the run ('' none).
+        prompter: answers the station's prompts (None: a run without prompts).
+
+    In the main thread SIGTERM and SIGHUP abort the run as Ctrl-C does (the result is ABORTED); a signal before
+    the run started raises :class:`KeyboardInterrupt`.
     """
     console = console if console is not None else Console()
     plan = plan if plan is not None else default_plan()
     wall0 = time.monotonic()
-    with SimStation(units, scale, seed, plan=plan, effects=effects) as sim:
+    runners: list[SequenceRunner] = []
+    with abort_on_signals(lambda: runners[-1] if runners else None), \
+            SimStation(units, scale, seed, plan=plan, effects=effects) as sim:
         for u in sim.units:
             install_firmware(u.sensor, sim.clock)
         console.print(f"simulated rig at {sim.rig_url}; {units} sensor(s) on "
@@ -104,9 +115,9 @@ def run_demo(
         )
         display = ProgressDisplay(console, [u.truth.serial for u in sim.units], scale)
         station = Station(config, clock=sim.clock, options=options, subscribers=[display, *subscribers],
-                          admit=admit, on_provision=on_provision)
+                          admit=admit, on_provision=on_provision, prompter=prompter)
         with display:
-            result = station.run()
+            result = station.run(on_runner=runners.append)
     console.print(summary_table(result))
     if station.provisioner is not None and station.provisioner.records:
         console.print(provisioning_table(station.provisioner))
@@ -357,8 +368,9 @@ def run_thermal_demo(
         unit_effects[-1] = Effects()
     wall0 = time.monotonic()
     holder: list[Any] = []
-    with SimStation(units, scale, seed, plan=plan, effects=effects, chamber={"ambient_degc": thermal.ambient_degc},
-                    unit_effects=unit_effects) as sim:
+    with abort_on_signals(lambda: holder[-1] if holder else None), \
+            SimStation(units, scale, seed, plan=plan, effects=effects, chamber={"ambient_degc": thermal.ambient_degc},
+                       unit_effects=unit_effects) as sim:
         for u in sim.units:
             install_firmware(u.sensor, sim.clock)
         console.print(f"simulated rig at {sim.rig_url}; chamber at {sim.chamber_url}; {units} sensor(s); "
