@@ -62,7 +62,8 @@ def test_the_registry_is_the_only_list_of_names() -> None:
     assert set(likelihood.PROFILE_TC) == {e.name for e in EFFECTS if e.identifiability.profile_tc}
     assert set(likelihood.WANDER_LIKE) == {e.name for e in EFFECTS if e.identifiability.wander_like}
     assert likelihood.WANDER_LIKE == ("temperature_bias",)
-    assert candidates.LIBRARY is registry.LIBRARY and candidates.RIG_STEPS is registry.RIG_STEPS
+    # the regressors' module holds no view of the registry (it is imported by it)
+    assert not hasattr(candidates, "LIBRARY") and not hasattr(candidates, "RIG_STEPS")
     # no other module of the diagnosis holds a table (tuple, list, set, dict) naming two or more effects
     for path in sorted(DIAGNOSE.glob("*.py")):
         if path.name == "registry.py":

@@ -201,9 +201,9 @@ def diagnose(
         typer.echo(f"error: cannot write {plot}: {exc.strerror or exc}", err=True)
         raise typer.Exit(2) from None
     if as_json:
-        sys.stdout.write(json.dumps(result.report) + "\n")
+        sys.stdout.write(json.dumps(result.report.to_json()) + "\n")
     else:
-        _print_text(result.report)
+        _print_text(result.report.to_json())
         if plot is not None:
             typer.echo(f"wrote {plot}")
 

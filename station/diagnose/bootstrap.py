@@ -19,6 +19,7 @@ the value depends on which segments are in); and the level the report states: ``
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -50,7 +51,7 @@ class Bootstrap:
     std: tuple[float, ...] | None = None
     unit: str | None = None
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_json(self) -> dict[str, Any]:
         out: dict[str, Any] = {"resamples": self.resamples, "seed": self.seed,
                                "accepted_fraction": self.accepted_fraction, "level": self.level,
                                "std_ratio": self.std_ratio,
@@ -58,6 +59,13 @@ class Bootstrap:
         if self.median is not None:
             out.update(median=list(self.median), std=list(self.std or ()), unit=self.unit)
         return out
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> Bootstrap:
+        median = d.get("median")
+        return cls(d["resamples"], d["seed"], d["accepted_fraction"], d["level"], d["std_ratio"],
+                   None if median is None else tuple(median), None if median is None else tuple(d["std"]),
+                   d.get("unit"))
 
 
 def level(fraction: float) -> str:

@@ -198,19 +198,6 @@ def delay_regressor(b: Baseline, s: SensorData, tau_s: float) -> np.ndarray:
     return ((shifted - s.u) / tau_s)[:, :, None]
 
 
-#: Names this module held before the registry (station.diagnose.registry); kept as thin aliases.
-_FROM_REGISTRY = ("LIBRARY", "MEAN_CANDIDATES", "NAMES", "RIG_STEPS", "SHAPES", "engineering", "unit_factor")
-
-
-def __getattr__(name: str) -> object:
-    # PEP 562, resolved on use: the registry imports this module for the regressors
-    if name in _FROM_REGISTRY:
-        from station.diagnose import registry
-
-        return getattr(registry, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
 __all__ = [
     "MAX_DELAY_S", "asymmetry", "attitude", "delay_regressor", "earth_rate_world", "earth_rotation", "g_sensitivity",
     "lever_arm", "nonlinearity", "poly_even", "poly_odd", "temperature_bias", "temperature_scale", "time_offset",

@@ -50,6 +50,7 @@ from scipy import linalg, stats
 from station.diagnose import robust
 from station.diagnose.likelihood import RCOND
 from station.diagnose.registry import REGISTRY, SHAPES, unit_factor
+from station.diagnose.results import CheckEntry, Rejection, Unexplained
 from station.diagnose.robust import AX
 from station.session.model import Kind
 
@@ -135,23 +136,21 @@ class Check:
             return f"{label}: not checked"
         return f"{label}: {self.result} (p {self.p_value:.2g})"
 
-    def to_dict(self) -> dict[str, Any]:
+    def entry(self) -> CheckEntry:
+        """This check as the finding's report entry."""
         if self.split is None:
-            return {"check": None, "result": "not checked", "reason": self.reason}
-        a, b = PARTS[self.split]
-        out: dict[str, Any] = {"check": self.split, "parts": [a, b], "result": self.result}
+            return CheckEntry(None, "not checked", reason=self.reason)
+        parts = PARTS[self.split]
         if not self.checked:
-            out["reason"] = self.reason
-            return out
-        out.update({"chi2": round(self.chi2, 2), "dof": self.dof, "critical_chi2": round(self.critical, 2),
-                    "p_value": float(f"{self.p_value:.3g}"), "power_chi2": round(self.power_chi2, 1),
-                    "tolerance": TOLERANCE})
+            return CheckEntry(self.split, self.result, parts, reason=self.reason)
+        reason = None
         if self.result == "not informative":
-            out["reason"] = (f"{b} could not have shown a disagreement as large as the finding "
-                             f"(power chi2 {self.power_chi2:.1f} <= {self.critical:.1f})")
-        if self.part_a is not None:
-            out["part_a"], out["part_b"] = self.part_a, self.part_b
-        return out
+            reason = (f"{parts[1]} could not have shown a disagreement as large as the finding "
+                      f"(power chi2 {self.power_chi2:.1f} <= {self.critical:.1f})")
+        return CheckEntry(self.split, self.result, parts, chi2=round(self.chi2, 2), dof=self.dof,
+                          critical_chi2=round(self.critical, 2), p_value=float(f"{self.p_value:.3g}"),
+                          power_chi2=round(self.power_chi2, 1), tolerance=TOLERANCE, reason=reason,
+                          part_a=self.part_a, part_b=self.part_b if self.part_a is not None else None)
 
 
 def _block_masks(prob: Any, baseline: Any, split: str, name: str, energy: np.ndarray) -> np.ndarray | None:
@@ -305,22 +304,19 @@ def not_checked(name: str, sensor: str) -> list[Check]:
 
 
 def review(prob: Any, baseline: Any, names: list[str], gains: dict[str, float] | None = None
-           ) -> tuple[dict[str, list[Check]], dict[str, Any] | None, robust.Unexplained | None]:
+           ) -> tuple[dict[str, list[Check]], Rejection | None, Unexplained | None]:
     """:func:`check` under the final model's dispersion (:func:`station.diagnose.robust.dispersion`), the
     rejection entry of the worst failing finding (None when every informative check passes) and, where that
     finding's drop-one chi^2 gain (``gains``) shows its structure above the noise, where that structure stays
     unexplained (:func:`locate`)."""
     phi, table = robust.dispersion(prob)
-    saved = robust._with_inflated_noise(prob, phi)
-    try:
+    with prob.inflated_noise(phi):
         fitted = final_fit(prob)
         checks = check(prob, baseline, names, fitted)
         worst = failed([c for cs in checks.values() for c in cs])
         where = None
-        if worst is not None and (gains or {}).get(worst.effect, 0.0) > 0.0:
+        if worst is not None and gains is not None and gains.get(worst.effect, 0.0) > 0.0:
             where = locate(prob, names.index(worst.effect), worst, gains[worst.effect], table, fitted)
-    finally:
-        robust._restore_noise(prob, saved)
     return checks, (rejection(worst) if worst is not None else None), where
 
 
@@ -329,7 +325,7 @@ LOCATE_SHARE = 0.1
 
 
 def locate(prob: Any, j: int, c: Check, gain: float, table: dict[str, list[float]],
-           fitted: Fitted | None = None) -> robust.Unexplained:
+           fitted: Fitted | None = None) -> Unexplained:
     """Where the structure of accepted term ``j``, rejected by check ``c``, lies: the axes and segment kinds
     holding at least :data:`LOCATE_SHARE` of its whitened fitted signal energy; ``gain``: its chi^2 gain;
     ``fitted``: :func:`final_fit` where the caller has it."""
@@ -341,13 +337,13 @@ def locate(prob: Any, j: int, c: Check, gain: float, table: dict[str, list[float
     axes = tuple(AX[k] for k in range(3) if energy[:, k].sum() / total >= LOCATE_SHARE)
     kinds = tuple(sorted(Kind(k).label for k in np.unique(prob.sd.kind)
                          if energy[prob.sd.kind == k].sum() / total >= LOCATE_SHARE))
-    a, b = PARTS[c.split]
+    a, b = PARTS[c.split or ""]
     what = f"what the {c.effect} model fits, but {a} and {b} disagree on it"
     if c.part_a and c.part_b:
         def fmt(v: dict[str, Any]) -> str:
             return ", ".join(f"{x:.3g}+-{e:.2g}" for x, e in zip(v["value"], v["std"], strict=False)) + f" {v['unit']}"
         what += f" ({a} {fmt(c.part_a)}; {b} {fmt(c.part_b)})"
-    return robust.Unexplained(c.sensor, axes, kinds, what, table, float(gain))
+    return Unexplained(c.sensor, axes, kinds, what, table, float(gain))
 
 
 def failed(checks: list[Check]) -> Check | None:
@@ -356,13 +352,12 @@ def failed(checks: list[Check]) -> Check | None:
     return max(bad, key=lambda c: c.chi2 / c.critical) if bad else None
 
 
-def rejection(c: Check) -> dict[str, Any]:
-    """The report entry of a finding rejected by check ``c``."""
-    a, b = PARTS[c.split]
-    return {"effect": c.effect, "sensor": c.sensor, "consistency": c.to_dict(),
-            "reason": f"inconsistent between {a} and {b} (chi2 {c.chi2:.1f} > {c.critical:.1f} for {c.dof} "
-                      f"dof, {100 * TOLERANCE:g} % model tolerance): structure the parts disagree on is not "
-                      f"this effect"}
+def rejection(c: Check) -> Rejection:
+    """The rejection of a finding by check ``c``."""
+    a, b = PARTS[c.split or ""]
+    return Rejection(c.effect, c.sensor, f"inconsistent between {a} and {b} (chi2 {c.chi2:.1f} > {c.critical:.1f} "
+                     f"for {c.dof} dof, {100 * TOLERANCE:g} % model tolerance): structure the parts disagree on is "
+                     f"not this effect", {"consistency": c.entry().to_json()})
 
 
 __all__ = [

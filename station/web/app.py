@@ -10,7 +10,7 @@ Pages (server-rendered Jinja2 templates in ``templates/``, no front-end build st
 * ``/units/{serial}``: parameter set against limits (marginal values highlighted), run
   history and plots (``/units/{serial}/plots/{name}.svg``, see :mod:`station.web.plots`), and the
   diagnosis of each run's recording (loaded by the page from the API, figure at
-  ``/units/{serial}/diagnosis.svg``; computed in the background, see :mod:`station.web.diagnosis`);
+  ``/units/{serial}/diagnosis.svg``; computed in the background, see :mod:`station.web.diagnosis_worker`);
 * ``/population``: a histogram per limit-checked parameter over all units, with limits;
 * ``/quality``: yield (first pass, final; by station, shift, day, lot) and its trend, parameters ranked by Cpk,
   control charts with run rules, histograms, CSV exports; filters by date, station, lot, limits version.
@@ -38,7 +38,7 @@ from station.kernel.limits_file import load_limits
 from station.store.db import Database, open_database
 from station.store.quality import ShiftCalendar
 from station.web.context import WebContext
-from station.web.diagnosis import DiagnosisService
+from station.web.diagnosis_worker import DiagnosisService
 from station.web.openapi import StationAPI
 from station.web.routes import diagnosis, population, quality, runs, status, units
 from station.web.state import LiveStatus

@@ -31,7 +31,7 @@ from station.fit.allan import overlapping_allan_deviation
 from station.fit.params import ParameterSet
 from station.kernel.errors import FitError
 from station.session.model import Kind, Session
-from station.web.diagnosis import Curve
+from station.web.diagnosis_worker import Curve
 
 AXES = "xyz"
 _DEG = 180.0 / math.pi
