@@ -45,7 +45,7 @@ from dataclasses import replace
 import numpy as np
 
 from station.diagnose import NAMES, diagnose
-from station.diagnose.registry import LIBRARY
+from station.diagnose.effect_registry import LIBRARY
 from station.kernel.limits_file import DEFAULT_LIMITS_PATH, load_limits
 from station.kernel.plan import RigPlan, random_plan
 from station.kernel.sensor_class import TABLE1, SensorClass

@@ -12,7 +12,7 @@ import pytest
 
 from station.diagnose import FORMAT, NAMES, diagnose
 from station.diagnose.candidates import attitude
-from station.diagnose.registry import LIBRARY
+from station.diagnose.effect_registry import LIBRARY
 from station.diagnose.residuals import fit_baseline
 from station.kernel.plan import RigPlan
 from station.kernel.sensor_class import TABLE1

@@ -15,9 +15,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import indepgen
 
-from station.diagnose import bootstrap, consistency, robust
+from station.diagnose import bootstrap, robust
+from station.diagnose import finding_consistency as consistency
+from station.diagnose.effect_registry import EFFECTS, LIBRARY
 from station.diagnose.likelihood import SensorProblem
-from station.diagnose.registry import EFFECTS, LIBRARY
 from station.diagnose.residuals import fit_baseline
 from station.diagnose.results import CheckEntry
 

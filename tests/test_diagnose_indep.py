@@ -152,8 +152,8 @@ def test_the_walk_explains_a_wander_but_not_a_temperature_bias() -> None:
     """``gain_given_walk`` on the temperature bias's block regressor: for a recording holding a walk and no
     temperature effect (development seed 508) it falls well below the gain without a walk; for a recording holding
     a temperature bias and no walk (development seed 604) it stays above the threshold."""
+    from station.diagnose.effect_registry import LIBRARY
     from station.diagnose.likelihood import SensorProblem
-    from station.diagnose.registry import LIBRARY
     from station.diagnose.residuals import fit_baseline
 
     def gains(seed: int, effects: dict[str, float]) -> tuple[float, float, float]:

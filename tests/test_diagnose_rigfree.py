@@ -18,7 +18,7 @@ import pytest
 from typer.testing import CliRunner
 
 from station.cli import app
-from station.diagnose.registry import REGISTRY, rig_free_testable
+from station.diagnose.effect_registry import REGISTRY, rig_free_testable
 from station.diagnose.report import diagnose
 from station.diagnose.rigfree_diagnosis import rig_free_baseline, rig_free_candidates
 from station.fit.rigfree import is_rig_free

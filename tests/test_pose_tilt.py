@@ -205,7 +205,7 @@ def test_real_hand_placed_poses_are_named_and_the_rerun_matches() -> None:
     assert ext["rms"][0] < base["rms"][0] / 2.5
     assert all(r < 1.7 * n for r, n in zip(ext["rms"], ext["noise_rms"], strict=True))
     # every candidate of each sensor is accounted for: found, rejected (with why) or inseparable
-    from station.diagnose.registry import LIBRARY
+    from station.diagnose.effect_registry import LIBRARY
 
     listed = {(f["effect"], f["sensor"]) for f in (*report["findings"], *report["rejected"])}
     listed |= {(e, item["sensor"]) for item in report["inseparable"] for e in item["effects"]}

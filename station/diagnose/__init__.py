@@ -3,9 +3,9 @@
 
 # Lazy (PEP 562): importing the package, e.g. for its CLI commands, loads no heavy dependency.
 _EXPORTS = {
-    "NAMES": "station.diagnose.registry",
-    "Progress": "station.diagnose.progress",
-    "Stage": "station.diagnose.progress",
+    "NAMES": "station.diagnose.effect_registry",
+    "Progress": "station.diagnose.diagnosis_progress",
+    "Stage": "station.diagnose.diagnosis_progress",
     "FORMAT": "station.diagnose.report",
     "Diagnosis": "station.diagnose.report",
     "diagnose": "station.diagnose.report",

@@ -26,8 +26,8 @@ from typing import Any
 import numpy as np
 from scipy import linalg
 
-from station.diagnose.likelihood import RCOND
-from station.diagnose.registry import SHAPES, unit_factor
+from station.diagnose.effect_registry import SHAPES, unit_factor
+from station.diagnose.likelihood import RCOND, SensorProblem
 
 #: Resamples per sensor (the linear refit costs a few ms each).
 RESAMPLES = 60
@@ -72,7 +72,7 @@ def level(fraction: float) -> str:
     return "high" if fraction >= HIGH else "medium" if fraction >= MEDIUM else "low"
 
 
-def _design(prob: Any, keep: np.ndarray, white: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+def _design(prob: SensorProblem, keep: np.ndarray, white: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
     """Whitened stacked design (base per axis, then the accepted effects) and data on the blocks ``keep``,
     with white block variance ``white`` (m, 3) (0 weight blocks already dropped)."""
     idx = np.flatnonzero(keep)
@@ -87,7 +87,7 @@ def _chi2(x: np.ndarray, y: np.ndarray) -> tuple[float, np.ndarray]:
     return float(r @ r), beta
 
 
-def bootstrap(prob: Any, names: list[str], thresholds: dict[str, float], phi: np.ndarray, *,
+def bootstrap(prob: SensorProblem, names: list[str], thresholds: dict[str, float], phi: np.ndarray, *,
               resamples: int = RESAMPLES, seed: int = SEED) -> dict[str, Bootstrap]:
     """The bootstrap of the module docstring for the accepted mean effects ``names`` (order of
     ``prob.accepted``) with a test threshold in ``thresholds``; ``phi``: dispersion per block and axis (m, 3)."""

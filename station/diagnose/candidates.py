@@ -1,7 +1,7 @@
 """The regressors of the candidate effects the base model (eq. 1 + eq. 3) leaves out.
 
 The candidates themselves (names, units, simulator and compensation mappings, identifiability) are
-:mod:`station.diagnose.registry`; this module holds their regressors. Each *mean* candidate is a set
+:mod:`station.diagnose.effect_registry`; this module holds their regressors. Each *mean* candidate is a set
 of regressors built from the session's references and metadata: per sample an array ``Z`` of shape
 (n, 3, p) such that the effect adds ``Z[i, k] @ theta`` to output axis k of sample i (theta: p
 parameters in SI). They are
@@ -10,7 +10,7 @@ model's linear terms by :mod:`station.diagnose.selection`. Two candidates are no
 terms: ``bias_random_walk`` changes the block covariance and ``outliers`` is a count.
 
 Units: ``u = M ref`` in m/s^2 (accelerometer) or rad/s (gyroscope), temperature rise in K,
-time in s. :func:`station.diagnose.registry.engineering` converts fitted SI parameters to the units the
+time in s. :func:`station.diagnose.effect_registry.engineering` converts fitted SI parameters to the units the
 report uses.
 """
 

@@ -34,14 +34,13 @@ from __future__ import annotations
 
 import contextlib
 import math
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 from scipy import linalg, optimize, stats
 
-from station.diagnose.registry import EFFECTS
+from station.diagnose.effect_registry import EFFECTS
 from station.diagnose.residuals import Baseline, SensorData
 from station.fit.blocks import block_exp_mean, power_on_gm_correlation
 from station.session.model import Kind
@@ -131,6 +130,18 @@ class Test:
         standard errors): an effect that only fits the segments it was fitted on fails; a slow effect, which
         the drift's conditional mean predicts about as well on held-out segments, is not left to a coin flip."""
         return self.heldout_after - self.heldout_before <= HELDOUT_SE * self.heldout_change_se
+
+
+@dataclass(frozen=True)
+class WalkConsistency:
+    """:meth:`SensorProblem.walk_consistency`: whether the wander is the same throughout the record; ``z`` per
+    comparison ("halves", "inside_vs_across_segments") the difference of the two K^2 estimates in standard
+    errors; ``k2_pooled`` the pooled moment estimate; ``reason`` where no comparison could be made."""
+
+    consistent: bool
+    z: Mapping[str, float]
+    k2_pooled: float | None = None
+    reason: str | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -719,7 +730,7 @@ class SensorProblem:
             self._restore(saved)
         return max(0.0, 2.0 * (nll0 - nll1))
 
-    def walk_consistency(self) -> dict[str, Any]:
+    def walk_consistency(self) -> WalkConsistency:
         """Whether the wander in the current model's block residual is a random walk: the increments of the
         residual between consecutive settled blocks (rest, pose, rate; moves left out), ``d = r_j - r_i``, have
         ``E d^2 = w_i + w_j + K^2 dt`` (white block noise ``w``, :attr:`white`) for a random walk wherever they are
@@ -731,7 +742,7 @@ class SensorProblem:
         sd = self.sd
         settled = np.flatnonzero(sd.kind != int(Kind.MOVE))
         if len(settled) < 6:
-            return {"consistent": True, "reason": "too few settled blocks"}
+            return WalkConsistency(True, {}, reason="too few settled blocks")
         i, j = settled[:-1], settled[1:]
         dt = sd.t_s[j] - sd.t_s[i]
         d2 = (raw[j] - raw[i]) ** 2  # (pairs, 3)
@@ -745,7 +756,7 @@ class SensorProblem:
         k2_all = max(float(excess.sum()) / max(3.0 * float(dt.sum()), 1e-300), 0.0)
         var = (2.0 * (w + k2_all * dt[:, None]) ** 2).sum(axis=1)
         mid = 0.5 * float(sd.t_s.max())
-        out: dict[str, Any] = {"k2_pooled": k2_all}
+        z_of: dict[str, float] = {}
         consistent = True
         for name, a in (("halves", sd.t_s[j] <= mid), ("inside_vs_across_segments", same)):
             est: list[tuple[float, float]] = []
@@ -758,10 +769,9 @@ class SensorProblem:
             if len(est) < 2:
                 continue
             z = (est[0][0] - est[1][0]) / max(math.hypot(est[0][1], est[1][1]), 1e-300)
-            out[name] = {"k2": [est[0][0], est[1][0]], "std": [est[0][1], est[1][1]], "z": round(z, 2)}
+            z_of[name] = round(z, 2)
             consistent = consistent and abs(z) <= WALK_CONSISTENCY_Z
-        out["consistent"] = consistent
-        return out
+        return WalkConsistency(consistent, z_of, k2_all)
 
     def _temperature_vs_warmup(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(T grid s, R^2 (T, axis), energy (axis,)) of the block temperature course against eq. 3's warm-up.

@@ -14,7 +14,7 @@ unit in engineering units), ``evidence`` (likelihood gain, BIC gain, held-out er
 has ``rerun`` (block RMS of its sensor per axis: base, base + this effect, all effects).
 Each mean finding also has ``confidence`` (``level`` high/medium/low: the bootstrap's where it ran, else the
 drop-one test's against the full model), ``consistency`` (its effect-specific checks,
-:mod:`station.diagnose.consistency`: per check ``check``, ``parts``, ``result`` passed/failed/not
+:mod:`station.diagnose.finding_consistency`: per check ``check``, ``parts``, ``result`` passed/failed/not
 informative/not checked, ``reason`` where not checked, chi^2 and the parameters per part) and ``bootstrap``
 (:mod:`station.diagnose.bootstrap`: ``accepted_fraction``, ``std_ratio``, parameters' median and spread). A
 finding failing a check is in ``rejected`` with the check under ``consistency``.
@@ -47,9 +47,9 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from station.diagnose.bootstrap import RESAMPLES, SEED
-from station.diagnose.compensation import compensation
+from station.diagnose.diagnosis_progress import DONE, STAGES, Progress, Stage
+from station.diagnose.finding_compensation import compensation
 from station.diagnose.outcome import Curve, Diagnosis
-from station.diagnose.progress import DONE, STAGES, Progress, Stage
 from station.diagnose.rerun import FittedEffect, Rerun, rerun
 from station.diagnose.residuals import BaseFitNoise, fit_baseline, locate, warmup_ranges
 from station.diagnose.results import FORMAT, DiagnosisReport, FindingRerun, RerunError, RerunSummary
@@ -74,8 +74,8 @@ def diagnose(session: Session, *, warmup_tc_s: Mapping[str, tuple[float, float]]
     ``resamples``: the bootstrap over segments that states each finding's confidence
     (:mod:`station.diagnose.bootstrap`, seeded with ``seed``: same recording, same numbers); 0 leaves it out.
 
-    ``progress``: called with a :class:`~station.diagnose.progress.Stage` as each stage starts and once
-    more when done (see :mod:`station.diagnose.progress`; a rig-free recording's diagnosis tells only its
+    ``progress``: called with a :class:`~station.diagnose.diagnosis_progress.Stage` as each stage starts and once
+    more when done (see :mod:`station.diagnose.diagnosis_progress`; a rig-free recording's diagnosis tells only its
     start and its end); None: nothing is told.
 
     Raises :class:`station.kernel.errors.FitError` when the base fit refuses the recording.

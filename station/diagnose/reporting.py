@@ -12,9 +12,9 @@ from typing import Any
 import numpy as np
 from scipy import optimize, stats
 
-from station.diagnose.consistency import not_checked
+from station.diagnose.effect_registry import REGISTRY, engineering, unit_factor
+from station.diagnose.finding_consistency import not_checked
 from station.diagnose.likelihood import ALPHA, ModelQuality, Test
-from station.diagnose.registry import REGISTRY, engineering, unit_factor
 from station.diagnose.residuals import SensorData
 from station.diagnose.results import (
     BlockFit,

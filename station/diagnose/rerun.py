@@ -8,7 +8,7 @@ and temperature course,
 * **base**: the fitted eq. (1) with the drift of eq. (3) (``baseline.params``),
 * **extended**: the same plus every accepted mean effect with its fitted SI parameters
   (mapped onto the simulator's :class:`~station.physics.effects.EffectTruth` by each effect's entry in
-  :mod:`station.diagnose.registry`),
+  :mod:`station.diagnose.effect_registry`),
 
 and both are compared with the recording per block of :mod:`station.diagnose.residuals`.
 
@@ -48,7 +48,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from station.diagnose.candidates import attitude
-from station.diagnose.registry import EFFECTS, REGISTRY, simulator_input
+from station.diagnose.effect_registry import EFFECTS, REGISTRY, simulator_input
 from station.diagnose.residuals import SENSORS, Baseline, SensorData
 from station.diagnose.results import BlockStatistics, FindingRerun, Improvement, KindStatistics, RerunSummary
 from station.fit.blocks import block_exp_mean

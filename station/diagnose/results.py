@@ -54,7 +54,7 @@ class Compensation:
 
 @dataclass(frozen=True)
 class CheckEntry:
-    """One consistency check of a finding as reported (:meth:`station.diagnose.consistency.Check.entry`):
+    """One consistency check of a finding as reported (:meth:`station.diagnose.finding_consistency.Check.entry`):
     ``check`` None for an effect the registry gives no check; the numbers only where the check ran."""
 
     check: str | None
@@ -268,11 +268,12 @@ class Finding:
     ``parameters``: per the effect (:func:`station.diagnose.effect_registry.engineering`), JSON-ready;
     ``evidence``: the selection's test (:class:`Evidence`) or, for ``outliers``, the count (:class:`OutlierEvidence`);
     ``fit``: the sensor's fit before/after (None for ``outliers``); ``confidence``: None where not assessed;
-    ``consistency``: the effect-specific checks (:mod:`station.diagnose.consistency`; a ``not checked`` entry with
-    the reason where none could run); ``bootstrap``: None where not run; ``rerun``: the simulator re-run's part
-    (None where not simulated); ``calibration``: whether the station's calibration compensates it (None before
-    that is assessed). ``theta`` (the fitted SI parameters, for the simulator re-run) and ``block_residual`` (the
-    block residual before and after the effect, (m, 3), sensor units) are not part of the JSON entry.
+    ``consistency``: the effect-specific checks (:mod:`station.diagnose.finding_consistency`; a ``not checked``
+    entry with the reason where none could run); ``bootstrap``: None where not run; ``rerun``: the simulator
+    re-run's part (None where not simulated); ``calibration``: whether the station's calibration compensates it
+    (None before that is assessed). ``theta`` (the fitted SI parameters, for the simulator re-run) and
+    ``block_residual`` (the block residual before and after the effect, (m, 3), sensor units) are not part of the
+    JSON entry.
     """
 
     effect: str

@@ -11,7 +11,7 @@ between them (Tedaldi et al. 2014; :mod:`station.fit.rigfree`). The diagnosis he
    blocks of the diagnosis are the still segments only; the moves' information (the rotation between
    two stills) is already spent on the gyroscope's M in the base fit.
 2. **Candidates** restricted to those such a recording can test: the registry's identifiability rules
-   (``Identifiability.rig_free``, :func:`station.diagnose.registry.rig_free_testable`) and what the recording
+   (``Identifiability.rig_free``, :func:`station.diagnose.effect_registry.rig_free_testable`) and what the recording
    holds (``Identifiability.needs``: e.g. a temperature span); the others are listed as :class:`Untestable`
    with the reason. ``bias_random_walk`` and ``outliers`` are tested as on any recording.
 3. **Earth rate**: a still gyro sees the Earth rate, whose vertical part ``Omega sin(lat)`` lies along
@@ -37,8 +37,8 @@ import numpy as np
 from scipy import stats
 from threadpoolctl import threadpool_limits
 
+from station.diagnose.effect_registry import REGISTRY, rig_free_testable
 from station.diagnose.outcome import Curve, Diagnosis
-from station.diagnose.registry import REGISTRY, rig_free_testable
 from station.diagnose.residuals import SENSORS, BaseFitNoise, Baseline, baseline_from_params, locate, warmup_ranges
 from station.diagnose.results import (
     Compensation,

@@ -30,11 +30,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 from scipy import linalg, stats
 
+from station.diagnose.likelihood import SensorProblem, Test, WalkConsistency
+from station.diagnose.residuals import Baseline, SensorData
 from station.diagnose.results import Confidence, Rejection, Unexplained
 from station.session.model import Kind
 
@@ -63,7 +64,7 @@ class Audit:
     unexplained: list[Unexplained] = field(default_factory=list)
 
 
-def innovations(prob: Any) -> np.ndarray:
+def innovations(prob: SensorProblem) -> np.ndarray:
     """Whitened GLS residual of the current model per block and axis, (m, 3) (1 = noise)."""
     chols, yw = prob.whitened()
     x, _ = prob.design(chols, prob.accepted)
@@ -71,7 +72,7 @@ def innovations(prob: Any) -> np.ndarray:
     return (yw - x @ beta).reshape(3, prob.m).T
 
 
-def dispersion(prob: Any) -> tuple[np.ndarray, dict[str, list[float]]]:
+def dispersion(prob: SensorProblem) -> tuple[np.ndarray, dict[str, list[float]]]:
     """Per block and axis the dispersion of its kind (>= 1), and the table kind -> per-axis mean square."""
     z = innovations(prob)
     phi = np.ones_like(z)
@@ -86,9 +87,9 @@ def dispersion(prob: Any) -> tuple[np.ndarray, dict[str, list[float]]]:
     return phi, table
 
 
-def _walk_summary(cons: dict[str, Any]) -> dict[str, float]:
+def _walk_summary(cons: WalkConsistency) -> dict[str, float]:
     """The z-scores of :meth:`station.diagnose.likelihood.SensorProblem.walk_consistency` for the report."""
-    return {k: v["z"] for k, v in cons.items() if isinstance(v, dict)}
+    return dict(cons.z)
 
 
 def _confidence(gain: float, threshold: float) -> str:
@@ -96,7 +97,17 @@ def _confidence(gain: float, threshold: float) -> str:
     return "high" if r >= 4.0 else "medium" if r >= 1.5 else "low"
 
 
-def periodic_in_spin(baseline: Any, sd: Any, fitted: np.ndarray) -> dict[str, Any] | None:
+@dataclass(frozen=True, eq=False)
+class SpinPeriodic:
+    """:func:`periodic_in_spin`: chi^2 per axis of the cos/sin terms of the rate table's angle, its degrees of
+    freedom (2 per hold) and the rms amplitude per axis (sensor units, SI)."""
+
+    chi2: np.ndarray
+    dof: int
+    amplitude: np.ndarray
+
+
+def periodic_in_spin(baseline: Baseline, sd: SensorData, fitted: np.ndarray) -> SpinPeriodic | None:
     """Sample residual (minus the accepted effects' ``fitted`` signal, (n, 3)) in the rate-table holds against
     the table's angle: per hold and axis the least-squares cos/sin amplitude of the angle integrated from the
     rate reference, summed to a chi^2 per axis (2 per hold). None without rate holds."""
@@ -127,11 +138,11 @@ def periodic_in_spin(baseline: Any, sd: Any, fitted: np.ndarray) -> dict[str, An
     if dof == 0:
         return None
     n_all = sum(len(s) for s in session.segments() if s.kind == Kind.RATE)
-    return {"chi2": chi, "dof": dof, "amplitude": np.sqrt(amp2 / max(n_all, 1))}
+    return SpinPeriodic(chi, dof, np.sqrt(amp2 / max(n_all, 1)))
 
 
-def audit(prob: Any, baseline: Any, names: list[str], regs: dict[str, np.ndarray], random_walk: Any | None,
-          fitted_samples: np.ndarray) -> Audit:
+def audit(prob: SensorProblem, baseline: Baseline, names: list[str], regs: dict[str, np.ndarray],
+          random_walk: Test | None, fitted_samples: np.ndarray) -> Audit:
     """Run the checks of the module docstring on the final model of one sensor.
 
     ``prob``: the :class:`station.diagnose.likelihood.SensorProblem` with the accepted mean effects (block
@@ -158,7 +169,7 @@ def audit(prob: Any, baseline: Any, names: list[str], regs: dict[str, np.ndarray
     periodic_axes = []
     if per is not None:
         for k in range(3):
-            if stats.chi2.sf(per["chi2"][k], per["dof"]) < ALPHA_UNEXPLAINED and per["chi2"][k] > 3.0 * per["dof"]:
+            if stats.chi2.sf(per.chi2[k], per.dof) < ALPHA_UNEXPLAINED and per.chi2[k] > 3.0 * per.dof:
                 periodic_axes.append(k)
                 bad_cells.add((int(Kind.RATE), k))
                 bad_cells.add((int(Kind.MOVE), k))
@@ -207,7 +218,7 @@ def audit(prob: Any, baseline: Any, names: list[str], regs: dict[str, np.ndarray
             with prob.random_walk_off():
                 t = prob.test_random_walk()
             cons = prob.walk_consistency()
-            if t.passes and not bad_cells and cons["consistent"]:
+            if t.passes and not bad_cells and cons.consistent:
                 out.confidence["bias_random_walk"] = Confidence(_confidence(t.gain, t.threshold), round(t.gain, 2),
                                                                 round(t.threshold, 2), _walk_summary(cons))
             elif t.passes and not bad_cells:
@@ -238,10 +249,10 @@ def audit(prob: Any, baseline: Any, names: list[str], regs: dict[str, np.ndarray
             sel = sd.kind == cell
             excess += float(np.sum(z[sel, k] ** 2)) - float(sel.sum())
         if periodic_axes and per is not None:
-            amp = ", ".join(f"{AX[k]} {per['amplitude'][k] * factor:.3g}" for k in periodic_axes)
+            amp = ", ".join(f"{AX[k]} {per.amplitude[k] * factor:.3g}" for k in periodic_axes)
             cov = f"periodic at the rate table's spin frequency (amplitude {amp} {unit})"
-            periodic = {"axes": [AX[k] for k in periodic_axes], "chi2": np.round(per["chi2"], 1).tolist(),
-                        "dof": per["dof"], "amplitude": np.round(per["amplitude"] * factor, 6).tolist(),
+            periodic = {"axes": [AX[k] for k in periodic_axes], "chi2": np.round(per.chi2, 1).tolist(),
+                        "dof": per.dof, "amplitude": np.round(per.amplitude * factor, 6).tolist(),
                         "unit": unit}
         else:
             cov = _covariate(prob, baseline, z, bad_cells)
@@ -251,7 +262,7 @@ def audit(prob: Any, baseline: Any, names: list[str], regs: dict[str, np.ndarray
     return out
 
 
-def _covariate(prob: Any, baseline: Any, z: np.ndarray, cells: set[tuple[int, int]]) -> str:
+def _covariate(prob: SensorProblem, baseline: Baseline, z: np.ndarray, cells: set[tuple[int, int]]) -> str:
     """The block covariate the unexplained innovations follow most closely (|correlation|)."""
     sd = prob.sd
     rate = sd.block_mean(np.nan_to_num(baseline.session.ref_gyro_radps))

@@ -32,11 +32,11 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy import linalg
 
-from station.diagnose import bootstrap, consistency, robust
+from station.diagnose import bootstrap, finding_consistency, robust
 from station.diagnose.bootstrap import Bootstrap
 from station.diagnose.candidates import MAX_DELAY_S, delay_regressor
+from station.diagnose.effect_registry import LIBRARY, REGISTRY, RIG_STEPS
 from station.diagnose.likelihood import RCOND, WANDER_LIKE, SensorProblem, Test
-from station.diagnose.registry import LIBRARY, REGISTRY, RIG_STEPS
 from station.diagnose.reporting import detectable_from, finding, outlier_test
 from station.diagnose.residuals import SENSORS, Baseline, SensorData
 from station.diagnose.results import (
@@ -314,19 +314,19 @@ def _accept_walk(prob: SensorProblem, best: Test) -> None:
 
 
 def _audit(prob: SensorProblem, baseline: Baseline, fwd: _Forward, out: _Entries
-           ) -> tuple[dict[str, Confidence], dict[str, list[consistency.Check]]]:
+           ) -> tuple[dict[str, Confidence], dict[str, list[finding_consistency.Check]]]:
     """The checks that hold when the model is wrong (robust.py: drop-one under the dispersion, stand-ins, what
     stays unexplained) and the effect-specific consistency (consistency.py: the worst failing finding goes), in
     rounds until nothing more is rejected. Returns the confidence and the checks of the effects kept."""
     confidence: dict[str, Confidence] = {}
-    checks: dict[str, list[consistency.Check]] = {}
+    checks: dict[str, list[finding_consistency.Check]] = {}
     for round_ in range(AUDIT_ROUNDS):
         audit = robust.audit(prob, baseline, fwd.names, fwd.regs, fwd.walk, _fitted_samples(prob, baseline, fwd))
         confidence = audit.confidence
         gone = {r.effect for r in audit.rejected}
         out.rejected.extend(audit.rejected)
         if not gone:
-            checks, bad, where = consistency.review(
+            checks, bad, where = finding_consistency.review(
                 prob, baseline, [n if n in confidence else NUISANCE + n for n in fwd.names],
                 {n: c.gain for n, c in confidence.items()})
             if bad is not None:
@@ -355,13 +355,13 @@ def _drop(prob: SensorProblem, fwd: _Forward, gone: set[str]) -> None:
 
 
 def _checked(f: Finding, confidence: Mapping[str, Confidence], boot: Mapping[str, Bootstrap],
-             checks: Mapping[str, list[consistency.Check]]) -> Finding:
+             checks: Mapping[str, list[finding_consistency.Check]]) -> Finding:
     """Finding ``f`` with its confidence (the bootstrap's level where it ran), bootstrap and consistency checks."""
     conf = confidence.get(f.effect, Confidence("low"))
     b = boot.get(f.effect)
     if b is not None:  # the level the report states is the bootstrap's (bootstrap.py)
         conf = conf.with_bootstrap(b)
-    found = checks.get(f.effect) or consistency.not_checked(f.effect, f.sensor)
+    found = checks.get(f.effect) or finding_consistency.not_checked(f.effect, f.sensor)
     return replace(f, confidence=conf, bootstrap=b, consistency=tuple(c.entry() for c in found))
 
 

@@ -47,7 +47,7 @@ class ParameterValue(BaseModel):
 class FindingSummary(BaseModel):
     """An effect the recording supports."""
 
-    effect: str = Field(description="the candidate effect's name (station.diagnose.registry)")
+    effect: str = Field(description="the candidate effect's name (station.diagnose.effect_registry)")
     sensor: str = Field(description="'accel' or 'gyro'")
     axes: list[str] = Field(description="sensor axes the effect acts on")
     parameters: list[ParameterValue] = Field(description="fitted parameters with uncertainties and units")

@@ -6,7 +6,7 @@ finding, the recording's blocks are split in two parts that each reach the effec
 different way, and the parameters are compared between the parts:
 
 Which splits an effect is checked on is part of its registry entry
-(:attr:`station.diagnose.registry.Effect.consistency`; ``not_checked`` says why an effect has none):
+(:attr:`station.diagnose.effect_registry.Effect.consistency`; ``not_checked`` says why an effect has none):
 
 * ``tumbles_vs_ramps`` (``time_offset``): the rig's tumbles (moves that turn gravity in the sensor
   frame) against the rate ramps and other changes of the reference (the table spinning up and down
@@ -48,8 +48,9 @@ import numpy as np
 from scipy import linalg, stats
 
 from station.diagnose import robust
-from station.diagnose.likelihood import RCOND
-from station.diagnose.registry import REGISTRY, SHAPES, unit_factor
+from station.diagnose.effect_registry import REGISTRY, SHAPES, unit_factor
+from station.diagnose.likelihood import RCOND, SensorProblem
+from station.diagnose.residuals import Baseline
 from station.diagnose.results import CheckEntry, Rejection, Unexplained
 from station.diagnose.robust import AX
 from station.session.model import Kind
@@ -153,7 +154,8 @@ class Check:
                           part_a=self.part_a, part_b=self.part_b if self.part_a is not None else None)
 
 
-def _block_masks(prob: Any, baseline: Any, split: str, name: str, energy: np.ndarray) -> np.ndarray | None:
+def _block_masks(prob: SensorProblem, baseline: Baseline, split: str, name: str,
+                 energy: np.ndarray) -> np.ndarray | None:
     """Block mask of part B of ``split`` for finding ``name`` (energy: its whitened signal energy per block)."""
     sd = prob.sd
     session = baseline.session
@@ -215,7 +217,7 @@ def _part_values(name: str, sensor: str, x_rest: np.ndarray, wa: np.ndarray, wb:
 Fitted = tuple[Any, np.ndarray, np.ndarray, int, np.ndarray]
 
 
-def final_fit(prob: Any) -> Fitted:
+def final_fit(prob: SensorProblem) -> Fitted:
     """:data:`Fitted` of ``prob``'s accepted terms under the noise ``prob`` has now."""
     chols, yw = prob.whitened()
     x0, nbase = prob.design(chols, prob.accepted)
@@ -227,7 +229,8 @@ def _not_checked(name: str, sensor: str, split: str, reason: str) -> Check:
     return Check(name, sensor, split, critical=float(stats.chi2.isf(ALPHA, 1)), reason=reason)
 
 
-def check_finding(prob: Any, baseline: Any, j: int, name: str, split: str, fitted: Fitted | None = None) -> Check:
+def check_finding(prob: SensorProblem, baseline: Baseline, j: int, name: str, split: str,
+                  fitted: Fitted | None = None) -> Check:
     """The consistency check ``split`` of accepted term ``j`` (named ``name``) of ``prob``'s final model; the
     noise as ``prob`` has it now (the caller inflates it by the dispersion). ``fitted``: :func:`final_fit` where
     the caller has it."""
@@ -275,10 +278,11 @@ def check_finding(prob: Any, baseline: Any, j: int, name: str, split: str, fitte
     return Check(name, sd.sensor, split, chi2, dof, float(stats.chi2.isf(ALPHA, dof)), power, part_a, part_b)
 
 
-def check(prob: Any, baseline: Any, names: list[str], fitted: Fitted | None = None) -> dict[str, list[Check]]:
+def check(prob: SensorProblem, baseline: Baseline, names: list[str],
+          fitted: Fitted | None = None) -> dict[str, list[Check]]:
     """All consistency checks of the accepted findings ``names`` (order of ``prob.accepted``; nuisance terms,
     prefixed ``~``, are not checked), the splits each effect's registry entry names
-    (:attr:`station.diagnose.registry.Effect.consistency`), on one sensor's final model under the noise ``prob``
+    (:attr:`station.diagnose.effect_registry.Effect.consistency`), on one sensor's final model under the noise ``prob``
     has (``fitted``: :func:`final_fit` where the caller has it); an effect without checks gets one ``not checked``
     entry with the registry's reason."""
     out: dict[str, list[Check]] = {}
@@ -303,7 +307,7 @@ def not_checked(name: str, sensor: str) -> list[Check]:
     return [Check(name, sensor, None, reason=reason)]
 
 
-def review(prob: Any, baseline: Any, names: list[str], gains: dict[str, float] | None = None
+def review(prob: SensorProblem, baseline: Baseline, names: list[str], gains: dict[str, float] | None = None
            ) -> tuple[dict[str, list[Check]], Rejection | None, Unexplained | None]:
     """:func:`check` under the final model's dispersion (:func:`station.diagnose.robust.dispersion`), the
     rejection entry of the worst failing finding (None when every informative check passes) and, where that
@@ -324,7 +328,7 @@ def review(prob: Any, baseline: Any, names: list[str], gains: dict[str, float] |
 LOCATE_SHARE = 0.1
 
 
-def locate(prob: Any, j: int, c: Check, gain: float, table: dict[str, list[float]],
+def locate(prob: SensorProblem, j: int, c: Check, gain: float, table: dict[str, list[float]],
            fitted: Fitted | None = None) -> Unexplained:
     """Where the structure of accepted term ``j``, rejected by check ``c``, lies: the axes and segment kinds
     holding at least :data:`LOCATE_SHARE` of its whitened fitted signal energy; ``gain``: its chi^2 gain;

@@ -13,7 +13,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from station.diagnose.registry import REGISTRY
+from station.diagnose.effect_registry import REGISTRY
 from station.diagnose.results import Compensation
 from station.fit.calibrate import FitOptions, fit_session
 from station.fit.compensation import APPLIED, COMPENSATION, compensated_by, field_value
