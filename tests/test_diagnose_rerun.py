@@ -17,6 +17,7 @@ import pytest
 from station.diagnose import diagnose
 from station.diagnose.rerun import Drive, FittedEffect, rerun, run_model
 from station.diagnose.residuals import SensorData, fit_baseline
+from station.diagnose.results import load_report
 from station.kernel.plan import RigPlan
 from station.kernel.sensor_class import TABLE1
 from station.physics.effects import Effects
@@ -42,7 +43,12 @@ def test_lever_arm_rerun_matches_the_recording_better() -> None:
     res = simulate_session(5, plan=PLAN, effects=Effects(lever_arm=30.0, temperature_scale=300.0))
     d = diagnose(res.session)
     report = d.to_json()
-    json.dumps(report)
+    # the one JSON form, and read back into the types unchanged (findings with re-run, calibration, bootstrap)
+    text = json.dumps(report)
+    assert json.dumps(load_report(json.loads(text)).to_json()) == text
+    lever_arm = next(f for f in d.report.findings if f.effect == "lever_arm")
+    assert lever_arm.rerun is not None and lever_arm.calibration is not None and lever_arm.fit is not None
+    assert d.report.of_sensor("accel").findings[0].sensor == "accel"
     rr = report["rerun"]
     assert set(rr) >= {"method", "effects", "not_simulated", "base", "extended", "improvement"}
     assert {"effect": "lever_arm", "sensor": "accel"} in rr["effects"]

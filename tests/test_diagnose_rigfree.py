@@ -9,6 +9,7 @@ Seeds: 620..629 here (the development seeds were 5..11 and 20..25).
 
 from __future__ import annotations
 
+import json
 import math
 import os
 from pathlib import Path
@@ -20,6 +21,7 @@ from typer.testing import CliRunner
 from station.cli import app
 from station.diagnose.effect_registry import REGISTRY, rig_free_testable
 from station.diagnose.report import diagnose
+from station.diagnose.results import load_report
 from station.diagnose.rigfree_diagnosis import rig_free_baseline, rig_free_candidates
 from station.fit.rigfree import is_rig_free
 from station.physics.effects import GYRO_PER_ACCEL, Effects
@@ -56,6 +58,8 @@ def test_null_recording_gives_no_finding(seed: int) -> None:
     assert is_rig_free(session)
     report = diagnose(session).to_json()
     assert report["method"] == "rig-free"
+    text = json.dumps(report)  # rig-free sections read back too
+    assert json.dumps(load_report(json.loads(text)).to_json()) == text
     assert report["findings"] == [] and report["unexplained"] == []
     # what it cannot test comes from the registry's rules, plus what this recording lacks (no temperature)
     untestable = {(u["effect"], u["sensor"]): u["reason"] for u in report["untestable"]}

@@ -6,8 +6,10 @@ _EXPORTS = {
     "NAMES": "station.diagnose.effect_registry",
     "Progress": "station.diagnose.diagnosis_progress",
     "Stage": "station.diagnose.diagnosis_progress",
-    "FORMAT": "station.diagnose.report",
-    "Diagnosis": "station.diagnose.report",
+    "FORMAT": "station.diagnose.results",
+    "Diagnosis": "station.diagnose.outcome",
+    "DiagnosisReport": "station.diagnose.results",
+    "load_report": "station.diagnose.results",
     "diagnose": "station.diagnose.report",
     "save_figure": "station.diagnose.report",
 }
