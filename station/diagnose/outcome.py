@@ -12,7 +12,7 @@ from station.diagnose.residuals import Baseline
 from station.diagnose.results import DiagnosisReport
 
 
-class Curve(NamedTuple):
+class ResidualCurve(NamedTuple):
     """One finding's block residual, before and after it was taken into the model (m, 3), sensor units (SI)."""
 
     title: str  # "SENSOR EFFECT", e.g. "accel lever_arm"
@@ -35,7 +35,7 @@ class Diagnosis:
 
     report: DiagnosisReport
     baseline: Baseline
-    curves: list[Curve] = field(default_factory=list)
+    curves: list[ResidualCurve] = field(default_factory=list)
     rerun: Rerun | None = None
 
     @property
@@ -48,4 +48,4 @@ class Diagnosis:
         return self.report.to_json()
 
 
-__all__ = ["Curve", "Diagnosis"]
+__all__ = ["Diagnosis", "ResidualCurve"]

@@ -49,7 +49,7 @@ from threadpoolctl import threadpool_limits
 from station.diagnose.bootstrap import RESAMPLES, SEED
 from station.diagnose.diagnosis_progress import DONE, STAGES, Progress, Stage
 from station.diagnose.finding_compensation import compensation
-from station.diagnose.outcome import Curve, Diagnosis
+from station.diagnose.outcome import Diagnosis, ResidualCurve
 from station.diagnose.rerun import FittedEffect, Rerun, rerun
 from station.diagnose.residuals import BaseFitNoise, fit_baseline, locate, warmup_ranges
 from station.diagnose.results import FORMAT, DiagnosisReport, FindingRerun, RerunError, RerunSummary
@@ -99,7 +99,7 @@ def diagnose(session: Session, *, warmup_tc_s: Mapping[str, tuple[float, float]]
         baseline = fit_baseline(session, warmup_tc_s=warmup_tc_s)
         tell(1)
         decision = select(baseline, resamples=resamples, seed=seed)
-        curves = [Curve(f"{f.sensor} {f.effect}", baseline.sensor(f.sensor).t_s, *f.block_residual)
+        curves = [ResidualCurve(f"{f.sensor} {f.effect}", baseline.sensor(f.sensor).t_s, *f.block_residual)
                   for f in decision.findings if f.block_residual is not None]
         fitted = [FittedEffect(f.effect, f.sensor, np.zeros(0) if f.theta is None else f.theta)
                   for f in decision.findings if f.theta is not None or f.effect == "outliers"]
@@ -142,7 +142,7 @@ def save_figure(diagnosis: Diagnosis, path: str | os.PathLike[str]) -> None:
     curves = diagnosis.curves
     if not curves:
         b = diagnosis.baseline
-        curves = [Curve(f"{sd.sensor} base model", sd.t_s, sd.y, sd.y) for sd in (b.accel, b.gyro)]
+        curves = [ResidualCurve(f"{sd.sensor} base model", sd.t_s, sd.y, sd.y) for sd in (b.accel, b.gyro)]
     for title, t, before, after in curves:
         rows.append((title.split(" ")[0], f"{title}: block residual before", f"{title}: block residual after",
                      t, before, after))

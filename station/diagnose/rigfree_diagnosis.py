@@ -38,7 +38,7 @@ from scipy import stats
 from threadpoolctl import threadpool_limits
 
 from station.diagnose.effect_registry import REGISTRY, rig_free_testable
-from station.diagnose.outcome import Curve, Diagnosis
+from station.diagnose.outcome import Diagnosis, ResidualCurve
 from station.diagnose.residuals import SENSORS, BaseFitNoise, Baseline, baseline_from_params, locate, warmup_ranges
 from station.diagnose.results import (
     Compensation,
@@ -241,7 +241,7 @@ def diagnose_rig_free(session: Session, *,
             rejected.append(earth)
             continue
         if f.block_residual is not None:
-            curves.append(Curve(f"{f.sensor} {f.effect}", baseline.sensor(f.sensor).t_s, *f.block_residual))
+            curves.append(ResidualCurve(f"{f.sensor} {f.effect}", baseline.sensor(f.sensor).t_s, *f.block_residual))
         findings.append(replace(f, calibration=Compensation(f.effect, False, "not assessed on a rig-free recording")))
     rf = baseline.params.quality.get("rig_free", {})
     report = DiagnosisReport(
