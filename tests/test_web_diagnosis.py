@@ -124,6 +124,12 @@ def test_lever_arm_goes_pending_then_ready(client: TestClient, store: dict[str, 
         assert r2.status_code == 200 and r2.json()["report"] == report
         svg = other.get("/units/LEVER-1/diagnosis.svg")
         assert svg.status_code == 200 and "lever_arm" in svg.text
+    # a kept report of another format is not read back into the types (it would be computed again)
+    rec = Recording(NEW, lever, saved["session_sha256"])
+    assert DiagnosisService().peek(rec) is not None
+    other_format = {**saved, "report": {**saved["report"], "format": "station-diagnosis/0"}}
+    sidecar_path(lever).write_text(json.dumps(other_format), encoding="utf-8")
+    assert DiagnosisService().peek(rec) is None
 
 
 def test_svg_figure(client: TestClient) -> None:
