@@ -130,6 +130,7 @@ def test_lever_arm_goes_pending_then_ready(client: TestClient, store: dict[str, 
     other_format = {**saved, "report": {**saved["report"], "format": "station-diagnosis/0"}}
     sidecar_path(lever).write_text(json.dumps(other_format), encoding="utf-8")
     assert DiagnosisService().peek(rec) is None
+    sidecar_path(lever).write_text(json.dumps(saved), encoding="utf-8")
 
 
 def test_svg_figure(client: TestClient) -> None:
