@@ -184,9 +184,9 @@ def test_a_course_neither_test_names_is_listed_as_wander_or_temperature() -> Non
 
     walk = Test("bias_random_walk", "accel", gain=0.0, params=1, bic_gain=-7.0, critical=18.2)
     pair = _wander_or_temperature({"temperature_bias": temp(24.4), "bias_random_walk": walk}, None)
-    assert pair is not None and pair["effects"] == ["temperature_bias", "bias_random_walk"]
-    assert "climate-chamber" in pair["rig_step"]
-    assert pair["evidence"]["temperature_bias"]["gain_given_walk"] == 24.4
+    assert pair is not None and pair.effects == ("temperature_bias", "bias_random_walk") and pair.sensor == "accel"
+    assert "climate-chamber" in pair.rig_step
+    assert pair.evidence["temperature_bias"]["gain_given_walk"] == 24.4
     assert _wander_or_temperature({"temperature_bias": temp(30.0), "bias_random_walk": walk}, None) is None
     assert _wander_or_temperature({"temperature_bias": temp(24.4), "bias_random_walk": walk}, walk) is None
     assert _wander_or_temperature({"temperature_bias": temp(24.4)}, None) is None
