@@ -47,7 +47,7 @@ from __future__ import annotations
 
 import math
 import weakref
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 
 import numpy as np
 
@@ -55,6 +55,9 @@ from station.diagnose.residuals import Baseline, SensorData
 from station.kernel.geometry import up_vector
 from station.physics.effects import POSES
 from station.session.model import Kind
+
+#: A regressor column of one pose and rotation axis: ``column(pose index, axis (3,))`` -> (n, 3).
+Column = Callable[[int, np.ndarray], np.ndarray]
 
 NAME = "pose_tilt"
 SENSORS = ("accel",)
@@ -179,7 +182,7 @@ def rig_places(baseline: Baseline) -> tuple[np.ndarray, list[tuple[str, np.ndarr
     return index, poses, moves
 
 
-def _rig_columns(baseline: Baseline, f: np.ndarray) -> tuple[list[tuple[str, np.ndarray]], object]:
+def _rig_columns(baseline: Baseline, f: np.ndarray) -> tuple[list[tuple[str, np.ndarray]], Column]:
     """(pose list, column(p, a)) of the ``rig`` variant: the body-frame tilt ``a`` (rad) of pose ``p``, in ``f x a``
     (specific force m/s^2 per rad) wherever the rig holds or leaves/approaches that pose (see :func:`rig_places`)."""
     index, poses, moves = rig_places(baseline)
@@ -208,7 +211,7 @@ def _rig_columns(baseline: Baseline, f: np.ndarray) -> tuple[list[tuple[str, np.
     return poses, column
 
 
-def _segment_columns(baseline: Baseline, f: np.ndarray) -> tuple[list[tuple[str, np.ndarray]], object]:
+def _segment_columns(baseline: Baseline, f: np.ndarray) -> tuple[list[tuple[str, np.ndarray]], Column]:
     """(pose list, column(p, a)) of the ``segment`` variant: the tilt in pose segments only (as the station's
     simulator has it)."""
     index, poses = pose_groups(baseline)
@@ -222,7 +225,8 @@ def _segment_columns(baseline: Baseline, f: np.ndarray) -> tuple[list[tuple[str,
     return poses, column
 
 
-def _assemble(baseline: Baseline, sd: SensorData, poses: list, column, free_of) -> np.ndarray:
+def _assemble(baseline: Baseline, sd: SensorData, poses: list, column: Column,
+              free_of: Callable[[int], bool]) -> np.ndarray:
     m = np.nan_to_num(np.asarray(sd.params.misalignment, dtype=float))
     # the (n, 3, p) array is filled in place, M (f x a) per column: a list of (n, 3) columns stacked and then
     # multiplied by M held the regressors three times (the largest arrays of a long recording's diagnosis)

@@ -10,7 +10,7 @@ Pages (server-rendered Jinja2 templates in ``templates/``, no front-end build st
 * ``/units/{serial}``: parameter set against limits (marginal values highlighted), run
   history and plots (``/units/{serial}/plots/{name}.svg``, see :mod:`station.web.plots`), and the
   diagnosis of each run's recording (loaded by the page from the API, figure at
-  ``/units/{serial}/diagnosis.svg``; computed in the background, see :mod:`station.web.diagnosis`);
+  ``/units/{serial}/diagnosis.svg``; computed in the background, see :mod:`station.web.diagnosis_worker`);
 * ``/units/{serial}/certificate.pdf`` and ``.html``: the unit's calibration certificate (see
   :mod:`station.web.routes.certificate`);
 * ``/operator``: the operator console (sign in, lot and serials by barcode scanner, the station's prompts, start
@@ -46,7 +46,7 @@ from station.store.db import Database, open_database
 from station.store.quality import ShiftCalendar
 from station.web.console import ConsoleOperator, ConsoleSettings
 from station.web.context import WebContext
-from station.web.diagnosis import DiagnosisService
+from station.web.diagnosis_worker import DiagnosisService
 from station.web.openapi import StationAPI
 from station.web.routes import (
     certificate,

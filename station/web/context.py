@@ -14,7 +14,7 @@ from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from station.store.db import Database
 from station.store.quality import ShiftCalendar
 from station.web.cache import SvgCache
-from station.web.diagnosis import DiagnosisService
+from station.web.diagnosis_worker import DiagnosisService
 from station.web.state import LiveStatus
 
 

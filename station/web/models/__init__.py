@@ -5,7 +5,7 @@ rad/s, s), and every field's description names its unit where it has one.
 """
 
 from station.web.models.common import ErrorDetail, problem
-from station.web.models.diagnosis import (
+from station.web.models.diagnosis_api import (
     DiagnosisFailed,
     DiagnosisPending,
     DiagnosisQueueFull,
