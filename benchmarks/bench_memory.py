@@ -25,6 +25,7 @@ import argparse
 import os
 import re
 import resource
+import signal
 import subprocess
 import sys
 import tempfile
@@ -66,10 +67,14 @@ def timed(args: list[str], env: dict[str, str], *, limit_s: float | None = None,
 
     with tempfile.NamedTemporaryFile("r", suffix=".time") as report:
         start = time.perf_counter()
+        # a session of its own: on a timeout the whole group goes (time's child too, e.g. one blocked on a FIFO)
+        proc = subprocess.Popen(["/usr/bin/time", "-v", "-o", report.name, *args], env=env, stdout=subprocess.PIPE,
+                                stderr=subprocess.PIPE, text=True, preexec_fn=limits, start_new_session=True)
         try:
-            proc = subprocess.run(["/usr/bin/time", "-v", "-o", report.name, *args], env=env, capture_output=True,
-                                  text=True, timeout=limit_s, preexec_fn=limits)
+            _, stderr = proc.communicate(timeout=limit_s)
         except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.communicate()
             return {"code": "timeout", "wall_s": time.perf_counter() - start, "rss_mb": None, "cpu_s": None,
                     "message": f"no answer in {limit_s:.0f} s (killed)"}
         text = Path(report.name).read_text()
@@ -77,7 +82,7 @@ def timed(args: list[str], env: dict[str, str], *, limit_s: float | None = None,
     cpu = float(values["User time (seconds)"]) + float(values["System time (seconds)"])
     wall = values["Elapsed (wall clock) time (h:mm:ss or m:ss)"].split(":")
     wall_s = sum(float(x) * 60**i for i, x in enumerate(reversed(wall)))
-    lines = [ln for ln in proc.stderr.strip().splitlines() if ln.strip()]
+    lines = [ln for ln in stderr.strip().splitlines() if ln.strip()]
     return {"code": proc.returncode, "rss_mb": int(values["Maximum resident set size (kbytes)"]) / 1024,
             "cpu_s": cpu, "user_s": float(values["User time (seconds)"]),
             "sys_s": float(values["System time (seconds)"]), "wall_s": wall_s,
@@ -90,7 +95,7 @@ def cell(value: object, fmt: str) -> str:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--sizes", default="0.5e6,1.6e6,5e6", help="comma-separated sample counts")
+    ap.add_argument("--sizes", default="0.5e6,1.6e6,5e6", help="comma-separated sample counts ('' for none)")
     ap.add_argument("--commands", default="fit,diagnose", help="subset of fit,diagnose")
     ap.add_argument("--dir", type=Path, default=Path(tempfile.gettempdir()) / "station-bench-memory",
                     help="where the recordings are made once and reused")
@@ -104,7 +109,7 @@ def main() -> None:
     print(f"code: {code}")
     print(f"{'command':<9} {'rows':>9} {'file MB':>8} {'exit':>5} {'peak RSS MB':>12} {'user s':>7} {'sys s':>6} "
           f"{'CPU s':>7} {'CPU us/row':>11} {'wall s':>7}")
-    for rows in [float(x) for x in args.sizes.split(",")]:
+    for rows in [float(x) for x in args.sizes.split(",") if x.strip()]:
         path = recording(args.dir, rows, code)
         with path.open("rb") as f:
             n = sum(1 for line in f if not line.startswith(b"#")) - 1  # data rows: not metadata, not the header
@@ -117,7 +122,7 @@ def main() -> None:
     if args.no_probes:
         return
     print()
-    print(f"{'refusal probe (station fit)':<34} {'exit':>7} {'wall s':>7} {'peak RSS MB':>12}  message")
+    print(f"{'refusal probe (station fit)':<34} {'exit':>7} {'wall s':>7} {'CPU s':>6} {'peak RSS MB':>12}  message")
     with tempfile.TemporaryDirectory() as tmp:
         sparse = Path(tmp) / "sparse.csv"
         with sparse.open("wb") as f:
@@ -131,8 +136,8 @@ def main() -> None:
         for name, target, extra in probes:
             r = timed([station_exe(), "fit", target], env_for(code, extra), limit_s=TIME_LIMIT_S,
                       as_bytes=PROBE_AS_BYTES)
-            print(f"{name:<34} {r['code']!s:>7} {r['wall_s']:>7.2f} {cell(r['rss_mb'], '.0f'):>12}  {r['message']}",
-                  flush=True)
+            print(f"{name:<34} {r['code']!s:>7} {r['wall_s']:>7.2f} {cell(r['cpu_s'], '.2f'):>6} "
+                  f"{cell(r['rss_mb'], '.0f'):>12}  {r['message']}", flush=True)
 
 
 if __name__ == "__main__":
