@@ -1,7 +1,10 @@
 """Session recording file format, CSV v1 (spec: shared/spec/session-csv-v1.md).
 
-Reading: :func:`read_session` / :func:`parse_session`. The happy path hands the data block to
-the pandas C parser after cheap byte-level screening. When anything looks wrong the data is
+Reading: :func:`read_session` / :func:`parse_session`. The file is read in blocks of whole lines
+(about 4 MiB, :mod:`station.session.line_source`) into arrays grown in place, so memory follows the
+arrays kept, not the text; a size and a row limit (:mod:`station.session.session_limits`) and a line
+limit bound it, and a path that is not a regular file is refused before it is read. The happy path
+hands each block to the pandas C parser after cheap byte-level screening. When anything looks wrong the data is
 retried in blocks of lines, and a slow line-by-line reference parser reads the blocks the fast
 parser refuses: it either names the offending 1-based line in a
 :class:`~station.kernel.errors.SessionFormatError` or (for lines the fast path merely could not handle,
