@@ -14,7 +14,7 @@ pose order, rate list, duration or sample rate is assumed.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -30,7 +30,7 @@ from station.fit.blocks import Blocks, block_exp_mean, make_blocks
 from station.fit.boundary import numerics
 from station.fit.checks import check_session
 from station.fit.consistency import check_rotations
-from station.fit.goodness import TriadResidual, goodness_of_fit
+from station.fit.goodness import Rows, TriadResidual, goodness_of_fit
 from station.fit.params import MAX_TEMP_ORDER, AllanCoefficients, ParameterSet, ThermalFit, TriadParams
 from station.fit.thermal import (
     assess_temperature,
@@ -133,12 +133,13 @@ def _settled_runs(session: Session, kinds: tuple[Kind, ...], ref: np.ndarray) ->
 def _noise(session: Session, data: np.ndarray, runs: list[tuple[int, int, int]], outlier_sigma: float) -> _Noise:
     """White-noise std from first differences within settled runs (robust to outliers), and outlier flags."""
     keep = np.ones(len(session), dtype=bool)
-    diffs: list[np.ndarray] = []
-    for _, a, b in runs:
-        diffs.append(np.diff(data[a:b], axis=0))
-    d = np.concatenate(diffs)
-    # robust std of a difference of two samples is sqrt(2) sigma
-    sigma_robust = 1.4826 * np.median(np.abs(d - np.median(d, axis=0)), axis=0) / np.sqrt(2.0)
+    # robust std of a difference of two samples is sqrt(2) sigma (one axis at a time: a third of the memory)
+    mad = np.empty(3)
+    for j in range(3):
+        d = np.concatenate([np.diff(data[a:b, j]) for _, a, b in runs])
+        mad[j] = np.median(np.abs(d - np.median(d)))
+        del d
+    sigma_robust = 1.4826 * mad / np.sqrt(2.0)
     sigma_robust = np.maximum(sigma_robust, 1e-12)
     outliers = np.zeros(3, dtype=int)
     for _, a, b in runs:
@@ -149,16 +150,46 @@ def _noise(session: Session, data: np.ndarray, runs: list[tuple[int, int, int]],
         outliers += bad.sum(axis=0)
         keep[a:b] &= ~bad.any(axis=1)
     # the plain std of the clean differences is efficient; use it for the value
-    clean: list[np.ndarray] = []
-    for _, a, b in runs:
-        k = keep[a:b]
-        pair = k[1:] & k[:-1]
-        clean.append(np.diff(data[a:b], axis=0)[pair])
-    dc = np.concatenate(clean)
-    sigma = dc.std(axis=0) / np.sqrt(2.0)
+
+    def clean() -> Iterator[np.ndarray]:  # each run's differences of kept neighbours, a piece at a time
+        for _, a, b in runs:
+            for lo in range(a, b - 1, _ROWS):
+                hi = min(lo + _ROWS, b - 1)
+                yield (data[lo + 1:hi + 1] - data[lo:hi])[keep[lo + 1:hi + 1] & keep[lo:hi]]
+
+    sigma, count = _std_of_rows(clean)
+    sigma = sigma / np.sqrt(2.0)
     # differences of white noise: lag-1 correlation -1/2 inflates the variance of the estimate by 1.5
-    sigma_std = sigma * np.sqrt(1.5 / (2.0 * max(len(dc) - 1, 1)))
+    sigma_std = sigma * np.sqrt(1.5 / (2.0 * max(count - 1, 1)))
     return _Noise(sigma=sigma, sigma_std=sigma_std, keep=keep, outliers=outliers)
+
+
+def _sum_of_rows(parts: Iterator[np.ndarray]) -> tuple[np.ndarray, int]:
+    """Column sums of the rows of ``parts`` (each (k, 3)) added in row order, as ``np.sum(axis=0)`` of the rows
+    stacked adds them (the same numbers, without the stack), and the number of rows."""
+    total: np.ndarray | None = None
+    count = 0
+    for part in parts:
+        total = np.add.reduce(part if total is None else np.concatenate([total[None, :], part]), axis=0)
+        count += len(part)
+    return (np.zeros(3) if total is None else total), count
+
+
+def _std_of_rows(parts: Callable[[], Iterator[np.ndarray]]) -> tuple[np.ndarray, int]:
+    """``np.std(rows, axis=0)`` of the rows of ``parts()`` stacked (numpy's two passes: the mean, then the mean
+    squared deviation), one part at a time; and the number of rows."""
+    total, count = _sum_of_rows(parts())
+    mean = total / count
+    squares, _ = _sum_of_rows(_squared(x - mean) for x in parts())
+    return np.sqrt(squares / count), count
+
+
+def _squared(d: np.ndarray) -> np.ndarray:
+    return np.multiply(d, d, out=d)
+
+
+#: Samples per piece where a per-sample quantity is summed a piece at a time.
+_ROWS = 1 << 18
 
 
 @dataclass(frozen=True)
@@ -192,9 +223,9 @@ def _fit_triad(
     triad: str,
     nonlin_m: np.ndarray | None = None,
 ) -> tuple[_TriadLinear, Blocks]:
-    force = np.nan_to_num(session.ref_accel_mps2)
-    blocks = make_blocks(
-        session.t_s, data, np.nan_to_num(ref), force, noise.keep, runs, 1.0 / session.sample_rate_hz, options.max_blocks
+    blocks = make_blocks(  # NaN references count as 0 there
+        session.t_s, data, ref, session.ref_accel_mps2, noise.keep, runs, 1.0 / session.sample_rate_hz,
+        options.max_blocks,
     )
     design = _design(blocks, with_ref, g_sens)
     tc_range = options.tc_range_s.get(triad)
@@ -255,10 +286,9 @@ def _fit_triad_thermal(
     Returns the fits, the blocks, the temperature coefficients with their stds (``temp_bias_coeff``,
     ``temp_scale_coeff``, ``*_std``, each (3, 3)) and the (bias, scale) orders per axis.
     """
-    force = np.nan_to_num(session.ref_accel_mps2)
-    blocks = make_blocks(
-        session.t_s, data, np.nan_to_num(ref), force, noise.keep, runs, 1.0 / session.sample_rate_hz,
-        options.max_blocks, extra=temperature_columns(dt, ref if with_ref else None),
+    blocks = make_blocks(  # NaN references count as 0 there; the temperature columns made a few blocks at a time
+        session.t_s, data, ref, session.ref_accel_mps2, noise.keep, runs, 1.0 / session.sample_rate_hz,
+        options.max_blocks, extra=lambda lo, hi: temperature_columns(dt[lo:hi], ref[lo:hi] if with_ref else None),
     )
     base = _design(blocks, with_ref, g_sens)
     tc_range = options.tc_range_s.get(triad)
@@ -386,7 +416,7 @@ def mean_model(
     return out
 
 
-def _allan(session: Session, residual: np.ndarray, keep: np.ndarray) -> AllanCoefficients:
+def _allan(session: Session, residual: Rows, keep: np.ndarray) -> AllanCoefficients:
     """IEEE 952 coefficients from the longest still segment's residual."""
     still = session.segments_of(Kind.REST) or session.segments_of(Kind.POSE)
     seg = max(still, key=len)
@@ -407,29 +437,63 @@ def _allan(session: Session, residual: np.ndarray, keep: np.ndarray) -> AllanCoe
 
 
 def _quality(
-    session: Session, name: str, residual: np.ndarray, runs: list[tuple[int, int, int]], keep: np.ndarray
+    session: Session, name: str, residual: Rows, runs: list[tuple[int, int, int]], keep: np.ndarray
 ) -> dict[str, Any]:
     rms_seg = {}
-    parts = []
     for seg, a, b in runs:
         r = residual[a:b][keep[a:b]]
-        parts.append(r)
         rms_seg[str(seg)] = np.sqrt(np.mean(r**2, axis=0)).round(9).tolist()
-    allr = np.concatenate(parts)
-    return {"rms": np.sqrt(np.mean(allr**2, axis=0)).round(9).tolist(), "segments": rms_seg, "samples": len(allr)}
+    total, count = _sum_of_rows(r**2 for r in _kept_rows(residual, runs, keep))
+    return {"rms": np.sqrt(total / count).round(9).tolist(), "segments": rms_seg, "samples": count}
 
 
-def _sample_design(n: int, ref: np.ndarray | None, force: np.ndarray | None) -> np.ndarray:
-    """The linear regressors of eq. (1) per sample: reference (if M is fitted here), 1, force (g-sensitivity)."""
-    cols = [np.nan_to_num(ref)] if ref is not None else []
-    cols.append(np.ones((n, 1)))
-    if force is not None:
-        cols.append(np.nan_to_num(force))
-    return np.column_stack(cols)
+def _sample_design(
+    n: int, ref: np.ndarray | None, force: np.ndarray | None, *, nonlinearity: np.ndarray | None = None,
+    dt: np.ndarray | None = None, order: int = 1,
+) -> Rows:
+    """The linear regressors of eq. (1) per sample: reference (if M is fitted here), 1, force (g-sensitivity);
+    with ``nonlinearity`` (the gyro reference) the nonlinearity's regressors (a superset: ``ref_i |ref_i|``); with
+    ``dt`` the temperature regressors the fit used up to ``order`` (a superset for the scale: every ``ref_i dT^j``).
+    Made for the rows asked only (the goodness of fit reads them per segment)."""
+
+    def rows(lo: int, hi: int) -> np.ndarray:
+        cols = [np.nan_to_num(ref[lo:hi])] if ref is not None else []
+        cols.append(np.ones((hi - lo, 1)))
+        if force is not None:
+            cols.append(np.nan_to_num(force[lo:hi]))
+        design = np.column_stack(cols)
+        if nonlinearity is not None:
+            r = np.nan_to_num(nonlinearity[lo:hi])
+            design = np.column_stack([design, r * np.abs(r)])
+        if dt is not None:
+            design = np.column_stack([design, temperature_columns(dt[lo:hi], None if ref is None else ref[lo:hi],
+                                                                  order)])
+        return design
+
+    return Rows(n, rows)
+
+
+def _residual(session: Session, data: np.ndarray, p: dict[str, np.ndarray], ref: np.ndarray,
+              dt: np.ndarray | None) -> Rows:
+    """``data`` minus the fitted mean model, (n, 3), made for the rows asked (each row's numbers are those of
+    one pass over the whole recording): the quality figures and the goodness of fit read it per segment."""
+
+    def rows(lo: int, hi: int) -> np.ndarray:
+        return data[lo:hi] - mean_model(p, session.t_s[lo:hi], ref[lo:hi], session.ref_accel_mps2[lo:hi],
+                                        None if dt is None else dt[lo:hi])
+
+    return Rows(len(data), rows)
+
+
+def _kept_rows(residual: np.ndarray | Rows, runs: list[tuple[int, int, int]], keep: np.ndarray
+               ) -> Iterator[np.ndarray]:
+    """The residual's kept samples of each run, in the order of the samples."""
+    for _, a, b in sorted(runs, key=lambda r: r[1]):
+        yield residual[a:b][keep[a:b]]
 
 
 def _triad_residual(
-    name: str, res: np.ndarray, design: np.ndarray, runs: list[tuple[int, int, int]], noise: _Noise,
+    name: str, res: Rows, design: Rows, runs: list[tuple[int, int, int]], noise: _Noise,
     tri: _TriadLinear, blocks: Blocks, scale: float, unit: str, reference_var: float = 0.0,
 ) -> TriadResidual:
     return TriadResidual(
@@ -517,11 +581,11 @@ def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
     a = _unpack(a_tri)
 
     # --- gyroscope: rest + poses + rate steps, or static + known angles --------
-    static_ref = np.where(np.isnan(session.ref_gyro_radps), 0.0, session.ref_gyro_radps)
     if gyro_method == "rate":
         g_runs = _settled_runs(session, (Kind.REST, Kind.POSE, Kind.RATE), session.ref_gyro_radps)
         g_ref = session.ref_gyro_radps
     else:
+        static_ref = np.where(np.isnan(session.ref_gyro_radps), 0.0, session.ref_gyro_radps)
         g_runs = _settled_runs(session, (Kind.REST, Kind.POSE), static_ref)
         g_ref = static_ref
     with numerics(f"gyroscope fit ({'rest, poses and rate steps' if gyro_method == 'rate' else 'rest and poses'})"):
@@ -578,8 +642,8 @@ def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
         angle_report = angle_fit.report
 
     # --- residuals, noise figures and quality ----------------------------------
-    a_res = session.accel_mps2 - mean_model(a, session.t_s, session.ref_accel_mps2, session.ref_accel_mps2, dt)
-    g_res = session.gyro_radps - mean_model(g, session.t_s, g_ref, session.ref_accel_mps2, dt)
+    a_res = _residual(session, session.accel_mps2, a, session.ref_accel_mps2, dt)
+    g_res = _residual(session, session.gyro_radps, g, g_ref, dt)
     quality = {
         "accel": _quality(session, "accel", a_res, a_runs, a_noise.keep),
         "gyro": _quality(session, "gyro", g_res, g_runs, g_noise.keep),
@@ -595,18 +659,11 @@ def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
     if nonlin_note is not None:
         quality["scale_nonlinearity"] = nonlin_note
     deg = float(np.degrees(1.0))
-    n = len(session)
-    a_design = _sample_design(n, session.ref_accel_mps2, None)
-    g_design = _sample_design(n, g_ref if gyro_method == "rate" else None,
-                              session.ref_accel_mps2 if options.g_sensitivity else None)
-    if np.any(g.get("scale_nonlinearity", 0.0)):  # the nonlinearity regressors (a superset: ref_i |ref_i|)
-        r = np.nan_to_num(g_ref)
-        g_design = np.column_stack([g_design, r * np.abs(r)])
-    if dt is not None:  # the temperature regressors the fit used (a superset for the scale: every ref_i dT^j)
-        a_design = np.column_stack([a_design, temperature_columns(
-            dt, session.ref_accel_mps2, _top(thermal_note, "accel"))])
-        g_design = np.column_stack([g_design, temperature_columns(
-            dt, g_ref if gyro_method == "rate" else None, _top(thermal_note, "gyro"))])
+    a_design = _sample_design(len(session), session.ref_accel_mps2, None, dt=dt, order=_top(thermal_note, "accel"))
+    g_design = _sample_design(len(session), g_ref if gyro_method == "rate" else None,
+                              session.ref_accel_mps2 if options.g_sensitivity else None,
+                              nonlinearity=g_ref if np.any(g.get("scale_nonlinearity", 0.0)) else None,
+                              dt=dt, order=_top(thermal_note, "gyro"))
     quality["goodness_of_fit"] = goodness_of_fit(session, [
         _triad_residual("accel", a_res, a_design, a_runs, a_noise, a_tri, a_blocks, 1.0, "m/s^2",
                         (0.5 * (session.meta_float("reference_tolerance_mps2") or 0.0)) ** 2),
@@ -614,17 +671,14 @@ def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
     ], angle_report or None)
 
     def triad(
-        p: dict[str, np.ndarray], noise: _Noise, res: np.ndarray, runs: list[tuple[int, int, int]]
+        p: dict[str, np.ndarray], noise: _Noise, res: Rows, runs: list[tuple[int, int, int]]
     ) -> TriadParams:
-        mask = np.zeros(len(session), dtype=bool)
-        for _, s0, s1 in runs:
-            mask[s0:s1] = True
-        mask &= noise.keep
+        squares, count = _sum_of_rows(r**2 for r in _kept_rows(res, runs, noise.keep))  # np.mean(res[mask]**2, 0)
         return TriadParams(
             noise_std=noise.sigma,
             noise_std_std=noise.sigma_std,
             allan=_allan(session, res, noise.keep),
-            residual_rms=np.sqrt(np.mean(res[mask] ** 2, axis=0)),
+            residual_rms=np.sqrt(squares / count),
             **p,
         )
 
