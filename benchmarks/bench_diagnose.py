@@ -45,7 +45,7 @@ from dataclasses import replace
 import numpy as np
 
 from station.diagnose import NAMES, diagnose
-from station.diagnose.registry import LIBRARY
+from station.diagnose.effect_registry import LIBRARY
 from station.kernel.limits_file import DEFAULT_LIMITS_PATH, load_limits
 from station.kernel.plan import RigPlan, random_plan
 from station.kernel.sensor_class import TABLE1, SensorClass
@@ -102,10 +102,10 @@ def run(
     t0 = time.perf_counter()
     d = diagnose(res.session, warmup_tc_s=WARMUP_TC if class_range else None)
     dt = time.perf_counter() - t0
-    named = {f["effect"] for f in d.report["findings"]}
-    inseparable = {e for item in d.report["inseparable"] for e in item["effects"]}
+    named = {f["effect"] for f in d.to_json()["findings"]}
+    inseparable = {e for item in d.to_json()["inseparable"] for e in item["effects"]}
     gains = []
-    for f in d.report["findings"]:
+    for f in d.to_json()["findings"]:
         fit = f.get("fit") or {}
         if "before" in fit:
             b, a = np.array(fit["before"]["block_chi2"]), np.array(fit["after"]["block_chi2"])
@@ -295,7 +295,7 @@ def detectable(names: list[str], seeds: int) -> None:
         for s in range(seeds):
             seed = 20_000 + s
             plan = plan_for(seed)
-            clean = diagnose(simulate_session(seed, plan=plan).session, warmup_tc_s=WARMUP_TC).report
+            clean = diagnose(simulate_session(seed, plan=plan).session, warmup_tc_s=WARMUP_TC).to_json()
             quoted = [r for r in clean["rejected"] if r["effect"] == name and r.get("detectable_from")]
             sizes = {r["sensor"]: np.abs(np.asarray(r["detectable_from"]["value"], dtype=float)).ravel()
                      for r in quoted}
@@ -309,7 +309,7 @@ def detectable(names: list[str], seeds: int) -> None:
             found = []
             for magnitude in (hi, lo):
                 res = simulate_session(seed, plan=plan, effects=Effects(**{name: magnitude}))
-                report = diagnose(res.session, warmup_tc_s=WARMUP_TC).report
+                report = diagnose(res.session, warmup_tc_s=WARMUP_TC).to_json()
                 found.append(name in {f["effect"] for f in report["findings"]})
             tested += 1
             hi_found += found[0]

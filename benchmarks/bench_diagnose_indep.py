@@ -53,15 +53,15 @@ def run(seed: int, effects: dict[str, float], tc: dict | None
     t0 = time.perf_counter()
     d = diagnose(rec.session, warmup_tc_s=tc)
     dt = time.perf_counter() - t0
-    named = {f["effect"] for f in d.report["findings"]}
-    insep = {e for i in d.report["inseparable"] for e in i["effects"]}
+    named = {f["effect"] for f in d.to_json()["findings"]}
+    insep = {e for i in d.to_json()["inseparable"] for e in i["effects"]}
     # a finding whose form the plan cannot tell from another of its family (e.g. w|w| vs w^3 on a sensor that
     # sees one input magnitude) says so in its evidence: it names the family's physics, the form undetermined
     forms: dict[str, set[str]] = {}
-    for f in d.report["findings"]:
+    for f in d.to_json()["findings"]:
         alt = (f.get("evidence") or {}).get("form_inseparable_from") or {}
         forms.setdefault(f["effect"], set()).update(alt.get("effects", {}))
-    return named, insep, d.report["unexplained"], dt, len(rec.session), forms
+    return named, insep, d.to_json()["unexplained"], dt, len(rec.session), forms
 
 
 def main() -> None:

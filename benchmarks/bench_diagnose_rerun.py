@@ -50,7 +50,7 @@ def main() -> None:
                 rerun(d.baseline, fitted)
                 best = min(best, time.perf_counter() - t0)
                 cpu = min(cpu, time.process_time() - c0)
-        rr = d.report["rerun"]
+        rr = d.to_json()["rerun"]
         cols = []
         for sensor in ("accel", "gyro"):
             b, e = max(rr["base"][sensor]["chi2"]), max(rr["extended"][sensor]["chi2"])

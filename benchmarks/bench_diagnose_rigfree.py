@@ -82,7 +82,7 @@ def main() -> None:
             res = simulate_handheld(seed, effects=effects, latitude_deg=LATITUDE_DEG)
             t0 = time.perf_counter()
             try:
-                report = diagnose(session_of(res)).report
+                report = diagnose(session_of(res)).to_json()
             except StationError:
                 refused += 1
                 continue

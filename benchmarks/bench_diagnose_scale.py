@@ -76,7 +76,7 @@ def _measure(path: str, trace: bool) -> None:
     peak = tracemalloc.get_traced_memory()[1] / 2**20 if trace else None
     maxrss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # Linux: KiB
     print(json.dumps({"time_s": dt, "cpu_s": cpu, "rss_loaded_mb": rss_loaded, "maxrss_mb": maxrss, "traced_mb": peak,
-                      "findings": sorted(f"{f['effect']}:{f['sensor']}" for f in d.report["findings"])}))
+                      "findings": sorted(f"{f['effect']}:{f['sensor']}" for f in d.to_json()["findings"])}))
 
 
 def _rss_now_mb() -> float:

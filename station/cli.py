@@ -54,6 +54,7 @@ def _add_subapps() -> None:
     from station.commands.interchange import export_command, import_imu_tk_command, import_openaxes_command
     from station.commands.msa import msa_app
     from station.commands.nest_cal import nest_app
+    from station.commands.roles import line_app
     from station.commands.units import units_app
 
     app.add_typer(eeprom_app, name="eeprom")
@@ -61,6 +62,7 @@ def _add_subapps() -> None:
     app.add_typer(msa_app, name="msa")
     app.add_typer(nest_app, name="nest-cal")
     app.add_typer(golden_app, name="golden")
+    app.add_typer(line_app, name="line")
     app.command(name="diagnose")(diagnose_command)
     app.command(name="export")(export_command)
     import_app.command("openaxes")(import_openaxes_command)
@@ -394,8 +396,14 @@ def run_station(
     chamber: Annotated[str | None, typer.Option("--chamber", help="climate chamber URL (modbus-tcp://HOST:PORT): "
                                                 "run the thermal plan (plateaus 5/15/25/45 degC, verification at "
                                                 "35 degC) instead of the room-temperature sequence")] = None,
+    yes: Annotated[bool, typer.Option("--yes", "-y", help="confirm the station's prompts (load, close the lid, "
+                                      "unload) without waiting for Enter: CI, a fixture loaded by a robot")] = False,
 ) -> None:
     """Run the calibration sequence against any rig and sensors (real ones, or `station sim`).
+
+    The station prompts at the terminal before the rig moves (load the units into their nests, close the lid)
+    and after the verdicts (unload, each nest with its verdict); Enter confirms, n and Enter cancels (ABORTED,
+    nothing moved). Without a terminal on stdin give ``--yes``: otherwise the run ends ERROR before anything moves.
 
     With ``--chamber`` the thermal plan runs in that climate chamber (``station sim --chamber`` serves one):
     soaks gated on the units' own temperatures, the poses and rate steps at every plateau, the corrected
@@ -416,8 +424,9 @@ def run_station(
     from station.kernel.display import limits_identity
     from station.kernel.plan import default_plan
     from station.kernel.thermal_plan import default_thermal_plan
+    from station.sequence.prompts import AutoConfirm
     from station.sequence.runner import SequenceRunner
-    from station.terminal import ProgressDisplay, summary_table
+    from station.terminal import ProgressDisplay, TerminalOperator, summary_table
 
     thermal = default_thermal_plan() if chamber else None
     plan = thermal.base if thermal is not None else default_plan()
@@ -434,8 +443,9 @@ def run_station(
                              plan=plan, operator=operator, lot=lot, limits_path=limits, provision=True,
                              chamber_url=chamber, thermal=thermal)
         display = ProgressDisplay(console, list(cfg.sensor_urls), cfg.clock_scale)
+        prompter = AutoConfirm("--yes") if yes else TerminalOperator(console, cfg.operator)
         with abort_on_signals(lambda: runners[-1] if runners else None):
-            station = Station(cfg, subscribers=[display])
+            station = Station(cfg, subscribers=[display], prompter=prompter)
             lim = station.limits
             console.print(f"station {cfg.station_id}: database {station.recorder.db.url if station.recorder else '-'}, "
                           f"limits {limits_identity(f'{lim.name} {lim.version}', lim.sha256)}"
@@ -474,41 +484,47 @@ def serve(
     out: Annotated[Path | None, typer.Option(help="directory for session CSVs and parameter JSONs "
                                                   "[default: runs]")] = None,
     name: Annotated[str | None, typer.Option("--station", help="station id for the records and images")] = None,
+    operator: Annotated[str | None, typer.Option(help="the operator recorded on runs started with the bearer token "
+                                                 "(API, automation); a signed-in operator's own name wins")] = None,
 ) -> None:
-    """Operator status page and JSON API.
+    """Operator console, status page and JSON API.
 
-    Write actions (start/abort a run) need the bearer token in $STATION_TOKEN and a station
-    given with --rig/--sensor or --config; otherwise the server is read-only and they answer 401
-    (or 503). SIGINT, SIGTERM and SIGHUP abort a run in progress (rig to rest, ABORTED with the
-    signal's name) before the server exits.
+    With a station (--rig/--sensor or --config) the operator console at /operator runs it: sign in, scan the
+    lot and serials, answer the station's prompts (load, close the lid, unload), start and abort. Write actions
+    need a signed-in operator or the bearer token in $STATION_TOKEN (the token is never shown by a page);
+    without a station the server is read-only and they answer 401 (or 503). SIGINT, SIGTERM and SIGHUP abort a
+    run in progress (rig to rest, ABORTED with the signal's name) before the server exits.
     """
     import os
 
     from station.web.serve import serve as run_server
 
     token = os.environ.get("STATION_TOKEN") or None
-    live, on_exit = None, None
+    live, on_exit, prompter = None, None, None
     if config is not None or (rig is not None and sensor):
         from station.compose import Station
+        from station.web.console import ConsoleOperator
         from station.web.control import StationControl
         from station.web.state import LiveStatus
 
         try:
             cfg = station_config(config, rig, sensor, station_id=name, db_url=db, out_dir=out, clock_scale=scale,
-                                 limits_path=limits, provision=True)
-            station = Station(cfg)
+                                 limits_path=limits, provision=True, operator=operator)
+            prompter = ConsoleOperator()
+            station = Station(cfg, prompter=prompter)
         except StationError as exc:
             raise fail(exc) from None
         assert station.recorder is not None
         db = cfg.db_url
         live = LiveStatus(station.recorder.db)
+        live.nests = len(cfg.sensor_urls)
         station.subscribe(live)  # after the recorder: the page reads what it stored
         control = StationControl(station.run, on_error=live.set_fault)
         live.on_start = control.start
         live.on_abort = control.abort
         on_exit = control.stop
     try:
-        run_server(host, port, db, token, live, on_exit)
+        run_server(host, port, db, token, live, on_exit, prompter)
     except StationError as exc:  # e.g. a database that cannot be opened
         raise fail(exc) from None
 

@@ -40,6 +40,7 @@ from station.rig_lock import RigLock
 from station.sensor import open_sensor
 from station.sensor.protocol import Sensor
 from station.sequence.options import SequenceOptions
+from station.sequence.prompts import Operator
 from station.sequence.provision import EepromProvisioner, ProvisionRecord
 from station.sequence.records import Record
 from station.sequence.runner import RunResult, SequenceRunner
@@ -351,6 +352,8 @@ class Station:
         subscribers: record subscribers called before the store's recorder (e.g. a display).
         admit: the retest policy (default: the store's retest gate when recording, else none).
         on_provision: called with each unit's EEPROM write and verification (default: the recorder's).
+        prompter: answers the station's prompts (load, close the lid, unload; :mod:`station.sequence.prompts`);
+            None: the sequence runs without prompts.
 
     Raises :class:`~station.kernel.errors.StationError` when the limits file or the database cannot
     be used: a station that cannot record or judge does not start.
@@ -366,8 +369,10 @@ class Station:
         subscribers: Sequence[Subscriber] = (),
         admit: Admit | None = None,
         on_provision: Callable[[ProvisionRecord], None] | None = None,
+        prompter: Operator | None = None,
     ) -> None:
         self.config = config
+        self.prompter = prompter
         self.clock = clock if clock is not None else make_clock(config.clock_scale)
         self.limits = limits if limits is not None else load_limits(config.limits_path)
         self.options = (options if options is not None else SequenceOptions()).for_scale(self.clock.scale)
@@ -436,7 +441,7 @@ class Station:
         return RigVerifier(hw.rig, self.clock, self.limits.verification, gravity_mps2=plan.gravity_mps2,
                            sample_rate_hz=int(plan.sample_rate_hz), options=self.options)
 
-    def _thermal_runner(self, hw: Hardware, chamber: Any) -> ThermalRunner:
+    def _thermal_runner(self, hw: Hardware, chamber: Any, serials: Mapping[int, str] | None = None) -> ThermalRunner:
         c = self.config
         assert c.thermal is not None
         self.provisioner = (EepromProvisioner(c.station_id, on_record=self.on_provision) if c.provision else None)
@@ -445,13 +450,17 @@ class Station:
             options=self.options, limits=self.limits.product, out_dir=c.out_dir, station=c.station_id,
             rig_name=hw.rig_name, sensor_urls=list(c.sensor_urls), subscribers=self.subscribers,
             provisioner=self.provisioner, admit=self.admit, fit_options=self.fit_options,
+            operator=self.prompter, expected_serials=serials,
         )
 
-    def run(self, on_runner: Callable[[SequenceRunner], None] | None = None, operator: str | None = None) -> RunResult:
+    def run(self, on_runner: Callable[[SequenceRunner], None] | None = None, operator: str | None = None, *,
+            lot: str | None = None, serials: Mapping[int, str] | None = None) -> RunResult:
         """Take the rig, open the hardware, run the sequence once, close everything; the run's result.
 
         ``on_runner`` gets the runner before it runs (its ``run_id``, and :meth:`SequenceRunner.abort`).
-        ``operator``: who started this run (default: the configuration's), recorded on the run.
+        ``operator``: who started this run (default: the configuration's), recorded on the run; ``lot``: the
+        units' lot (default: the configuration's); ``serials``: fixture slot -> the serial scanned for it (a
+        unit reporting another serial is REFUSED). The station's :attr:`prompter` answers its prompts.
         Raises :class:`~station.rig_lock.RigBusy` (before anything is touched) when another run holds the
         rig, :class:`~station.kernel.errors.HardwareError` if the rig or a sensor cannot be opened.
         """
@@ -459,7 +468,7 @@ class Station:
         db = self.recorder.db if self.recorder is not None else None
         if self.recorder is not None:
             who = c.operator if operator is None else operator
-            self.recorder.context = replace(self.recorder.context, operator=who)
+            self.recorder.context = replace(self.recorder.context, operator=who, lot=c.lot if lot is None else lot)
         with RigLock(c.rig_url, c.station_id, db), open_hardware(
             c.rig_url, c.sensor_urls, self.clock, rig_options=self._rig_options(), sensor_options=c.sensor_options
         ) as hw:
@@ -469,7 +478,7 @@ class Station:
                     self.clock.scale)
                 chamber = open_chamber(c.chamber_url, self.clock, **dict(options))
                 try:
-                    runner: SequenceRunner = self._thermal_runner(hw, chamber)
+                    runner: SequenceRunner = self._thermal_runner(hw, chamber, serials)
                     if on_runner is not None:
                         on_runner(runner)
                     return runner.run()
@@ -481,7 +490,7 @@ class Station:
                 hw.rig, hw.sensors, self.clock, plan=c.plan, options=self.options, limits=self.limits.product,
                 out_dir=c.out_dir, station=c.station_id, rig_name=hw.rig_name, sensor_urls=list(c.sensor_urls),
                 subscribers=self.subscribers, provisioner=self.provisioner, admit=self.admit,
-                fit_options=self.fit_options, nests=nests,
+                fit_options=self.fit_options, nests=nests, operator=self.prompter, expected_serials=serials,
             )
             if on_runner is not None:
                 on_runner(runner)

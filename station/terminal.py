@@ -1,10 +1,13 @@
-"""The terminal subscriber: a live progress display of a run, and the tables printed after it."""
+"""The terminal subscriber: a live progress display of a run, the operator's prompts (:class:`TerminalOperator`:
+answered with Enter), and the tables printed after it."""
 
 from __future__ import annotations
 
 import math
+import select
+import threading
 import time
-from typing import Any
+from typing import IO, Any
 
 from rich.console import Console, Group, JustifyMethod, RenderableType
 from rich.live import Live
@@ -12,10 +15,13 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from station.kernel.display import display_for
+from station.sequence.prompts import Answer, NoOperator, Prompt
 from station.sequence.provision import EepromProvisioner
 from station.sequence.records import (
     Measured,
     Outcome,
+    PromptAnswered,
+    PromptShown,
     Record,
     RunFinished,
     RunStarted,
@@ -77,6 +83,17 @@ class ProgressDisplay:
         return Group(self.progress, clock, table)
 
     def __call__(self, record: Record) -> None:
+        if isinstance(record, PromptShown):
+            if self.live is not None:  # the prompt and its answer are typed below the display, not over it
+                self.live.stop()
+            self.console.print(f"[bold reverse] {record.kind.upper()} [/] {record.text}")
+            return
+        if isinstance(record, PromptAnswered):
+            by = f" by {record.by}" if record.by else ""
+            self.console.print(f"  {record.answer}{by} after {record.waited_s:.1f} s")
+            if self.live is not None:
+                self.live.start()
+            return
         if isinstance(record, RunStarted):
             self.steps_total = len(record.steps)
             self.t_start = self.t_now = record.t_s
@@ -115,6 +132,48 @@ class ProgressDisplay:
         elif isinstance(record, RunFinished):
             self.t_now = record.t_s
             self.progress.update(self.task, description=f"done: {record.outcome.value}")
+
+
+class TerminalOperator:
+    """Answers the station's prompts at the terminal: Enter confirms, ``n`` and Enter cancels.
+
+    The prompt's text is printed by the :class:`ProgressDisplay` (a record subscriber); this only waits for the
+    answer, up to the prompt's timeout, and gives up when the run is aborted. End of input (a closed terminal,
+    stdin from ``/dev/null``) raises :class:`~station.sequence.prompts.NoOperator`: a station fault, nothing moves.
+    Ctrl-C, SIGTERM and SIGHUP interrupt the wait (:class:`KeyboardInterrupt`) as they interrupt a run.
+
+    Args:
+        console: where the hint goes.
+        name: who answers (recorded with the answer; '' if unknown).
+        stream: the input (default: stdin); must have a file descriptor (``select``).
+    """
+
+    def __init__(self, console: Console, name: str = "", stream: IO[str] | None = None) -> None:
+        import sys
+
+        self.console = console
+        self.name = name
+        self.stream = stream if stream is not None else sys.stdin
+
+    def ask(self, prompt_id: str, prompt: Prompt, cancel: threading.Event) -> tuple[Answer, str]:
+        self.console.print(f"  press Enter to confirm, n and Enter to cancel (waiting up to {prompt.timeout_s:g} s)")
+        deadline = time.monotonic() + prompt.timeout_s
+        while True:
+            if cancel.is_set():
+                return "cancelled", ""
+            left = deadline - time.monotonic()
+            if left <= 0:
+                return "timeout", ""
+            ready, _, _ = select.select([self.stream], [], [], min(left, 0.2))
+            if not ready:
+                continue
+            line = self.stream.readline()
+            if line == "":
+                raise NoOperator("end of input: no operator at the terminal to answer the prompt "
+                                 f"'{prompt.kind.value}' (give --yes to confirm prompts without one)")
+            if line.strip().lower() in ("n", "no", "cancel", "abort"):
+                return "cancelled", self.name
+            return "confirmed", self.name
 
 
 def _fmt(values: Any, scale: float = 1.0, digits: int = 4, offset: float = 0.0) -> str:

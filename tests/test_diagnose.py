@@ -12,7 +12,7 @@ import pytest
 
 from station.diagnose import FORMAT, NAMES, diagnose
 from station.diagnose.candidates import attitude
-from station.diagnose.registry import LIBRARY
+from station.diagnose.effect_registry import LIBRARY
 from station.diagnose.residuals import fit_baseline
 from station.kernel.plan import RigPlan
 from station.kernel.sensor_class import TABLE1
@@ -30,7 +30,7 @@ PLAN = RigPlan(
 
 def _run(effects: str, seed: int) -> dict:
     res = simulate_session(seed, plan=PLAN, effects=Effects.parse(effects))
-    return diagnose(res.session).report
+    return diagnose(res.session).to_json()
 
 
 def _named(report: dict) -> set[tuple[str, str]]:
@@ -55,7 +55,7 @@ def test_no_findings_on_base_model_recording() -> None:
 
 def test_lever_arm_in_mm_with_temperature_scale() -> None:
     res = simulate_session(5, plan=PLAN, effects=Effects(lever_arm=30.0, temperature_scale=300.0))
-    report = diagnose(res.session).report
+    report = diagnose(res.session).to_json()
     assert "temperature_scale" in {f["effect"] for f in report["findings"]}
     finding = next(f for f in report["findings"] if f["effect"] == "lever_arm")
     assert finding["sensor"] == "accel"
@@ -68,7 +68,7 @@ def test_lever_arm_in_mm_with_temperature_scale() -> None:
 
 def test_g_sensitivity_and_time_offset_in_engineering_units() -> None:
     res = simulate_session(7, plan=PLAN, effects=Effects(g_sensitivity=0.05, time_offset=3.0))
-    report = diagnose(res.session).report
+    report = diagnose(res.session).to_json()
     finding = next(f for f in report["findings"] if f["effect"] == "g_sensitivity")
     assert finding["sensor"] == "gyro"
     truth = res.effect_truth.g_sensitivity * 9.80665 * 180.0 / math.pi
@@ -125,7 +125,7 @@ def test_random_walk_below_the_noise_is_found() -> None:
     """A bias random walk of 1e-4 m/s^2/sqrt(s) (gyro 5e-4 deg/s/sqrt(s)): ~3 mm/s^2 and 0.013 deg/s over
     the record, below one sample's noise; found on the gyro with its density, and nothing else named."""
     res = simulate_session(12, plan=PLAN, effects=Effects(bias_random_walk=1e-4))
-    report = diagnose(res.session).report
+    report = diagnose(res.session).to_json()
     walks = [f for f in report["findings"] if f["effect"] == "bias_random_walk"]
     assert {f["sensor"] for f in walks} >= {"gyro"}
     assert {f["effect"] for f in report["findings"]} == {"bias_random_walk"}
@@ -153,7 +153,7 @@ def test_temperature_bias_found_with_the_rig_step_the_report_names() -> None:
     with this step: benchmarks/bench_diagnose.py --chamber.)"""
     chamber = replace(TABLE1, ambient_cycle_k=2.0, ambient_cycle_period_s=300.0)
     res = simulate_session(14, plan=PLAN, sensor_class=chamber, effects=Effects(temperature_bias=2e-3))
-    report = diagnose(res.session).report
+    report = diagnose(res.session).to_json()
     found = [f for f in report["findings"] if f["effect"] == "temperature_bias" and f["sensor"] == "gyro"]
     assert found, report["findings"]
     value = np.array(found[0]["parameters"]["value"])  # deg/s/K
@@ -161,7 +161,7 @@ def test_temperature_bias_found_with_the_rig_step_the_report_names() -> None:
     truth = np.degrees(res.effect_truth.gyro_temp_bias)
     assert np.all(np.abs(value - truth) < 4 * std + 2e-4)
     clean = simulate_session(14, plan=PLAN, sensor_class=chamber)
-    assert diagnose(clean.session).report["findings"] == []
+    assert diagnose(clean.session).to_json()["findings"] == []
 
 
 def test_temperature_bias_found_with_the_sensor_class_tc_range() -> None:
@@ -173,10 +173,10 @@ def test_temperature_bias_found_with_the_sensor_class_tc_range() -> None:
 
     tc_range = load_limits().correlation_time_s
     res = simulate_session(14, plan=PLAN, effects=Effects(temperature_bias=2e-3))
-    alone = diagnose(res.session).report
+    alone = diagnose(res.session).to_json()
     assert alone["findings"] == [] and alone["warmup_tc_range_s"] is None
     assert any("temperature_bias" in e["effects"] for e in alone["inseparable"])
-    report = diagnose(res.session, warmup_tc_s=tc_range).report
+    report = diagnose(res.session, warmup_tc_s=tc_range).to_json()
     assert report["warmup_tc_range_s"] == {"accel": [50.0, 167.0], "gyro": [1030.0, 3760.0]}
     assert _named(report) == {("temperature_bias", "gyro")}
     par = report["findings"][0]["parameters"]
@@ -185,7 +185,7 @@ def test_temperature_bias_found_with_the_sensor_class_tc_range() -> None:
     assert np.all(np.abs(value - truth) < 3 * std)
     assert np.all(std < 0.1 * np.abs(truth))
     clean = simulate_session(14, plan=PLAN)
-    assert diagnose(clean.session, warmup_tc_s=tc_range).report["findings"] == []
+    assert diagnose(clean.session, warmup_tc_s=tc_range).to_json()["findings"] == []
 
 
 def test_temperature_scale_at_the_concealed_magnitude_with_its_coefficient() -> None:
@@ -195,7 +195,7 @@ def test_temperature_scale_at_the_concealed_magnitude_with_its_coefficient() -> 
     from station.kernel.limits_file import load_limits
 
     res = simulate_session(17, plan=PLAN, effects=Effects(temperature_scale=100.0))
-    report = diagnose(res.session, warmup_tc_s=load_limits().correlation_time_s).report
+    report = diagnose(res.session, warmup_tc_s=load_limits().correlation_time_s).to_json()
     assert _named(report) == {("temperature_scale", "gyro")}
     par = report["findings"][0]["parameters"]
     value, std = np.array(par["value"]), np.array(par["std"])  # ppm/K
@@ -242,7 +242,7 @@ def test_temperature_bias_is_not_taken_for_a_random_walk() -> None:
         return random_plan(np.random.default_rng(10_000 + seed))
 
     alone = simulate_session(107, plan=plan(107), effects=Effects(temperature_bias=2e-3))
-    report = diagnose(alone.session).report
+    report = diagnose(alone.session).to_json()
     assert {f["effect"] for f in report["findings"]} <= {"temperature_bias"}  # no random walk
     for f in report["findings"]:  # where named at all (the gyro's z here, marginally), with the true coefficient
         truth = np.degrees(alone.effect_truth.gyro_temp_bias) if f["sensor"] == "gyro" else (
@@ -252,7 +252,7 @@ def test_temperature_bias_is_not_taken_for_a_random_walk() -> None:
     assert any("temperature_bias" in e["effects"] for e in report["inseparable"])
     chamber = replace(TABLE1, ambient_cycle_k=2.0, ambient_cycle_period_s=300.0)
     cycled = simulate_session(105, plan=plan(105), sensor_class=chamber, effects=Effects(temperature_bias=2e-3))
-    assert _named(diagnose(cycled.session).report) == {("temperature_bias", "accel"), ("temperature_bias", "gyro")}
+    assert _named(diagnose(cycled.session).to_json()) == {("temperature_bias", "accel"), ("temperature_bias", "gyro")}
 
 
 def test_warmup_tc_range_is_checked() -> None:
@@ -268,7 +268,7 @@ def test_nonlinearity_that_distorts_the_base_warmup_names_no_temperature_bias() 
     The diagnosis re-fits the drift with the whole b_drift, not as a correction on top of the base fit's: the
     nonlinearity is found with its coefficient and the leftover warm-up is not taken for a temperature bias."""
     res = simulate_session(23, plan=PLAN, effects=Effects(scale_nonlinearity=1e-3))
-    report = diagnose(res.session).report
+    report = diagnose(res.session).to_json()
     assert _named(report) == {("scale_nonlinearity", "gyro")}
     finding = report["findings"][0]
     value = np.array(finding["parameters"]["value"])  # relative scale error at 200 deg/s
@@ -322,21 +322,21 @@ def test_detectable_from_is_the_size_at_the_quoted_power() -> None:
     t = Test(effect="temperature_scale", sensor="gyro", gain=3.0, params=3, bic_gain=3.0 - 3 * math.log(900.0),
              critical=float(stats.chi2.isf(1e-5, 3)), theta=np.zeros(3), cov=cov)
     d = detectable_from(t)
-    assert d is not None and d["unit"] == "ppm/K" and d["power"] == DETECT_POWER
+    assert d is not None and d.unit == "ppm/K" and d.power == DETECT_POWER
     threshold = max(t.critical, 3 * math.log(900.0))
-    for k, value in enumerate(d["value"]):
+    for k, value in enumerate(d.value):
         lam = (value * 1e-6) ** 2 / cov[k, k]
         assert stats.ncx2.sf(threshold, 3, lam) == pytest.approx(DETECT_POWER, abs=0.005)
     assert detectable_from(replace(t, params=2)) is None  # not every parameter determined
 
-    clean = diagnose(simulate_session(21, plan=PLAN).session).report
+    clean = diagnose(simulate_session(21, plan=PLAN).session).to_json()
     rejected = next(r for r in clean["rejected"] if (r["effect"], r["sensor"]) == ("temperature_scale", "gyro"))
     sizes = np.abs(rejected["detectable_from"]["value"])  # ppm/K
     # the simulator's per-axis coefficients are the magnitude times 0.5-1
     big = simulate_session(21, plan=PLAN, effects=Effects(temperature_scale=2.0 * sizes.max() / 0.5))
-    assert ("temperature_scale", "gyro") in _named(diagnose(big.session).report)
+    assert ("temperature_scale", "gyro") in _named(diagnose(big.session).to_json())
     small = simulate_session(21, plan=PLAN, effects=Effects(temperature_scale=0.2 * sizes.min()))
-    assert "temperature_scale" not in {f["effect"] for f in diagnose(small.session).report["findings"]}
+    assert "temperature_scale" not in {f["effect"] for f in diagnose(small.session).to_json()["findings"]}
 
 
 def test_odd_scale_forms_a_plan_cannot_tell_apart_give_one_finding() -> None:
@@ -348,7 +348,7 @@ def test_odd_scale_forms_a_plan_cannot_tell_apart_give_one_finding() -> None:
     plan = random_plan(np.random.default_rng(10_000 + 401))
     assert {abs(r) for _, r in plan.rate_steps} == {100.0}
     res = simulate_session(401, plan=plan, effects=Effects(scale_nonlinearity=2e-4))
-    report = diagnose(res.session, warmup_tc_s={"accel": (50.0, 167.0), "gyro": (1030.0, 3760.0)}).report
+    report = diagnose(res.session, warmup_tc_s={"accel": (50.0, 167.0), "gyro": (1030.0, 3760.0)}).to_json()
     assert [(f["effect"], f["sensor"]) for f in report["findings"]] == [("scale_nonlinearity", "gyro")]
     form = report["findings"][0]["evidence"]["form_inseparable_from"]
     assert set(form["effects"]) == {"scale_nonlinearity_odd"}

@@ -19,7 +19,7 @@ PRIOR = {"accel": (50.0, 167.0), "gyro": (1030.0, 3760.0)}
 def test_each_finding_says_whether_the_calibration_compensates_it(
     effects: Effects, name: str, compensated: bool, note: str
 ) -> None:
-    report = diagnose(simulate_session(310, effects=effects).session, warmup_tc_s=PRIOR).report
+    report = diagnose(simulate_session(310, effects=effects).session, warmup_tc_s=PRIOR).to_json()
     found = [f for f in report["findings"] if f["effect"] == name and f["sensor"] == "gyro"]
     assert found, [f["effect"] for f in report["findings"]]
     cal = found[0]["calibration"]

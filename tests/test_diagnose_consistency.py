@@ -15,10 +15,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import indepgen
 
-from station.diagnose import bootstrap, consistency, robust
+from station.diagnose import bootstrap, robust
+from station.diagnose import finding_consistency as consistency
+from station.diagnose.effect_registry import EFFECTS, LIBRARY
 from station.diagnose.likelihood import SensorProblem
-from station.diagnose.registry import EFFECTS, LIBRARY
 from station.diagnose.residuals import fit_baseline
+from station.diagnose.results import CheckEntry
 
 TC = {"accel": (50.0, 167.0), "gyro": (1030.0, 3760.0)}  # Table 1, as the station's default limits file
 
@@ -30,7 +32,7 @@ def _accepted(seed: int, effects: dict[str, float], sensor: str, names: list[str
     sd = base.sensor(sensor)
     prob = SensorProblem(base, sd)
     for n in names:
-        prob.accepted.append(sd.block_mean(LIBRARY[n].build(base, sd)))
+        prob.accept(sd.block_mean(LIBRARY[n].build(base, sd)), refit=False)
     prob.refit_drift()
     return base, prob
 
@@ -63,10 +65,10 @@ def test_a_check_the_recording_cannot_run_says_why(delayed) -> None:
     (c,) = consistency.check(prob, base, ["time_offset"])["time_offset"]
     assert c.result == "not checked" and not c.checked and c.passes
     assert "does not reach the rate ramps" in c.reason
-    assert c.to_dict()["reason"] == c.reason
+    assert c.entry().to_json()["reason"] == c.reason
     # an effect the registry gives no check: its reason
     (n,) = consistency.not_checked("bias_random_walk", "gyro")
-    assert n.split is None and "covariance" in n.reason and n.to_dict()["result"] == "not checked"
+    assert n.split is None and "covariance" in n.reason and n.entry().to_json()["result"] == "not checked"
 
 
 def test_an_even_scale_term_fitted_as_asymmetry_is_rejected_and_located() -> None:
@@ -75,7 +77,7 @@ def test_an_even_scale_term_fitted_as_asymmetry_is_rejected_and_located() -> Non
     checks, bad, where = consistency.review(prob, base, ["scale_asymmetry"], {"scale_asymmetry": 100.0})
     failed = [c for c in checks["scale_asymmetry"] if c.result == "failed"]
     assert failed and failed[0].chi2 > failed[0].critical
-    assert bad is not None and bad["effect"] == "scale_asymmetry" and "inconsistent between" in bad["reason"]
+    assert bad is not None and bad.effect == "scale_asymmetry" and "inconsistent between" in bad.reason
     assert isinstance(where, robust.Unexplained)
     assert where.sensor == "gyro" and "rate" in where.segment_kinds and where.excess_chi2 == 100.0
     assert "scale_asymmetry" in where.covariate
@@ -123,13 +125,14 @@ def test_findings_carry_their_checks_and_bootstrap_typed_and_in_the_report() -> 
     assert gyro.effect == "time_offset"
     assert isinstance(gyro.bootstrap, bootstrap.Bootstrap) and gyro.bootstrap.resamples == 10
     assert gyro.bootstrap.seed == 5 and gyro.bootstrap.accepted_fraction == 1.0
-    assert abs(gyro.bootstrap.median[0] - 10.0) < 0.5 and gyro.confidence["level"] == "high"
+    assert abs(gyro.bootstrap.median[0] - 10.0) < 0.5
+    assert gyro.confidence is not None and gyro.confidence.level == "high"
     (c,) = gyro.consistency
-    assert isinstance(c, consistency.Check) and c.result == "passed"
-    entry = gyro.to_dict()
+    assert isinstance(c, CheckEntry) and c.result == "passed"
+    entry = gyro.to_json()
     assert entry["consistency"][0]["check"] == "tumbles_vs_ramps" and entry["bootstrap"]["resamples"] == 10
     # resamples=0 leaves the bootstrap out; the checks stay
-    report = diagnose(rec.session, warmup_tc_s=TC, resamples=0).report
+    report = diagnose(rec.session, warmup_tc_s=TC, resamples=0).to_json()
     for f in report["findings"]:
         assert "bootstrap" not in f and f["consistency"]
 

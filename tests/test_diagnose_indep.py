@@ -43,7 +43,7 @@ def test_generator_is_deterministic_and_writes_the_session_format(tmp_path: Path
 
 
 def test_null_recording_names_nothing() -> None:
-    report = diagnose(indepgen.generate(1, {}).session, warmup_tc_s=TC).report
+    report = diagnose(indepgen.generate(1, {}).session, warmup_tc_s=TC).to_json()
     assert report["findings"] == []
     assert report["unexplained"] == []
 
@@ -52,7 +52,7 @@ def test_null_recording_names_nothing() -> None:
 def test_a_delay_of_milliseconds_is_the_only_finding_with_its_size(seed: int, delay_ms: float) -> None:
     """The issue: a 3-15 ms offset dragged in bias_random_walk, g_sensitivity, outliers, temperature_scale."""
     rec = indepgen.generate(seed, {"time_offset": delay_ms})
-    report = diagnose(rec.session, warmup_tc_s=TC).report
+    report = diagnose(rec.session, warmup_tc_s=TC).to_json()
     assert {e for e, _ in _named(report)} == {"time_offset"}
     for f in report["findings"]:
         value, std = f["parameters"]["value"][0], f["parameters"]["std"][0]
@@ -64,7 +64,7 @@ def test_even_scale_term_is_named_even_not_asymmetry() -> None:
     """k2 w^2 (IEEE even term) with five rate magnitudes: named scale_nonlinearity_even, nothing else."""
     rec = indepgen.generate(3, {"scale_nonlinearity_even": 2e-3})
     assert len(rec.plan.rates_dps) >= 3
-    report = diagnose(rec.session, warmup_tc_s=TC).report
+    report = diagnose(rec.session, warmup_tc_s=TC).to_json()
     assert {e for e, _ in _named(report)} == {"scale_nonlinearity_even"}
     gyro = next(f for f in report["findings"] if f["sensor"] == "gyro")
     k2 = np.abs(np.asarray(gyro["parameters"]["value"]))
@@ -73,7 +73,7 @@ def test_even_scale_term_is_named_even_not_asymmetry() -> None:
 
 def test_odd_scale_term_is_named_odd() -> None:
     rec = indepgen.generate(6, {"scale_nonlinearity_odd": 2e-3})
-    report = diagnose(rec.session, warmup_tc_s=TC).report
+    report = diagnose(rec.session, warmup_tc_s=TC).to_json()
     assert ("scale_nonlinearity_odd", "gyro") in _named(report)
     assert {e for e, _ in _named(report)} <= {"scale_nonlinearity_odd"}
 
@@ -83,7 +83,7 @@ def test_physics_outside_the_library_is_unexplained_not_named(seed: int, effect:
     """A wobbling spin axis (gravity rotating at the spin frequency in the accelerometer) and a table rate ripple
     once per turn (gyro): no finding; ``unexplained`` names the sensor and the spin-frequency covariate."""
     size = {"wobble": 0.3, "ripple": 0.003}[effect]
-    report = diagnose(indepgen.generate(seed, {effect: size}).session, warmup_tc_s=TC).report
+    report = diagnose(indepgen.generate(seed, {effect: size}).session, warmup_tc_s=TC).to_json()
     assert report["findings"] == []
     where = [u for u in report["unexplained"] if u["sensor"] == sensor]
     assert where and "spin frequency" in where[0]["covariate"]
@@ -110,7 +110,7 @@ def test_cli_prints_the_unexplained_location(tmp_path: Path) -> None:
 def test_a_random_walk_is_the_same_wander_throughout_and_named() -> None:
     """Development seed 22 (the study's bias_random_walk row): the walk is named, and its K^2 agrees between the
     record's halves and between increments inside and across segments."""
-    report = diagnose(indepgen.generate(22, {"bias_random_walk": 3e-4}).session, warmup_tc_s=TC).report
+    report = diagnose(indepgen.generate(22, {"bias_random_walk": 3e-4}).session, warmup_tc_s=TC).to_json()
     assert {e for e, _ in _named(report)} == {"bias_random_walk"}
     for f in report["findings"]:
         z = f["confidence"]["consistency"]
@@ -127,7 +127,7 @@ def test_a_mis_modelled_mean_effect_is_not_taken_for_a_random_walk(monkeypatch: 
 
     monkeypatch.setattr(pose_tilt, "choose_variant",
                         lambda b, sd: ("segment", {"segment": pose_tilt.build_variant(b, sd, "segment")}))
-    report = diagnose(indepgen.generate(101, {"pose_tilt": 0.1}).session, warmup_tc_s=TC).report
+    report = diagnose(indepgen.generate(101, {"pose_tilt": 0.1}).session, warmup_tc_s=TC).to_json()
     assert "bias_random_walk" not in {e for e, _ in _named(report)}
     walk = [r for r in report["rejected"] if r["effect"] == "bias_random_walk" and "consistency" in r]
     assert walk and "not the same wander" in walk[0]["reason"]
@@ -142,7 +142,7 @@ def test_a_random_walk_is_not_taken_for_a_temperature_bias(seed: int, other: str
     hypotheses: its gain falls below the threshold, and the walk is named instead."""
     magnitude = {"earth_rotation": 1.0, "g_sensitivity": 0.02}[other]
     rec = indepgen.generate(seed, {"bias_random_walk": 3e-4, other: magnitude})
-    report = diagnose(rec.session, warmup_tc_s=TC).report
+    report = diagnose(rec.session, warmup_tc_s=TC).to_json()
     names = {e for e, _ in _named(report)}
     assert "temperature_bias" not in names
     assert ("bias_random_walk", "accel") in _named(report) and other in names
@@ -152,8 +152,8 @@ def test_the_walk_explains_a_wander_but_not_a_temperature_bias() -> None:
     """``gain_given_walk`` on the temperature bias's block regressor: for a recording holding a walk and no
     temperature effect (development seed 508) it falls well below the gain without a walk; for a recording holding
     a temperature bias and no walk (development seed 604) it stays above the threshold."""
+    from station.diagnose.effect_registry import LIBRARY
     from station.diagnose.likelihood import SensorProblem
-    from station.diagnose.registry import LIBRARY
     from station.diagnose.residuals import fit_baseline
 
     def gains(seed: int, effects: dict[str, float]) -> tuple[float, float, float]:
@@ -184,9 +184,9 @@ def test_a_course_neither_test_names_is_listed_as_wander_or_temperature() -> Non
 
     walk = Test("bias_random_walk", "accel", gain=0.0, params=1, bic_gain=-7.0, critical=18.2)
     pair = _wander_or_temperature({"temperature_bias": temp(24.4), "bias_random_walk": walk}, None)
-    assert pair is not None and pair["effects"] == ["temperature_bias", "bias_random_walk"]
-    assert "climate-chamber" in pair["rig_step"]
-    assert pair["evidence"]["temperature_bias"]["gain_given_walk"] == 24.4
+    assert pair is not None and pair.effects == ("temperature_bias", "bias_random_walk") and pair.sensor == "accel"
+    assert "climate-chamber" in pair.rig_step
+    assert pair.evidence["temperature_bias"]["gain_given_walk"] == 24.4
     assert _wander_or_temperature({"temperature_bias": temp(30.0), "bias_random_walk": walk}, None) is None
     assert _wander_or_temperature({"temperature_bias": temp(24.4), "bias_random_walk": walk}, walk) is None
     assert _wander_or_temperature({"temperature_bias": temp(24.4)}, None) is None

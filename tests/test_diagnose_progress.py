@@ -13,7 +13,7 @@ from typer.testing import CliRunner
 from station.cli import app
 from station.commands.progress import stderr_progress, wants_progress
 from station.diagnose import diagnose
-from station.diagnose.progress import DONE, STAGES, Stage
+from station.diagnose.diagnosis_progress import DONE, STAGES, Stage
 from station.kernel.plan import RigPlan
 from station.physics.effects import Effects
 from station.session.csv_v1 import write_session

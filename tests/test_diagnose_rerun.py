@@ -17,6 +17,7 @@ import pytest
 from station.diagnose import diagnose
 from station.diagnose.rerun import Drive, FittedEffect, rerun, run_model
 from station.diagnose.residuals import SensorData, fit_baseline
+from station.diagnose.results import load_report
 from station.kernel.plan import RigPlan
 from station.kernel.sensor_class import TABLE1
 from station.physics.effects import Effects
@@ -41,8 +42,13 @@ def _chi2(run_residual: np.ndarray, sd: SensorData) -> np.ndarray:
 def test_lever_arm_rerun_matches_the_recording_better() -> None:
     res = simulate_session(5, plan=PLAN, effects=Effects(lever_arm=30.0, temperature_scale=300.0))
     d = diagnose(res.session)
-    report = d.report
-    json.dumps(report)
+    report = d.to_json()
+    # the one JSON form, and read back into the types unchanged (findings with re-run, calibration, bootstrap)
+    text = json.dumps(report)
+    assert json.dumps(load_report(json.loads(text)).to_json()) == text
+    lever_arm = next(f for f in d.report.findings if f.effect == "lever_arm")
+    assert lever_arm.rerun is not None and lever_arm.calibration is not None and lever_arm.fit is not None
+    assert d.report.of_sensor("accel").findings[0].sensor == "accel"
     rr = report["rerun"]
     assert set(rr) >= {"method", "effects", "not_simulated", "base", "extended", "improvement"}
     assert {"effect": "lever_arm", "sensor": "accel"} in rr["effects"]
@@ -72,8 +78,8 @@ def test_lever_arm_rerun_matches_the_recording_better() -> None:
 def test_clean_recording_rerun_is_at_the_noise() -> None:
     res = simulate_session(3, plan=PLAN)
     d = diagnose(res.session)
-    assert d.report["findings"] == []
-    rr = d.report["rerun"]
+    assert d.to_json()["findings"] == []
+    rr = d.to_json()["rerun"]
     assert rr["effects"] == [] and rr["not_simulated"] == []
     assert rr["extended"] == rr["base"]
     for sensor in ("accel", "gyro"):
@@ -113,7 +119,7 @@ def all_effects() -> tuple:
 def test_true_effects_bring_the_rerun_to_the_noise(all_effects: tuple) -> None:
     baseline, effects = all_effects
     rr = rerun(baseline, [*effects, FittedEffect("outliers", "accel", np.zeros(0))])
-    summary = rr.summary()
+    summary = rr.summary().to_json()
     json.dumps(summary, allow_nan=False)
     assert summary["not_simulated"][0]["effect"] == "outliers"
     for sensor in ("accel", "gyro"):

@@ -9,6 +9,7 @@ Seeds: 620..629 here (the development seeds were 5..11 and 20..25).
 
 from __future__ import annotations
 
+import json
 import math
 import os
 from pathlib import Path
@@ -18,9 +19,10 @@ import pytest
 from typer.testing import CliRunner
 
 from station.cli import app
-from station.diagnose.registry import REGISTRY, rig_free_testable
+from station.diagnose.effect_registry import REGISTRY, rig_free_testable
 from station.diagnose.report import diagnose
-from station.diagnose.rigfree import rig_free_baseline, rig_free_candidates
+from station.diagnose.results import load_report
+from station.diagnose.rigfree_diagnosis import rig_free_baseline, rig_free_candidates
 from station.fit.rigfree_fit import is_rig_free
 from station.physics.effects import GYRO_PER_ACCEL, Effects
 from station.session import write_session
@@ -54,8 +56,10 @@ def _named(report: dict) -> set[tuple[str, str]]:
 def test_null_recording_gives_no_finding(seed: int) -> None:
     session = _session(simulate_handheld(seed))
     assert is_rig_free(session)
-    report = diagnose(session).report
+    report = diagnose(session).to_json()
     assert report["method"] == "rig-free"
+    text = json.dumps(report)  # rig-free sections read back too
+    assert json.dumps(load_report(json.loads(text)).to_json()) == text
     assert report["findings"] == [] and report["unexplained"] == []
     # what it cannot test comes from the registry's rules, plus what this recording lacks (no temperature)
     untestable = {(u["effect"], u["sensor"]): u["reason"] for u in report["untestable"]}
@@ -74,14 +78,14 @@ def test_vertical_earth_rate_is_no_g_sensitivity() -> None:
     """At 52 deg latitude, without the latitude: the Earth rate's vertical part along gravity looks like G = c I;
     it is not named (a rejection says why), and the horizontal part of random heading is no random walk."""
     res = simulate_handheld(623, effects=Effects(earth_rotation=1.0), latitude_deg=52.0)
-    report = diagnose(_session(res)).report
+    report = diagnose(_session(res)).to_json()
     assert report["findings"] == []
     earth = [r for r in report["rejected"] if "earth_rate_c_dps_per_g" in r]
     assert len(earth) == 1 and earth[0]["effect"] == "g_sensitivity"
     omega_v = 15.041 / 3600.0 * math.sin(math.radians(52.0))  # deg/s along 1 g
     assert earth[0]["earth_rate_c_dps_per_g"] == pytest.approx(omega_v, rel=0.5)
     # with the latitude the vertical part is removed as known physics: nothing to reject, still no finding
-    report = diagnose(_session(res, latitude_deg="52")).report
+    report = diagnose(_session(res, latitude_deg="52")).to_json()
     assert report["findings"] == [] and not [r for r in report["rejected"] if "earth_rate_c_dps_per_g" in r]
     assert report["rig_free"]["earth_vertical_removed_dps"] == pytest.approx(omega_v, rel=1e-3)
 
@@ -90,7 +94,7 @@ def test_vertical_earth_rate_is_no_g_sensitivity() -> None:
 def test_planted_g_sensitivity_is_found(seed: int) -> None:
     effects = Effects(g_sensitivity=0.02)
     res = simulate_handheld(seed, effects=effects)
-    report = diagnose(_session(res)).report
+    report = diagnose(_session(res)).to_json()
     assert _named(report) == {("g_sensitivity", "gyro")}
     p = next(f for f in report["findings"] if f["effect"] == "g_sensitivity")["parameters"]
     truth = effects.realize(res.truth.shapes).g_sensitivity * DPS_PER_G
@@ -101,7 +105,7 @@ def test_planted_g_sensitivity_is_found(seed: int) -> None:
 
 def test_planted_bias_random_walk_is_found() -> None:
     k = 0.0005  # accelerometer m/s^2/sqrt(s); the gyro's GYRO_PER_ACCEL times it in deg/s/sqrt(s)
-    report = diagnose(_session(simulate_handheld(627, effects=Effects(bias_random_walk=k)))).report
+    report = diagnose(_session(simulate_handheld(627, effects=Effects(bias_random_walk=k)))).to_json()
     assert ("bias_random_walk", "gyro") in _named(report)
     assert _named(report) <= {("bias_random_walk", "gyro"), ("bias_random_walk", "accel")}
     f = next(f for f in report["findings"] if f["effect"] == "bias_random_walk" and f["sensor"] == "gyro")
@@ -141,7 +145,7 @@ def test_cli_says_method_and_what_it_cannot_test(tmp_path: Path) -> None:
 def openaxes() -> dict[str, dict]:
     if not LOG.is_file():
         pytest.skip(f"the OpenAXES recording is absent ({LOG}); set STATION_REAL to the shared/real folder")
-    return {a: diagnose(import_openaxes(LOG, accel=a)).report for a in ("adxl355", "bmi160")}
+    return {a: diagnose(import_openaxes(LOG, accel=a)).to_json() for a in ("adxl355", "bmi160")}
 
 
 @pytest.mark.parametrize("accel", ["adxl355", "bmi160"])
@@ -172,10 +176,10 @@ def test_openaxes(openaxes: dict[str, dict], accel: str) -> None:
 
 def test_bootstrap_resamples_reach_the_rig_free_path() -> None:
     session = _session(simulate_handheld(625, effects=Effects(g_sensitivity=0.02)))
-    without = diagnose(session, resamples=0).report
+    without = diagnose(session, resamples=0).to_json()
     assert _named(without) == {("g_sensitivity", "gyro")}
     assert "bootstrap" not in without["findings"][0]
-    few = diagnose(session, resamples=12, seed=3).report
+    few = diagnose(session, resamples=12, seed=3).to_json()
     assert few["findings"][0]["bootstrap"]["resamples"] == 12
 
 
@@ -185,7 +189,7 @@ def test_a_random_walk_is_consistent_across_poses_whose_heading_is_unknown(seed:
     # pose and enters those across a move; subtracting it from both made the walk look "not the same wander
     # inside and across segments" (z -4.3, -4.3, -4.9 on these seeds) and a true walk was rejected
     res = simulate_handheld(seed, effects=Effects(bias_random_walk=0.0005, earth_rotation=1.0), latitude_deg=52.0)
-    report = diagnose(_session(res), resamples=0).report
+    report = diagnose(_session(res), resamples=0).to_json()
     f = next(f for f in report["findings"] if (f["effect"], f["sensor"]) == ("bias_random_walk", "gyro"))
     z = f["confidence"]["consistency"]
     assert abs(z["inside_vs_across_segments"]) < 3.0 and abs(z["halves"]) < 3.0, z

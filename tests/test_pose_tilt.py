@@ -195,7 +195,7 @@ def test_real_hand_placed_poses_are_named_and_the_rerun_matches() -> None:
     from station.session.imucal_import import import_imucal_ferraris
 
     session = import_imucal_ferraris(REAL / "example_ferraris_session.csv", REAL / "example_ferraris_session_list.json")
-    report = diagnose(session).report
+    report = diagnose(session).to_json()
     assert [(f["effect"], f["sensor"]) for f in report["findings"]] == [("pose_tilt", "accel")]
     finding = report["findings"][0]
     assert 0.05 < finding["parameters"]["rms_half_difference_deg"] < 0.5
@@ -205,7 +205,7 @@ def test_real_hand_placed_poses_are_named_and_the_rerun_matches() -> None:
     assert ext["rms"][0] < base["rms"][0] / 2.5
     assert all(r < 1.7 * n for r, n in zip(ext["rms"], ext["noise_rms"], strict=True))
     # every candidate of each sensor is accounted for: found, rejected (with why) or inseparable
-    from station.diagnose.registry import LIBRARY
+    from station.diagnose.effect_registry import LIBRARY
 
     listed = {(f["effect"], f["sensor"]) for f in (*report["findings"], *report["rejected"])}
     listed |= {(e, item["sensor"]) for item in report["inseparable"] for e in item["effects"]}
@@ -281,7 +281,7 @@ def test_pose_tilted_independent_recording_names_pose_tilt_alone(seed: int) -> N
 
     from station.diagnose import diagnose
 
-    report = diagnose(indepgen.generate(seed, {"pose_tilt": 0.1}).session, warmup_tc_s=INDEP_TC).report
+    report = diagnose(indepgen.generate(seed, {"pose_tilt": 0.1}).session, warmup_tc_s=INDEP_TC).to_json()
     assert [(f["effect"], f["sensor"]) for f in report["findings"]] == [("pose_tilt", "accel")]
     assert report["unexplained"] == []
     rms = report["findings"][0]["parameters"]["rms_half_difference_deg"]

@@ -41,7 +41,7 @@ class Sim:
 
     def run_args(self, tmp: Path, db: str, *extra: str) -> list[str]:
         args = [STATION, "run", "--rig", self.rig, "--scale", f"{SCALE:g}", "--db", db, "--out", str(tmp / "runs"),
-                "--station", "line1", "--operator", "ci"]
+                "--station", "line1", "--operator", "ci", "--yes"]
         for s in self.sensors:
             args += ["--sensor", s]
         return args + list(extra)

@@ -238,7 +238,10 @@ def test_shift_stats(store: dict[str, Any]) -> None:
                                                                                       tzinfo=UTC), "night")
     st = shift_stats(store["db"], datetime(2026, 11, 21, 12, 0, tzinfo=UTC))  # 6 h into the shift, one PASS unit
     assert (st.units_tested, st.first_pass_units, st.first_pass_yield) == (1, 1, 1.0)
-    assert st.units_per_hour == pytest.approx(1 / 6.0)
+    # units per hour over the last hour, not since the shift's start: the unit (10:00) is 2 h old at 12:00
+    assert (st.units_per_hour, st.units_in_window, st.rate_window_s) == (0.0, 0, 3600.0)
+    soon = shift_stats(store["db"], datetime(2026, 11, 21, 10, 30, tzinfo=UTC))
+    assert (soon.units_per_hour, soon.units_in_window) == (1.0, 1)
     prev = shift_stats(store["db"], datetime(2026, 11, 20, 12, 0, tzinfo=UTC))  # a FAIL and an ERROR
     # the ERROR result is not tested: it is no unit tested and uses up no first pass
     assert (prev.results, prev.not_tested, prev.units_tested, prev.first_pass_units, prev.first_pass_yield) == \
@@ -296,8 +299,10 @@ def test_unit_page_plots_and_population(client: TestClient, store: dict[str, Any
     assert client.get("/units/NO-SUCH-UNIT").status_code == 404
     hostile = client.get("/units/%3Cscript%3Ealert(1)")
     assert hostile.status_code == 404 and "<script>alert" not in hostile.text and "&lt;script&gt;" in hostile.text
-    pop = client.get("/population")
-    assert pop.status_code == 200 and "/population/plots/accel.bias_static.x.svg" in pop.text
+    pop = client.get("/population")  # the quality page's histograms, counted by the database
+    assert pop.status_code == 200 and "/quality/histogram/accel.bias_static.x.svg" in pop.text
+    old = client.get("/population/plots/accel.bias_static.x.svg", follow_redirects=False)
+    assert old.status_code == 308 and old.headers["location"] == "/quality/histogram/accel.bias_static.x.svg"
     h = client.get("/population/plots/accel.bias_static.x.svg")
     assert h.status_code == 200 and "n=2" in h.text  # BAD-1 and the real unit
     assert client.get("/population/plots/nope.svg").status_code == 404

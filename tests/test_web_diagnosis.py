@@ -21,6 +21,8 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
+from station.diagnose.residuals import BaseFitNoise
+from station.diagnose.results import DiagnosisReport, RerunError
 from station.kernel.plan import RigPlan
 from station.physics.effects import Effects
 from station.sequence.records import Outcome, Record, RunFinished, RunStarted, UnitFinished
@@ -29,7 +31,7 @@ from station.session.model import Kind, Session
 from station.sim.session_sim import simulate_session
 from station.store import Recorder, open_database
 from station.web.app import create_app
-from station.web.diagnosis import READY, DiagnosisService, Recording, Result, sidecar_path
+from station.web.diagnosis_worker import READY, DiagnosisService, Recording, Result, sidecar_path
 
 #: ~8 min at 100 Hz with two rate magnitudes (as tests/test_diagnose.py): the lever arm is identifiable.
 PLAN = RigPlan(
@@ -122,6 +124,13 @@ def test_lever_arm_goes_pending_then_ready(client: TestClient, store: dict[str, 
         assert r2.status_code == 200 and r2.json()["report"] == report
         svg = other.get("/units/LEVER-1/diagnosis.svg")
         assert svg.status_code == 200 and "lever_arm" in svg.text
+    # a kept report of another format is not read back into the types (it would be computed again)
+    rec = Recording(NEW, lever, saved["session_sha256"])
+    assert DiagnosisService().peek(rec) is not None
+    other_format = {**saved, "report": {**saved["report"], "format": "station-diagnosis/0"}}
+    sidecar_path(lever).write_text(json.dumps(other_format), encoding="utf-8")
+    assert DiagnosisService().peek(rec) is None
+    sidecar_path(lever).write_text(json.dumps(saved), encoding="utf-8")
 
 
 def test_svg_figure(client: TestClient) -> None:
@@ -179,12 +188,21 @@ def test_openapi_documents_the_endpoint(client: TestClient) -> None:
     assert [p["name"] for p in op["parameters"]] == ["serial", "run_id"]
 
 
+def _odd_report() -> DiagnosisReport:
+    """A report without entries whose base-fit noise holds a NaN."""
+    nan = float("nan")
+    return DiagnosisReport(serial="LEVER-1", findings=(), rejected=(), inseparable=(), unexplained=(), location={},
+                           warmup_tc_range_s=None, base_fit=BaseFitNoise([nan, 0.0, 0.0], [0.0] * 3, [0.0] * 3,
+                                                                         [0.0] * 3),
+                           rerun=RerunError("no motion"))
+
+
 def test_busy_queue_and_strict_json(store: dict[str, Any]) -> None:
     release = threading.Event()
 
     def slow(rec: Recording) -> Result:
         release.wait(30.0)
-        return Result(READY, report={"findings": [], "odd": float("nan")}, elapsed_s=0.0)
+        return Result(READY, report=_odd_report(), elapsed_s=0.0)
 
     service = DiagnosisService(max_queued=1, persist=False, compute=slow)
     try:
@@ -195,7 +213,9 @@ def test_busy_queue_and_strict_json(store: dict[str, Any]) -> None:
             assert busy.status_code == 503 and busy.json()["status"] == "busy" and "Retry-After" in busy.headers
             release.set()
             codes, r = _poll(c, "/api/units/LEVER-1/diagnosis")
-            assert codes[-1] == 200 and r.json()["report"] == {"findings": [], "odd": None}  # strict JSON
+            expected = json.loads(json.dumps(_odd_report().to_json()).replace("NaN", "null"))
+            assert expected["base_fit"]["accel_residual_rms_mps2"] == [None, 0.0, 0.0]
+            assert codes[-1] == 200 and r.json()["report"] == expected  # strict JSON
     finally:
         release.set()
 
@@ -222,11 +242,12 @@ def test_service_diagnoses_with_the_limits_tc_range(tmp_path: Path) -> None:
     alone = DiagnosisService(nice=0)
     try:
         found = _wait_ready(with_range, rec)
-        assert {(f["effect"], f["sensor"]) for f in found.report["findings"]} == {("temperature_bias", "gyro")}
+        assert found.report is not None and found.report.effects == [("temperature_bias", "gyro")]
         saved = json.loads(sidecar_path(path).read_text(encoding="utf-8"))
         assert saved["settings"] == {"warmup_tc_range_s": {"accel": [50.0, 167.0], "gyro": [1030.0, 3760.0]}}
         assert alone.peek(rec) is None  # persisted with another range: computed again
-        assert _wait_ready(alone, rec).report["findings"] == []
+        again = _wait_ready(alone, rec).report
+        assert again is not None and again.findings == ()
         assert DiagnosisService(warmup_tc_s=load_limits().correlation_time_s).peek(rec) is None
     finally:
         with_range.stop()

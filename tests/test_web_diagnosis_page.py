@@ -25,6 +25,15 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import indepgen
 
+from station.diagnose.residuals import BaseFitNoise
+from station.diagnose.results import (
+    DiagnosisReport,
+    Finding,
+    OutlierEvidence,
+    ReportFormatError,
+    RerunError,
+    load_report,
+)
 from station.kernel.plan import RigPlan
 from station.physics.effects import Effects
 from station.sequence.records import Outcome, RunFinished, RunStarted, UnitFinished
@@ -32,7 +41,7 @@ from station.session.csv_v1 import write_session
 from station.sim.session_sim import simulate_session
 from station.store import Recorder, open_database
 from station.web.app import create_app
-from station.web.diagnosis import DiagnosisService
+from station.web.diagnosis_worker import DiagnosisService
 from station.web.models import DiagnosisReady, DiagnosisSummary
 
 #: ~8 min at 100 Hz with two rate magnitudes (as tests/test_web_diagnosis.py).
@@ -98,7 +107,7 @@ def test_lever_arm_finding_with_values_uncertainties_units_and_confidence(client
     body = _ready(client, "LEVER-1")
     DiagnosisReady.model_validate(body)
     summary = DiagnosisSummary.model_validate(body["summary"])
-    assert summary == DiagnosisSummary.of(body["report"])
+    assert summary == DiagnosisSummary.of(load_report(body["report"]))
     lever = next(f for f in summary.findings if f.effect == "lever_arm")
     assert lever.sensor == "accel" and lever.axes == ["x", "y", "z"] and lever.confidence == "high"
     main = next(p for p in lever.parameters if p.name == "lever_arm")
@@ -155,11 +164,21 @@ def test_summary_models_are_described_in_openapi(client: TestClient) -> None:
     assert "summary" in schemas["DiagnosisReady"]["properties"]
 
 
-def test_summary_of_a_sparse_or_odd_report() -> None:
-    """Every key is optional: an empty report gives empty lists, non-finite numbers become null."""
-    assert DiagnosisSummary.of({}) == DiagnosisSummary(findings=[], unexplained=[], inseparable=[], rejected=[])
-    s = DiagnosisSummary.of({"findings": [{"effect": "time_offset", "sensor": "gyro", "axes": ["x"],
-                                           "parameters": {"value": [float("nan")], "std": [0.1], "unit": "ms"}},
-                                          "not an entry"]})
+def test_summary_of_no_report_or_an_odd_one() -> None:
+    """No report gives empty lists; non-finite numbers become null; a report of another format or a malformed one
+    is refused by the loader."""
+    assert DiagnosisSummary.of(None) == DiagnosisSummary(findings=[], unexplained=[], inseparable=[], rejected=[])
+    finding = Finding("time_offset", "gyro", ("x",), {"value": [float("nan")], "std": [0.1], "unit": "ms"},
+                      OutlierEvidence(0, 3, 1e-5, 1.0))
+    report = DiagnosisReport(serial="X", findings=(finding,), rejected=(), inseparable=(), unexplained=(),
+                             location={}, warmup_tc_range_s=None, base_fit=BaseFitNoise([0.0] * 3, [0.0] * 3,
+                                                                                        [0.0] * 3, [0.0] * 3),
+                             rerun=RerunError("none"))
+    s = DiagnosisSummary.of(report)
     assert s.findings[0].parameters[0].value == [None] and s.findings[0].parameters[0].std == [0.1]
-    assert s.findings[0].confidence is None
+    assert s.findings[0].confidence is None and s.findings[0].bic_gain is None
+    assert DiagnosisSummary.of(load_report(report.to_json())) == s
+    with pytest.raises(ReportFormatError, match="station-diagnosis/1"):
+        load_report({**report.to_json(), "format": "station-diagnosis/2"})
+    with pytest.raises(ReportFormatError, match="malformed"):
+        load_report({"format": "station-diagnosis/1", "findings": []})

@@ -1,22 +1,28 @@
 """``station diagnose SESSION.csv [--json] [--plot OUT.png] [--resamples N]``: the CLI front of :mod:`station.diagnose`.
 
-Wire it into ``station/cli.py`` with ``app.command()(diagnose)``.
+Wire it into ``station/cli.py`` with ``app.command()(diagnose)``. The text report reads the typed
+:class:`~station.diagnose.results.DiagnosisReport`; ``--json`` prints its ``to_json()``.
 """
 
 from __future__ import annotations
 
 import json
 import sys
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import numpy as np
 import typer
 
 from station.kernel.errors import StationError
 
+if TYPE_CHECKING:
+    from station.diagnose.results import DiagnosisReport, Finding, RerunSummary
+    from station.diagnose.results import RerunError as RerunErrorType
 
-def _fmt_value(params: dict[str, Any]) -> tuple[str, str]:
+
+def _fmt_value(params: Mapping[str, Any]) -> tuple[str, str]:
     """A finding's parameters as 'value +- std' text and its unit (numbers rounded for people)."""
     if "pairs" in params:  # pose_tilt: per pose pair; the summary here, the pairs in --json
         d = [v["half_difference"] for v in params["pairs"].values() if v.get("half_difference")]
@@ -34,126 +40,126 @@ def _fmt_value(params: dict[str, Any]) -> tuple[str, str]:
     return text, str(params.get("unit", ""))
 
 
-def _print_text(report: dict[str, Any]) -> None:
-    findings = report["findings"]
-    unexplained = report.get("unexplained", [])
-    untestable = report.get("untestable", [])
-    method = f" ({report['method']}: tested on the still poses)" if report.get("method") else ""
-    typer.echo(f"diagnosis of {report['serial']}{method}: {len(findings)} finding(s), {len(unexplained)} unexplained"
+def _print_text(report: DiagnosisReport) -> None:
+    findings, unexplained, untestable = report.findings, report.unexplained, report.untestable
+    method = f" ({report.method}: tested on the still poses)" if report.method else ""
+    typer.echo(f"diagnosis of {report.serial}{method}: {len(findings)} finding(s), {len(unexplained)} unexplained"
                + (f", {len(untestable)} untestable here" if untestable else ""))
-    if (rf := report.get("rig_free")) and rf.get("accel_norm_rms_mps2") is not None:
-        typer.echo(f"  base: rig-free fit, {rf['still_segments']} still segments, {rf['moves']} moves; gravity-norm "
-                   f"RMS {rf['accel_norm_rms_mps2'] * 1e3:.2f} mm/s^2, direction after each move "
-                   f"{rf['gyro_direction_rms_deg']:.3f} deg RMS")
-        if (timing := rf.get("read_timing")) and timing.get("selected"):
+    if (rf := report.rig_free) is not None and rf.accel_norm_rms_mps2 is not None:
+        typer.echo(f"  base: rig-free fit, {rf.still_segments} still segments, {rf.moves} moves; gravity-norm "
+                   f"RMS {rf.accel_norm_rms_mps2 * 1e3:.2f} mm/s^2, direction after each move "
+                   f"{rf.gyro_direction_rms_deg:.3f} deg RMS")
+        if (timing := rf.read_timing) and timing.get("selected"):
             # found and modelled by the base fit (station.fit.readtiming): the logger's, not the sensor's physics
             typer.echo(f"  base fit found in the gyro's read timing: {timing['reason']}")
     if findings:
         typer.echo(f"  {'effect':24s} {'sensor':6s} {'axes':4s} {'confidence':10s} value (unit)")
     for f in findings:
-        text, unit = _fmt_value(f["parameters"])
-        conf = (f.get("confidence") or {}).get("level", "-")
-        typer.echo(f"  {f['effect']:24s} {f['sensor']:6s} {''.join(f['axes']):4s} {conf:10s} {text} {unit}")
-        ev = f["evidence"]
-        if "likelihood_gain_chi2" in ev:
-            typer.echo(f"    evidence: chi2 gain {ev['likelihood_gain_chi2']:.1f} for {ev['params']} parameter(s), "
-                       f"BIC gain {ev['bic_gain']:.1f}, held-out error {ev['heldout_before']:.3f} -> "
-                       f"{ev['heldout_after']:.3f}"
-                       + (" (1 = as expected)" if f["effect"] == "bias_random_walk" else ""))
-            q = f.get("confidence") or {}
-            if "quasi_gain_chi2" in q:
-                typer.echo(f"    against the full model, noise inflated by its dispersion: chi2 gain "
-                           f"{q['quasi_gain_chi2']:.1f} (threshold {q['threshold']:.1f})")
-            b, a = f["fit"]["before"], f["fit"]["after"]
-            typer.echo(f"    block chi2 per axis {b['block_chi2']} -> {a['block_chi2']}")
-        else:
-            typer.echo(f"    evidence: {json.dumps(ev)}")
-        _print_confidence(f)
-        cal = f.get("calibration")
-        if cal is not None:
-            typer.echo(f"    calibration: {'compensates it' if cal['compensated'] else 'does not compensate it'}: "
-                       f"{cal['note']}")
-        if "rerun" in f:
-            r = f["rerun"]
-            typer.echo(f"    simulator re-run, block RMS per axis: {r['rms_base']} -> {r['rms_with_this_effect']} "
-                       f"{r['unit']} with this effect")
+        _print_finding(f)
     for u in unexplained:
-        typer.echo(f"  UNEXPLAINED ({u['sensor']}, axes {''.join(u['axes'])}, in {'/'.join(u['segment_kinds'])} "
-                   f"segments): {u['covariate']}; excess chi2 {u['excess_chi2']:.0f}. No candidate of the library "
+        typer.echo(f"  UNEXPLAINED ({u.sensor}, axes {''.join(u.axes)}, in {'/'.join(u.segment_kinds)} "
+                   f"segments): {u.covariate}; excess chi2 {round(u.excess_chi2, 1):.0f}. No candidate of the library "
                    "explains it.")
     if untestable:
         typer.echo("  not testable on this recording:")
         by_reason: dict[tuple[str, str], list[str]] = {}
-        for u in untestable:
-            by_reason.setdefault((u["sensor"], u["reason"]), []).append(u["effect"])
+        for item in untestable:
+            by_reason.setdefault((item.sensor, item.reason), []).append(item.effect)
         for (sensor, reason), effects in by_reason.items():
             typer.echo(f"    {', '.join(effects)} ({sensor}): {reason}")
-    for item in report["inseparable"]:
-        typer.echo(f"  inseparable ({item['sensor']}): {' / '.join(item['effects'])}; rig step: {item['rig_step']}")
-    if report.get("warmup_tc_range_s"):
-        ranges = ", ".join(f"{k} {lo:g}-{hi:g} s" for k, (lo, hi) in report["warmup_tc_range_s"].items())
+    for pair in report.inseparable:
+        typer.echo(f"  inseparable ({pair.sensor}): {' / '.join(pair.effects)}; rig step: {pair.rig_step}")
+    if report.warmup_tc_range_s:
+        ranges = ", ".join(f"{k} {lo:g}-{hi:g} s" for k, (lo, hi) in report.warmup_tc_range_s.items())
         typer.echo(f"  warm-up T_c kept in the sensor class's range: {ranges}")
-    if not findings and not report["inseparable"] and not unexplained:
+    if not findings and not report.inseparable and not unexplained:
         typer.echo("  the base model (eq. 1 + eq. 3) explains this recording")
-    sizes = [r for r in report["rejected"] if r.get("detectable_from")]
+    sizes = [(r, r.detectable_from) for r in report.rejected
+             if r.detectable_from is not None and r.detectable_from.determined]
     if sizes:
-        power = sizes[0]["detectable_from"]["power"]
-        typer.echo(f"  not found; this recording would show them ({100 * power:.0f} % power, "
+        typer.echo(f"  not found; this recording would show them ({100 * sizes[0][1].power:.0f} % power, "
                    "one parameter at a time) from:")
-        for r in sizes:
-            d = r["detectable_from"]
-            v = np.abs(np.asarray(d["value"], dtype=float)).ravel()
+        for r, d in sizes:
+            v = np.abs(np.asarray(d.value, dtype=float)).ravel()
             v = v[v > 0]
             if not v.size:
                 continue
             span = f"{v.min():.3g}" if v.min() == v.max() else f"{v.min():.3g}-{v.max():.3g}"
-            typer.echo(f"    {r['effect']} ({r['sensor']}): {span} {d['unit']}")
-    _print_rerun(report.get("rerun"))
+            typer.echo(f"    {r.effect} ({r.sensor}): {span} {d.unit}")
+    _print_rerun(report.rerun)
 
 
-def _print_confidence(f: dict[str, Any]) -> None:
+def _print_finding(f: Finding) -> None:
+    """One finding: its value, the evidence, confidence and checks, calibration and re-run."""
+    text, unit = _fmt_value(f.parameters)
+    conf = f.confidence.level if f.confidence is not None else "-"
+    typer.echo(f"  {f.effect:24s} {f.sensor:6s} {''.join(f.axes):4s} {conf:10s} {text} {unit}")
+    ev = f.selection_test
+    if ev is not None:
+        typer.echo(f"    evidence: chi2 gain {ev.likelihood_gain_chi2:.1f} for {ev.params} parameter(s), "
+                   f"BIC gain {ev.bic_gain:.1f}, held-out error {ev.heldout_before:.3f} -> "
+                   f"{ev.heldout_after:.3f}"
+                   + (" (1 = as expected)" if f.effect == "bias_random_walk" else ""))
+        q = f.confidence
+        if q is not None and q.quasi_gain_chi2 is not None:
+            typer.echo(f"    against the full model, noise inflated by its dispersion: chi2 gain "
+                       f"{q.quasi_gain_chi2:.1f} (threshold {q.limit:.1f})")
+        if f.fit is not None:
+            typer.echo(f"    block chi2 per axis {list(f.fit.before.block_chi2)} -> {list(f.fit.after.block_chi2)}")
+    else:
+        typer.echo(f"    evidence: {json.dumps(f.evidence.to_json())}")
+    _print_confidence(f)
+    if f.calibration is not None:
+        typer.echo(f"    calibration: {'compensates it' if f.calibration.compensated else 'does not compensate it'}: "
+                   f"{f.calibration.note}")
+    if f.rerun is not None:
+        r = f.rerun
+        typer.echo(f"    simulator re-run, block RMS per axis: {list(r.rms_base)} -> {list(r.rms_with_this_effect)} "
+                   f"{r.unit} with this effect")
+
+
+def _print_confidence(f: Finding) -> None:
     """A finding's bootstrap and consistency checks, one line each."""
-    b = f.get("bootstrap")
-    if b:
+    b = f.bootstrap
+    if b is not None:
         spread = ""
-        if "median" in b:
-            values = ", ".join(f"{m:.3g}+-{s:.2g}" for m, s in zip(b["median"], b["std"], strict=False))
-            spread = f"; over the resamples {values} {b['unit']}"
-        typer.echo(f"    bootstrap over segments ({b['resamples']} resamples, seed {b['seed']}): named in "
-                   f"{100 * b['accepted_fraction']:.0f} %, spread {b['std_ratio']:.2g} x the stated std{spread}")
-    checks = f.get("consistency") or []
-    if checks:
+        if b.median is not None:
+            values = ", ".join(f"{m:.3g}+-{s:.2g}" for m, s in zip(b.median, b.std or (), strict=False))
+            spread = f"; over the resamples {values} {b.unit}"
+        typer.echo(f"    bootstrap over segments ({b.resamples} resamples, seed {b.seed}): named in "
+                   f"{100 * b.accepted_fraction:.0f} %, spread {b.std_ratio:.2g} x the stated std{spread}")
+    if f.consistency:
         parts = []
-        for c in checks:
-            if c.get("check") is None:
-                parts.append(f"not checked: {c['reason']}")
+        for c in f.consistency:
+            if c.check is None or c.parts is None:
+                parts.append(f"not checked: {c.reason}")
                 continue
-            label = f"{c['parts'][0]} vs {c['parts'][1]}"
-            if c["result"] == "not checked":
-                parts.append(f"{label}: not checked, {c['reason']}")
+            label = f"{c.parts[0]} vs {c.parts[1]}"
+            if c.result == "not checked":
+                parts.append(f"{label}: not checked, {c.reason}")
             else:
-                parts.append(f"{label}: {c['result']} (p {c['p_value']:.2g})")
+                parts.append(f"{label}: {c.result} (p {c.p_value:.2g})")
         typer.echo(f"    consistency: {'; '.join(parts)}")
 
 
-def _print_rerun(rerun: dict[str, Any] | None) -> None:
+def _print_rerun(rerun: RerunSummary | RerunErrorType) -> None:
     """The simulator re-run: recording minus simulation per block, base vs base + effects."""
-    if not rerun:
+    from station.diagnose.results import RerunError
+
+    if isinstance(rerun, RerunError):
+        typer.echo(f"  simulator re-run not possible: {rerun.error}")
         return
-    if "error" in rerun:
-        typer.echo(f"  simulator re-run not possible: {rerun['error']}")
-        return
-    n = len(rerun["effects"])
+    n = len(rerun.effects)
     head = "simulator re-run on the recording's motion, recording minus simulation per block"
     typer.echo(f"  {head} (RMS x/y/z, chi2 x/y/z, 1 = noise):")
     for sensor in ("accel", "gyro"):
-        b = rerun["base"][sensor]
-        line = f"    {sensor:5s} base {b['rms']} {b['unit']}, chi2 {b['chi2']}"
+        b = rerun.base[sensor]
+        line = f"    {sensor:5s} base {list(b.overall.rms)} {b.unit}, chi2 {list(b.overall.chi2)}"
         if n:
-            e = rerun["extended"][sensor]
-            line += f" -> with {n} effect(s) {e['rms']} {e['unit']}, chi2 {e['chi2']}"
-        typer.echo(line + f" (noise {b['noise_rms']})")
-    for item in rerun["not_simulated"]:
+            e = rerun.extended[sensor]
+            line += f" -> with {n} effect(s) {list(e.overall.rms)} {e.unit}, chi2 {list(e.overall.chi2)}"
+        typer.echo(line + f" (noise {list(b.overall.noise_rms)})")
+    for item in rerun.not_simulated:
         typer.echo(f"    not simulated: {item['effect']} ({item['sensor']}): {item['reason']}")
 
 
@@ -201,7 +207,7 @@ def diagnose(
         typer.echo(f"error: cannot write {plot}: {exc.strerror or exc}", err=True)
         raise typer.Exit(2) from None
     if as_json:
-        sys.stdout.write(json.dumps(result.report) + "\n")
+        sys.stdout.write(json.dumps(result.report.to_json()) + "\n")
     else:
         _print_text(result.report)
         if plot is not None:

@@ -1,6 +1,6 @@
 """Stage progress of a long command on stderr (never on stdout, which may carry ``--json``).
 
-:func:`stderr_progress` gives the :class:`station.diagnose.progress.Progress` callback ``station diagnose``
+:func:`stderr_progress` gives the :class:`station.diagnose.diagnosis_progress.Progress` callback ``station diagnose``
 passes to the diagnosis: one line per stage, with the elapsed time, when stderr is a terminal or the user
 asked for it; None (no callback) otherwise.
 """
@@ -11,7 +11,7 @@ import sys
 from typing import TYPE_CHECKING, TextIO
 
 if TYPE_CHECKING:
-    from station.diagnose.progress import Progress, Stage
+    from station.diagnose.diagnosis_progress import Progress, Stage
 
 
 def wants_progress(flag: bool | None, stream: TextIO | None = None) -> bool:

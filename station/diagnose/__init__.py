@@ -3,11 +3,13 @@
 
 # Lazy (PEP 562): importing the package, e.g. for its CLI commands, loads no heavy dependency.
 _EXPORTS = {
-    "NAMES": "station.diagnose.registry",
-    "Progress": "station.diagnose.progress",
-    "Stage": "station.diagnose.progress",
-    "FORMAT": "station.diagnose.report",
-    "Diagnosis": "station.diagnose.report",
+    "NAMES": "station.diagnose.effect_registry",
+    "Progress": "station.diagnose.diagnosis_progress",
+    "Stage": "station.diagnose.diagnosis_progress",
+    "FORMAT": "station.diagnose.results",
+    "Diagnosis": "station.diagnose.outcome",
+    "DiagnosisReport": "station.diagnose.results",
+    "load_report": "station.diagnose.results",
     "diagnose": "station.diagnose.report",
     "save_figure": "station.diagnose.report",
 }

@@ -19,14 +19,15 @@ the value depends on which segments are in); and the level the report states: ``
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from scipy import linalg
 
-from station.diagnose.likelihood import RCOND
-from station.diagnose.registry import SHAPES, unit_factor
+from station.diagnose.effect_registry import SHAPES, unit_factor
+from station.diagnose.likelihood import RCOND, SensorProblem
 
 #: Resamples per sensor (the linear refit costs a few ms each).
 RESAMPLES = 60
@@ -50,7 +51,7 @@ class Bootstrap:
     std: tuple[float, ...] | None = None
     unit: str | None = None
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_json(self) -> dict[str, Any]:
         out: dict[str, Any] = {"resamples": self.resamples, "seed": self.seed,
                                "accepted_fraction": self.accepted_fraction, "level": self.level,
                                "std_ratio": self.std_ratio,
@@ -59,12 +60,19 @@ class Bootstrap:
             out.update(median=list(self.median), std=list(self.std or ()), unit=self.unit)
         return out
 
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> Bootstrap:
+        median = d.get("median")
+        return cls(d["resamples"], d["seed"], d["accepted_fraction"], d["level"], d["std_ratio"],
+                   None if median is None else tuple(median), None if median is None else tuple(d["std"]),
+                   d.get("unit"))
+
 
 def level(fraction: float) -> str:
     return "high" if fraction >= HIGH else "medium" if fraction >= MEDIUM else "low"
 
 
-def _design(prob: Any, keep: np.ndarray, white: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+def _design(prob: SensorProblem, keep: np.ndarray, white: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
     """Whitened stacked design (base per axis, then the accepted effects) and data on the blocks ``keep``,
     with white block variance ``white`` (m, 3) (0 weight blocks already dropped)."""
     idx = np.flatnonzero(keep)
@@ -79,7 +87,7 @@ def _chi2(x: np.ndarray, y: np.ndarray) -> tuple[float, np.ndarray]:
     return float(r @ r), beta
 
 
-def bootstrap(prob: Any, names: list[str], thresholds: dict[str, float], phi: np.ndarray, *,
+def bootstrap(prob: SensorProblem, names: list[str], thresholds: dict[str, float], phi: np.ndarray, *,
               resamples: int = RESAMPLES, seed: int = SEED) -> dict[str, Bootstrap]:
     """The bootstrap of the module docstring for the accepted mean effects ``names`` (order of
     ``prob.accepted``) with a test threshold in ``thresholds``; ``phi``: dispersion per block and axis (m, 3)."""

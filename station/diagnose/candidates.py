@@ -1,7 +1,7 @@
 """The regressors of the candidate effects the base model (eq. 1 + eq. 3) leaves out.
 
 The candidates themselves (names, units, simulator and compensation mappings, identifiability) are
-:mod:`station.diagnose.registry`; this module holds their regressors. Each *mean* candidate is a set
+:mod:`station.diagnose.effect_registry`; this module holds their regressors. Each *mean* candidate is a set
 of regressors built from the session's references and metadata: per sample an array ``Z`` of shape
 (n, 3, p) such that the effect adds ``Z[i, k] @ theta`` to output axis k of sample i (theta: p
 parameters in SI). They are
@@ -10,7 +10,7 @@ model's linear terms by :mod:`station.diagnose.selection`. Two candidates are no
 terms: ``bias_random_walk`` changes the block covariance and ``outliers`` is a count.
 
 Units: ``u = M ref`` in m/s^2 (accelerometer) or rad/s (gyroscope), temperature rise in K,
-time in s. :func:`station.diagnose.registry.engineering` converts fitted SI parameters to the units the
+time in s. :func:`station.diagnose.effect_registry.engineering` converts fitted SI parameters to the units the
 report uses.
 """
 
@@ -196,19 +196,6 @@ def delay_regressor(b: Baseline, s: SensorData, tau_s: float) -> np.ndarray:
     t = b.session.t_s
     shifted = np.stack([np.interp(t - tau_s, t, s.u[:, k]) for k in range(3)], axis=1)
     return ((shifted - s.u) / tau_s)[:, :, None]
-
-
-#: Names this module held before the registry (station.diagnose.registry); kept as thin aliases.
-_FROM_REGISTRY = ("LIBRARY", "MEAN_CANDIDATES", "NAMES", "RIG_STEPS", "SHAPES", "engineering", "unit_factor")
-
-
-def __getattr__(name: str) -> object:
-    # PEP 562, resolved on use: the registry imports this module for the regressors
-    if name in _FROM_REGISTRY:
-        from station.diagnose import registry
-
-        return getattr(registry, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 __all__ = [

@@ -32,14 +32,15 @@ misspecification :mod:`station.diagnose.robust`; the findings' report entries :m
 
 from __future__ import annotations
 
+import contextlib
 import math
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 from scipy import linalg, optimize, stats
 
-from station.diagnose.registry import EFFECTS
+from station.diagnose.effect_registry import EFFECTS
 from station.diagnose.residuals import Baseline, SensorData
 from station.fit.blocks import block_exp_mean, power_on_gm_correlation
 from station.session.model import Kind
@@ -61,7 +62,7 @@ WARMUP_SIGMAS = 2.0
 REFIT_ROUNDS = 8
 #: Drift-noise correlation matrices kept per T_c (each (m, m) for m blocks).
 GM_CACHE = 48
-#: Whether eq. 3's drift noise q is bounded in every fit (off: the base model as before; tried with the robust checks):
+#: Whether the drift noise q of eq. 3 is bounded in every fit (off: the base model as before):
 #: its wander over the record at most ``Q_BOUND`` times the random-walk test's bound
 #: (:meth:`SensorProblem.drift_noise_max`), i.e. at most the warm-up's own change over the record. Unbounded,
 #: a large q takes any unmodelled mean structure (e.g. pose tilts) for drift noise and hides it from every test
@@ -131,6 +132,30 @@ class Test:
         return self.heldout_after - self.heldout_before <= HELDOUT_SE * self.heldout_change_se
 
 
+@dataclass(frozen=True)
+class WalkConsistency:
+    """:meth:`SensorProblem.walk_consistency`: whether the wander is the same throughout the record; ``z`` per
+    comparison ("halves", "inside_vs_across_segments") the difference of the two K^2 estimates in standard
+    errors; ``k2_pooled`` the pooled moment estimate; ``reason`` where no comparison could be made."""
+
+    consistent: bool
+    z: Mapping[str, float]
+    k2_pooled: float | None = None
+    reason: str | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class ModelQuality:
+    """The current model of one sensor (:meth:`SensorProblem.quality`): negative log-likelihood, BIC, block chi^2
+    per axis (white-noise units), block residual RMS per axis and the raw block residual (m, 3), sensor units."""
+
+    nll: float
+    bic: float
+    block_chi2: np.ndarray
+    block_rms: np.ndarray
+    block_residual: np.ndarray
+
+
 def base_drift(t_s: np.ndarray, sd: SensorData) -> np.ndarray:
     """The base fit's warm-up ``b_drift exp(-t/T_c)`` (eq. 3) at the sample times ``t_s`` (s), (n, 3), in the
     sensor's unit (m/s^2 or rad/s); zero on axes where the base fit left it unresolved.
@@ -159,8 +184,8 @@ class SensorProblem:
         self.tmin = np.minimum(t[:, None], t[None, :])
         self.d_temp = sd.block_mean(baseline.d_temp)  # temperature rise per block (K)
         # eq. 3's T_c inside the sensor class's range, where one is given (SensorData.tc_range_s)
-        self.tc = np.maximum(sd.clip_tc([tc if np.isfinite(tc) and tc > 0 else span
-                                         for tc in sd.params.correlation_time_s]), TC_FLOOR_S)
+        self.tc = np.maximum(sd.clip_tc(np.array([tc if np.isfinite(tc) and tc > 0 else span
+                                                  for tc in sd.params.correlation_time_s])), TC_FLOOR_S)
         self._gm_cache: dict[float, np.ndarray] = {}
         self.gm = [self._gm(float(tc)) for tc in self.tc]
         ref_b = sd.block_mean(sd.ref)
@@ -172,9 +197,82 @@ class SensorProblem:
         self.q = np.zeros(3)
         self.k2 = 0.0
         self._eig_cache: dict[tuple[int, float], tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
-        self.accepted: list[np.ndarray] = []  # block regressors (m, 3, p) of accepted mean effects
+        self._accepted: list[np.ndarray] = []  # block regressors (m, 3, p) of accepted mean effects, see accepted
         self._fit_q()
         self.refit_drift()
+
+    # --- the accepted model: changed through these methods only -----------------------------------------------
+    @property
+    def accepted(self) -> tuple[np.ndarray, ...]:
+        """Block regressors (m, 3, p) of the accepted mean effects, in the order accepted."""
+        return tuple(self._accepted)
+
+    def accept(self, zb: np.ndarray, *, refit: bool = True) -> None:
+        """Take the mean effect with block regressors ``zb`` into the model (the drift's T_c re-fitted unless
+        ``refit`` is False, e.g. before taking in more)."""
+        self._accepted.append(zb)
+        if refit:
+            self.refit_drift()
+
+    def retain(self, indices: Sequence[int], *, random_walk: bool) -> None:
+        """Keep only the accepted effects at ``indices`` (in that order) and the bias random walk only when
+        ``random_walk``; then re-fit the drift (:meth:`refit_drift`)."""
+        self._accepted = [self._accepted[i] for i in indices]
+        if not random_walk:
+            self.k2 = 0.0
+        self.refit_drift()
+
+    @contextlib.contextmanager
+    def given(self, zb: np.ndarray) -> Iterator[None]:
+        """Inside: ``zb`` taken into the model as well (nothing re-fitted); afterwards as before."""
+        self._accepted.append(zb)
+        try:
+            yield
+        finally:
+            self._accepted.pop()
+
+    @contextlib.contextmanager
+    def without(self, index: int) -> Iterator[np.ndarray]:
+        """Inside: the model without accepted effect ``index`` (yields its block regressors); afterwards as before."""
+        accepted = self._accepted
+        self._accepted = accepted[:index] + accepted[index + 1:]
+        try:
+            yield accepted[index]
+        finally:
+            self._accepted = accepted
+
+    def set_random_walk(self, k2: float) -> None:
+        """The bias random walk's K^2 in the block covariance (0: none), eq. 3's drift noise q re-fitted with it."""
+        self.k2 = float(k2)
+        self._fit_q()
+
+    @contextlib.contextmanager
+    def random_walk_off(self) -> Iterator[None]:
+        """Inside: no bias random walk (q re-fitted); afterwards the walk and q as before."""
+        k2 = self.k2
+        self.set_random_walk(0.0)
+        try:
+            yield
+        finally:
+            self.set_random_walk(k2)
+
+    @contextlib.contextmanager
+    def inflated_noise(self, phi: np.ndarray) -> Iterator[None]:
+        """Inside: the white block noise variance multiplied by ``phi`` (m, 3), e.g. the final model's dispersion
+        (:func:`station.diagnose.robust.dispersion`); afterwards as before."""
+        white, cache = self.white, dict(self._eig_cache)
+        self.white = self.white * phi
+        self._eig_cache.clear()
+        try:
+            yield
+        finally:
+            self.white = white
+            self._eig_cache.clear()
+            self._eig_cache.update(cache)
+
+    def heldout_errors(self) -> np.ndarray:
+        """Per held-out block, the prediction error of the current model (see :meth:`heldout`)."""
+        return self._heldout_errors(self._accepted, self._heldout_folds())
 
     def _base_design(self, tc: float) -> np.ndarray:
         """Base linear terms of one axis: corrections to the row of M and b_stat, and b_drift exp(-t/T_c) (eq. 3)."""
@@ -303,9 +401,9 @@ class SensorProblem:
         return (0.0, nll0) if nll0 <= res.fun else (q, float(res.fun))
 
     def _accepted_axis(self, k: int) -> np.ndarray | None:
-        if not self.accepted:
+        if not self._accepted:
             return None
-        z = np.concatenate([a[:, k, :] for a in self.accepted], axis=1)
+        z = np.concatenate([a[:, k, :] for a in self._accepted], axis=1)
         keep = np.any(z != 0, axis=0)
         return z[:, keep] if keep.any() else None
 
@@ -326,7 +424,7 @@ class SensorProblem:
                              for k in range(3)])
         return chols, yw
 
-    def design(self, chols: list[np.ndarray], blocks: list[np.ndarray],
+    def design(self, chols: list[np.ndarray], blocks: Sequence[np.ndarray],
                rows: np.ndarray | None = None) -> tuple[np.ndarray, int]:
         """Whitened stacked design: per-axis base columns (block diagonal), then ``blocks`` (m, 3, p) shared;
         ``rows``: only those blocks (the ``chols`` of :meth:`whitened` with the same rows)."""
@@ -366,7 +464,7 @@ class SensorProblem:
         drift's T_c and q re-fitted for the null and the alternative (a likelihood ratio with both profiled).
         """
         chols, yw = self.whitened()
-        x0, _ = self.design(chols, self.accepted)
+        x0, _ = self.design(chols, self._accepted)
         b0, *_ = linalg.lstsq(x0, yw, cond=RCOND, check_finite=False)
         chi0 = float(np.sum((yw - x0 @ b0) ** 2))
         r0 = self._rank(x0)
@@ -377,27 +475,27 @@ class SensorProblem:
             self.refit_drift()
             nll0 = self.total_nll()
             chols, yw = self.whitened()
-            x0, _ = self.design(chols, self.accepted)
+            x0, _ = self.design(chols, self._accepted)
             r0 = self._rank(x0)
-            self.accepted.append(zb)
+            self._accepted.append(zb)
             self.refit_drift()
-            self.accepted.pop()
+            self._accepted.pop()
             chols, yw = self.whitened()
-        x1, _ = self.design(chols, [*self.accepted, zb])
+        x1, _ = self.design(chols, [*self._accepted, zb])
         gain_rank = self._rank(x1) - r0
         if profile:
             # the null's and the alternative's drift (T_c, q) differ: count the rank gain on one well-conditioned
             # weighting (the white block noise), not on two different whitenings
             wch = [np.diag(np.sqrt(self.white[:, k])) for k in range(3)]
-            gain_rank = (self._rank(self.design(wch, [*self.accepted, zb])[0])
-                         - self._rank(self.design(wch, self.accepted)[0]))
+            gain_rank = (self._rank(self.design(wch, [*self._accepted, zb])[0])
+                         - self._rank(self.design(wch, self._accepted)[0]))
         b1, *_ = linalg.lstsq(x1, yw, cond=RCOND, check_finite=False)
         chi1 = float(np.sum((yw - x1 @ b1) ** 2))
         gain = chi0 - chi1
         if saved is not None:
-            self.accepted.append(zb)
+            self._accepted.append(zb)
             gain = 2.0 * (nll0 - self.total_nll())
-            self.accepted.pop()
+            self._accepted.pop()
             self._restore(saved)
         p = zb.shape[2]
         nfix = x1.shape[1] - p
@@ -432,8 +530,8 @@ class SensorProblem:
         stays in training); and the standard error of their difference, paired over the held-out blocks.
         """
         folds = self._heldout_folds()
-        before = self._heldout_errors(self.accepted, folds)
-        after = self._heldout_errors([*self.accepted, zb], folds)
+        before = self._heldout_errors(self._accepted, folds)
+        after = self._heldout_errors([*self._accepted, zb], folds)
         d = after - before
         se = float(np.std(d, ddof=1) / math.sqrt(len(d))) if len(d) > 1 else math.inf
         return float(before.mean()), float(after.mean()), se
@@ -468,7 +566,7 @@ class SensorProblem:
         return out
 
     def _heldout_errors(
-        self, blocks: list[np.ndarray], folds: list[tuple[np.ndarray, np.ndarray, list[_FoldAxis]]]
+        self, blocks: Sequence[np.ndarray], folds: list[tuple[np.ndarray, np.ndarray, list[_FoldAxis]]]
     ) -> np.ndarray:
         """The squared whitened prediction errors of :meth:`heldout` per held-out block (folds and axes in
         turn) for the mean model with ``blocks``."""
@@ -543,11 +641,11 @@ class SensorProblem:
             if np.any(self.d_temp):
                 # a temperature bias that the warm-up absorbed (T_c pulled to the self-heating's time constant)
                 # leaves eq. 3's slower drift unexplained: with the temperature term, T_c goes back to it
-                self.accepted.append(self.d_temp[:, None, None] * np.eye(3)[None, :, :])
+                self._accepted.append(self.d_temp[:, None, None] * np.eye(3)[None, :, :])
                 try:
                     self.refit_drift()
                 finally:
-                    self.accepted.pop()
+                    self._accepted.pop()
             return self._random_walk_at_current_tc()
         finally:
             self._restore(saved)
@@ -572,9 +670,9 @@ class SensorProblem:
         gain = max(0.0, 2.0 * (nll0 - best_nll))
         # K^2 >= 0 sits on the boundary: the null distribution is half chi^2_1
         crit = float(stats.chi2.isf(2.0 * ALPHA, 1))
-        k = math.sqrt(k2)
+        k_walk = math.sqrt(k2)
         return Test(effect="bias_random_walk", sensor=self.sd.sensor, gain=gain, params=1,
-                    bic_gain=gain - math.log(self.n_rows), critical=crit, theta=np.array([k]),
+                    bic_gain=gain - math.log(self.n_rows), critical=crit, theta=np.array([k_walk]),
                     cov=np.array([[k_std**2]]))
 
     def _profile_k2(self, qs: list[float], extra: list[np.ndarray | None]) -> tuple[float, float, float]:
@@ -621,18 +719,18 @@ class SensorProblem:
             if refit:
                 self.refit_drift()
             nll0 = self.walk_profiled_nll()
-            self.accepted.append(zb)
+            self._accepted.append(zb)
             try:
                 if refit:
                     self.refit_drift()
                 nll1 = self.walk_profiled_nll()
             finally:
-                self.accepted.pop()
+                self._accepted.pop()
         finally:
             self._restore(saved)
         return max(0.0, 2.0 * (nll0 - nll1))
 
-    def walk_consistency(self) -> dict[str, Any]:
+    def walk_consistency(self) -> WalkConsistency:
         """Whether the wander in the current model's block residual is a random walk: the increments of the
         residual between consecutive settled blocks (rest, pose, rate; moves left out), ``d = r_j - r_i``, have
         ``E d^2 = w_i + w_j + K^2 dt`` (white block noise ``w``, :attr:`white`) for a random walk wherever they are
@@ -640,11 +738,11 @@ class SensorProblem:
         pairs: the first / second half of the record, pairs inside one segment / across a segment boundary; the
         standard error of each from ``var d^2 = 2 (E d^2)^2`` at the pooled K^2. Consistent when both
         differences are within :data:`WALK_CONSISTENCY_Z` standard errors."""
-        raw = self.quality()["block_residual"]
+        raw = self.quality().block_residual
         sd = self.sd
         settled = np.flatnonzero(sd.kind != int(Kind.MOVE))
         if len(settled) < 6:
-            return {"consistent": True, "reason": "too few settled blocks"}
+            return WalkConsistency(True, {}, reason="too few settled blocks")
         i, j = settled[:-1], settled[1:]
         dt = sd.t_s[j] - sd.t_s[i]
         d2 = (raw[j] - raw[i]) ** 2  # (pairs, 3)
@@ -658,10 +756,10 @@ class SensorProblem:
         k2_all = max(float(excess.sum()) / max(3.0 * float(dt.sum()), 1e-300), 0.0)
         var = (2.0 * (w + k2_all * dt[:, None]) ** 2).sum(axis=1)
         mid = 0.5 * float(sd.t_s.max())
-        out: dict[str, Any] = {"k2_pooled": k2_all}
+        z_of: dict[str, float] = {}
         consistent = True
         for name, a in (("halves", sd.t_s[j] <= mid), ("inside_vs_across_segments", same)):
-            est = []
+            est: list[tuple[float, float]] = []
             for sel in (a, ~a):
                 if not sel.any():
                     est = []
@@ -671,10 +769,9 @@ class SensorProblem:
             if len(est) < 2:
                 continue
             z = (est[0][0] - est[1][0]) / max(math.hypot(est[0][1], est[1][1]), 1e-300)
-            out[name] = {"k2": [est[0][0], est[1][0]], "std": [est[0][1], est[1][1]], "z": round(z, 2)}
+            z_of[name] = round(z, 2)
             consistent = consistent and abs(z) <= WALK_CONSISTENCY_Z
-        out["consistent"] = consistent
-        return out
+        return WalkConsistency(consistent, z_of, k2_all)
 
     def _temperature_vs_warmup(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(T grid s, R^2 (T, axis), energy (axis,)) of the block temperature course against eq. 3's warm-up.
@@ -720,10 +817,10 @@ class SensorProblem:
         return float(np.sum(np.asarray(theta) ** 2 * energy * (1.0 - r2.max(axis=0))))
 
     # --- fit quality ---------------------------------------------------------------
-    def quality(self) -> dict[str, Any]:
+    def quality(self) -> ModelQuality:
         """Negative log-likelihood, BIC, block chi^2 per axis (white-noise units) of the current model."""
         chols, yw = self.whitened()
-        x, _ = self.design(chols, self.accepted)
+        x, _ = self.design(chols, self._accepted)
         beta, *_ = linalg.lstsq(x, yw, check_finite=False)
         rw = yw - x @ beta
         logdet = sum(float(np.log(np.diag(c)).sum()) for c in chols)
@@ -736,17 +833,17 @@ class SensorProblem:
         total_base = sum(nb)
         for k in range(3):
             fit = self.base[k] @ beta[col:col + nb[k]]
-            if self.accepted:
-                fit = fit + np.concatenate([a[:, k, :] for a in self.accepted], axis=1) @ beta[total_base:]
+            if self._accepted:
+                fit = fit + np.concatenate([a[:, k, :] for a in self._accepted], axis=1) @ beta[total_base:]
             col += nb[k]
             raw[:, k] = self.y[:, k] - fit
         chi = np.mean(raw**2 / self.white, axis=0)
-        return {"nll": nll, "bic": 2.0 * nll + npar * math.log(self.n_rows), "block_chi2": chi,
-                "block_rms": np.sqrt(np.average(raw**2, axis=0, weights=self.sd.count)), "block_residual": raw}
+        return ModelQuality(nll, 2.0 * nll + npar * math.log(self.n_rows), chi,
+                            np.sqrt(np.average(raw**2, axis=0, weights=self.sd.count)), raw)
 
 
 __all__ = [
     "ALPHA", "DRIFT_NOISE_MAX", "FOLDS", "HELDOUT_SE", "PROFILE_TC", "RCOND", "TC_FLOOR_S", "WALK_CONSISTENCY_Z",
     "WANDER_LIKE",
-    "SensorProblem", "Test", "base_drift",
+    "ModelQuality", "SensorProblem", "Test", "base_drift",
 ]

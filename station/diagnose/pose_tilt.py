@@ -47,7 +47,7 @@ from __future__ import annotations
 
 import math
 import weakref
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 
 import numpy as np
 
@@ -55,6 +55,9 @@ from station.diagnose.residuals import Baseline, SensorData
 from station.kernel.geometry import up_vector
 from station.physics.effects import POSES
 from station.session.model import Kind
+
+#: A regressor column of one pose and rotation axis: ``column(pose index, axis (3,))`` -> (n, 3).
+Column = Callable[[int, np.ndarray], np.ndarray]
 
 NAME = "pose_tilt"
 SENSORS = ("accel",)
@@ -179,7 +182,7 @@ def rig_places(baseline: Baseline) -> tuple[np.ndarray, list[tuple[str, np.ndarr
     return index, poses, moves
 
 
-def _rig_columns(baseline: Baseline, f: np.ndarray) -> tuple[list[tuple[str, np.ndarray]], object]:
+def _rig_columns(baseline: Baseline, f: np.ndarray) -> tuple[list[tuple[str, np.ndarray]], Column]:
     """(pose list, column(p, a)) of the ``rig`` variant: the body-frame tilt ``a`` (rad) of pose ``p``, in ``f x a``
     (specific force m/s^2 per rad) wherever the rig holds or leaves/approaches that pose (see :func:`rig_places`)."""
     index, poses, moves = rig_places(baseline)
@@ -208,7 +211,7 @@ def _rig_columns(baseline: Baseline, f: np.ndarray) -> tuple[list[tuple[str, np.
     return poses, column
 
 
-def _segment_columns(baseline: Baseline, f: np.ndarray) -> tuple[list[tuple[str, np.ndarray]], object]:
+def _segment_columns(baseline: Baseline, f: np.ndarray) -> tuple[list[tuple[str, np.ndarray]], Column]:
     """(pose list, column(p, a)) of the ``segment`` variant: the tilt in pose segments only (as the station's
     simulator has it)."""
     index, poses = pose_groups(baseline)
@@ -222,7 +225,8 @@ def _segment_columns(baseline: Baseline, f: np.ndarray) -> tuple[list[tuple[str,
     return poses, column
 
 
-def _assemble(baseline: Baseline, sd: SensorData, poses: list, column, free_of) -> np.ndarray:
+def _assemble(baseline: Baseline, sd: SensorData, poses: list, column: Column,
+              free_of: Callable[[int], bool]) -> np.ndarray:
     m = np.nan_to_num(np.asarray(sd.params.misalignment, dtype=float))
     # the (n, 3, p) array is filled in place, M (f x a) per column: a list of (n, 3) columns stacked and then
     # multiplied by M held the regressors three times (the largest arrays of a long recording's diagnosis)
@@ -236,15 +240,25 @@ def _assemble(baseline: Baseline, sd: SensorData, poses: list, column, free_of) 
         free = both and free_of(_AXES.index(k))
         for a in axes:
             plus, minus = column(ip, a), column(im, a)
-            z[:, :, col] = (plus - minus) @ m.T  # d
-            if free:  # s, else zero
-                z[:, :, col + 1] = (plus + minus) @ m.T
+            for lo in range(0, len(z), _ROWS):  # a piece at a time: no (n, 3) temporaries (the same numbers)
+                hi = lo + _ROWS
+                z[lo:hi, :, col] = (plus[lo:hi] - minus[lo:hi]) @ m.T  # d
+                if free:  # s, else zero
+                    z[lo:hi, :, col + 1] = (plus[lo:hi] + minus[lo:hi]) @ m.T
+            del plus, minus
             col += 2
     for p, axes in zip(range(len(POSES), len(poses)), others, strict=True):
         for a in axes:
-            z[:, :, col] = column(p, a) @ m.T
+            c = column(p, a)
+            for lo in range(0, len(z), _ROWS):
+                z[lo:lo + _ROWS, :, col] = c[lo:lo + _ROWS] @ m.T
+            del c
             col += 1
     return z
+
+
+#: Samples per piece where :func:`_assemble` multiplies its columns by M.
+_ROWS = 1 << 16
 
 
 #: The two places a pose error can act (:func:`build`): ``rig`` (every time the rig holds the pose, rest included,
@@ -299,10 +313,26 @@ def _explained(sd: SensorData, zb: np.ndarray) -> float:
 
 
 def choose_variant(baseline: Baseline, sd: SensorData) -> tuple[str, dict[str, np.ndarray | None]]:
-    """The variant (:data:`VARIANTS`) whose regressors explain more of the block residual, and all variants'."""
-    zs = {v: build_variant(baseline, sd, v) for v in VARIANTS}
-    gains = {v: _explained(sd, sd.block_mean(z)) if z is not None else -math.inf for v, z in zs.items()}
-    return max(VARIANTS, key=lambda v: gains[v]), zs
+    """The variant (:data:`VARIANTS`) whose regressors explain more of the block residual (the first of
+    :data:`VARIANTS` on a tie), and its regressors ``{variant: z}``.
+
+    The variants are built one at a time and only the chosen one is kept (each is (n, 3, p), the largest arrays
+    of a long recording's diagnosis): ``segment`` (cheap) is built, scored and let go, then ``rig``; when ``rig``
+    loses, ``segment`` is built again.
+    """
+    gains: dict[str, float] = {}
+    kept: dict[str, np.ndarray | None] = {}
+    for v in reversed(VARIANTS):
+        z = build_variant(baseline, sd, v)
+        gains[v] = _explained(sd, sd.block_mean(z)) if z is not None else -math.inf
+        if v == VARIANTS[0]:
+            kept[v] = z
+        del z
+    best = max(VARIANTS, key=lambda v: gains[v])
+    if best in kept:
+        return best, kept
+    kept.clear()  # the losing ``rig`` regressors go before ``segment``'s are built again
+    return best, {best: build_variant(baseline, sd, best)}
 
 
 def build(baseline: Baseline, sd: SensorData) -> np.ndarray | None:

@@ -1,7 +1,8 @@
-"""The diagnosis of one session as a JSON-ready object, and an optional figure.
+"""The diagnosis of one session, and an optional figure.
 
-:func:`diagnose` runs the whole chain (base fit, residuals, candidate selection) and
-returns a :class:`Diagnosis`; ``Diagnosis.report`` is the object ``station diagnose --json``
+:func:`diagnose` runs the whole chain (base fit, residuals, candidate selection, simulator re-run, calibration
+check) and returns a :class:`~station.diagnose.outcome.Diagnosis`; its ``report`` is the typed
+:class:`~station.diagnose.results.DiagnosisReport`, whose ``to_json()`` is the object ``station diagnose --json``
 prints::
 
     {"format": "station-diagnosis/1", "findings": [...], "rejected": [...], "inseparable": [...],
@@ -13,7 +14,7 @@ unit in engineering units), ``evidence`` (likelihood gain, BIC gain, held-out er
 has ``rerun`` (block RMS of its sensor per axis: base, base + this effect, all effects).
 Each mean finding also has ``confidence`` (``level`` high/medium/low: the bootstrap's where it ran, else the
 drop-one test's against the full model), ``consistency`` (its effect-specific checks,
-:mod:`station.diagnose.consistency`: per check ``check``, ``parts``, ``result`` passed/failed/not
+:mod:`station.diagnose.finding_consistency`: per check ``check``, ``parts``, ``result`` passed/failed/not
 informative/not checked, ``reason`` where not checked, chi^2 and the parameters per part) and ``bootstrap``
 (:mod:`station.diagnose.bootstrap`: ``accepted_fraction``, ``std_ratio``, parameters' median and spread). A
 finding failing a check is in ``rejected`` with the check under ``consistency``.
@@ -30,9 +31,9 @@ with the base model and with the accepted effects, compared with the recording p
 sensor class's T_c range per sensor the diagnosis kept eq. 3's warm-up in (null: none given). Pure numerics: only
 :func:`save_figure` writes a file.
 
-A rig-free recording (:mod:`station.diagnose.rigfree`) adds ``"method": "rig-free"``, ``untestable`` (``effect``,
-``sensor``, ``reason`` per candidate it cannot test) and ``rig_free`` (the base fit's still segments, moves,
-gravity-norm and move-direction RMS, the Earth rate handling); its ``rerun`` is ``{"error": ...}``.
+A rig-free recording (:mod:`station.diagnose.rigfree_diagnosis`) adds ``"method": "rig-free"``, ``untestable``
+(``effect``, ``sensor``, ``reason`` per candidate it cannot test) and ``rig_free`` (the base fit's still segments,
+moves, gravity-norm and move-direction RMS, the Earth rate handling); its ``rerun`` is ``{"error": ...}``.
 """
 
 from __future__ import annotations
@@ -40,44 +41,23 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass, field
-from typing import Any
+from dataclasses import replace
 
 import numpy as np
 from threadpoolctl import threadpool_limits
 
 from station.diagnose.bootstrap import RESAMPLES, SEED
-from station.diagnose.compensation import compensation
-from station.diagnose.progress import DONE, STAGES, Progress, Stage
+from station.diagnose.diagnosis_progress import DONE, STAGES, Progress, Stage
+from station.diagnose.finding_compensation import compensation
+from station.diagnose.outcome import Diagnosis, ResidualCurve
 from station.diagnose.rerun import FittedEffect, Rerun, rerun
-from station.diagnose.residuals import SENSORS, Baseline, fit_baseline, locate
-from station.diagnose.selection import Decision, select
+from station.diagnose.residuals import BaseFitNoise, fit_baseline, locate, warmup_ranges
+from station.diagnose.results import FORMAT, DiagnosisReport, FindingRerun, RerunError, RerunSummary
+from station.diagnose.rigfree_diagnosis import diagnose_rig_free
+from station.diagnose.selection import select
+from station.fit.rigfree_fit import is_rig_free
 from station.kernel.errors import FitError
 from station.session.model import Session
-
-FORMAT = "station-diagnosis/1"
-
-
-@dataclass(frozen=True, eq=False)
-class Diagnosis:
-    """Result of :func:`diagnose`.
-
-    Attributes:
-        report: the JSON-ready object (see the module docstring).
-        baseline: the base fit and residuals.
-        curves: per finding, (block times s, block residual before, after), sensor units (SI).
-        rerun: the simulator re-runs (base and extended), None when the recording cannot drive it.
-    """
-
-    report: dict[str, Any]
-    baseline: Baseline
-    curves: list[tuple[str, np.ndarray, np.ndarray, np.ndarray]] = field(default_factory=list)
-    rerun: Rerun | None = None
-
-    @property
-    def effects(self) -> list[tuple[str, str]]:
-        """(effect, sensor) of every finding."""
-        return [(f["effect"], f["sensor"]) for f in self.report["findings"]]
 
 
 def diagnose(session: Session, *, warmup_tc_s: Mapping[str, tuple[float, float]] | None = None,
@@ -89,20 +69,17 @@ def diagnose(session: Session, *, warmup_tc_s: Mapping[str, tuple[float, float]]
     recording alone decides T_c (a temperature bias then often cannot be told from the warm-up).
 
     A rig-free recording (hand-held poses without references, :func:`station.fit.rigfree_fit.is_rig_free`) is
-    diagnosed by :func:`station.diagnose.rigfree.diagnose_rig_free` (its report adds ``untestable``).
+    diagnosed by :func:`station.diagnose.rigfree_diagnosis.diagnose_rig_free` (its report adds ``untestable``).
 
     ``resamples``: the bootstrap over segments that states each finding's confidence
     (:mod:`station.diagnose.bootstrap`, seeded with ``seed``: same recording, same numbers); 0 leaves it out.
 
-    ``progress``: called with a :class:`~station.diagnose.progress.Stage` as each stage starts and once
-    more when done (see :mod:`station.diagnose.progress`; a rig-free recording's diagnosis tells only its
+    ``progress``: called with a :class:`~station.diagnose.diagnosis_progress.Stage` as each stage starts and once
+    more when done (see :mod:`station.diagnose.diagnosis_progress`; a rig-free recording's diagnosis tells only its
     start and its end); None: nothing is told.
 
     Raises :class:`station.kernel.errors.FitError` when the base fit refuses the recording.
     """
-    from station.diagnose import rigfree
-    from station.fit.rigfree_fit import is_rig_free
-
     t0 = time.perf_counter()
     n = len(session)
 
@@ -113,7 +90,7 @@ def diagnose(session: Session, *, warmup_tc_s: Mapping[str, tuple[float, float]]
 
     if is_rig_free(session):
         tell(0)
-        out = rigfree.diagnose_rig_free(session, warmup_tc_s=warmup_tc_s, resamples=resamples, seed=seed)
+        out = diagnose_rig_free(session, warmup_tc_s=warmup_tc_s, resamples=resamples, seed=seed)
         tell(len(STAGES))
         return out
     # the linear algebra is on a few hundred blocks: BLAS threads only spin
@@ -122,62 +99,31 @@ def diagnose(session: Session, *, warmup_tc_s: Mapping[str, tuple[float, float]]
         baseline = fit_baseline(session, warmup_tc_s=warmup_tc_s)
         tell(1)
         decision = select(baseline, resamples=resamples, seed=seed)
-        curves = []
-        findings = []
-        fitted = []
-        for f in decision.findings:
-            if f.block_residual is not None:
-                sd = baseline.sensor(f.sensor)
-                curves.append((f"{f.sensor} {f.effect}", sd.t_s, *f.block_residual))
-            if f.theta is not None or f.effect == "outliers":
-                fitted.append(FittedEffect(f.effect, f.sensor, np.zeros(0) if f.theta is None else f.theta))
-            findings.append(f.to_dict())
+        curves = [ResidualCurve(f"{f.sensor} {f.effect}", baseline.sensor(f.sensor).t_s, *f.block_residual)
+                  for f in decision.findings if f.block_residual is not None]
+        fitted = [FittedEffect(f.effect, f.sensor, np.zeros(0) if f.theta is None else f.theta)
+                  for f in decision.findings if f.theta is not None or f.effect == "outliers"]
         tell(2)
+        runs: Rerun | None
+        section: RerunSummary | RerunError
+        parts: list[FindingRerun | None]
         try:
-            runs: Rerun | None = rerun(baseline, fitted)
+            runs = rerun(baseline, fitted)
         except FitError as exc:
-            runs = None
-            rerun_section: dict[str, Any] = {"error": str(exc)}
+            runs, section, parts = None, RerunError(str(exc)), [None] * len(decision.findings)
         else:
-            rerun_section = runs.summary()
-            for f in findings:
-                part = runs.finding_part(f["effect"], f["sensor"])
-                if part is not None:
-                    f["rerun"] = part
+            section = runs.summary()
+            parts = [runs.finding_part(f.effect, f.sensor) for f in decision.findings]
         tell(3)
-        for f, c in zip(findings, compensation(
-                session, [(f["effect"], f["sensor"]) for f in findings], warmup_tc_s=warmup_tc_s),
-                        strict=True):
-            f["calibration"] = c.to_dict()
-    report = {
-        "format": FORMAT,
-        "serial": session.serial,
-        "findings": findings,
-        "rejected": [r.to_dict() for r in decision.rejected],
-        **common_sections(baseline, decision),
-        "rerun": rerun_section,
-    }
+        calibration = compensation(session, [(f.effect, f.sensor) for f in decision.findings], warmup_tc_s=warmup_tc_s)
+    findings = tuple(replace(f, rerun=part, calibration=c)
+                     for f, part, c in zip(decision.findings, parts, calibration, strict=True))
+    report = DiagnosisReport(
+        serial=session.serial, findings=findings, rejected=decision.rejected, inseparable=decision.inseparable,
+        unexplained=decision.unexplained, location=locate(baseline), warmup_tc_range_s=warmup_ranges(baseline),
+        base_fit=BaseFitNoise.of(baseline), rerun=section)
     tell(len(STAGES))
     return Diagnosis(report=report, baseline=baseline, curves=curves, rerun=runs)
-
-
-def common_sections(baseline: Baseline, decision: Decision) -> dict[str, Any]:
-    """The report's sections that every diagnosis path writes the same way: inseparable, unexplained, location,
-    the warm-up T_c range given, and the base fit's residual and noise (engineering units named in the keys)."""
-    p = baseline.params
-    return {
-        "inseparable": [i.to_dict() for i in decision.inseparable],
-        "unexplained": [u.to_dict() for u in decision.unexplained],
-        "location": locate(baseline),
-        "warmup_tc_range_s": {s: list(sd.tc_range_s) for s in SENSORS
-                              if (sd := baseline.sensor(s)).tc_range_s is not None} or None,
-        "base_fit": {
-            "accel_residual_rms_mps2": np.round(p.accel.residual_rms, 9).tolist(),
-            "gyro_residual_rms_dps": np.round(np.degrees(p.gyro.residual_rms), 9).tolist(),
-            "accel_noise_std_mps2": np.round(p.accel.noise_std, 9).tolist(),
-            "gyro_noise_std_dps": np.round(np.degrees(p.gyro.noise_std), 9).tolist(),
-        },
-    }
 
 
 def save_figure(diagnosis: Diagnosis, path: str | os.PathLike[str]) -> None:
@@ -196,7 +142,7 @@ def save_figure(diagnosis: Diagnosis, path: str | os.PathLike[str]) -> None:
     curves = diagnosis.curves
     if not curves:
         b = diagnosis.baseline
-        curves = [(f"{sd.sensor} base model", sd.t_s, sd.y, sd.y) for sd in (b.accel, b.gyro)]
+        curves = [ResidualCurve(f"{sd.sensor} base model", sd.t_s, sd.y, sd.y) for sd in (b.accel, b.gyro)]
     for title, t, before, after in curves:
         rows.append((title.split(" ")[0], f"{title}: block residual before", f"{title}: block residual after",
                      t, before, after))

@@ -6,14 +6,26 @@ Numbers come from :mod:`station.diagnose.likelihood` tests; :mod:`station.diagno
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from scipy import optimize, stats
 
-from station.diagnose.likelihood import ALPHA, Test
-from station.diagnose.registry import REGISTRY, engineering, unit_factor
+from station.diagnose.effect_registry import REGISTRY, engineering, unit_factor
+from station.diagnose.finding_consistency import not_checked
+from station.diagnose.likelihood import ALPHA, ModelQuality, Test
 from station.diagnose.residuals import SensorData
+from station.diagnose.results import (
+    BlockFit,
+    DetectableSize,
+    Evidence,
+    Finding,
+    FitChange,
+    FormInseparable,
+    OutlierEvidence,
+    Rejection,
+)
 
 #: Outlier rate per sample and axis that the base fit already tolerates (it rejects them):
 #: the paper reports outliers on the accelerometer; none are expected on the gyroscope.
@@ -23,7 +35,7 @@ DETECT_POWER = 0.9
 AX = "xyz"
 
 
-def detectable_from(t: Test) -> dict[str, Any] | None:
+def detectable_from(t: Test) -> DetectableSize | None:
     """How large each of a mean candidate's parameters would have had to be for this recording to show it.
 
     Per parameter, in engineering units: the size at which the test (chi^2 with ``t.params`` degrees of
@@ -42,8 +54,7 @@ def detectable_from(t: Test) -> dict[str, Any] | None:
     shape = REGISTRY[t.effect].shape
     if shape is not None:
         size = size.reshape(shape)
-    return {"value": round_sig(size).tolist(), "unit": unit, "power": DETECT_POWER,
-            "noncentrality": round(lam, 2)}
+    return DetectableSize(round_sig(size).tolist(), unit, DETECT_POWER, round(lam, 2))
 
 
 def round_sig(x: np.ndarray, digits: int = 3) -> np.ndarray:
@@ -53,19 +64,45 @@ def round_sig(x: np.ndarray, digits: int = 3) -> np.ndarray:
     return np.round(x * scale) / scale
 
 
-def outlier_test(sd: SensorData) -> dict[str, Any]:
+@dataclass(frozen=True)
+class OutlierTest:
+    """The base fit's outlier count of one sensor against the sensor class's allowance (Poisson tail):
+    ``significant`` at :data:`~station.diagnose.likelihood.ALPHA`; ``axes``: those with more than allowed."""
+
+    sensor: str
+    count: int
+    samples: int
+    rate: float
+    rate_std: float
+    allowance: float
+    p_value: float
+    axes: tuple[int, ...]
+
+    @property
+    def significant(self) -> bool:
+        return self.p_value < ALPHA
+
+    def finding(self) -> Finding:
+        """The ``outliers`` finding."""
+        return Finding(
+            "outliers", self.sensor, tuple(AX[k] for k in self.axes) or tuple(AX),
+            {"rate_per_sample": {"value": self.rate, "std": self.rate_std, "unit": "1"}},
+            OutlierEvidence(self.count, self.samples, self.allowance, self.p_value),
+            consistency=tuple(c.entry() for c in not_checked("outliers", self.sensor)))
+
+    def rejection(self, reason: str = "no more outliers than allowed") -> Rejection:
+        """The ``outliers`` rejection, with ``reason``."""
+        return Rejection("outliers", self.sensor, reason, {"count": self.count, "p_value": self.p_value})
+
+
+def outlier_test(sd: SensorData) -> OutlierTest:
     n = max(sd.settled_samples, 1)
     count = int(sd.outlier_count.sum())
     lam = OUTLIER_ALLOWANCE[sd.sensor] * 3 * n
     p_value = float(stats.poisson.sf(count - 1, lam)) if count > 0 else 1.0
-    rate = count / (3 * n)
-    return {
-        "effect": "outliers", "sensor": sd.sensor, "count": count, "samples": 3 * n,
-        "rate": rate, "rate_std": math.sqrt(max(count, 1)) / (3 * n), "allowance": OUTLIER_ALLOWANCE[sd.sensor],
-        "p_value": p_value, "accepted": p_value < ALPHA,
-        "axes": [k for k in range(3) if sd.outlier_count[k] > OUTLIER_ALLOWANCE[sd.sensor] * n + 3 * math.sqrt(
-            OUTLIER_ALLOWANCE[sd.sensor] * n + 1)],
-    }
+    limit = OUTLIER_ALLOWANCE[sd.sensor] * n + 3 * math.sqrt(OUTLIER_ALLOWANCE[sd.sensor] * n + 1)
+    return OutlierTest(sd.sensor, count, 3 * n, count / (3 * n), math.sqrt(max(count, 1)) / (3 * n),
+                       OUTLIER_ALLOWANCE[sd.sensor], p_value, tuple(k for k in range(3) if sd.outlier_count[k] > limit))
 
 
 def affected_axes(name: str, theta: np.ndarray, cov: np.ndarray) -> list[int]:
@@ -80,7 +117,11 @@ def affected_axes(name: str, theta: np.ndarray, cov: np.ndarray) -> list[int]:
 
 
 
-def finding(sd: SensorData, t: Test, before: dict[str, Any], after: dict[str, Any]) -> dict[str, Any]:
+def finding(sd: SensorData, t: Test, before: ModelQuality, after: ModelQuality, *,
+            form: FormInseparable | None = None) -> Finding:
+    """The finding of test ``t`` (accepted at one selection step), the sensor's model ``before`` and ``after``
+    it; ``form``: the forms of its physics it is not told apart from. Confidence, consistency and bootstrap
+    are added when the checks after the selection have run (:func:`station.diagnose.selection.select`)."""
     if REGISTRY[t.effect].kind == "noise":  # bias_random_walk: a density
         k, k_std = float(t.theta[0]), float(math.sqrt(t.cov[0, 0]))
         factor, unit = unit_factor(t.effect, sd.sensor)
@@ -91,25 +132,17 @@ def finding(sd: SensorData, t: Test, before: dict[str, Any], after: dict[str, An
         axes = affected_axes(t.effect, t.theta, t.cov)
     out_factor = 180.0 / math.pi if sd.sensor == "gyro" else 1.0
     unit = "deg/s" if sd.sensor == "gyro" else "m/s^2"
-    return {
-        "effect": t.effect,
-        "sensor": sd.sensor,
-        "axes": [AX[k] for k in axes],
-        "parameters": params,
-        "evidence": {
-            "likelihood_gain_chi2": round(t.gain, 3), "params": t.params, "bic_gain": round(t.bic_gain, 3),
-            "critical_chi2": round(t.critical, 3), "heldout_before": round(t.heldout_before, 4),
-            "heldout_after": round(t.heldout_after, 4), "heldout_change_se": round(t.heldout_change_se, 4),
-        },
-        "fit": {
-            "before": {"bic": round(before["bic"], 3), "block_chi2": np.round(before["block_chi2"], 4).tolist(),
-                       "block_rms": np.round(before["block_rms"] * out_factor, 9).tolist(), "unit": unit},
-            "after": {"bic": round(after["bic"], 3), "block_chi2": np.round(after["block_chi2"], 4).tolist(),
-                      "block_rms": np.round(after["block_rms"] * out_factor, 9).tolist(), "unit": unit},
-        },
-        "_block_residual": (before["block_residual"], after["block_residual"]),
-        "_theta": np.array(t.theta, dtype=float),  # fitted SI parameters, for the simulator re-run (rerun.py)
-    }
+    def block_fit(q: ModelQuality) -> BlockFit:
+        return BlockFit(round(q.bic, 3), tuple(np.round(q.block_chi2, 4).tolist()),
+                        tuple(np.round(q.block_rms * out_factor, 9).tolist()), unit)
+
+    return Finding(
+        t.effect, sd.sensor, tuple(AX[k] for k in axes), params,
+        Evidence(round(t.gain, 3), t.params, round(t.bic_gain, 3), round(t.critical, 3), round(t.heldout_before, 4),
+                 round(t.heldout_after, 4), round(t.heldout_change_se, 4), form),
+        FitChange(block_fit(before), block_fit(after)),
+        theta=np.array(t.theta, dtype=float),  # fitted SI parameters, for the simulator re-run (rerun.py)
+        block_residual=(before.block_residual, after.block_residual))
 
 
-__all__ = ["AX", "DETECT_POWER", "OUTLIER_ALLOWANCE", "detectable_from"]
+__all__ = ["AX", "DETECT_POWER", "OUTLIER_ALLOWANCE", "OutlierTest", "detectable_from", "finding", "outlier_test"]

@@ -8,7 +8,7 @@ and temperature course,
 * **base**: the fitted eq. (1) with the drift of eq. (3) (``baseline.params``),
 * **extended**: the same plus every accepted mean effect with its fitted SI parameters
   (mapped onto the simulator's :class:`~station.physics.effects.EffectTruth` by each effect's entry in
-  :mod:`station.diagnose.registry`),
+  :mod:`station.diagnose.effect_registry`),
 
 and both are compared with the recording per block of :mod:`station.diagnose.residuals`.
 
@@ -44,13 +44,13 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 
 from station.diagnose.candidates import attitude
-from station.diagnose.registry import EFFECTS, REGISTRY, simulator_input
+from station.diagnose.effect_registry import EFFECTS, REGISTRY, simulator_input
 from station.diagnose.residuals import SENSORS, Baseline, SensorData
+from station.diagnose.results import BlockStatistics, FindingRerun, Improvement, KindStatistics, RerunSummary
 from station.fit.blocks import block_exp_mean
 from station.kernel.errors import FitError
 from station.kernel.geometry import Kinematics
@@ -147,33 +147,28 @@ class Rerun:
     alone: tuple[ModelRun, ...]
     skipped: tuple[dict[str, str], ...]
 
-    def statistics(self, run: ModelRun) -> dict[str, Any]:
-        """JSON-ready statistic of ``run`` per sensor (see :func:`block_statistics`)."""
+    def statistics(self, run: ModelRun) -> dict[str, BlockStatistics]:
+        """The statistic of ``run`` per sensor (see :func:`block_statistics`)."""
         return {s: block_statistics(self.baseline.sensor(s), run.block_residual[s]) for s in SENSORS}
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> RerunSummary:
         """The ``rerun`` section of the diagnosis report (gyro in deg/s)."""
         base, ext = self.statistics(self.base), self.statistics(self.extended)
         improvement = {}
         for s in SENSORS:
-            rb, re = np.array(base[s]["rms"]), np.array(ext[s]["rms"])
-            cb, ce = np.array(base[s]["chi2"]), np.array(ext[s]["chi2"])
-            improvement[s] = {
-                "rms_ratio": np.round(np.divide(rb, re, out=np.ones(3), where=re > 0), 4).tolist(),
-                "chi2_ratio": np.round(np.divide(cb, ce, out=np.ones(3), where=ce > 0), 4).tolist(),
-            }
-        return {
-            "method": "noise-free simulator on the recording's reference motion and temperature; base = fitted "
-                      "eq. 1 + eq. 3, extended = base + accepted effects; both with M rows, b_stat, b_drift and T_c "
-                      "re-fitted on the block means; statistic: recording minus simulation per block",
-            "effects": [{"effect": e.effect, "sensor": e.sensor} for e in self.extended.effects],
-            "not_simulated": list(self.skipped),
-            "base": base,
-            "extended": ext,
-            "improvement": improvement,
-        }
+            rb, re = np.array(base[s].overall.rms), np.array(ext[s].overall.rms)
+            cb, ce = np.array(base[s].overall.chi2), np.array(ext[s].overall.chi2)
+            improvement[s] = Improvement(
+                tuple(np.round(np.divide(rb, re, out=np.ones(3), where=re > 0), 4).tolist()),
+                tuple(np.round(np.divide(cb, ce, out=np.ones(3), where=ce > 0), 4).tolist()))
+        return RerunSummary(
+            method="noise-free simulator on the recording's reference motion and temperature; base = fitted "
+                   "eq. 1 + eq. 3, extended = base + accepted effects; both with M rows, b_stat, b_drift and T_c "
+                   "re-fitted on the block means; statistic: recording minus simulation per block",
+            effects=tuple((e.effect, e.sensor) for e in self.extended.effects),
+            not_simulated=self.skipped, base=base, extended=ext, improvement=improvement)
 
-    def finding_part(self, effect: str, sensor: str) -> dict[str, Any] | None:
+    def finding_part(self, effect: str, sensor: str) -> FindingRerun | None:
         """Per finding: RMS per axis of its sensor for base, base + this effect alone, and extended."""
         unit, factor = _UNITS[sensor]
         count = self.baseline.sensor(sensor).count
@@ -183,8 +178,7 @@ class Rerun:
 
         for e, run in zip(self.extended.effects, self.alone, strict=True):
             if e.effect == effect and e.sensor == sensor:
-                return {"unit": unit, "rms_base": rms(self.base), "rms_with_this_effect": rms(run),
-                        "rms_extended": rms(self.extended)}
+                return FindingRerun(unit, tuple(rms(self.base)), tuple(rms(run)), tuple(rms(self.extended)))
         return None
 
 
@@ -197,27 +191,24 @@ def _rms(d: np.ndarray, count: np.ndarray) -> np.ndarray:
     return np.sqrt(np.average(d**2, axis=0, weights=count)) if len(d) else np.full(3, math.nan)
 
 
-def block_statistics(sd: SensorData, d: np.ndarray) -> dict[str, Any]:
+def block_statistics(sd: SensorData, d: np.ndarray) -> BlockStatistics:
     """Block residual ``d`` (m, 3) of one sensor: RMS (weighted by block size), its white-noise floor
     and the block chi^2 per axis, overall and per kind of segment (gyro in deg/s)."""
     unit, factor = _UNITS[sd.sensor]
     white = sd.sigma[None, :] ** 2 / sd.count[:, None]  # (m, 3), block-mean noise variance
 
-    def stats(sel: np.ndarray) -> dict[str, Any]:
+    def stats(sel: np.ndarray) -> KindStatistics:
         w = sd.count[sel]
-        return {
-            "blocks": int(sel.sum()),
-            "rms": _round(_rms(d[sel], w) * factor),
-            "noise_rms": _round(np.sqrt(np.average(white[sel], axis=0, weights=w)) * factor),
-            "chi2": _round(np.mean(d[sel] ** 2 / white[sel], axis=0)),
-        }
+        return KindStatistics(int(sel.sum()), tuple(_round(_rms(d[sel], w) * factor)),
+                              tuple(_round(np.sqrt(np.average(white[sel], axis=0, weights=w)) * factor)),
+                              tuple(_round(np.mean(d[sel] ** 2 / white[sel], axis=0))))
 
-    out: dict[str, Any] = {"unit": unit, **stats(np.ones(len(d), dtype=bool)), "per_kind": {}}
+    per_kind = {}
     for kind in Kind:
         sel = sd.kind == int(kind)
         if np.any(sel):
-            out["per_kind"][kind.label] = stats(sel)
-    return out
+            per_kind[kind.label] = stats(sel)
+    return BlockStatistics(unit, stats(np.ones(len(d), dtype=bool)), per_kind)
 
 
 # --- the simulator, driven by the recording --------------------------------------------------
@@ -366,7 +357,7 @@ class Drive:
         force (m/s^2, (n, 3)), the fitted pose tilts."""
         session = self.baseline.session
         z3 = np.zeros(3)
-        shapes = EffectShapes(*([z3] * 4), np.zeros((3, 3)), *([z3] * 5))
+        shapes = EffectShapes(z3, z3, z3, z3, np.zeros((3, 3)), z3, z3, z3, z3, z3)
         unit = UnitTruth(serial=session.serial, accel=triads["accel"].truth(), gyro=triads["gyro"].truth(),
                          self_heating_k=0.0, self_heating_tau_s=1.0, temp_noise_std_k=0.0, temp_lsb_k=0.0,
                          shapes=shapes)

@@ -57,7 +57,7 @@ class SensorData:
             diagnosis keeps the warm-up drift in; None: the recording alone decides T_c.
         extra_var: variance added to each block mean's white-noise variance, (m, 3), in the sensor's unit
             squared: known physics of unknown phase (a rig-free recording's horizontal Earth rate, whose
-            heading each pose draws anew, :mod:`station.diagnose.rigfree`); None: none.
+            heading each pose draws anew, :mod:`station.diagnose.rigfree_diagnosis`); None: none.
     """
 
     sensor: str
@@ -263,13 +263,75 @@ def _corr(a: np.ndarray, b: np.ndarray, w: np.ndarray) -> float:
     return float(np.average(wa * wb, weights=w) / den) if den > 0 else 0.0
 
 
-def locate(baseline: Baseline) -> dict[str, Any]:
+@dataclass(frozen=True)
+class WorstSegment:
+    """A segment where the base model disagrees most: its index and mean chi^2 per block."""
+
+    segment: int
+    chi2_per_block: float
+
+
+@dataclass(frozen=True)
+class SensorLocation:
+    """Where the base model disagrees, for one sensor (:func:`locate`): per kind of segment the normalized block
+    residual (chi^2 per block per axis, 1 = white noise), the worst segments, per covariate the correlation of the
+    block residual with it per axis, and the number of blocks."""
+
+    chi2_per_block: Mapping[str, list[float]]
+    worst_segments: tuple[WorstSegment, ...]
+    correlation: Mapping[str, list[float]]
+    blocks: int
+
+    def to_json(self) -> dict[str, Any]:
+        return {"chi2_per_block": dict(self.chi2_per_block),
+                "worst_segments": [{"segment": w.segment, "chi2_per_block": w.chi2_per_block}
+                                   for w in self.worst_segments],
+                "correlation": dict(self.correlation), "blocks": self.blocks}
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> SensorLocation:
+        return cls(d["chi2_per_block"], tuple(WorstSegment(w["segment"], w["chi2_per_block"])
+                                              for w in d["worst_segments"]), d["correlation"], d["blocks"])
+
+
+@dataclass(frozen=True)
+class BaseFitNoise:
+    """The base fit's residual RMS and noise std per axis, accelerometer in m/s^2, gyroscope in deg/s."""
+
+    accel_residual_rms_mps2: list[float]
+    gyro_residual_rms_dps: list[float]
+    accel_noise_std_mps2: list[float]
+    gyro_noise_std_dps: list[float]
+
+    @classmethod
+    def of(cls, baseline: Baseline) -> BaseFitNoise:
+        p = baseline.params
+        return cls(np.round(p.accel.residual_rms, 9).tolist(), np.round(np.degrees(p.gyro.residual_rms), 9).tolist(),
+                   np.round(p.accel.noise_std, 9).tolist(), np.round(np.degrees(p.gyro.noise_std), 9).tolist())
+
+    def to_json(self) -> dict[str, Any]:
+        return {"accel_residual_rms_mps2": self.accel_residual_rms_mps2,
+                "gyro_residual_rms_dps": self.gyro_residual_rms_dps,
+                "accel_noise_std_mps2": self.accel_noise_std_mps2, "gyro_noise_std_dps": self.gyro_noise_std_dps}
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> BaseFitNoise:
+        return cls(d["accel_residual_rms_mps2"], d["gyro_residual_rms_dps"], d["accel_noise_std_mps2"],
+                   d["gyro_noise_std_dps"])
+
+
+def warmup_ranges(baseline: Baseline) -> dict[str, tuple[float, float]] | None:
+    """The sensor class's T_c range per sensor the base fit kept eq. 3's warm-up in (None: none given)."""
+    return {s: sd.tc_range_s for s in SENSORS if (sd := baseline.sensor(s)).tc_range_s is not None} or None
+
+
+def locate(baseline: Baseline) -> dict[str, SensorLocation]:
     """Where the base model disagrees: per sensor and axis, the normalized block residual
     (chi^2 per block, 1 = as expected from white noise) per kind of segment, the worst
     segments, and correlations of the block residual with temperature, rate, |rate|,
     rate sign, specific force and time.
     """
-    out: dict[str, Any] = {}
+    out: dict[str, SensorLocation] = {}
     force = np.nan_to_num(baseline.session.ref_accel_mps2)
     rate = np.nan_to_num(baseline.session.ref_gyro_radps)
     for name in SENSORS:
@@ -299,13 +361,12 @@ def locate(baseline: Baseline) -> dict[str, Any]:
                          "specific_force": f_b[:, k]})
             for vname, v in cols.items():
                 corr.setdefault(vname, []).append(round(_corr(sd.y[:, k], v, w), 3))
-        out[name] = {
-            "chi2_per_block": per_kind,
-            "worst_segments": [{"segment": s, "chi2_per_block": round(seg_chi[s], 3)} for s in worst],
-            "correlation": corr,
-            "blocks": len(sd.t_s),
-        }
+        out[name] = SensorLocation(per_kind, tuple(WorstSegment(s, round(seg_chi[s], 3)) for s in worst), corr,
+                                   len(sd.t_s))
     return out
 
 
-__all__ = ["SENSORS", "Baseline", "SensorData", "baseline_from_params", "fit_baseline", "locate"]
+__all__ = [
+    "SENSORS", "BaseFitNoise", "Baseline", "SensorData", "SensorLocation", "WorstSegment", "baseline_from_params",
+    "fit_baseline", "locate", "warmup_ranges",
+]

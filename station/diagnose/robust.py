@@ -30,11 +30,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 from scipy import linalg, stats
 
+from station.diagnose.likelihood import SensorProblem, Test, WalkConsistency
+from station.diagnose.residuals import Baseline, SensorData
+from station.diagnose.results import Confidence, Rejection, Unexplained
 from station.session.model import Kind
 
 #: Tail probability below which a cell's excess chi^2 counts as unexplained.
@@ -53,38 +55,16 @@ AX = "xyz"
 NUISANCE = "~"
 
 
-@dataclass(frozen=True)
-class Unexplained:
-    """Where the final model leaves structure that no candidate explains."""
-
-    sensor: str
-    axes: tuple[str, ...]
-    segment_kinds: tuple[str, ...]
-    covariate: str
-    dispersion: dict[str, list[float]]  # kind -> mean square innovation per axis (1 = noise)
-    excess_chi2: float
-    periodic: dict[str, Any] | None = None
-
-    def to_dict(self) -> dict[str, Any]:
-        out = {"sensor": self.sensor, "axes": list(self.axes), "segment_kinds": list(self.segment_kinds),
-               "covariate": self.covariate, "dispersion": self.dispersion, "excess_chi2": round(self.excess_chi2, 1),
-               "explained_by": None,
-               "note": "no candidate of the library explains this: physics outside the model"}
-        if self.periodic:
-            out["periodic"] = self.periodic
-        return out
-
-
 @dataclass
 class Audit:
     """What the checks keep: confidence per kept effect, rejections, unexplained locations."""
 
-    confidence: dict[str, dict[str, Any]] = field(default_factory=dict)
-    rejected: list[dict[str, Any]] = field(default_factory=list)
+    confidence: dict[str, Confidence] = field(default_factory=dict)
+    rejected: list[Rejection] = field(default_factory=list)
     unexplained: list[Unexplained] = field(default_factory=list)
 
 
-def innovations(prob: Any) -> np.ndarray:
+def innovations(prob: SensorProblem) -> np.ndarray:
     """Whitened GLS residual of the current model per block and axis, (m, 3) (1 = noise)."""
     chols, yw = prob.whitened()
     x, _ = prob.design(chols, prob.accepted)
@@ -92,7 +72,7 @@ def innovations(prob: Any) -> np.ndarray:
     return (yw - x @ beta).reshape(3, prob.m).T
 
 
-def dispersion(prob: Any) -> tuple[np.ndarray, dict[str, list[float]]]:
+def dispersion(prob: SensorProblem) -> tuple[np.ndarray, dict[str, list[float]]]:
     """Per block and axis the dispersion of its kind (>= 1), and the table kind -> per-axis mean square."""
     z = innovations(prob)
     phi = np.ones_like(z)
@@ -102,27 +82,14 @@ def dispersion(prob: Any) -> tuple[np.ndarray, dict[str, list[float]]]:
         if sel.sum() < 3:
             continue
         ms = np.mean(z[sel] ** 2, axis=0)
-        table[kind.label] = np.round(ms, 3).tolist()
+        table[kind.label] = [float(v) for v in np.round(np.asarray(ms, dtype=float), 3)]
         phi[sel] = np.maximum(ms, 1.0)[None, :]
     return phi, table
 
 
-def _with_inflated_noise(prob: Any, phi: np.ndarray) -> Any:
-    saved = (prob.white, dict(prob._eig_cache))
-    prob.white = prob.white * phi
-    prob._eig_cache.clear()
-    return saved
-
-
-def _restore_noise(prob: Any, saved: Any) -> None:
-    prob.white, cache = saved
-    prob._eig_cache.clear()
-    prob._eig_cache.update(cache)
-
-
-def _walk_summary(cons: dict[str, Any]) -> dict[str, float]:
+def _walk_summary(cons: WalkConsistency) -> dict[str, float]:
     """The z-scores of :meth:`station.diagnose.likelihood.SensorProblem.walk_consistency` for the report."""
-    return {k: v["z"] for k, v in cons.items() if isinstance(v, dict)}
+    return dict(cons.z)
 
 
 def _confidence(gain: float, threshold: float) -> str:
@@ -130,7 +97,17 @@ def _confidence(gain: float, threshold: float) -> str:
     return "high" if r >= 4.0 else "medium" if r >= 1.5 else "low"
 
 
-def periodic_in_spin(baseline: Any, sd: Any, fitted: np.ndarray) -> dict[str, Any] | None:
+@dataclass(frozen=True, eq=False)
+class SpinPeriodic:
+    """:func:`periodic_in_spin`: chi^2 per axis of the cos/sin terms of the rate table's angle, its degrees of
+    freedom (2 per hold) and the rms amplitude per axis (sensor units, SI)."""
+
+    chi2: np.ndarray
+    dof: int
+    amplitude: np.ndarray
+
+
+def periodic_in_spin(baseline: Baseline, sd: SensorData, fitted: np.ndarray) -> SpinPeriodic | None:
     """Sample residual (minus the accepted effects' ``fitted`` signal, (n, 3)) in the rate-table holds against
     the table's angle: per hold and axis the least-squares cos/sin amplitude of the angle integrated from the
     rate reference, summed to a chi^2 per axis (2 per hold). None without rate holds."""
@@ -161,11 +138,11 @@ def periodic_in_spin(baseline: Any, sd: Any, fitted: np.ndarray) -> dict[str, An
     if dof == 0:
         return None
     n_all = sum(len(s) for s in session.segments() if s.kind == Kind.RATE)
-    return {"chi2": chi, "dof": dof, "amplitude": np.sqrt(amp2 / max(n_all, 1))}
+    return SpinPeriodic(chi, dof, np.sqrt(amp2 / max(n_all, 1)))
 
 
-def audit(prob: Any, baseline: Any, names: list[str], regs: dict[str, np.ndarray], random_walk: Any | None,
-          fitted_samples: np.ndarray) -> Audit:
+def audit(prob: SensorProblem, baseline: Baseline, names: list[str], regs: dict[str, np.ndarray],
+          random_walk: Test | None, fitted_samples: np.ndarray) -> Audit:
     """Run the checks of the module docstring on the final model of one sensor.
 
     ``prob``: the :class:`station.diagnose.likelihood.SensorProblem` with the accepted mean effects (block
@@ -192,7 +169,7 @@ def audit(prob: Any, baseline: Any, names: list[str], regs: dict[str, np.ndarray
     periodic_axes = []
     if per is not None:
         for k in range(3):
-            if stats.chi2.sf(per["chi2"][k], per["dof"]) < ALPHA_UNEXPLAINED and per["chi2"][k] > 3.0 * per["dof"]:
+            if stats.chi2.sf(per.chi2[k], per.dof) < ALPHA_UNEXPLAINED and per.chi2[k] > 3.0 * per.dof:
                 periodic_axes.append(k)
                 bad_cells.add((int(Kind.RATE), k))
                 bad_cells.add((int(Kind.MOVE), k))
@@ -216,83 +193,66 @@ def audit(prob: Any, baseline: Any, names: list[str], regs: dict[str, np.ndarray
             if e > 0 and float(sig[in_bad] @ sig[in_bad]) / e >= STAND_IN_SHARE:
                 stand_in.add(name)
     # --- drop-one re-test of every accepted effect under the dispersion ---
-    saved = _with_inflated_noise(prob, phi)
-    try:
-        accepted = list(prob.accepted)
+    with prob.inflated_noise(phi):
         for i, name in enumerate(names):
             if name.startswith(NUISANCE):  # an inseparable pair's signal: part of the model, named by no finding
                 continue
-            others = accepted[:i] + accepted[i + 1:]
-            prob.accepted = others
-            try:
-                t = prob.test_mean(name, accepted[i], profile=True)
-            finally:
-                prob.accepted = accepted
+            with prob.without(i) as zb:
+                t = prob.test_mean(name, zb, profile=True)
             if name in stand_in:
-                out.rejected.append({"effect": name, "sensor": sd.sensor, "gain": round(t.gain, 3),
-                                     "reason": "a stand-in: most of its fitted signal lies where structure stays "
-                                               "unexplained (see unexplained)"})
+                out.rejected.append(Rejection(name, sd.sensor, "a stand-in: most of its fitted signal lies where "
+                                              "structure stays unexplained (see unexplained)",
+                                              {"gain": round(t.gain, 3)}))
             elif not t.passes:  # (the held-out gate was the forward selection's; here only the significance)
                 why = ("not significant against the full model with the noise inflated by the final model's "
                        "dispersion per segment kind (misspecification)")
                 if t.walk_explains:
                     why += (f"; with a bias random walk allowed its gain is {t.gain_given_walk:.3g}: a slow wander "
                             "explains it as well")
-                out.rejected.append({"effect": name, "sensor": sd.sensor, "gain": round(t.gain, 3),
-                                     "threshold": round(t.threshold, 3), "reason": why})
+                out.rejected.append(Rejection(name, sd.sensor, why, {"gain": round(t.gain, 3),
+                                                                     "threshold": round(t.threshold, 3)}))
             else:
-                out.confidence[name] = {"level": _confidence(t.gain, t.threshold),
-                                        "quasi_gain_chi2": round(t.gain, 2), "threshold": round(t.threshold, 2)}
+                out.confidence[name] = Confidence(_confidence(t.gain, t.threshold), round(t.gain, 2),
+                                                  round(t.threshold, 2))
         if random_walk is not None:
-            k2 = prob.k2
-            prob.k2 = 0.0
-            prob._fit_q()
-            try:
+            with prob.random_walk_off():
                 t = prob.test_random_walk()
-            finally:
-                prob.k2 = k2
-                prob._fit_q()
             cons = prob.walk_consistency()
-            if t.passes and not bad_cells and cons["consistent"]:
-                out.confidence["bias_random_walk"] = {"level": _confidence(t.gain, t.threshold),
-                                                      "quasi_gain_chi2": round(t.gain, 2),
-                                                      "threshold": round(t.threshold, 2),
-                                                      "consistency": _walk_summary(cons)}
+            if t.passes and not bad_cells and cons.consistent:
+                out.confidence["bias_random_walk"] = Confidence(_confidence(t.gain, t.threshold), round(t.gain, 2),
+                                                                round(t.threshold, 2), _walk_summary(cons))
             elif t.passes and not bad_cells:
-                out.rejected.append({"effect": "bias_random_walk", "sensor": sd.sensor, "gain": round(t.gain, 3),
-                                     "consistency": _walk_summary(cons),
-                                     "reason": "not the same wander throughout the record (its K^2 differs between "
-                                               "the halves, or between increments inside and across segments): "
-                                               "structure of a mean effect, not a random walk"})
+                out.rejected.append(Rejection(
+                    "bias_random_walk", sd.sensor, "not the same wander throughout the record (its K^2 differs "
+                    "between the halves, or between increments inside and across segments): structure of a mean "
+                    "effect, not a random walk", {"gain": round(t.gain, 3), "consistency": _walk_summary(cons)}))
             else:
-                out.rejected.append({"effect": "bias_random_walk", "sensor": sd.sensor, "gain": round(t.gain, 3),
-                                     "reason": "not significant under the final model's dispersion, or a wander "
-                                               "that stands in for unexplained structure"})
-    finally:
-        _restore_noise(prob, saved)
+                out.rejected.append(Rejection(
+                    "bias_random_walk", sd.sensor, "not significant under the final model's dispersion, or a wander "
+                    "that stands in for unexplained structure", {"gain": round(t.gain, 3)}))
     # --- a marginal effect next to a dominant one: the dominant model's imperfection can leave that much ---
-    gains = {n: c["quasi_gain_chi2"] for n, c in out.confidence.items()}
+    gains = {n: c.gain for n, c in out.confidence.items()}
     for name, c in list(out.confidence.items()):
         dominant = max((g for n, g in gains.items() if n != name), default=0.0)
-        if c["quasi_gain_chi2"] < MARGINAL * c["threshold"] and dominant >= DOMINANT * c["quasi_gain_chi2"]:
+        if c.gain < MARGINAL * c.limit and dominant >= DOMINANT * c.gain:
             del out.confidence[name]
-            out.rejected.append({"effect": name, "sensor": sd.sensor, "gain": c["quasi_gain_chi2"],
-                                 "threshold": c["threshold"],
-                                 "reason": f"marginal (chi2 gain below {MARGINAL:g}x its threshold) next to an effect "
-                                           f"{DOMINANT:g}x stronger, whose model's imperfection can leave that much"})
+            out.rejected.append(Rejection(
+                name, sd.sensor, f"marginal (chi2 gain below {MARGINAL:g}x its threshold) next to an effect "
+                f"{DOMINANT:g}x stronger, whose model's imperfection can leave that much",
+                {"gain": c.quasi_gain_chi2, "threshold": c.threshold}))
     # --- locate what stays unexplained ---
     if bad_cells:
-        kinds = sorted({Kind(c).label for c, _ in bad_cells})
+        kinds = sorted({Kind(cell).label for cell, _ in bad_cells})
         axes = sorted({k for _, k in bad_cells})
         excess = 0.0
-        for c, k in bad_cells:
-            sel = sd.kind == c
+        for cell, k in bad_cells:
+            sel = sd.kind == cell
             excess += float(np.sum(z[sel, k] ** 2)) - float(sel.sum())
-        if periodic_axes:
-            amp = ", ".join(f"{AX[k]} {per['amplitude'][k] * factor:.3g}" for k in periodic_axes)
+        if periodic_axes and per is not None:
+            amp = ", ".join(f"{AX[k]} {per.amplitude[k] * factor:.3g}" for k in periodic_axes)
             cov = f"periodic at the rate table's spin frequency (amplitude {amp} {unit})"
-            periodic = {"axes": [AX[k] for k in periodic_axes], "chi2": np.round(per["chi2"], 1).tolist(),
-                        "dof": per["dof"], "amplitude": np.round(per["amplitude"] * factor, 6).tolist(),
+            periodic = {"axes": [AX[k] for k in periodic_axes], "chi2": np.round(per.chi2, 1).tolist(),
+                        "dof": per.dof, "amplitude": np.round(per.amplitude * factor, 6).tolist(),
                         "unit": unit}
         else:
             cov = _covariate(prob, baseline, z, bad_cells)
@@ -302,7 +262,7 @@ def audit(prob: Any, baseline: Any, names: list[str], regs: dict[str, np.ndarray
     return out
 
 
-def _covariate(prob: Any, baseline: Any, z: np.ndarray, cells: set[tuple[int, int]]) -> str:
+def _covariate(prob: SensorProblem, baseline: Baseline, z: np.ndarray, cells: set[tuple[int, int]]) -> str:
     """The block covariate the unexplained innovations follow most closely (|correlation|)."""
     sd = prob.sd
     rate = sd.block_mean(np.nan_to_num(baseline.session.ref_gyro_radps))

@@ -26,20 +26,28 @@ the full model under the final model's dispersion and locates what stays unexpla
 
 from __future__ import annotations
 
-from collections.abc import Collection, Mapping
-from dataclasses import dataclass
-from typing import Any
+from collections.abc import Collection, Iterable, Mapping
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy import linalg
 
-from station.diagnose import bootstrap, consistency, robust
+from station.diagnose import bootstrap, finding_consistency, robust
+from station.diagnose.bootstrap import Bootstrap
 from station.diagnose.candidates import MAX_DELAY_S, delay_regressor
+from station.diagnose.effect_registry import LIBRARY, REGISTRY, RIG_STEPS
 from station.diagnose.likelihood import RCOND, WANDER_LIKE, SensorProblem, Test
-from station.diagnose.registry import LIBRARY, REGISTRY, RIG_STEPS
-from station.diagnose.reporting import AX, detectable_from, finding, outlier_test
+from station.diagnose.reporting import detectable_from, finding, outlier_test
 from station.diagnose.residuals import SENSORS, Baseline, SensorData
-from station.diagnose.results import Finding, Inseparable, Rejection
+from station.diagnose.results import (
+    Confidence,
+    DetectableSize,
+    Finding,
+    FormInseparable,
+    Inseparable,
+    Rejection,
+    Unexplained,
+)
 
 #: Two candidates are inseparable when each one's fitted signal is explained this well (R^2) by the other.
 COLLINEAR_R2 = 0.9
@@ -47,7 +55,7 @@ COLLINEAR_R2 = 0.9
 #: cannot be told from the warm-up in this recording.
 TEMPERATURE_R2 = 0.98
 #: The base model's part a temperature bias can be inseparable from (eq. 3's warm-up), as the registry names it.
-WARMUP = REGISTRY["temperature_bias"].identifiability.base_twin
+WARMUP = REGISTRY["temperature_bias"].identifiability.base_twin or "bias_drift"
 #: Prefix of an accepted term that is in the model but named by no finding (an inseparable pair's signal).
 NUISANCE = "~"
 #: Rounds of the checks after the forward selection (robust.py, consistency.py); each may reject effects.
@@ -68,7 +76,52 @@ class Decision:
     findings: tuple[Finding, ...]
     rejected: tuple[Rejection, ...]
     inseparable: tuple[Inseparable, ...]
-    unexplained: tuple[robust.Unexplained, ...] = ()
+    unexplained: tuple[Unexplained, ...] = ()
+
+    @classmethod
+    def join(cls, parts: Iterable[Decision]) -> Decision:
+        """One decision of several (e.g. per sensor), the entries in the order of ``parts``."""
+        parts = list(parts)
+        return cls(tuple(f for p in parts for f in p.findings), tuple(r for p in parts for r in p.rejected),
+                   tuple(i for p in parts for i in p.inseparable), tuple(u for p in parts for u in p.unexplained))
+
+
+@dataclass
+class _Entries:
+    """The report entries of one sensor as they are decided."""
+
+    findings: list[Finding] = field(default_factory=list)
+    rejected: list[Rejection] = field(default_factory=list)
+    inseparable: list[Inseparable] = field(default_factory=list)
+    unexplained: list[Unexplained] = field(default_factory=list)
+
+    def decision(self) -> Decision:
+        return Decision(tuple(self.findings), tuple(self.rejected), tuple(self.inseparable), tuple(self.unexplained))
+
+
+@dataclass
+class _Forward:
+    """The forward selection's bookkeeping for one sensor (the model itself is the :class:`SensorProblem`'s).
+
+    ``regs``: block regressors per testable mean candidate; ``pool``: candidates still to test; ``last``: each
+    candidate's latest test that was not accepted; ``names``: the accepted terms in the order of
+    ``SensorProblem.accepted`` (``NUISANCE`` + name for an inseparable pair's signal); ``walk``: the accepted bias
+    random walk's test; ``found``: the findings accepted so far (confidence and checks come later)."""
+
+    sensor: str
+    regs: dict[str, np.ndarray]
+    tau: float
+    pool: set[str]
+    last: dict[str, Test] = field(default_factory=dict)
+    names: list[str] = field(default_factory=list)
+    walk: Test | None = None
+    found: list[Finding] = field(default_factory=list)
+
+    def retire(self, *effects: str) -> None:
+        """``effects`` are decided: no more tests, and no rejection entry from their last test."""
+        for e in effects:
+            self.pool.discard(e)
+            self.last.pop(e, None)
 
 
 def _r2(signal: np.ndarray, span: np.ndarray) -> float:
@@ -81,14 +134,11 @@ def _r2(signal: np.ndarray, span: np.ndarray) -> float:
 
 def _conditional(prob: SensorProblem, name: str, zb: np.ndarray, given: np.ndarray) -> Test:
     """Test of candidate ``name`` with the block regressors ``given`` taken into the model first."""
-    prob.accepted.append(given)
-    try:
+    with prob.given(given):
         return prob.test_mean(name, zb)
-    finally:
-        prob.accepted.pop()
 
 
-def _unique(prob: SensorProblem, best: Test, twin: Test, regs: dict[str, np.ndarray]) -> bool:
+def _unique(prob: SensorProblem, best: Test, twin: Test, regs: Mapping[str, np.ndarray]) -> bool:
     """Whether ``best`` is significant given ``twin`` while ``twin`` is not significant given ``best``."""
     b = _conditional(prob, best.effect, regs[best.effect], regs[twin.effect])
     if not b.passes:
@@ -97,233 +147,271 @@ def _unique(prob: SensorProblem, best: Test, twin: Test, regs: dict[str, np.ndar
     return not t.passes
 
 
-
 def select(baseline: Baseline, *, max_effects: int = 4,
            candidates: Mapping[str, Collection[str]] | None = None, resamples: int = bootstrap.RESAMPLES,
            seed: int = bootstrap.SEED) -> Decision:
     """Forward selection of candidate effects per sensor (see the module docstring).
 
     ``candidates``: per sensor, the mean candidates to test (None: every one of the library); a recording that
-    cannot test some (e.g. a rig-free one, :mod:`station.diagnose.rigfree`) says so itself. ``bias_random_walk``
-    and ``outliers`` are always tested. ``resamples``: the bootstrap's over segments for each finding's
-    confidence (:mod:`station.diagnose.bootstrap`, seeded with ``seed``; 0: none).
+    cannot test some (e.g. a rig-free one, :mod:`station.diagnose.rigfree_diagnosis`) says so itself.
+    ``bias_random_walk`` and ``outliers`` are always tested. ``resamples``: the bootstrap's over segments for each
+    finding's confidence (:mod:`station.diagnose.bootstrap`, seeded with ``seed``; 0: none).
     """
-    findings: list[dict[str, Any]] = []
-    rejected: list[dict[str, Any]] = []
-    inseparable: list[dict[str, Any]] = []
-    unexplained: list[robust.Unexplained] = []
-    for sensor in SENSORS:
-        sd = baseline.sensor(sensor)
-        prob = SensorProblem(baseline, sd)
-        regs: dict[str, np.ndarray] = {}
-        for name, cand in LIBRARY.items():
-            if sensor in cand.sensors and (candidates is None or name in candidates.get(sensor, ())):
-                z = cand.build(baseline, sd)
-                if z is not None and np.any(z):
-                    regs[name] = sd.block_mean(z)
-                else:
-                    why = "no data for it" if z is None else "the recording never excites it (all regressors 0)"
-                    rejected.append({"effect": name, "sensor": sensor, "reason": f"not testable: {why}"})
-                del z  # per-sample (n, 3, p): not kept alive while the next candidate's are built
-        if "time_offset" in regs:
-            regs["time_offset"], tau = _refine_delay(prob, baseline, sd, regs["time_offset"])
-        else:
-            tau = 0.0
-        pool = set(regs) | {"bias_random_walk"}
-        last: dict[str, Test] = {}
-        names: list[str] = []
-        walk: Test | None = None
-        mine: list[dict[str, Any]] = []
-        for _step in range(max_effects):
-            before = prob.quality()
-            tests = {name: prob.test_mean(name, regs[name]) for name in sorted(pool - {"bias_random_walk"})}
-            ok = [t for t in tests.values() if t.passes and t.validates]
-            if not ok and "bias_random_walk" in pool:
-                # the wander is tested once the mean effects are in: an unmodelled mean signal is a wander too
-                tests["bias_random_walk"] = prob.test_random_walk()
-                ok = [tests["bias_random_walk"]] if tests["bias_random_walk"].passes else []
-            last.update(tests)
-            if not ok:
-                break
-            best = max(ok, key=lambda t: t.bic_gain)
-            # identifiability: a competitor that explains the same signal about as well
-            twins = []
-            if best.effect != "bias_random_walk":
-                for t in ok:
-                    if t is best or t.effect == "bias_random_walk":
-                        continue
-                    if _r2(best.signal, t.span) > COLLINEAR_R2 and _r2(t.signal, best.span) > COLLINEAR_R2:
-                        twins.append(t)
-                # nearly collinear is not the same as inseparable: the best stays when what it alone
-                # explains (given the twin) is significant while what the twin alone explains is not
-                twins = [t for t in twins if not _unique(prob, best, t, regs)]
-            # forms of one physics (registry family): the effect is found, only its form is not told apart
-            family = REGISTRY[best.effect].identifiability.family
-            forms = [t for t in twins if family and REGISTRY[t.effect].identifiability.family == family]
-            if forms and len(forms) == len(twins):
-                twins = []
-            else:
-                forms = []
-            if best.effect == "temperature_bias" and prob.temperature_unique(best.theta) < best.critical:
-                # significant, but what only a temperature bias explains is not: the warm-up (eq. 3) with
-                # another T_c could take it over
-                pool.discard(best.effect)
-                last.pop(best.effect, None)
-                r2, t_like = prob.temperature_collinearity()
-                inseparable.append({
-                    "effects": ["temperature_bias", WARMUP], "sensor": sensor,
-                    "evidence": {"gain": round(best.gain, 2), "bic_gain": round(best.bic_gain, 2),
-                                 "chi2_only_temperature": round(prob.temperature_unique(best.theta), 2),
-                                 "r2_temperature_vs_warmup": round(r2, 4), "warmup_time_constant_s": round(t_like, 1)},
-                    "rig_step": RIG_STEPS["temperature_bias"],
-                })
-                continue
-            if twins:
-                for t in (best, *twins):
-                    pool.discard(t.effect)
-                    last.pop(t.effect, None)
-                # the signal is real, only its name is not: it stays in the model as a nuisance term, so that
-                # what it explains does not pass another candidate's test
-                prob.accepted.append(regs[best.effect])
-                names.append(NUISANCE + best.effect)
-                prob.refit_drift()
-                inseparable.append({
-                    "effects": [best.effect, *[t.effect for t in twins]], "sensor": sensor,
-                    "evidence": {t.effect: {"gain": round(t.gain, 2), "bic_gain": round(t.bic_gain, 2)}
-                                 for t in (best, *twins)},
-                    "rig_step": "; ".join(RIG_STEPS.get(t.effect, "") for t in (best, *twins) if t.effect in RIG_STEPS),
-                })
-                continue
-            if best.effect == "bias_random_walk":
-                # its held-out check: the held-out blocks' prediction error under the covariance without and
-                # with the walk (the mean model is the same; a walk that is there makes the kriging from the
-                # training segments predict better and the errors' spread match, 1 = as expected)
-                e0 = prob._heldout_errors(prob.accepted, prob._heldout_folds())
-                prob.k2 = float(best.theta[0] ** 2)
-                prob._fit_q()
-                e1 = prob._heldout_errors(prob.accepted, prob._heldout_folds())
-                if len(e0) == len(e1) and len(e0) > 1:
-                    best.heldout_before, best.heldout_after = float(e0.mean()), float(e1.mean())
-                    best.heldout_change_se = float(np.std(e1 - e0, ddof=1) / np.sqrt(len(e0)))
-                walk = best
-            else:
-                prob.accepted.append(regs[best.effect])
-                names.append(best.effect)
-                prob.refit_drift()
-            after = prob.quality()
-            pool.discard(best.effect)
-            last.pop(best.effect, None)
-            mine.append(finding(sd, best, before, after))
-            if best.effect != "bias_random_walk" and forms:
-                for t in forms:
-                    pool.discard(t.effect)
-                    last.pop(t.effect, None)
-                mine[-1]["evidence"]["form_inseparable_from"] = {
-                    "family": family, "effects": {t.effect: {"gain": round(t.gain, 2)} for t in forms},
-                    "rig_step": RIG_STEPS[best.effect]}
-        # checks that hold when the model is wrong (robust.py): drop-one under the dispersion, stand-ins,
-        # what stays unexplained; rounds until nothing more is rejected
-        confidence: dict[str, dict[str, Any]] = {}
-        checks: dict[str, list[consistency.Check]] = {}
-        for _round in range(AUDIT_ROUNDS):
-            audit = robust.audit(prob, baseline, names, regs, walk, _fitted_samples(prob, baseline, sd, names, tau))
-            confidence = audit.confidence
-            gone = {r["effect"] for r in audit.rejected}
-            rejected.extend(audit.rejected)
-            if not gone:  # effect-specific consistency (consistency.py): the worst failing finding goes
-                checks, bad, where = consistency.review(
-                    prob, baseline, [n if n in confidence else NUISANCE + n for n in names],
-                    {n: c["quasi_gain_chi2"] for n, c in confidence.items()})
-                if bad is not None:
-                    gone = {bad["effect"]}
-                    rejected.append(bad)
-                if where is not None:  # its structure stays, and no candidate explains it
-                    unexplained.append(where)
-            unexplained.extend(audit.unexplained if not gone else [])
-            if not gone:
-                break
-            keep = [i for i, n in enumerate(names) if n not in gone]
-            prob.accepted = [prob.accepted[i] for i in keep]
-            names = [names[i] for i in keep]
-            if "bias_random_walk" in gone:
-                walk = None
-                prob.k2 = 0.0
-            prob.refit_drift()
-            mine = [f for f in mine if f["effect"] not in gone]
-            if _round == AUDIT_ROUNDS - 1:
-                unexplained.extend(robust.audit(prob, baseline, names, regs, walk,
-                                                _fitted_samples(prob, baseline, sd, names, tau)).unexplained)
-        boot = (bootstrap.bootstrap(prob, names, {n: c["threshold"] for n, c in confidence.items()},
-                                    robust.dispersion(prob)[0], resamples=resamples, seed=seed)
-                if names and resamples else {})
-        for f in mine:
-            f["confidence"] = conf = dict(confidence.get(f["effect"], {"level": "low"}))
-            if f["effect"] in boot:  # the level the report states is the bootstrap's (bootstrap.py)
-                conf["drop_one_level"] = conf.get("level")
-                conf["level"] = boot[f["effect"]].level
-                conf["bootstrap_accepted_fraction"] = boot[f["effect"]].accepted_fraction
-                f["bootstrap"] = boot[f["effect"]]
-            f["consistency"] = checks.get(f["effect"]) or consistency.not_checked(f["effect"], sensor)
-        findings.extend(mine)
-        for t in last.values():
-            entry: dict[str, Any] = {"effect": t.effect, "sensor": sensor, "gain": round(t.gain, 3),
-                                     "bic_gain": round(t.bic_gain, 3), "params": t.params}
-            if t.params == 0:
-                entry["reason"] = "not identifiable with this recording (absorbed by the base model)"
-                entry["rig_step"] = RIG_STEPS[t.effect]
-            elif t.walk_explains:
-                entry["reason"] = WALK_EXPLAINS
-                entry["gain_given_walk"] = round(t.gain_given_walk, 3)
-            elif not t.passes:
-                entry["reason"] = "no significant improvement"
-                if t.effect in LIBRARY:
-                    entry["detectable_from"] = detectable_from(t)
-            else:
-                entry["reason"] = "worse on held-out segments"
-            rejected.append(entry)
-        twin = _wander_or_temperature(last, walk)
-        if twin is not None:
-            inseparable.append({"sensor": sensor, **twin})
-        if "temperature_bias" in pool and np.any(baseline.d_temp):
-            r2, t_like = prob.temperature_collinearity()
-            if r2 > TEMPERATURE_R2:
-                inseparable.append({
-                    "effects": ["temperature_bias", WARMUP], "sensor": sensor,
-                    "evidence": {"r2_temperature_vs_warmup": round(r2, 4), "warmup_time_constant_s": round(t_like, 1),
-                                 "note": "the temperature course has the shape of a warm-up exp(-t/T_c) here"},
-                    "rig_step": RIG_STEPS["temperature_bias"],
-                })
-        out = outlier_test(sd)
-        if any(u.sensor == sensor for u in unexplained):
-            # structure no candidate explains: effects named for it are stand-ins (robust.py)
-            for item in [i for i in inseparable
-                         if i["sensor"] == sensor and WARMUP not in i["effects"]]:
-                inseparable.remove(item)
-                rejected.append({"effect": " / ".join(item["effects"]), "sensor": sensor,
-                                 "reason": "inseparable stand-ins for structure that stays unexplained"})
-            if out["accepted"]:
-                out["accepted"] = False
-                out["reason"] = "more outliers than allowed, but where structure stays unexplained"
-        if out.pop("accepted"):
-            findings.append({
-                "effect": "outliers", "sensor": sensor, "axes": [AX[k] for k in out.pop("axes")] or list(AX),
-                "parameters": {"rate_per_sample": {"value": out["rate"], "std": out["rate_std"], "unit": "1"}},
-                "evidence": {k: out[k] for k in ("count", "samples", "allowance", "p_value")},
-                "fit": {}, "consistency": consistency.not_checked("outliers", sensor),
-            })
-        else:
-            rejected.append({"effect": "outliers", "sensor": sensor,
-                             "reason": out.get("reason", "no more outliers than allowed"),
-                             "count": out["count"], "p_value": out["p_value"]})
-    # the selection works on report entries; its result is typed
-    return Decision(tuple(Finding.from_entry(f) for f in findings), tuple(Rejection.from_entry(r) for r in rejected),
-                    tuple(Inseparable.from_entry(i) for i in inseparable), tuple(unexplained))
+    return Decision.join(
+        select_sensor(baseline, sensor, max_effects=max_effects,
+                      candidates=None if candidates is None else candidates.get(sensor, ()),
+                      resamples=resamples, seed=seed)
+        for sensor in SENSORS)
 
 
-def _wander_or_temperature(last: Mapping[str, Test], walk: Test | None) -> dict[str, Any] | None:
+def select_sensor(baseline: Baseline, sensor: str, *, max_effects: int = 4, candidates: Collection[str] | None = None,
+                  resamples: int = bootstrap.RESAMPLES, seed: int = bootstrap.SEED) -> Decision:
+    """:func:`select` for one sensor, in its steps: the candidates' regressors; the forward selection; the checks
+    that hold when the model is wrong (robust.py, consistency.py); the bootstrap's confidence; the candidates'
+    rejections; the pairs the recording cannot tell apart; the outlier count."""
+    sd = baseline.sensor(sensor)
+    prob = SensorProblem(baseline, sd)
+    out = _Entries()
+    regs = _regressors(baseline, sd, candidates, out)
+    tau = 0.0
+    if "time_offset" in regs:
+        regs["time_offset"], tau = _refine_delay(prob, baseline, sd, regs["time_offset"])
+    fwd = _Forward(sensor, regs, tau, set(regs) | {WALK})
+    for _step in range(max_effects):
+        if not _forward_step(prob, fwd, out):
+            break
+    confidence, checks = _audit(prob, baseline, fwd, out)
+    boot = (bootstrap.bootstrap(prob, fwd.names, {n: c.limit for n, c in confidence.items()},
+                                robust.dispersion(prob)[0], resamples=resamples, seed=seed)
+            if fwd.names and resamples else {})
+    out.findings.extend(_checked(f, confidence, boot, checks) for f in fwd.found)
+    out.rejected.extend(_not_named(t) for t in fwd.last.values())
+    twin = _wander_or_temperature(fwd.last, fwd.walk)
+    if twin is not None:
+        out.inseparable.append(twin)
+    if "temperature_bias" in fwd.pool and np.any(baseline.d_temp):
+        _warmup_shaped_temperature(prob, out)
+    _outliers(sd, out)
+    return out.decision()
+
+
+# --- the steps of select_sensor ----------------------------------------------------------------------------------
+def _regressors(baseline: Baseline, sd: SensorData, candidates: Collection[str] | None,
+                out: _Entries) -> dict[str, np.ndarray]:
+    """Block regressors of every mean candidate of the library this sensor can test (``candidates``: only those);
+    the ones the recording gives no data for, or never excites, are rejected as not testable."""
+    regs: dict[str, np.ndarray] = {}
+    for name, cand in LIBRARY.items():
+        if sd.sensor in cand.sensors and (candidates is None or name in candidates):
+            z = cand.regressors(baseline, sd)
+            if z is not None and np.any(z):
+                regs[name] = sd.block_mean(z)
+            else:
+                why = "no data for it" if z is None else "the recording never excites it (all regressors 0)"
+                out.rejected.append(Rejection(name, sd.sensor, f"not testable: {why}"))
+            del z  # per-sample (n, 3, p): not kept alive while the next candidate's are built
+    return regs
+
+
+def _forward_step(prob: SensorProblem, fwd: _Forward, out: _Entries) -> bool:
+    """One step of the forward selection: test every candidate left, decide on the best one (a finding, a pair the
+    recording cannot tell apart, or a temperature course the warm-up could take). False: none passes, stop."""
+    before = prob.quality()
+    tests = {name: prob.test_mean(name, fwd.regs[name]) for name in sorted(fwd.pool - {WALK})}
+    ok = [t for t in tests.values() if t.passes and t.validates]
+    if not ok and WALK in fwd.pool:
+        # the wander is tested once the mean effects are in: an unmodelled mean signal is a wander too
+        tests[WALK] = prob.test_random_walk()
+        ok = [tests[WALK]] if tests[WALK].passes else []
+    fwd.last.update(tests)
+    if not ok:
+        return False
+    best = max(ok, key=lambda t: t.bic_gain)
+    twins, forms = _twins(prob, best, ok, fwd.regs)
+    if best.effect == "temperature_bias" and prob.temperature_unique(best.theta) < best.critical:
+        # significant, but what only a temperature bias explains is not: the warm-up (eq. 3) with
+        # another T_c could take it over
+        fwd.retire(best.effect)
+        out.inseparable.append(_temperature_or_warmup(prob, best))
+        return True
+    if twins:
+        fwd.retire(best.effect, *(t.effect for t in twins))
+        # the signal is real, only its name is not: it stays in the model as a nuisance term, so that
+        # what it explains does not pass another candidate's test
+        prob.accept(fwd.regs[best.effect])
+        fwd.names.append(NUISANCE + best.effect)
+        out.inseparable.append(_inseparable(best, twins))
+        return True
+    if best.effect == WALK:
+        _accept_walk(prob, best)
+        fwd.walk = best
+    else:
+        prob.accept(fwd.regs[best.effect])
+        fwd.names.append(best.effect)
+    after = prob.quality()
+    fwd.retire(best.effect)
+    form = None
+    if best.effect != WALK and forms:
+        fwd.retire(*(t.effect for t in forms))
+        form = FormInseparable(REGISTRY[best.effect].identifiability.family or "",
+                               {t.effect: round(t.gain, 2) for t in forms}, RIG_STEPS[best.effect])
+    fwd.found.append(finding(prob.sd, best, before, after, form=form))
+    return True
+
+
+def _twins(prob: SensorProblem, best: Test, ok: list[Test], regs: Mapping[str, np.ndarray]
+           ) -> tuple[list[Test], list[Test]]:
+    """Identifiability of ``best`` among the passing tests ``ok``: the competitors that explain the same signal
+    about as well (twins), or, when every twin is a form of the same physics (registry family), those forms (the
+    effect is found, only its form is not told apart). Returns (twins, forms), at most one of them non-empty."""
+    twins = []
+    if best.effect != WALK:
+        for t in ok:
+            if t is best or t.effect == WALK:
+                continue
+            if _r2(best.signal, t.span) > COLLINEAR_R2 and _r2(t.signal, best.span) > COLLINEAR_R2:
+                twins.append(t)
+        # nearly collinear is not the same as inseparable: the best stays when what it alone
+        # explains (given the twin) is significant while what the twin alone explains is not
+        twins = [t for t in twins if not _unique(prob, best, t, regs)]
+    family = REGISTRY[best.effect].identifiability.family
+    forms = [t for t in twins if family and REGISTRY[t.effect].identifiability.family == family]
+    if forms and len(forms) == len(twins):
+        return [], forms
+    return twins, []
+
+
+def _temperature_or_warmup(prob: SensorProblem, best: Test) -> Inseparable:
+    """A significant temperature bias whose own part (what the warm-up cannot take) is not significant."""
+    r2, t_like = prob.temperature_collinearity()
+    return Inseparable(
+        ("temperature_bias", WARMUP), best.sensor,
+        {"gain": round(best.gain, 2), "bic_gain": round(best.bic_gain, 2),
+         "chi2_only_temperature": round(prob.temperature_unique(best.theta), 2),
+         "r2_temperature_vs_warmup": round(r2, 4), "warmup_time_constant_s": round(t_like, 1)},
+        RIG_STEPS["temperature_bias"])
+
+
+def _inseparable(best: Test, twins: list[Test]) -> Inseparable:
+    tests = (best, *twins)
+    return Inseparable(
+        tuple(t.effect for t in tests), best.sensor,
+        {t.effect: {"gain": round(t.gain, 2), "bic_gain": round(t.bic_gain, 2)} for t in tests},
+        "; ".join(RIG_STEPS.get(t.effect, "") for t in tests if t.effect in RIG_STEPS))
+
+
+def _accept_walk(prob: SensorProblem, best: Test) -> None:
+    """Take the bias random walk of ``best`` into the block covariance, with its held-out check: the held-out
+    blocks' prediction error under the covariance without and with the walk (the mean model is the same; a walk
+    that is there makes the kriging from the training segments predict better and the errors' spread match,
+    1 = as expected)."""
+    e0 = prob.heldout_errors()
+    prob.set_random_walk(float(best.theta[0] ** 2))
+    e1 = prob.heldout_errors()
+    if len(e0) == len(e1) and len(e0) > 1:
+        best.heldout_before, best.heldout_after = float(e0.mean()), float(e1.mean())
+        best.heldout_change_se = float(np.std(e1 - e0, ddof=1) / np.sqrt(len(e0)))
+
+
+def _audit(prob: SensorProblem, baseline: Baseline, fwd: _Forward, out: _Entries
+           ) -> tuple[dict[str, Confidence], dict[str, list[finding_consistency.Check]]]:
+    """The checks that hold when the model is wrong (robust.py: drop-one under the dispersion, stand-ins, what
+    stays unexplained) and the effect-specific consistency (consistency.py: the worst failing finding goes), in
+    rounds until nothing more is rejected. Returns the confidence and the checks of the effects kept."""
+    confidence: dict[str, Confidence] = {}
+    checks: dict[str, list[finding_consistency.Check]] = {}
+    for round_ in range(AUDIT_ROUNDS):
+        audit = robust.audit(prob, baseline, fwd.names, fwd.regs, fwd.walk, _fitted_samples(prob, baseline, fwd))
+        confidence = audit.confidence
+        gone = {r.effect for r in audit.rejected}
+        out.rejected.extend(audit.rejected)
+        if not gone:
+            checks, bad, where = finding_consistency.review(
+                prob, baseline, [n if n in confidence else NUISANCE + n for n in fwd.names],
+                {n: c.gain for n, c in confidence.items()})
+            if bad is not None:
+                gone = {bad.effect}
+                out.rejected.append(bad)
+            if where is not None:  # its structure stays, and no candidate explains it
+                out.unexplained.append(where)
+        out.unexplained.extend(audit.unexplained if not gone else [])
+        if not gone:
+            break
+        _drop(prob, fwd, gone)
+        if round_ == AUDIT_ROUNDS - 1:
+            out.unexplained.extend(robust.audit(prob, baseline, fwd.names, fwd.regs, fwd.walk,
+                                                _fitted_samples(prob, baseline, fwd)).unexplained)
+    return confidence, checks
+
+
+def _drop(prob: SensorProblem, fwd: _Forward, gone: set[str]) -> None:
+    """The effects ``gone`` out of the model and out of the findings."""
+    keep = [i for i, n in enumerate(fwd.names) if n not in gone]
+    prob.retain(keep, random_walk=WALK not in gone)
+    fwd.names = [fwd.names[i] for i in keep]
+    if WALK in gone:
+        fwd.walk = None
+    fwd.found = [f for f in fwd.found if f.effect not in gone]
+
+
+def _checked(f: Finding, confidence: Mapping[str, Confidence], boot: Mapping[str, Bootstrap],
+             checks: Mapping[str, list[finding_consistency.Check]]) -> Finding:
+    """Finding ``f`` with its confidence (the bootstrap's level where it ran), bootstrap and consistency checks."""
+    conf = confidence.get(f.effect, Confidence("low"))
+    b = boot.get(f.effect)
+    if b is not None:  # the level the report states is the bootstrap's (bootstrap.py)
+        conf = conf.with_bootstrap(b)
+    found = checks.get(f.effect) or finding_consistency.not_checked(f.effect, f.sensor)
+    return replace(f, confidence=conf, bootstrap=b, consistency=tuple(c.entry() for c in found))
+
+
+def _not_named(t: Test) -> Rejection:
+    """The rejection of a candidate whose last test did not make it a finding, and why."""
+    details = {"gain": round(t.gain, 3), "bic_gain": round(t.bic_gain, 3), "params": t.params}
+    if t.params == 0:
+        return Rejection(t.effect, t.sensor, "not identifiable with this recording (absorbed by the base model)",
+                         details, rig_step=RIG_STEPS[t.effect])
+    if t.walk_explains:
+        return Rejection(t.effect, t.sensor, WALK_EXPLAINS, {**details, "gain_given_walk": round(t.gain_given_walk, 3)})
+    if not t.passes:
+        return Rejection(t.effect, t.sensor, "no significant improvement", details,
+                         detectable_from=(detectable_from(t) or DetectableSize()) if t.effect in LIBRARY else None)
+    return Rejection(t.effect, t.sensor, "worse on held-out segments", details)
+
+
+def _warmup_shaped_temperature(prob: SensorProblem, out: _Entries) -> None:
+    """A temperature bias not found, on a temperature course an exponential warm-up explains: inseparable."""
+    r2, t_like = prob.temperature_collinearity()
+    if r2 > TEMPERATURE_R2:
+        out.inseparable.append(Inseparable(
+            ("temperature_bias", WARMUP), prob.sd.sensor,
+            {"r2_temperature_vs_warmup": round(r2, 4), "warmup_time_constant_s": round(t_like, 1),
+             "note": "the temperature course has the shape of a warm-up exp(-t/T_c) here"},
+            RIG_STEPS["temperature_bias"]))
+
+
+def _outliers(sd: SensorData, out: _Entries) -> None:
+    """The outlier count; where structure stays unexplained, the effects named for it are stand-ins
+    (robust.py): their inseparable pairs become rejections, and more outliers than allowed are not a finding."""
+    test = outlier_test(sd)
+    reason = None
+    if any(u.sensor == sd.sensor for u in out.unexplained):
+        for item in [i for i in out.inseparable if i.sensor == sd.sensor and WARMUP not in i.effects]:
+            out.inseparable.remove(item)
+            out.rejected.append(Rejection(" / ".join(item.effects), sd.sensor,
+                                          "inseparable stand-ins for structure that stays unexplained"))
+        if test.significant:
+            reason = "more outliers than allowed, but where structure stays unexplained"
+    if test.significant and reason is None:
+        out.findings.append(test.finding())
+    else:
+        out.rejected.append(test.rejection(reason or "no more outliers than allowed"))
+
+
+def _wander_or_temperature(last: Mapping[str, Test], walk: Test | None) -> Inseparable | None:
     """A slow course that is significant as a wander-like candidate (a temperature bias) while no random walk is
     allowed, and not as a random walk while the temperature course is a nuisance term (each test holds the other):
-    the recording holds the structure but cannot name it. The pair's entry (without the sensor), or None."""
+    the recording holds the structure but cannot name it. The pair, or None."""
     wander = last.get(WALK)
     if walk is not None or wander is None or wander.passes:
         return None
@@ -331,14 +419,14 @@ def _wander_or_temperature(last: Mapping[str, Test], walk: Test | None) -> dict[
         course = last.get(name)
         if course is None or not course.walk_explains:
             continue
-        return {"effects": [name, WALK],
-                "evidence": {name: {"gain": round(course.gain, 2), "gain_given_walk": round(course.gain_given_walk, 2),
-                                    "threshold": round(course.threshold, 2)},
-                             WALK: {"gain_given_temperature": round(wander.gain, 2),
-                                    "threshold": round(wander.threshold, 2)},
-                             "note": "a slow wander: significant as a temperature bias without a random walk, and "
-                                     "not significant as either given the other"},
-                "rig_step": RIG_STEPS[name]}
+        return Inseparable(
+            (name, WALK), wander.sensor,
+            {name: {"gain": round(course.gain, 2), "gain_given_walk": round(course.gain_given_walk, 2),
+                    "threshold": round(course.threshold, 2)},
+             WALK: {"gain_given_temperature": round(wander.gain, 2), "threshold": round(wander.threshold, 2)},
+             "note": "a slow wander: significant as a temperature bias without a random walk, and "
+                     "not significant as either given the other"},
+            RIG_STEPS[name])
     return None
 
 
@@ -363,9 +451,9 @@ def _refine_delay(
     return zb, tau
 
 
-def _fitted_samples(prob: SensorProblem, baseline: Baseline, sd: SensorData, names: list[str],
-                    tau: float) -> np.ndarray:
+def _fitted_samples(prob: SensorProblem, baseline: Baseline, fwd: _Forward) -> np.ndarray:
     """The accepted mean effects' fitted signal per sample (n, 3), at the joint fit's coefficients."""
+    sd, names, tau = prob.sd, fwd.names, fwd.tau
     out = np.zeros((len(baseline.session), 3))
     if not names:
         return out
@@ -378,10 +466,10 @@ def _fitted_samples(prob: SensorProblem, baseline: Baseline, sd: SensorData, nam
         theta = beta[col:col + p]
         col += p
         name = name.removeprefix(NUISANCE)
-        z = delay_regressor(baseline, sd, tau) if name == "time_offset" else LIBRARY[name].build(baseline, sd)
+        z = delay_regressor(baseline, sd, tau) if name == "time_offset" else LIBRARY[name].regressors(baseline, sd)
         if z is not None:
             out += np.einsum("nkp,p->nk", z, theta)
     return out
 
 
-__all__ = ["COLLINEAR_R2", "NUISANCE", "TEMPERATURE_R2", "WALK_EXPLAINS", "Decision", "select"]
+__all__ = ["COLLINEAR_R2", "NUISANCE", "TEMPERATURE_R2", "WALK_EXPLAINS", "Decision", "select", "select_sensor"]

@@ -10,6 +10,7 @@ This keeps the joint fit of eq. (1) over a whole session small and fast.
 from __future__ import annotations
 
 import itertools
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -46,6 +47,10 @@ class Blocks:
         return int(self.t_s.shape[0])
 
 
+#: Samples averaged per pass of :func:`make_blocks` (whole blocks; a longer block is one pass alone).
+SPAN_SAMPLES = 1 << 18
+
+
 def make_blocks(
     t_s: np.ndarray,
     y: np.ndarray,
@@ -55,12 +60,18 @@ def make_blocks(
     runs: list[tuple[int, int, int]],
     sample_period_s: float,
     max_blocks: int,
-    extra: np.ndarray | None = None,
+    extra: np.ndarray | Callable[[int, int], np.ndarray] | None = None,
 ) -> Blocks:
     """Cut each run ``(segment, start, stop)`` into blocks and average the kept samples.
 
     The block length is chosen so that the whole session gives about ``max_blocks``
-    blocks; every run gives at least one. ``keep`` masks out outliers.
+    blocks; every run gives at least one. ``keep`` masks out outliers. NaN in ``ref`` and
+    ``force`` count as 0. ``extra``: per-sample columns (n, k), or a function giving the
+    rows ``lo:hi`` of them (so that they are never all made at once).
+
+    The runs do not overlap. The samples are read a few blocks at a time (about
+    :data:`SPAN_SAMPLES`), so that no per-sample copy of the inputs is made; each block's sum
+    is added up in sample order as one pass over all samples would (the same numbers).
     """
     total = sum(float(t_s[b - 1] - t_s[a]) + sample_period_s for _, a, b in runs)
     block_s = max(total / max_blocks, 20 * sample_period_s)
@@ -72,25 +83,38 @@ def make_blocks(
         bounds.extend((seg, int(lo), int(hi)) for lo, hi in itertools.pairwise(edges) if hi > lo)
     starts = np.array([lo for _, lo, _ in bounds])
     stops = np.array([hi for _, _, hi in bounds])
-    # label each sample with its block (samples outside blocks get label -1)
-    label = np.full(len(t_s), -1, dtype=np.int64)
-    for i, (lo, hi) in enumerate(zip(starts, stops, strict=True)):
-        label[lo:hi] = i
-    sel = (label >= 0) & keep
-    lab = label[sel]
     m = len(bounds)
-    count = np.bincount(lab, minlength=m).astype(np.float64)
+    count = np.zeros(m)
+    sums: dict[str, np.ndarray] = {}
+
+    def add(name: str, i0: int, i1: int, lab: np.ndarray, v: np.ndarray) -> None:
+        v = v.reshape(len(v), -1)
+        if name not in sums:
+            sums[name] = np.zeros((m, v.shape[1]))
+        for j in range(v.shape[1]):
+            sums[name][i0:i1, j] = np.bincount(lab, weights=v[:, j], minlength=i1 - i0)
+
+    for i0, i1 in _spans(starts, stops):
+        lo, hi = int(starts[i0:i1].min()), int(stops[i0:i1].max())
+        label = np.full(hi - lo, -1, dtype=np.int64)
+        for i in range(i0, i1):
+            label[starts[i] - lo:stops[i] - lo] = i - i0
+        sel = (label >= 0) & keep[lo:hi]
+        lab = label[sel]
+        count[i0:i1] = np.bincount(lab, minlength=i1 - i0)
+        add("y", i0, i1, lab, np.asarray(y[lo:hi])[sel])
+        add("ref", i0, i1, lab, np.nan_to_num(ref[lo:hi][sel]))
+        add("force", i0, i1, lab, np.nan_to_num(force[lo:hi][sel]))
+        if extra is not None:
+            rows = extra(lo, hi) if callable(extra) else extra.reshape(len(t_s), -1)[lo:hi]
+            add("extra", i0, i1, lab, np.asarray(rows, dtype=np.float64).reshape(hi - lo, -1)[sel])
     if np.any(count == 0):
         seg = bounds[int(np.flatnonzero(count == 0)[0])][0]
         raise FitError(f"segment {seg}: a block of it has no usable sample (every sample is an outlier)")
 
-    def mean(values: np.ndarray) -> np.ndarray:
-        v = values[sel]
-        if v.ndim == 1:
-            return np.bincount(lab, weights=v, minlength=m) / count
-        return np.stack([np.bincount(lab, weights=v[:, j], minlength=m) for j in range(v.shape[1])], axis=1) / count[
-            :, None
-        ]
+    def mean(name: str) -> np.ndarray:
+        v = sums[name]
+        return v[:, 0] / count if name == "y" and np.ndim(y) == 1 else v / count[:, None]
 
     t_first = t_s[starts]
     t_last = t_s[stops - 1]
@@ -98,12 +122,23 @@ def make_blocks(
         t_s=0.5 * (t_first + t_last),
         width_s=t_last - t_first + sample_period_s,
         count=count,
-        y=mean(y),
-        ref=mean(ref),
-        force=mean(force),
+        y=mean("y"),
+        ref=mean("ref"),
+        force=mean("force"),
         segment=np.array([seg for seg, _, _ in bounds]),
-        extra=None if extra is None else mean(np.asarray(extra, dtype=np.float64).reshape(len(t_s), -1)),
+        extra=None if extra is None else mean("extra"),
     )
+
+
+def _spans(starts: np.ndarray, stops: np.ndarray) -> list[tuple[int, int]]:
+    """Consecutive blocks grouped into passes of about :data:`SPAN_SAMPLES` samples: [(first, last + 1)]."""
+    out: list[tuple[int, int]] = []
+    i0 = 0
+    for i in range(1, len(starts) + 1):
+        if i == len(starts) or stops[i] - starts[i0] > SPAN_SAMPLES:
+            out.append((i0, i))
+            i0 = i
+    return out
 
 
 def block_exp_mean(t_s: np.ndarray, width_s: np.ndarray, tc_s: float | np.ndarray) -> np.ndarray:

@@ -14,7 +14,7 @@ pose order, rate list, duration or sample rate is assumed.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -31,7 +31,7 @@ from station.fit.boundary import numerics
 from station.fit.checks import check_session
 from station.fit.consistency import check_rotations
 from station.fit.determinability import assess
-from station.fit.goodness import TriadResidual, goodness_of_fit
+from station.fit.goodness import Rows, TriadResidual, goodness_of_fit
 from station.fit.temperature_terms import (
     assess_temperature,
     axis_regressors,
@@ -135,7 +135,7 @@ class NoiseEstimate:
     outliers: np.ndarray  # (3,) count per axis
 
 
-def _settled_runs(session: Session, kinds: tuple[Kind, ...], ref: np.ndarray) -> list[tuple[int, int, int]]:
+def settled_runs(session: Session, kinds: tuple[Kind, ...], ref: np.ndarray) -> list[tuple[int, int, int]]:
     runs = []
     for seg in session.segments_of(*kinds):
         if np.all(np.isfinite(ref[seg.start:seg.stop])):
@@ -148,12 +148,13 @@ def white_noise(
 ) -> NoiseEstimate:
     """White-noise std from first differences within settled runs (robust to outliers), and outlier flags."""
     keep = np.ones(len(session), dtype=bool)
-    diffs: list[np.ndarray] = []
-    for _, a, b in runs:
-        diffs.append(np.diff(data[a:b], axis=0))
-    d = np.concatenate(diffs)
-    # robust std of a difference of two samples is sqrt(2) sigma
-    sigma_robust = 1.4826 * np.median(np.abs(d - np.median(d, axis=0)), axis=0) / np.sqrt(2.0)
+    # robust std of a difference of two samples is sqrt(2) sigma (one axis at a time: a third of the memory)
+    mad = np.empty(3)
+    for j in range(3):
+        d = np.concatenate([np.diff(data[a:b, j]) for _, a, b in runs])
+        mad[j] = np.median(np.abs(d - np.median(d)))
+        del d
+    sigma_robust = 1.4826 * mad / np.sqrt(2.0)
     sigma_robust = np.maximum(sigma_robust, 1e-12)
     outliers = np.zeros(3, dtype=int)
     for _, a, b in runs:
@@ -164,20 +165,50 @@ def white_noise(
         outliers += bad.sum(axis=0)
         keep[a:b] &= ~bad.any(axis=1)
     # the plain std of the clean differences is efficient; use it for the value
-    clean: list[np.ndarray] = []
-    for _, a, b in runs:
-        k = keep[a:b]
-        pair = k[1:] & k[:-1]
-        clean.append(np.diff(data[a:b], axis=0)[pair])
-    dc = np.concatenate(clean)
-    sigma = dc.std(axis=0) / np.sqrt(2.0)
+
+    def clean() -> Iterator[np.ndarray]:  # each run's differences of kept neighbours, a piece at a time
+        for _, a, b in runs:
+            for lo in range(a, b - 1, _ROWS):
+                hi = min(lo + _ROWS, b - 1)
+                yield (data[lo + 1:hi + 1] - data[lo:hi])[keep[lo + 1:hi + 1] & keep[lo:hi]]
+
+    sigma, count = _std_of_rows(clean)
+    sigma = sigma / np.sqrt(2.0)
     # differences of white noise: lag-1 correlation -1/2 inflates the variance of the estimate by 1.5
-    sigma_std = sigma * np.sqrt(1.5 / (2.0 * max(len(dc) - 1, 1)))
+    sigma_std = sigma * np.sqrt(1.5 / (2.0 * max(count - 1, 1)))
     return NoiseEstimate(sigma=sigma, sigma_std=sigma_std, keep=keep, outliers=outliers)
 
 
+def _sum_of_rows(parts: Iterator[np.ndarray]) -> tuple[np.ndarray, int]:
+    """Column sums of the rows of ``parts`` (each (k, 3)) added in row order, as ``np.sum(axis=0)`` of the rows
+    stacked adds them (the same numbers, without the stack), and the number of rows."""
+    total: np.ndarray | None = None
+    count = 0
+    for part in parts:
+        total = np.add.reduce(part if total is None else np.concatenate([total[None, :], part]), axis=0)
+        count += len(part)
+    return (np.zeros(3) if total is None else total), count
+
+
+def _std_of_rows(parts: Callable[[], Iterator[np.ndarray]]) -> tuple[np.ndarray, int]:
+    """``np.std(rows, axis=0)`` of the rows of ``parts()`` stacked (numpy's two passes: the mean, then the mean
+    squared deviation), one part at a time; and the number of rows."""
+    total, count = _sum_of_rows(parts())
+    mean = total / count
+    squares, _ = _sum_of_rows(_squared(x - mean) for x in parts())
+    return np.sqrt(squares / count), count
+
+
+def _squared(d: np.ndarray) -> np.ndarray:
+    return np.multiply(d, d, out=d)
+
+
+#: Samples per piece where a per-sample quantity is summed a piece at a time.
+_ROWS = 1 << 18
+
+
 @dataclass(frozen=True)
-class _TriadLinear:
+class TriadLinear:
     """Per-axis fits of one triad, and how to evaluate the mean model."""
 
     fits: list[AxisFit]
@@ -206,10 +237,10 @@ def _fit_triad(
     g_sens: bool,
     triad: str,
     nonlin_m: np.ndarray | None = None,
-) -> tuple[_TriadLinear, Blocks]:
-    force = np.nan_to_num(session.ref_accel_mps2)
-    blocks = make_blocks(
-        session.t_s, data, np.nan_to_num(ref), force, noise.keep, runs, 1.0 / session.sample_rate_hz, options.max_blocks
+) -> tuple[TriadLinear, Blocks]:
+    blocks = make_blocks(  # NaN references count as 0 there
+        session.t_s, data, ref, session.ref_accel_mps2, noise.keep, runs, 1.0 / session.sample_rate_hz,
+        options.max_blocks,
     )
     design = _design(blocks, with_ref, g_sens)
     tc_range = options.tc_range_s.get(triad)
@@ -219,7 +250,7 @@ def _fit_triad(
         fits.append(fit_axis(blocks, k, d_k, float(noise.sigma[k]), lr_threshold=options.drift_lr_threshold,
                              tc_range_s=tc_range))
         cols.append(col)
-    tri = _TriadLinear(fits=fits, n_ref=3 if with_ref else 0, extra=3 if g_sens else 0,
+    tri = TriadLinear(fits=fits, n_ref=3 if with_ref else 0, extra=3 if g_sens else 0,
                        nonlin_col=tuple(cols) if nonlin_m is not None else ())
     return tri, blocks
 
@@ -264,16 +295,15 @@ def _fit_triad_thermal(
     m_hat: np.ndarray | None,
     orders: tuple[list[int], list[int]] | None = None,
     nonlin_m: np.ndarray | None = None,
-) -> tuple[_TriadLinear, Blocks, dict[str, np.ndarray], tuple[list[int], list[int]]]:
+) -> tuple[TriadLinear, Blocks, dict[str, np.ndarray], tuple[list[int], list[int]]]:
     """The triad fit with the temperature terms (:mod:`station.fit.temperature_terms`), orders chosen or given.
 
     Returns the fits, the blocks, the temperature coefficients with their stds (``temp_bias_coeff``,
     ``temp_scale_coeff``, ``*_std``, each (3, 3)) and the (bias, scale) orders per axis.
     """
-    force = np.nan_to_num(session.ref_accel_mps2)
-    blocks = make_blocks(
-        session.t_s, data, np.nan_to_num(ref), force, noise.keep, runs, 1.0 / session.sample_rate_hz,
-        options.max_blocks, extra=temperature_columns(dt, ref if with_ref else None),
+    blocks = make_blocks(  # NaN references count as 0 there; the temperature columns made a few blocks at a time
+        session.t_s, data, ref, session.ref_accel_mps2, noise.keep, runs, 1.0 / session.sample_rate_hz,
+        options.max_blocks, extra=lambda lo, hi: temperature_columns(dt[lo:hi], ref[lo:hi] if with_ref else None),
     )
     base = _design(blocks, with_ref, g_sens)
     tc_range = options.tc_range_s.get(triad)
@@ -317,21 +347,21 @@ def _fit_triad_thermal(
         fits.append(fit)
         n_bias.append(nb)
         n_scale.append(ns)
-    tri = _TriadLinear(fits=fits, n_ref=3 if with_ref else 0, extra=3 if g_sens else 0, nonlin_col=tuple(cols))
+    tri = TriadLinear(fits=fits, n_ref=3 if with_ref else 0, extra=3 if g_sens else 0, nonlin_col=tuple(cols))
     return tri, blocks, coeff, (n_bias, n_scale)
 
 
 def _thermal_triad(
     session: Session, data: np.ndarray, ref: np.ndarray, runs: list[tuple[int, int, int]], noise: NoiseEstimate,
-    options: FitOptions, first: _TriadLinear, *, with_ref: bool, g_sens: bool, triad: str, dt: np.ndarray,
-) -> tuple[_TriadLinear, Blocks, dict[str, np.ndarray], tuple[list[int], list[int]]]:
+    options: FitOptions, first: TriadLinear, *, with_ref: bool, g_sens: bool, triad: str, dt: np.ndarray,
+) -> tuple[TriadLinear, Blocks, dict[str, np.ndarray], tuple[list[int], list[int]]]:
     """Two passes: orders chosen with M^ from the fit without temperature terms, then refitted with M^ from
     the first pass (the scale regressor ``(M^_k . ref) dT^j``)."""
-    m_hat = _unpack(first)["misalignment"] if with_ref else None
+    m_hat = unpack_triad(first)["misalignment"] if with_ref else None
     tri, blocks, coeff, orders = _fit_triad_thermal(session, data, ref, runs, noise, options, with_ref=with_ref,
                                                     g_sens=g_sens, triad=triad, dt=dt, m_hat=m_hat)
     if with_ref:
-        m_hat = _unpack(tri)["misalignment"]
+        m_hat = unpack_triad(tri)["misalignment"]
         tri, blocks, coeff, orders = _fit_triad_thermal(session, data, ref, runs, noise, options, with_ref=with_ref,
                                                         g_sens=g_sens, triad=triad, dt=dt, m_hat=m_hat, orders=orders)
     return tri, blocks, coeff, orders
@@ -349,7 +379,7 @@ def _temperature_terms(p: dict[str, np.ndarray], dt: np.ndarray, ref: np.ndarray
     return out
 
 
-def _unpack(tri: _TriadLinear) -> dict[str, np.ndarray]:
+def unpack_triad(tri: TriadLinear) -> dict[str, np.ndarray]:
     """Arrange per-axis results into M, b_stat, b_drift, T_c, ... with uncertainties."""
     m = np.full((3, 3), np.nan)
     m_std = np.full((3, 3), np.nan)
@@ -401,7 +431,7 @@ def mean_model(
     return out
 
 
-def residual_allan(session: Session, residual: np.ndarray, keep: np.ndarray) -> AllanCoefficients:
+def residual_allan(session: Session, residual: Rows | np.ndarray, keep: np.ndarray) -> AllanCoefficients:
     """IEEE 952 coefficients from the longest still segment's residual."""
     still = session.segments_of(Kind.REST) or session.segments_of(Kind.POSE)
     seg = max(still, key=len)
@@ -421,30 +451,65 @@ def residual_allan(session: Session, residual: np.ndarray, keep: np.ndarray) -> 
     return AllanCoefficients(**{n: np.array(v) for n, v in vals.items()})
 
 
-def _residual_figures(residual: np.ndarray, runs: list[tuple[int, int, int]], keep: np.ndarray) -> ResidualFigures:
+def residual_figures(
+    residual: Rows | np.ndarray, runs: list[tuple[int, int, int]], keep: np.ndarray
+) -> ResidualFigures:
     rms_seg = {}
-    parts = []
     for seg, a, b in runs:
         r = residual[a:b][keep[a:b]]
-        parts.append(r)
         rms_seg[str(seg)] = tuple(np.sqrt(np.mean(r**2, axis=0)).round(9).tolist())
-    allr = np.concatenate(parts)
-    return ResidualFigures(rms=tuple(np.sqrt(np.mean(allr**2, axis=0)).round(9).tolist()), segments=rms_seg,
-                           samples=len(allr))
+    total, count = _sum_of_rows(r**2 for r in _kept_rows(residual, runs, keep))
+    return ResidualFigures(rms=tuple(np.sqrt(total / count).round(9).tolist()), segments=rms_seg, samples=count)
 
 
-def _sample_design(n: int, ref: np.ndarray | None, force: np.ndarray | None) -> np.ndarray:
-    """The linear regressors of eq. (1) per sample: reference (if M is fitted here), 1, force (g-sensitivity)."""
-    cols = [np.nan_to_num(ref)] if ref is not None else []
-    cols.append(np.ones((n, 1)))
-    if force is not None:
-        cols.append(np.nan_to_num(force))
-    return np.column_stack(cols)
+def _sample_design(
+    n: int, ref: np.ndarray | None, force: np.ndarray | None, *, nonlinearity: np.ndarray | None = None,
+    dt: np.ndarray | None = None, order: int = 1,
+) -> Rows:
+    """The linear regressors of eq. (1) per sample: reference (if M is fitted here), 1, force (g-sensitivity);
+    with ``nonlinearity`` (the gyro reference) the nonlinearity's regressors (a superset: ``ref_i |ref_i|``); with
+    ``dt`` the temperature regressors the fit used up to ``order`` (a superset for the scale: every ``ref_i dT^j``).
+    Made for the rows asked only (the goodness of fit reads them per segment)."""
+
+    def rows(lo: int, hi: int) -> np.ndarray:
+        cols = [np.nan_to_num(ref[lo:hi])] if ref is not None else []
+        cols.append(np.ones((hi - lo, 1)))
+        if force is not None:
+            cols.append(np.nan_to_num(force[lo:hi]))
+        design = np.column_stack(cols)
+        if nonlinearity is not None:
+            r = np.nan_to_num(nonlinearity[lo:hi])
+            design = np.column_stack([design, r * np.abs(r)])
+        if dt is not None:
+            design = np.column_stack([design, temperature_columns(dt[lo:hi], None if ref is None else ref[lo:hi],
+                                                                  order)])
+        return design
+
+    return Rows(n, rows)
+
+
+def _residual(session: Session, data: np.ndarray, p: dict[str, np.ndarray], ref: np.ndarray,
+              dt: np.ndarray | None) -> Rows:
+    """``data`` minus the fitted mean model, (n, 3), made for the rows asked (each row's numbers are those of
+    one pass over the whole recording): the quality figures and the goodness of fit read it per segment."""
+
+    def rows(lo: int, hi: int) -> np.ndarray:
+        return data[lo:hi] - mean_model(p, session.t_s[lo:hi], ref[lo:hi], session.ref_accel_mps2[lo:hi],
+                                        None if dt is None else dt[lo:hi])
+
+    return Rows(len(data), rows)
+
+
+def _kept_rows(residual: np.ndarray | Rows, runs: list[tuple[int, int, int]], keep: np.ndarray
+               ) -> Iterator[np.ndarray]:
+    """The residual's kept samples of each run, in the order of the samples."""
+    for _, a, b in sorted(runs, key=lambda r: r[1]):
+        yield residual[a:b][keep[a:b]]
 
 
 def _triad_residual(
-    name: str, res: np.ndarray, design: np.ndarray, runs: list[tuple[int, int, int]], noise: NoiseEstimate,
-    tri: _TriadLinear, blocks: Blocks, scale: float, unit: str, reference_var: float = 0.0,
+    name: str, res: Rows, design: Rows, runs: list[tuple[int, int, int]], noise: NoiseEstimate,
+    tri: TriadLinear, blocks: Blocks, scale: float, unit: str, reference_var: float = 0.0,
 ) -> TriadResidual:
     return TriadResidual(
         name=name, residual=res, design=design, runs=runs, keep=noise.keep, sigma=noise.sigma,
@@ -473,9 +538,9 @@ def _top(note: ThermalFit, triad: str) -> int:
 
 def _gyro_nonlinearity(
     session: Session, g_ref: np.ndarray, g_runs: list[tuple[int, int, int]], g_noise: NoiseEstimate,
-    options: FitOptions, g: dict[str, np.ndarray], g_tri: _TriadLinear, g_blocks: Blocks, *, rate: bool,
+    options: FitOptions, g: dict[str, np.ndarray], g_tri: TriadLinear, g_blocks: Blocks, *, rate: bool,
     dt: np.ndarray | None, orders: tuple[list[int], list[int]] | None,
-) -> tuple[dict[str, np.ndarray], _TriadLinear, Blocks, dict[str, Any]]:
+) -> tuple[dict[str, np.ndarray], TriadLinear, Blocks, dict[str, Any]]:
     """The gyro refitted with ``k u|u|`` on the axes that identify it and keep it (see
     :attr:`FitOptions.scale_nonlinearity`): two passes, the regressor's M^ from the previous one. Returns the
     triad's parameters, fits, blocks and a note (``status`` fitted / not_identifiable / not_significant)."""
@@ -498,12 +563,12 @@ def _gyro_nonlinearity(
         if dt is None:
             tri, blocks = _fit_triad(session, session.gyro_radps, g_ref, g_runs, g_noise, options, with_ref=True,
                                      g_sens=options.g_sensitivity, triad="gyro", nonlin_m=nm)
-            p = _unpack(tri)
+            p = unpack_triad(tri)
         else:
             tri, blocks, coeff, _ = _fit_triad_thermal(
                 session, session.gyro_radps, g_ref, g_runs, g_noise, options, with_ref=True,
                 g_sens=options.g_sensitivity, triad="gyro", dt=dt, m_hat=m_hat, orders=orders, nonlin_m=nm)
-            p = {**_unpack(tri), **coeff}
+            p = {**unpack_triad(tri), **coeff}
         k_std = p["scale_nonlinearity_std"]
         z = np.divide(p["scale_nonlinearity"], k_std, out=np.zeros(3), where=k_std > 0)
         keep = use & (z**2 >= options.nonlinearity_wald)
@@ -523,26 +588,26 @@ def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
     ts = 1.0 / session.sample_rate_hz
 
     # --- accelerometer: rest + poses -----------------------------------------
-    a_runs = _settled_runs(session, (Kind.REST, Kind.POSE), session.ref_accel_mps2)
+    a_runs = settled_runs(session, (Kind.REST, Kind.POSE), session.ref_accel_mps2)
     with numerics("accelerometer fit (rest and poses)"):
         a_noise = white_noise(session, session.accel_mps2, a_runs, options.outlier_sigma)
         a_tri, a_blocks = _fit_triad(session, session.accel_mps2, session.ref_accel_mps2, a_runs, a_noise, options,
                               with_ref=True, g_sens=False, triad="accel")
-    a = _unpack(a_tri)
+    a = unpack_triad(a_tri)
 
     # --- gyroscope: rest + poses + rate steps, or static + known angles --------
-    static_ref = np.where(np.isnan(session.ref_gyro_radps), 0.0, session.ref_gyro_radps)
     if gyro_method == "rate":
-        g_runs = _settled_runs(session, (Kind.REST, Kind.POSE, Kind.RATE), session.ref_gyro_radps)
+        g_runs = settled_runs(session, (Kind.REST, Kind.POSE, Kind.RATE), session.ref_gyro_radps)
         g_ref = session.ref_gyro_radps
     else:
-        g_runs = _settled_runs(session, (Kind.REST, Kind.POSE), static_ref)
+        static_ref = np.where(np.isnan(session.ref_gyro_radps), 0.0, session.ref_gyro_radps)
+        g_runs = settled_runs(session, (Kind.REST, Kind.POSE), static_ref)
         g_ref = static_ref
     with numerics(f"gyroscope fit ({'rest, poses and rate steps' if gyro_method == 'rate' else 'rest and poses'})"):
         g_noise = white_noise(session, session.gyro_radps, g_runs, options.outlier_sigma)
         g_tri, g_blocks = _fit_triad(session, session.gyro_radps, g_ref, g_runs, g_noise, options,
                               with_ref=gyro_method == "rate", g_sens=options.g_sensitivity, triad="gyro")
-    g = _unpack(g_tri)
+    g = unpack_triad(g_tri)
 
     # --- temperature terms, when the recording's temperature course separates them from the warm-up ---
     course = assess_temperature(
@@ -563,8 +628,8 @@ def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
             g_tri, g_blocks, g_coeff, g_orders = _thermal_triad(
                 session, session.gyro_radps, g_ref, g_runs, g_noise, options, g_tri,
                 with_ref=gyro_method == "rate", g_sens=options.g_sensitivity, triad="gyro", dt=dt)
-        a = {**_unpack(a_tri), **a_coeff}
-        g = {**_unpack(g_tri), **g_coeff}
+        a = {**unpack_triad(a_tri), **a_coeff}
+        g = {**unpack_triad(g_tri), **g_coeff}
         thermal_note = replace(thermal_note, orders={
             "accel": {"bias": a_orders[0], "scale": a_orders[1]},
             "gyro": {"bias": g_orders[0], "scale": g_orders[1]},
@@ -592,11 +657,11 @@ def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
         angle_report = angle_fit.report
 
     # --- residuals, noise figures and quality ----------------------------------
-    a_res = session.accel_mps2 - mean_model(a, session.t_s, session.ref_accel_mps2, session.ref_accel_mps2, dt)
-    g_res = session.gyro_radps - mean_model(g, session.t_s, g_ref, session.ref_accel_mps2, dt)
+    a_res = _residual(session, session.accel_mps2, a, session.ref_accel_mps2, dt)
+    g_res = _residual(session, session.gyro_radps, g, g_ref, dt)
     quality = FitQuality(
-        accel=_residual_figures(a_res, a_runs, a_noise.keep),
-        gyro=_residual_figures(g_res, g_runs, g_noise.keep),
+        accel=residual_figures(a_res, a_runs, a_noise.keep),
+        gyro=residual_figures(g_res, g_runs, g_noise.keep),
         gyro_scale_method=gyro_method,
         outliers={"accel": tuple(a_noise.outliers.tolist()), "gyro": tuple(g_noise.outliers.tolist())},
         drift_likelihood_ratio={
@@ -607,18 +672,11 @@ def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
         scale_nonlinearity=None if nonlin_note is None else NonlinearityNote.from_dict(nonlin_note),
     )
     deg = float(np.degrees(1.0))
-    n = len(session)
-    a_design = _sample_design(n, session.ref_accel_mps2, None)
-    g_design = _sample_design(n, g_ref if gyro_method == "rate" else None,
-                              session.ref_accel_mps2 if options.g_sensitivity else None)
-    if np.any(g.get("scale_nonlinearity", 0.0)):  # the nonlinearity regressors (a superset: ref_i |ref_i|)
-        r = np.nan_to_num(g_ref)
-        g_design = np.column_stack([g_design, r * np.abs(r)])
-    if dt is not None:  # the temperature regressors the fit used (a superset for the scale: every ref_i dT^j)
-        a_design = np.column_stack([a_design, temperature_columns(
-            dt, session.ref_accel_mps2, _top(thermal_note, "accel"))])
-        g_design = np.column_stack([g_design, temperature_columns(
-            dt, g_ref if gyro_method == "rate" else None, _top(thermal_note, "gyro"))])
+    a_design = _sample_design(len(session), session.ref_accel_mps2, None, dt=dt, order=_top(thermal_note, "accel"))
+    g_design = _sample_design(len(session), g_ref if gyro_method == "rate" else None,
+                              session.ref_accel_mps2 if options.g_sensitivity else None,
+                              nonlinearity=g_ref if np.any(g.get("scale_nonlinearity", 0.0)) else None,
+                              dt=dt, order=_top(thermal_note, "gyro"))
     verdict = goodness_of_fit(session, [
         _triad_residual("accel", a_res, a_design, a_runs, a_noise, a_tri, a_blocks, 1.0, "m/s^2",
                         (0.5 * (session.meta_float("reference_tolerance_mps2") or 0.0)) ** 2),
@@ -627,17 +685,14 @@ def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
     quality = replace(quality, goodness_of_fit=GoodnessOfFit.from_dict(verdict))
 
     def triad(
-        p: dict[str, np.ndarray], noise: NoiseEstimate, res: np.ndarray, runs: list[tuple[int, int, int]]
+        p: dict[str, np.ndarray], noise: NoiseEstimate, res: Rows, runs: list[tuple[int, int, int]]
     ) -> TriadParams:
-        mask = np.zeros(len(session), dtype=bool)
-        for _, s0, s1 in runs:
-            mask[s0:s1] = True
-        mask &= noise.keep
+        squares, count = _sum_of_rows(r**2 for r in _kept_rows(res, runs, noise.keep))  # np.mean(res[mask]**2, 0)
         return TriadParams(
             noise_std=noise.sigma,
             noise_std_std=noise.sigma_std,
             allan=residual_allan(session, res, noise.keep),
-            residual_rms=np.sqrt(np.mean(res[mask] ** 2, axis=0)),
+            residual_rms=np.sqrt(squares / count),
             **p,
         )
 

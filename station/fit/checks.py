@@ -73,23 +73,41 @@ def check_pose_lengths(session: Session, min_samples: int) -> None:
             )
 
 
+#: Samples per pass in :func:`check_accel_design`.
+_ROWS = 1 << 18
+
+
 def check_accel_design(session: Session) -> None:
-    """The static references must point both ways along every axis, or M_a and b_a mix."""
+    """The static references must point both ways along every axis, or M_a and b_a mix.
+
+    Read a piece of the recording at a time: the rank of the (n, 4) design ``[ref, 1]`` is counted from the
+    singular values of its 4 x 4 Gram matrix (the design's singular values squared), summed over the pieces.
+    """
     mask = np.isin(session.kind, (Kind.REST, Kind.POSE)) & np.all(np.isfinite(session.ref_accel_mps2), axis=1)
     if not mask.any():
         raise FitError("no rest or pose segment with an accelerometer reference: M_a cannot be fitted")
-    ref = session.ref_accel_mps2[mask]
     g = session.gravity_mps2
+    up = np.zeros(3, dtype=bool)
+    down = np.zeros(3, dtype=bool)
+    gram = np.zeros((4, 4))
+    count = 0
+    for lo in range(0, len(mask), _ROWS):
+        ref = session.ref_accel_mps2[lo:lo + _ROWS][mask[lo:lo + _ROWS]]
+        up |= np.any(ref > 0.5 * g, axis=0)
+        down |= np.any(-ref > 0.5 * g, axis=0)
+        design = np.column_stack([ref, np.ones(len(ref))])
+        gram += design.T @ design
+        count += len(ref)
     for j in range(3):
-        for sign, word in ((1, "up"), (-1, "down")):
-            if not np.any(sign * ref[:, j] > 0.5 * g):
+        for seen, sign, word in ((up, 1, "up"), (down, -1, "down")):
+            if not seen[j]:
                 raise FitError(
                     f"missing pose: no settled pose with {AXES[j]} pointing {word} "
                     f"(ref_a{AXES[j]} {'>' if sign > 0 else '<'} {'+' if sign > 0 else '-'}g/2), "
                     "so M_a and the bias along it cannot be separated"
                 )
-    design = np.column_stack([ref, np.ones(len(ref))])
-    if np.linalg.matrix_rank(design, tol=1e-6 * g * np.sqrt(len(ref))) < 4:
+    singular = np.sqrt(np.clip(np.linalg.eigvalsh(gram), 0.0, None))
+    if np.count_nonzero(singular > 1e-6 * g * np.sqrt(count)) < 4:
         raise FitError("the pose references do not span three dimensions: M_a cannot be fitted")
 
 

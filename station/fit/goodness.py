@@ -36,6 +36,8 @@ command exits with :data:`EXIT_GOODNESS` and the sequence counts it as a FAIL of
 
 from __future__ import annotations
 
+import operator
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -58,14 +60,43 @@ FORMAT = "station-goodness/1"
 AXES = "xyz"
 
 
+class Rows:
+    """Per-sample values (n, p) made for the rows asked only: ``rows[a:b]`` (b - a, p), ``rows[a:b, j]``,
+    ``rows[i]`` (p,), ``rows.shape`` (n, p); ``make(lo, hi)`` gives rows ``lo:hi``. The test reads the design and
+    the residual one segment at a time, so a long recording's (n, p) matrices are never held whole."""
+
+    def __init__(self, n: int, make: Callable[[int, int], np.ndarray]) -> None:
+        self._make = make
+        self.shape = (n, int(make(0, min(n, 1)).shape[1]))
+
+    def __len__(self) -> int:
+        return self.shape[0]
+
+    def __getitem__(self, key: int | slice | tuple[int | slice, int]) -> np.ndarray:
+        column = None
+        if isinstance(key, tuple):
+            key, column = key
+        if isinstance(key, slice):
+            start, stop, step = key.indices(self.shape[0])
+            if step != 1:
+                raise IndexError("Rows takes contiguous rows")
+            out = self._make(start, max(start, stop))
+        else:
+            i = operator.index(key)
+            out = self._make(i, i + 1)[0]
+        return out if column is None else out[..., column]
+
+
 @dataclass(frozen=True)
 class TriadResidual:
     """What the test needs of one fitted triad.
 
     Attributes:
         name: ``accel`` or ``gyro``.
-        residual: measurement minus fitted mean model per sample (sensor unit), (n, 3).
-        design: the linear regressors of eq. (1) per sample (reference, 1, force), (n, p).
+        residual: measurement minus fitted mean model per sample (sensor unit), (n, 3): an array or
+            :class:`Rows` (read per segment).
+        design: the linear regressors of eq. (1) per sample (reference, 1, force), (n, p): an array or a
+            :class:`Rows` (read per segment).
         runs: settled ``(segment, start, stop)`` runs that entered the fit.
         keep: samples used (not outliers), (n,).
         sigma: white-noise std per sample and axis, (3,).
@@ -80,8 +111,8 @@ class TriadResidual:
     """
 
     name: str
-    residual: np.ndarray
-    design: np.ndarray
+    residual: np.ndarray | Rows
+    design: np.ndarray | Rows
     runs: list[tuple[int, int, int]]
     keep: np.ndarray
     sigma: np.ndarray

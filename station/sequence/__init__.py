@@ -2,6 +2,7 @@
 
 - :mod:`station.sequence.steps`: the plan as plain functions receiving their hardware.
 - :mod:`station.sequence.runner`: :class:`SequenceRunner` for N units on one rig.
+- :mod:`station.sequence.prompts`: the prompts to the operator (load, close the lid, unload, confirm).
 - :mod:`station.sequence.records`: what a run emits (RunStarted ... RunFinished, :class:`Outcome`).
 - :mod:`station.sequence.limits`: product limits (Table 1 ranges by default).
 - :mod:`station.sequence.provision`, :mod:`station.sequence.verify`: writing the image and verifying it on the rig.
@@ -11,6 +12,8 @@ from station.sequence.options import SequenceOptions
 from station.sequence.records import (
     Measured,
     Outcome,
+    PromptAnswered,
+    PromptShown,
     Record,
     RigReading,
     RunFinished,
@@ -24,6 +27,8 @@ from station.sequence.runner import Provisioner, RunResult, SequenceRunner, Unit
 __all__ = [
     "Measured",
     "Outcome",
+    "PromptAnswered",
+    "PromptShown",
     "Provisioner",
     "Record",
     "RigReading",

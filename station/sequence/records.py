@@ -70,6 +70,8 @@ class RunStarted:
         rig: rig description (URL or firmware id).
         sensors: sensor URLs, one per fixture slot.
         steps: names of the planned steps, in order.
+        holds_s: each step's planned capture time (s), in order (empty: not told); the time remaining
+            is estimated from them.
     """
 
     run_id: str
@@ -79,6 +81,7 @@ class RunStarted:
     rig: str
     sensors: tuple[str, ...]
     steps: tuple[str, ...]
+    holds_s: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -201,4 +204,36 @@ class RigReading:
     fault_code: int
 
 
-Record = RunStarted | StepStarted | StepFinished | Measured | UnitFinished | RunFinished | RigReading
+@dataclass(frozen=True)
+class PromptShown:
+    """The station asks its operator to do something and waits (see :mod:`station.sequence.prompts`).
+
+    Attributes:
+        prompt_id: unique within the run (``'<run_id>/p<N>'``).
+        kind: ``'load'``, ``'close-lid'``, ``'unload'`` or ``'confirm'``.
+        text: what the operator reads; nests: the nests concerned (numbered from 1; empty: the fixture).
+        timeout_s: how long the station waits for the answer (wall-clock s).
+    """
+
+    run_id: str
+    prompt_id: str
+    kind: str
+    text: str
+    nests: tuple[int, ...]
+    timeout_s: float
+
+
+@dataclass(frozen=True)
+class PromptAnswered:
+    """The prompt ``prompt_id`` was answered ``'confirmed'`` or ``'cancelled'``, or timed out (``'timeout'``);
+    ``by``: who answered ('' if unknown); ``waited_s``: wall-clock seconds it waited."""
+
+    run_id: str
+    prompt_id: str
+    answer: str
+    by: str
+    waited_s: float
+
+
+Record = (RunStarted | StepStarted | StepFinished | Measured | UnitFinished | RunFinished | RigReading | PromptShown
+          | PromptAnswered)

@@ -28,7 +28,7 @@ import logging
 import threading
 import time
 import uuid
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor, wait
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
@@ -51,9 +51,12 @@ from station.sequence.capture import UnitChannel, build_session
 from station.sequence.limits import check_limits
 from station.sequence.nest_correction import in_sensor_frame
 from station.sequence.options import SequenceOptions
+from station.sequence.prompts import Answer, Operator, Prompt, PromptPlan, fixture_prompts, unload_prompt
 from station.sequence.records import (
     Measured,
     Outcome,
+    PromptAnswered,
+    PromptShown,
     Record,
     RigReading,
     RunFinished,
@@ -180,6 +183,11 @@ class SequenceRunner:
         subscribers: called with every record, in order, from the thread calling :meth:`run`.
         nests: the rig's nest calibration: each unit's references are taken into its sensor frame before
             the session is saved and fitted (:mod:`station.sequence.nest_correction`); None: perfect nests.
+        operator: answers the station's prompts (:mod:`station.sequence.prompts`; None: no prompts).
+        prompts: which prompts (default with an operator: :func:`~station.sequence.prompts.fixture_prompts`,
+            load the nests and close the lid before the rig moves, unload after the verdicts).
+        expected_serials: fixture slot -> the serial the operator scanned for it; a unit that reports another
+            serial is REFUSED before anything moves (the wrong unit, or the right one in the wrong nest).
     """
 
     def __init__(
@@ -200,6 +208,9 @@ class SequenceRunner:
         sensor_urls: Sequence[str] | None = None,
         subscribers: Sequence[Subscriber] = (),
         nests: NestCalibration | None = None,
+        operator: Operator | None = None,
+        prompts: PromptPlan | None = None,
+        expected_serials: Mapping[int, str] | None = None,
     ) -> None:
         if not sensors:
             raise ValueError("a run needs at least one sensor")
@@ -223,6 +234,11 @@ class SequenceRunner:
         self._abort_requested = False
         self.abort_reason = "aborted by the operator"
         self._fixture: Fixture | None = None
+        self.operator = operator
+        self.prompts = prompts if prompts is not None or operator is None else fixture_prompts(len(self.sensors))
+        self.expected_serials = dict(expected_serials or {})
+        self._cancel = threading.Event()  # set by abort(): a prompt waiting for its answer gives up
+        self._prompt_seq = 0
         self.run_id = _new_run_id()
         self.started_at = datetime.now(UTC)  # reset when the run starts; the run's images carry it
 
@@ -248,6 +264,7 @@ class SequenceRunner:
         if not self._abort_requested:
             self.abort_reason = reason
         self._abort_requested = True
+        self._cancel.set()
         if self._fixture is not None:
             self._fixture.abort.set()
 
@@ -266,12 +283,13 @@ class SequenceRunner:
         self._emit(
             RunStarted(
                 self.run_id, self.started_at.isoformat(), t_start, self.station, self.rig_name,
-                tuple(self.sensor_urls), tuple(s.name for s in self.steps),
+                tuple(self.sensor_urls), tuple(s.name for s in self.steps), tuple(s.hold_s for s in self.steps),
             )
         )
         aborted = self._abort_requested
         run_message = ""
         completed = False
+        loaded = False  # the operator confirmed the prompts before the rig moves (or there were none)
         rig_at_rest = False
         pool = ThreadPoolExecutor(max_workers=len(channels), thread_name_prefix="capture")
         fx = Fixture(
@@ -285,6 +303,8 @@ class SequenceRunner:
         try:
             try:
                 if not aborted:
+                    self._ask_before()
+                    loaded = True
                     self._admit_units(fx, verdicts)
                     self._run_steps(fx, verdicts, reconnects0)
                     completed = bool(fx.active)
@@ -320,6 +340,9 @@ class SequenceRunner:
         )
         for rec in finished:
             self._emit(rec)
+        note = self._ask_unload(units) if loaded and not aborted else ""
+        if note:
+            run_message = f"{run_message}; {note}" if run_message else note
         duration = clock.now() - t_start
         wall = time.monotonic() - wall0
         post_wall = time.monotonic() - post_wall0
@@ -328,6 +351,51 @@ class SequenceRunner:
             self.run_id, outcome, tuple(units), tuple(self._records), sequence_s, duration, wall, post_wall,
             run_message, rig_at_rest,
         )
+
+    # --- prompts ----------------------------------------------------------------------------------
+
+    def _ask(self, prompt: Prompt) -> Answer:
+        """Show ``prompt`` (record), wait for the operator's answer, record it; the answer."""
+        assert self.operator is not None
+        self._prompt_seq += 1
+        pid = f"{self.run_id}/p{self._prompt_seq}"
+        self._emit(PromptShown(self.run_id, pid, prompt.kind.value, prompt.text, prompt.nests, prompt.timeout_s))
+        t0 = time.monotonic()
+        answer: Answer = "cancelled"
+        by = ""
+        try:
+            answer, by = self.operator.ask(pid, prompt, self._cancel)
+        finally:  # also on Ctrl-C or an operator that cannot be reached: the displays close the prompt
+            self._emit(PromptAnswered(self.run_id, pid, answer, by, time.monotonic() - t0))
+        return answer
+
+    def _ask_before(self) -> None:
+        """The prompts before the rig moves; a prompt not confirmed aborts the run (raises KeyboardInterrupt)."""
+        if self.operator is None or self.prompts is None:
+            return
+        for prompt in self.prompts.before:
+            answer = self._ask(prompt)
+            if answer == "confirmed":
+                continue
+            if answer == "timeout":
+                self.abort(f"aborted: no answer to the prompt '{prompt.kind.value}' within {prompt.timeout_s:g} s")
+            else:
+                self.abort(f"aborted by the operator at the prompt '{prompt.kind.value}'")
+            raise KeyboardInterrupt
+
+    def _ask_unload(self, units: Sequence[UnitResult]) -> str:
+        """The unload prompt after the verdicts; '' when confirmed, else a note for the run's message (the
+        verdicts stand either way)."""
+        if self.operator is None or self.prompts is None or not self.prompts.unload:
+            return ""
+        prompt = unload_prompt([(u.slot + 1, u.outcome.value) for u in units], self.prompts.timeout_s)
+        try:
+            answer = self._ask(prompt)
+        except KeyboardInterrupt:
+            return f"unload not confirmed ({self.abort_reason})"
+        except HardwareError as exc:
+            return f"unload not confirmed ({exc})"
+        return "" if answer == "confirmed" else f"unload not confirmed ({answer})"
 
     def _rig_reading(self, state: RigState) -> None:
         """Publish what the rig reports while the run waits on it: at most ~4 per wall second, and only
@@ -409,7 +477,7 @@ class SequenceRunner:
         sensor that does not answer is a station fault (ERROR) for its slot. With every unit refused
         the run ends without moving the rig.
         """
-        if self.admit is None:
+        if self.admit is None and not self.expected_serials:
             return
         for unit in list(fx.active):
             v = verdicts[unit.slot]
@@ -418,7 +486,14 @@ class SequenceRunner:
             except HardwareError as exc:
                 self._end_unit(fx, unit, v, Outcome.ERROR, f"could not identify the unit: {type(exc).__name__}: {exc}")
                 continue
-            reason = self.admit(ident.serial, self.run_id)
+            scanned = self.expected_serials.get(unit.slot)
+            if scanned and scanned != ident.serial:
+                unit.identity = ident
+                self._end_unit(fx, unit, v, Outcome.REFUSED,
+                               f"nest {unit.slot + 1}: the scanned serial is {scanned} but the unit in the nest "
+                               f"reports {ident.serial} (wrong unit, or the right unit in the wrong nest)")
+                continue
+            reason = self.admit(ident.serial, self.run_id) if self.admit is not None else None
             if reason:
                 unit.identity = ident
                 self._end_unit(fx, unit, v, Outcome.REFUSED, f"refused by the retest policy: {reason}")

@@ -1,7 +1,10 @@
 """Session recording file format, CSV v1 (spec: shared/spec/session-csv-v1.md).
 
-Reading: :func:`read_session` / :func:`parse_session`. The happy path hands the data block to
-the pandas C parser after cheap byte-level screening. When anything looks wrong the data is
+Reading: :func:`read_session` / :func:`parse_session`. The file is read in blocks of whole lines
+(about 4 MiB, :mod:`station.session.line_source`) into arrays grown in place, so memory follows the
+arrays kept, not the text; a size and a row limit (:mod:`station.session.session_limits`) and a line
+limit bound it, and a path that is not a regular file is refused before it is read. The happy path
+hands each block to the pandas C parser after cheap byte-level screening. When anything looks wrong the data is
 retried in blocks of lines, and a slow line-by-line reference parser reads the blocks the fast
 parser refuses: it either names the offending 1-based line in a
 :class:`~station.kernel.errors.SessionFormatError` or (for lines the fast path merely could not handle,
@@ -22,16 +25,19 @@ import io
 import math
 import os
 import re
+import stat
 import tempfile
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import IO, cast
 
 import numpy as np
 
 from station.kernel.errors import SessionFormatError, UnsupportedVersionError
+from station.session.line_source import MAX_LINE_BYTES, LineSource, LineTooLong, TooManyBytes
 from station.session.metadata import metadata_problem
 from station.session.model import KIND_LABELS, REQUIRED_KEYS, Session
+from station.session.session_limits import MAX_BYTES_ENV, MAX_ROWS_ENV, SessionLimitError, SessionLimits, size_text
 
 __all__ = [
     "COLUMNS",
@@ -85,72 +91,150 @@ class UnsupportedSessionVersionError(SessionFormatError, UnsupportedVersionError
 # --------------------------------------------------------------------------- reading
 
 
-def read_session(path: str | os.PathLike[str]) -> Session:
-    """Read a CSV v1 session file (gyro columns deg/s in the file, rad/s in the Session)."""
+def read_session(path: str | os.PathLike[str], *, limits: SessionLimits | None = None) -> Session:
+    """Read a CSV v1 session file (gyro columns deg/s in the file, rad/s in the Session).
+
+    The file is read in pieces of about 4 MiB, so memory follows the arrays kept, not the text. Refused
+    with a :class:`~station.kernel.errors.SessionFormatError` before anything is parsed: a path that is not
+    a regular file (a device such as ``/dev/zero``, a FIFO, a socket, a directory) and a file larger than
+    ``limits.max_bytes``; while reading: more than ``limits.max_rows`` data rows (a
+    :class:`~station.session.session_limits.SessionLimitError`) and a line longer than 64 KiB.
+    ``limits`` default to :meth:`SessionLimits.from_env`.
+    """
     name = os.fspath(path)
-    try:
-        data = Path(name).read_bytes()
+    limits = SessionLimits.from_env() if limits is None else limits
+    try:  # O_NONBLOCK: opening a FIFO must not wait for a writer (it is refused below)
+        fd = os.open(name, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
     except OSError as exc:
         raise SessionFormatError(f"cannot read session file: {exc.strerror or exc}", path=name) from exc
-    return _parse_bytes(data, name)
+    try:
+        info = os.fstat(fd)
+        if stat.S_ISDIR(info.st_mode):
+            raise SessionFormatError("cannot read session file: Is a directory", path=name)
+        if not stat.S_ISREG(info.st_mode):
+            raise SessionFormatError(f"cannot read session file: not a regular file ({_file_type(info.st_mode)}); "
+                                     "a recording is read from a file", path=name)
+        if info.st_size > limits.max_bytes:
+            raise SessionLimitError(
+                f"the file is {size_text(info.st_size)}, more than the reader's limit of "
+                f"{size_text(limits.max_bytes)} (set {MAX_BYTES_ENV} to read larger recordings)", path=name)
+        handle = os.fdopen(fd, "rb", buffering=0)
+    except BaseException:
+        os.close(fd)
+        raise
+    with handle:
+
+        def read(n: int) -> bytes:
+            try:
+                return handle.read(n) or b""
+            except OSError as exc:
+                raise SessionFormatError(f"cannot read session file: {exc.strerror or exc}", path=name) from exc
+
+        return _parse_stream(read, name, limits)
 
 
-def parse_session(text_or_stream: str | bytes | IO[str] | IO[bytes], *, path: str | None = None) -> Session:
+def _file_type(mode: int) -> str:
+    for test, what in ((stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
+                       (stat.S_ISFIFO, "a FIFO"), (stat.S_ISSOCK, "a socket")):
+        if test(mode):
+            return what
+    return "not a file"
+
+
+def parse_session(
+    text_or_stream: str | bytes | IO[str] | IO[bytes], *, path: str | None = None, limits: SessionLimits | None = None
+) -> Session:
     """Parse CSV v1 content given as text, bytes or a readable (text or binary) stream.
 
-    ``path`` is only used to name the source in error messages.
+    ``path`` is only used to name the source in error messages. A stream is read in pieces, under the same
+    ``limits`` as :func:`read_session` (bytes counted as read).
     """
+    limits = SessionLimits.from_env() if limits is None else limits
     if isinstance(text_or_stream, str):
-        data = text_or_stream.encode("utf-8", errors="surrogatepass")
-    elif isinstance(text_or_stream, bytes | bytearray | memoryview):
-        data = bytes(text_or_stream)
-    elif hasattr(text_or_stream, "read"):
-        content = text_or_stream.read()
-        data = content.encode("utf-8", errors="surrogatepass") if isinstance(content, str) else bytes(content)
-    else:
+        return _parse_stream(io.BytesIO(text_or_stream.encode("utf-8", errors="surrogatepass")).read, path, limits)
+    if isinstance(text_or_stream, bytes | bytearray | memoryview):
+        return _parse_stream(io.BytesIO(text_or_stream).read, path, limits)
+    if not hasattr(text_or_stream, "read"):
         raise TypeError(f"parse_session needs str, bytes or a readable stream, not {type(text_or_stream).__name__}")
-    return _parse_bytes(data, path)
+    stream = text_or_stream
+
+    def read(n: int) -> bytes:
+        piece = stream.read(n)
+        if isinstance(piece, str):
+            return piece.encode("utf-8", errors="surrogatepass")
+        return bytes(piece or b"")
+
+    return _parse_stream(read, path, limits)
 
 
 def _fail(message: str, line: int | None, path: str | None) -> SessionFormatError:
     return SessionFormatError(message, line=line, path=path)
 
 
-def _parse_bytes(data: bytes, path: str | None) -> Session:
-    if data.startswith(b"\xef\xbb\xbf"):  # UTF-8 byte-order mark written by some spreadsheet tools
-        data = data[3:]
-    if not data or data.isspace():
-        raise _fail("empty file", 1, path)
-    if b"\r" in data:  # accept CRLF line ends; a lone CR is caught as a bad cell later
-        data = data.replace(b"\r\n", b"\n")
-    metadata, angles, header_line, body_start = _parse_preamble(data, path)
-    body = data[body_start:]
-    first_data_line = header_line + 1
-    if not body:
-        raise _fail("no data rows after the header", first_data_line, path)
+def _parse_stream(read: Callable[[int], bytes], path: str | None, limits: SessionLimits) -> Session:
+    source = LineSource(read, limits.max_bytes)
     try:
-        arrays = _parse_body_fast(body)
-    except Exception:  # any failure, including pandas/numpy internals: let the reference parser decide
-        arrays = None
-    if arrays is None:
-        arrays = _parse_body_blocks(body, first_data_line, path)
-    return _build_session(metadata, angles, arrays)
+        head = source.peek()
+        if head.startswith(b"\xef\xbb\xbf"):  # UTF-8 byte-order mark written by some spreadsheet tools
+            source.skip(3)
+        _check_not_empty(source, path)
+        metadata, angles, header_line = _parse_preamble(source, path)
+        first_data_line = header_line + 1
+        if not source.peek():
+            raise _fail("no data rows after the header", first_data_line, path)
+        fields = _parse_body_stream(source, first_data_line, path, limits.max_rows)
+    except TooManyBytes as exc:
+        raise SessionLimitError(f"more than {size_text(exc.limit)} of text, the reader's limit "
+                                f"(set {MAX_BYTES_ENV} to read larger recordings)", path=path) from None
+    return _build_session(metadata, angles, fields)
+
+
+def _check_not_empty(source: LineSource, path: str | None) -> None:
+    """Refuse an empty or all-white-space input ("empty file"), reading no more than the white space."""
+    head = source.peek()
+    if head and not head.isspace():
+        return  # the usual case; a file that starts with white space fails the version check on line 1
+    while head:
+        if not head.isspace():
+            raise _fail(f"missing '# {VERSION_KEY}: {FORMAT_VERSION}' on the first line", 1, path)
+        head = source.discard()
+    raise _fail("empty file", 1, path)
+
+
+def _line_text(raw: bytes) -> bytes:
+    """A line without its line end (LF or CR LF; a lone CR stays and is refused later)."""
+    if raw.endswith(b"\n"):
+        raw = raw[:-1]
+        if raw.endswith(b"\r"):
+            raw = raw[:-1]
+    return raw
+
+
+def _long_line(head: bytes) -> str:
+    lone_cr = b"\r" in head.replace(b"\r\n", b"")
+    return f"line longer than {MAX_LINE_BYTES} bytes" + (
+        " (its lines end in a lone CR; expected LF or CR LF line ends)" if lone_cr else "")
 
 
 def _parse_preamble(
-    data: bytes, path: str | None
-) -> tuple[dict[str, str], dict[int, tuple[float, float, float]], int, int]:
-    """Metadata lines and the header. Returns (metadata, angles, header line number, body offset)."""
+    source: LineSource, path: str | None
+) -> tuple[dict[str, str], dict[int, tuple[float, float, float]], int]:
+    """Metadata lines and the header. Returns (metadata, angles, header line number)."""
     entries: list[tuple[int, str, str, str]] = []  # (line number, key, value, line text)
-    pos = 0
     lineno = 0
     header: str | None = None
-    while pos < len(data):
+    while True:
         lineno += 1
-        end = data.find(b"\n", pos)
-        raw, pos = (data[pos:], len(data)) if end < 0 else (data[pos:end], end + 1)
         try:
-            line = raw.decode("utf-8")
+            raw = source.line()
+        except LineTooLong as exc:
+            if not exc.head.startswith(b"#"):  # the header's place: a file without the version line says so
+                _check_version(entries, path)
+            raise _fail(_long_line(exc.head), lineno, path) from None
+        if raw is None:
+            break
+        try:
+            line = _line_text(raw).decode("utf-8")
         except UnicodeDecodeError:
             raise _fail("line is not valid UTF-8 text", lineno, path) from None
         if not line.startswith("#"):
@@ -163,7 +247,7 @@ def _parse_preamble(
         entries.append((lineno, key, value, line))
     _check_version(entries, path)
     if header is None:
-        raise _fail("end of file before the header line", lineno + 1, path)
+        raise _fail("end of file before the header line", lineno, path)
     header_line = lineno
     _check_header(header, header_line, path)
 
@@ -172,12 +256,12 @@ def _parse_preamble(
     key_lines: dict[str, int] = {}
     for number, key, value, _ in entries[1:]:
         if key in key_lines:
-            raise _fail(f"duplicate metadata key {key!r} (first on line {key_lines[key]})", number, path)
+            raise _fail(f"duplicate metadata key {_show(key, 40)} (first on line {key_lines[key]})", number, path)
         key_lines[key] = number
         if (m := _ANGLE_KEY.fullmatch(key)) is not None:
             index_text = m.group(1)
             if not index_text.isascii() or not index_text.isdigit() or len(index_text) > 18:
-                raise _fail(f"angle key needs a segment index, 'angle.N' with N >= 0: {key!r}", number, path)
+                raise _fail(f"angle key needs a segment index, 'angle.N' with N >= 0: {_show(key, 40)}", number, path)
             angles[int(index_text)] = _parse_angle(value, number, path)
         else:
             metadata[key] = value
@@ -192,7 +276,7 @@ def _parse_preamble(
         problem = metadata_problem(key, value)
         if problem:
             raise _fail(f"metadata {key}: {problem}", key_lines[key], path)
-    return metadata, angles, header_line, pos
+    return metadata, angles, header_line
 
 
 def _check_version(entries: list[tuple[int, str, str, str]], path: str | None) -> None:
@@ -205,7 +289,8 @@ def _check_version(entries: list[tuple[int, str, str, str]], path: str | None) -
     value = entries[0][2]
     if value != FORMAT_VERSION:
         raise UnsupportedSessionVersionError(
-            f"unknown {VERSION_KEY} version {value!r} (this reader reads version {FORMAT_VERSION})", line=1, path=path
+            f"unknown {VERSION_KEY} version {_show(value, 40)} (this reader reads version {FORMAT_VERSION})",
+            line=1, path=path,
         )
     if len(version_lines) > 1:
         raise _fail(f"duplicate '{VERSION_KEY}' line (it belongs on the first line only)", version_lines[1], path)
@@ -214,28 +299,29 @@ def _check_version(entries: list[tuple[int, str, str, str]], path: str | None) -
 def _metadata_number_problem(text: str) -> str | None:
     """Why a required numeric metadata value is unusable, or None. It must be finite and > 0."""
     if not _NUMBER.fullmatch(text):
-        return f"{text!r} is not a number"
+        return f"{_show(text, 40)} is not a number"
     value = float(text)
     if not math.isfinite(value):
-        return f"{text!r} is not finite"
+        return f"{_show(text, 40)} is not finite"
     if value <= 0.0:
-        return f"{text!r} must be positive"
+        return f"{_show(text, 40)} must be positive"
     return None
 
 
 def _parse_angle(value: str, lineno: int, path: str | None) -> tuple[float, float, float]:
     parts = [p.strip(_PAD) for p in value.split(",")]
     if len(parts) != 3:
-        raise _fail(f"angle needs three comma-separated numbers (deg), found {len(parts)}: {value!r}", lineno, path)
+        raise _fail(f"angle needs three comma-separated numbers (deg), found {len(parts)}: {_show(value, 40)}",
+                    lineno, path)
     out: list[float] = []
     for axis, text in zip("xyz", parts, strict=True):
         if text.lower().lstrip("+-") in _NONFINITE_WORDS:
-            raise _fail(f"angle {axis} is NaN or infinite: {text!r}", lineno, path)
+            raise _fail(f"angle {axis} is NaN or infinite: {_show(text, 40)}", lineno, path)
         if not _NUMBER.fullmatch(text):
-            raise _fail(f"angle {axis} is not a number: {text!r}", lineno, path)
+            raise _fail(f"angle {axis} is not a number: {_show(text, 40)}", lineno, path)
         number = float(text)
         if not math.isfinite(number):
-            raise _fail(f"angle {axis} is not finite: {text!r}", lineno, path)
+            raise _fail(f"angle {axis} is not finite: {_show(text, 40)}", lineno, path)
         out.append(number)
     return out[0], out[1], out[2]
 
@@ -269,14 +355,19 @@ def _show(text: str, limit: int = 80) -> str:
 _Arrays = dict[str, np.ndarray]
 
 
-def _parse_body_fast(body: bytes) -> _Arrays | None:
-    """Vectorized parse of the data block; None whenever the block is not plainly valid."""
+def _parse_body_fast(body: bytes, *, newlines: int | None = None) -> _Arrays | None:
+    """Vectorized parse of the data block; None whenever the block is not plainly valid.
+
+    ``newlines``: the number of line ends in ``body`` when the caller has counted them.
+    """
     import pandas as pd  # deferred: importing pandas costs ~0.3 s and only reading needs it
 
     if body.translate(None, _FAST_BYTES):
         return None  # characters outside the plain-file alphabet
     octets = np.frombuffer(body, dtype=np.uint8)  # numpy counts bytes about twice as fast as bytes.count
-    n_rows = int(np.count_nonzero(octets == ord("\n"))) + (0 if body.endswith(b"\n") else 1)
+    if newlines is None:
+        newlines = int(np.count_nonzero(octets == ord("\n")))
+    n_rows = newlines + (0 if body.endswith(b"\n") else 1)
     # Every row has exactly 15 commas: pandas refuses rows with too many fields, so with the total
     # right no row can have too few (pandas would silently pad those with NaN).
     if int(np.count_nonzero(octets == ord(","))) != (_N_COLS - 1) * n_rows:
@@ -342,14 +433,17 @@ _REQUIRED_IN_ROW = sum(1 for c in _NUMBER_COLUMNS if c not in _EMPTY_OK)  # ax..
 _BLOCK_LINES = 8192  # measured: fewer blocks cost pandas call overhead, more cost slow-parser time
 
 
-def _parse_body_blocks(body: bytes, first_line: int, path: str | None, block_lines: int = _BLOCK_LINES) -> _Arrays:
-    """Block-wise parse: identical result (or error) to the reference parser on the whole body."""
+def _parse_body_blocks(body: bytes, first_line: int, path: str | None, block_lines: int = _BLOCK_LINES, *,
+                       previous_t: float = -math.inf) -> _Arrays:
+    """Block-wise parse: identical result (or error) to the reference parser on the whole body.
+
+    ``previous_t`` is the time of the row before ``body`` (s) when ``body`` is a piece of a file.
+    """
     newlines = np.flatnonzero(np.frombuffer(body, dtype=np.uint8) == ord("\n"))
     ends = (newlines[block_lines - 1 :: block_lines] + 1).tolist()
     if not ends or ends[-1] != len(body):
         ends.append(len(body))
     pieces: list[_Arrays] = []
-    previous_t = -math.inf
     line = first_line
     start = 0
     for end in ends:
@@ -452,11 +546,11 @@ def _checked_row(raw: bytes, lineno: int, path: str | None) -> _Row:
             continue
         if not _NUMBER.fullmatch(cell):
             if cell.lower().lstrip("+-") in _NONFINITE_WORDS:
-                raise _fail(f"NaN or infinite value {cell!r} in column '{column}'", lineno, path)
+                raise _fail(f"NaN or infinite value {_show(cell, 40)} in column '{column}'", lineno, path)
             raise _fail(f"non-numeric value {_show(cell, 40)} in column '{column}'", lineno, path)
         value = float(cell)
         if not math.isfinite(value):
-            raise _fail(f"infinite value {cell!r} (out of range) in column '{column}'", lineno, path)
+            raise _fail(f"infinite value {_show(cell, 40)} (out of range) in column '{column}'", lineno, path)
         parsed.append(value)
     cell = cells[1].strip(_PAD)
     m = _SEGMENT.fullmatch(cell)
@@ -466,7 +560,7 @@ def _checked_row(raw: bytes, lineno: int, path: str | None) -> _Row:
         raise _fail(f"segment must be a non-negative integer, found {_show(cell, 40)}", lineno, path)
     segment = int(m.group(1))
     if segment > _INT64_MAX:
-        raise _fail(f"segment {cell} is too large", lineno, path)
+        raise _fail(f"segment {_show(cell, 40)[1:-1]} is too large", lineno, path)
     cell = cells[2].strip(_PAD)
     kind = _KIND_CODE.get(cell)
     if kind is None:
@@ -474,22 +568,102 @@ def _checked_row(raw: bytes, lineno: int, path: str | None) -> _Row:
     return parsed[0], segment, kind, parsed[1:]
 
 
-def _build_session(metadata: dict[str, str], angles: dict[int, tuple[float, float, float]], arrays: _Arrays) -> Session:
-    def stack(*names: str) -> np.ndarray:
-        return np.column_stack([arrays[name] for name in names])
+def _parse_body_stream(source: LineSource, first_line: int, path: str | None, max_rows: int) -> dict[str, np.ndarray]:
+    """The data rows, one block of whole lines (about one read) at a time: the fast parser, else the blocks of
+    :func:`_parse_body_blocks`. Returns the Session's fields (:class:`_Fields`)."""
+    fields = _Fields()
+    previous_t = -math.inf
+    line = first_line
+    rows = 0
+    while True:
+        try:
+            block = source.block()
+        except LineTooLong as exc:
+            raise _fail(_long_line(exc.head), line, path) from None
+        if block is None:
+            break
+        if b"\r" in block:  # accept CRLF line ends; a lone CR is caught as a bad cell later
+            block = block.replace(b"\r\n", b"\n")
+        ends = np.flatnonzero(np.frombuffer(block, dtype=np.uint8) == ord("\n"))
+        _check_line_lengths(block, ends, line, path)
+        n_rows = len(ends) + (0 if block.endswith(b"\n") else 1)
+        if rows + n_rows > max_rows:
+            raise SessionLimitError(f"more than {max_rows:,} data rows, the reader's limit (set {MAX_ROWS_ENV} to "
+                                    "read longer recordings)", line=first_line + max_rows, path=path)
+        try:
+            arrays = _parse_body_fast(block, newlines=len(ends))
+        except Exception:  # any failure, including pandas/numpy internals: let the reference parser decide
+            arrays = None
+        if arrays is None or not arrays["t"][0] > previous_t:
+            arrays = _parse_body_blocks(block, line, path, previous_t=previous_t)
+        previous_t = float(arrays["t"][-1])
+        fields.append(arrays)
+        rows += n_rows
+        line += len(ends)
+    return fields.arrays()
 
-    return Session(
-        metadata=metadata,
-        t_s=arrays["t"],
-        segment=arrays["segment"],
-        kind=arrays["kind"],
-        accel_mps2=stack("ax", "ay", "az"),
-        gyro_radps=np.deg2rad(stack("gx", "gy", "gz")),
-        temp_degc=arrays["temp"],
-        ref_accel_mps2=stack("ref_ax", "ref_ay", "ref_az"),
-        ref_gyro_radps=np.deg2rad(stack("ref_gx", "ref_gy", "ref_gz")),
-        angles_deg=angles,
-    )
+
+def _check_line_lengths(block: bytes, ends: np.ndarray, first_line: int, path: str | None) -> None:
+    """Refuse a line longer than the line limit (its line number), as the line source does across reads."""
+    lengths = np.diff(ends, prepend=-1) - 1
+    if lengths.size and int(lengths.max()) > MAX_LINE_BYTES:
+        i = int(np.argmax(lengths > MAX_LINE_BYTES))
+        start = int(ends[i - 1]) + 1 if i else 0
+        raise _fail(_long_line(block[start:start + 200]), first_line + i, path)
+    last = len(block) - (int(ends[-1]) + 1 if ends.size else 0)
+    if last > MAX_LINE_BYTES:
+        raise _fail(_long_line(block[len(block) - last:][:200]), first_line + len(ends), path)
+
+
+#: The Session's array fields: (field, file columns), columns stacked into (n, 3) where there are three.
+_FIELDS: tuple[tuple[str, tuple[str, ...]], ...] = (
+    ("t_s", ("t",)), ("segment", ("segment",)), ("kind", ("kind",)),
+    ("accel_mps2", ("ax", "ay", "az")), ("gyro_radps", ("gx", "gy", "gz")), ("temp_degc", ("temp",)),
+    ("ref_accel_mps2", ("ref_ax", "ref_ay", "ref_az")), ("ref_gyro_radps", ("ref_gx", "ref_gy", "ref_gz")),
+)
+_DEGREE_FIELDS = frozenset(("gyro_radps", "ref_gyro_radps"))
+
+
+class _Fields:
+    """The Session's arrays, grown block by block in place.
+
+    Each array is resized (``realloc``, which moves a large allocation's pages without copying them) and the
+    block written into its new end, gyro columns converted from deg/s to rad/s there: the peak is the arrays
+    plus one block, not the blocks kept and then joined (twice the arrays). The arrays are handed over read-only
+    and owning their memory, which the Session takes without a copy.
+    """
+
+    def __init__(self) -> None:
+        self._n = 0
+        self._arrays: dict[str, np.ndarray] = {}
+        for field, columns in _FIELDS:
+            dtype = np.int64 if field == "segment" else np.int8 if field == "kind" else np.float64
+            self._arrays[field] = np.empty((0, 3) if len(columns) == 3 else (0,), dtype=dtype)
+
+    def append(self, block: _Arrays) -> None:
+        k = len(block["t"])
+        lo, hi = self._n, self._n + k
+        for field, columns in _FIELDS:
+            a = self._arrays[field]
+            a.resize((hi, *a.shape[1:]), refcheck=False)
+            if len(columns) == 1:
+                a[lo:hi] = block[columns[0]]
+                continue
+            for j, column in enumerate(columns):
+                a[lo:hi, j] = block[column]
+            if field in _DEGREE_FIELDS:
+                np.deg2rad(a[lo:hi], out=a[lo:hi])
+        self._n = hi
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        for a in self._arrays.values():
+            a.flags.writeable = False
+        return self._arrays
+
+
+def _build_session(metadata: dict[str, str], angles: dict[int, tuple[float, float, float]],
+                   fields: dict[str, np.ndarray]) -> Session:
+    return Session(metadata=metadata, angles_deg=angles, **fields)
 
 
 # --------------------------------------------------------------------------- writing

@@ -58,7 +58,11 @@ class Segment:
 
 
 def _frozen(a: np.ndarray, dtype: type | np.dtype, shape_tail: tuple[int, ...]) -> np.ndarray:
-    arr = np.array(a, dtype=dtype, copy=True)
+    """A read-only copy of ``a``; an array that is already read-only, owns its memory and has the dtype is
+    taken as it is (a reader's arrays, another Session's), so a long recording is not held twice."""
+    taken = (isinstance(a, np.ndarray) and a.dtype == dtype and not a.flags.writeable and a.flags.owndata
+             and a.flags.c_contiguous)
+    arr = a if taken else np.array(a, dtype=dtype, copy=True)
     if arr.shape[1:] != shape_tail:
         raise ValueError(f"expected shape (n, {shape_tail}), got {arr.shape}")
     arr.flags.writeable = False

@@ -77,11 +77,19 @@ def demo(
     thermal: Annotated[bool, typer.Option("--thermal", help="thermal calibration in a simulated climate chamber: "
                                           "plateaus at 5/15/25/45 degC, verification at 35 degC; the last unit has "
                                           "no temperature effects (the reference)")] = False,
+    line: Annotated[bool, typer.Option("--line", help="the calibration line: the units soak in a simulated rack "
+                                       "(relay board on Modbus/TCP) from power-on, go powered to the rig for the "
+                                       "short plan, and are fitted over both recordings")] = False,
+    rack_s: Annotated[float, typer.Option("--rack-s", min=60.0, help="with --line: rest in the rack from power-on "
+                                          "(simulated s)")] = 1200.0,
     lot: Annotated[str | None, typer.Option("--lot", help="production lot of the units, recorded with the run "
                                                           "(quality page filter, certificate)")] = None,
     operator: Annotated[str | None, typer.Option(help="operator name for the records")] = None,
 ) -> None:
     """Simulated rig + N sensors, the whole sequence, fit, limits, summary: the station end to end.
+
+    With ``--line`` the warm-up is observed in a simulated soak rack and only the poses and rate steps run on
+    the rig; it prints ``rig time per unit``.
 
     With ``--thermal`` a simulated climate chamber (Modbus/TCP) joins: the units carry temperature bias and
     scale coefficients, are calibrated at four temperatures and verified at a fifth, and a table compares
@@ -90,17 +98,23 @@ def demo(
     Exit code: 0 all PASS, 1 a unit FAILed, 2 ERROR (station fault), 3 a unit REFUSED by the retest
     policy, 4 a unit to RETEST (inconclusive verdict), 130 ABORTED (Ctrl-C, SIGTERM, SIGHUP).
     """
-    from station.sim.demo import DEMO_SCALE, THERMAL_SCALE, run_demo, run_thermal_demo
+    from station.sequence.prompts import AutoConfirm
+    from station.sim.demo import DEMO_SCALE, THERMAL_SCALE, run_demo, run_line_demo, run_thermal_demo
 
     try:
-        if thermal:
+        if line:
+            result = run_line_demo(units, rack_s, seed, limits_path=limits)
+        elif thermal:
             result, _ = run_thermal_demo(units, scale or THERMAL_SCALE, seed, out, db_url=db, record=True,
                                          limits_path=limits, lot=lot or "", operator=operator or "")
-        else:
+        else:  # the simulated fixture loads itself: its prompts are shown and confirmed at once
             result = run_demo(units, scale or DEMO_SCALE, seed, out, db_url=db, record=True, limits_path=limits,
-                              lot=lot or "", operator=operator or "")
+                              lot=lot or "", operator=operator or "", prompter=AutoConfirm("the demo"))
     except StationError as exc:
         raise fail(exc) from None
+    except KeyboardInterrupt:
+        typer.echo("aborted before the run started; nothing was moved or written", err=True)
+        raise typer.Exit(130) from None
     raise typer.Exit(result.outcome.exit_code)
 
 
@@ -147,6 +161,47 @@ def sim(
         typer.echo("stopped")
 
 
+def plan(
+    limits: Annotated[Path | None, typer.Option("--limits", help="limits file (default: fixtures/limits/default.toml)")]
+    = None,
+    out: Annotated[Path, typer.Option(help="where the plan file goes")] = Path("line-plan.json"),
+    rig_units: Annotated[int, typer.Option("--rig-units", min=1, max=64, help="units per rig run")] = 16,
+    rack_slots: Annotated[int, typer.Option("--rack-slots", min=1, max=64, help="slots of the soak rack")] = 64,
+    units: Annotated[int, typer.Option("--units", min=1, max=20, help="simulated units per candidate")] = 3,
+    match_full: Annotated[float | None, typer.Option("--match-full", min=1.0, help="also keep the median stated "
+                                                     "std of M and b_stat within this factor of the full rig "
+                                                     "plan's on the same units")] = None,
+) -> None:
+    """The shortest line plan (rig part and rack time) whose predicted accuracy meets the limits file.
+
+    Each candidate is predicted from the joint fit's stated uncertainties on simulated units of the sensor
+    class; prints every candidate, the chosen plan's rig time, units per hour of rig, rack and line, and writes
+    the plan file (``station-line-plan/1``).
+    """
+    from station.kernel.limits_file import load_limits
+    from station.kernel.line_plan import line_plan_to_json
+    from station.sim.plan_design import design, throughput
+
+    try:
+        lim = load_limits(limits)
+        best, tried = design(lim, seeds=tuple(range(31, 31 + units)), match_full=match_full)
+    except StationError as exc:
+        raise fail(exc) from None
+    typer.echo("rack s | pose hold s | rig s (predicted) | largest stated std / limit | gyro T_c resolved | meets")
+    for c in tried:
+        worst = ", ".join(f"{k} {v:.2f}" for k, v in c.worst.items())
+        typer.echo(f"{c.plan.rack_s:6.0f} | {c.plan.rig.pose_hold_s:11.0f} | {c.rig_s:17.0f} | {worst} | "
+                   f"{'yes' if c.gyro_tc_resolved else 'no'} | {'yes' if c.meets else 'no'}")
+    if best is None:
+        typer.echo("no candidate meets the limits")
+        raise typer.Exit(1)
+    t = throughput(best, rig_units, rack_slots)
+    out.write_text(line_plan_to_json(best.plan) + "\n")
+    typer.echo(f"chosen: rack {best.plan.rack_s:.0f} s, poses {best.plan.rig.pose_hold_s:.0f} s; rig time per run "
+               f"{best.rig_s:.0f} s, per unit at N={rig_units} {t.rig_per_unit_s:.0f} s")
+    typer.echo(f"units/h: rig {t.rig_units_per_h:.0f}, rack ({rack_slots} slots) {t.rack_units_per_h:.0f}, "
+               f"line {t.line_units_per_h:.0f}")
+    typer.echo(f"wrote {out}")
 def msa_simulate(
     parts: Annotated[int, typer.Option(min=2, max=100, help="parts (simulated units) in the study")] = 10,
     nests: Annotated[int, typer.Option(min=2, max=16, help="nests of the rig (the appraisers)")] = 4,
@@ -209,10 +264,11 @@ def msa_simulate(
 
 
 def register(app: typer.Typer) -> None:
-    """Add ``simulate``, ``demo`` and ``sim`` to the ``station`` command."""
+    """Add ``simulate``, ``demo``, ``sim`` and ``plan`` to the ``station`` command."""
     app.command()(simulate)
     app.command()(demo)
     app.command()(sim)
+    app.command()(plan)
     from station.commands.msa import msa_app
 
     msa_app.command("simulate")(msa_simulate)

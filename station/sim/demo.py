@@ -14,6 +14,9 @@ a summary table and the verification residuals.
 
 At the default clock scale (30 simulated seconds per wall second) the sequence
 takes about 30 s of wall time; fits and set-up add a few seconds per unit.
+
+SIGTERM and SIGHUP do what Ctrl-C does, as in ``station run`` (:func:`station.compose.abort_on_signals`): the
+run ends ABORTED with the signal's name, the rig at rest, every unit's result recorded (none UNFINISHED).
 """
 
 from __future__ import annotations
@@ -27,16 +30,17 @@ from typing import Any
 import numpy as np
 from rich.console import Console
 
-from station.compose import Station, StationConfig
+from station.compose import Station, StationConfig, abort_on_signals
 from station.fit.calibrate import FitOptions
 from station.kernel.display import limits_identity
 from station.kernel.plan import RigPlan, default_plan
 from station.kernel.thermal_plan import ThermalPlan
 from station.physics.effects import Effects
 from station.sequence.options import SequenceOptions
+from station.sequence.prompts import Operator
 from station.sequence.provision import ProvisionRecord
 from station.sequence.records import Record
-from station.sequence.runner import RunResult
+from station.sequence.runner import RunResult, SequenceRunner
 from station.sim.firmware import install_firmware
 from station.sim.station_sim import SimStation
 from station.terminal import ProgressDisplay, provisioning_table, summary_table
@@ -65,6 +69,7 @@ def run_demo(
     admit: Callable[[str, str], str | None] | None = None,
     lot: str = "",
     operator: str = "",
+    prompter: Operator | None = None,
 ) -> RunResult:
     """Start the simulated station, run the sequence for ``units`` units at clock ``scale``, print, return.
 
@@ -88,11 +93,17 @@ def run_demo(
         on_provision: called with each unit's EEPROM write and verification record.
         admit: the retest policy (see :class:`~station.sequence.runner.SequenceRunner`).
         lot, operator: the production lot and the operator recorded with the run ('' none).
+        prompter: answers the station's prompts (None: a run without prompts).
+
+    In the main thread SIGTERM and SIGHUP abort the run as Ctrl-C does (the result is ABORTED); a signal before
+    the run started raises :class:`KeyboardInterrupt`.
     """
     console = console if console is not None else Console()
     plan = plan if plan is not None else default_plan()
     wall0 = time.monotonic()
-    with SimStation(units, scale, seed, plan=plan, effects=effects) as sim:
+    runners: list[SequenceRunner] = []
+    with abort_on_signals(lambda: runners[-1] if runners else None), \
+            SimStation(units, scale, seed, plan=plan, effects=effects) as sim:
         for u in sim.units:
             install_firmware(u.sensor, sim.clock)
         console.print(f"simulated rig at {sim.rig_url}; {units} sensor(s) on "
@@ -104,9 +115,9 @@ def run_demo(
         )
         display = ProgressDisplay(console, [u.truth.serial for u in sim.units], scale)
         station = Station(config, clock=sim.clock, options=options, subscribers=[display, *subscribers],
-                          admit=admit, on_provision=on_provision)
+                          admit=admit, on_provision=on_provision, prompter=prompter)
         with display:
-            result = station.run()
+            result = station.run(on_runner=runners.append)
     console.print(summary_table(result))
     if station.provisioner is not None and station.provisioner.records:
         console.print(provisioning_table(station.provisioner))
@@ -118,6 +129,118 @@ def run_demo(
     return result
 
 
+
+
+# --- the line demo: warm-up in a soak rack, poses and rates on the rig ---------------------------------
+
+LINE_UNITS = 2
+LINE_RACK_S = 1200.0
+#: total sample frames per wall second the simulated sensors may produce (sets the clock scale)
+LINE_MAX_FRAMES = 12000.0
+
+
+def run_line_demo(
+    units: int = LINE_UNITS,
+    rack_s: float = LINE_RACK_S,
+    seed: int = 0,
+    *,
+    transfer_s: float = 30.0,
+    console: Console | None = None,
+    limits_path: Path | None = None,
+    max_frames: float = LINE_MAX_FRAMES,
+    interrupt: Sequence[int] = (),
+) -> RunResult:
+    """The calibration line, simulated: ``units`` units soak ``rack_s`` in a rack (relay board on Modbus/TCP,
+    sensors on ptys, each still in its slot's orientation), are carried powered to the rig (``transfer_s``), run
+    the line's short rig plan there and are fitted over both recordings; prints the run and
+    ``rig time per unit: <seconds> s`` (simulated seconds of rig time divided by the units).
+
+    The rack's recordings go to an in-process archive (the same compressed bytes and SHA-256 checks as the
+    database's ``rack_recordings``). The clock scale is chosen so the sensors send at most ``max_frames`` frames
+    per wall second, and at most the plain demo's ``DEMO_SCALE``. The units of the slots in ``interrupt`` lose power
+    on the way to the rig: the rig role
+    refuses them (they get the full plan or go back to the rack) and says why.
+    """
+    from station.kernel.clock import SimClock
+    from station.kernel.limits_file import load_limits
+    from station.kernel.line_plan import line_rig_plan
+    from station.line.recordings import MemoryArchive
+    from station.line.rigrole import LineRigRunner
+    from station.line.soak import SoakRack
+    from station.rack.board import RelayBoard
+    from station.rig import open_rig
+    from station.sensor import open_sensor
+    from station.sim.rack_sim import StaticMount
+    from station.sim.relay_server import SimulatedRelayBoard
+
+    console = console if console is not None else Console()
+    wall0 = time.monotonic()
+    plan = replace(line_rig_plan(), rest_s=2.0)
+    scale = max(1.0, min(DEMO_SCALE, max_frames / (units * plan.sample_rate_hz)))
+    limits = load_limits(limits_path)
+    with SimStation(units, scale, seed, plan=plan, clock=SimClock(scale)) as sim:
+        rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(10_000,)))
+        for u in sim.units:
+            u.sensor.power_off()  # the rack's relay powers it
+            tilt = np.radians(rng.uniform(-20.0, 20.0, size=3))
+            u.source.rig = StaticMount(*tilt)  # still in its rack slot, an orientation nobody measured
+
+        def switch(slot: int, on: bool) -> None:
+            sensor = sim.units[slot].sensor
+            sensor.power_on() if on else sensor.power_off()
+
+        archive = MemoryArchive()
+        sensors = [open_sensor(url, sim.clock) for url in sim.sensor_urls]
+        try:
+            with SimulatedRelayBoard(units, on_switch=switch) as board_sim, RelayBoard(board_sim.url) as board:
+                console.print(f"soak rack: relay board at {board_sim.url}, {units} unit(s) on "
+                              f"{', '.join(u.sensor.device for u in sim.units)}; clock x{scale:g}; "
+                              f"{rack_s:g} s from power-on")
+                soaked = SoakRack(board, sensors, sim.clock, sample_rate_hz=int(plan.sample_rate_hz),
+                                  gravity_mps2=plan.gravity_mps2, station="demo-rack").soak(range(units), rack_s)
+                for r in soaked:
+                    if r.session is not None:
+                        sha = archive.save(r.session, station="demo-rack", slot=r.slot)
+                        console.print(f"  slot {r.slot}: {r.serial} {len(r.session)} samples, sha256 {sha[:12]}")
+                    else:
+                        console.print(f"  slot {r.slot}: {r.serial or '?'} no recording: {r.error}")
+                # carried to the rig, still powered (the relay stays on: the unit's supply travels with it)
+                for slot in interrupt:
+                    sim.units[slot].sensor.power_off()
+                sim.clock.sleep(transfer_s)
+                for slot in interrupt:
+                    sim.units[slot].sensor.power_on()
+                for u in sim.units:
+                    u.source.rig = sim.rig
+                rig = open_rig(sim.rig_url, sim.clock, **sim.rig_client_options())
+                try:
+                    runner = LineRigRunner(
+                        rig, sensors, sim.clock, archive=archive, plan=plan,
+                        options=SequenceOptions().for_scale(scale), limits=limits.product, station="demo-line",
+                        fit_options=FitOptions(tc_range_s=dict(limits.correlation_time_s)),
+                        clock_slack_s=2.0 + 0.2 * scale,  # command round trips take `scale` times longer here
+                    )
+                    for serial, d in runner.decisions.items():
+                        console.print(f"  {serial}: {d.plan}{' (' + d.reason + ')' if d.reason else ''}")
+                    display = ProgressDisplay(console, [u.truth.serial for u in sim.units], scale)
+                    runner.subscribe(display)
+                    with display:
+                        result = runner.run()
+                finally:
+                    rig.close()
+        finally:
+            for s_ in sensors:
+                s_.close()
+    console.print(summary_table(result))
+    for unit in result.units:
+        if unit.params is not None:
+            line = unit.params.quality.extra.get("line", {})
+            tc = unit.params.gyro.correlation_time_s
+            console.print(f"  {unit.serial}: rack {line.get('rack_span_s', 0):.0f} s + rig; gyro T_c "
+                          f"{', '.join('-' if not np.isfinite(v) else f'{v:.0f}' for v in tc)} s")
+    console.print(f"rig time per unit: {result.sequence_s / max(units, 1):.0f} s")
+    console.print(f"line demo finished in {time.monotonic() - wall0:.1f} s wall time")
+    return result
 
 
 # --- the thermal demo ---------------------------------------------------------------------------------
@@ -245,8 +368,9 @@ def run_thermal_demo(
         unit_effects[-1] = Effects()
     wall0 = time.monotonic()
     holder: list[Any] = []
-    with SimStation(units, scale, seed, plan=plan, effects=effects, chamber={"ambient_degc": thermal.ambient_degc},
-                    unit_effects=unit_effects) as sim:
+    with abort_on_signals(lambda: holder[-1] if holder else None), \
+            SimStation(units, scale, seed, plan=plan, effects=effects, chamber={"ambient_degc": thermal.ambient_degc},
+                       unit_effects=unit_effects) as sim:
         for u in sim.units:
             install_firmware(u.sensor, sim.clock)
         console.print(f"simulated rig at {sim.rig_url}; chamber at {sim.chamber_url}; {units} sensor(s); "

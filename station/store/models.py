@@ -233,6 +233,28 @@ class SessionRecording(Base):
     run_unit: Mapped[RunUnit] = relationship(back_populates="recordings")
 
 
+class RackRecording(Base):
+    """A unit's soak-rack rest (the line's rack role writes it, the rig role reads it by serial):
+    the session CSV (``station.session.csv_v1``) gzip-compressed in ``data``, the SHA-256 and size of the
+    uncompressed CSV, the unit's power-on counter and the station clock at its first sample
+    (what :func:`station.fit.joint.check_power` compares with the rig's recording)."""
+
+    __tablename__ = "rack_recordings"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    serial: Mapped[str] = mapped_column(String(100), index=True)
+    station: Mapped[str] = mapped_column(String(100))
+    slot: Mapped[int] = mapped_column(Integer)
+    boot_count: Mapped[int | None] = mapped_column(Integer, nullable=True)
+    wall_clock_at_start_s: Mapped[float | None] = mapped_column(Float, nullable=True)
+    duration_s: Mapped[float] = mapped_column(Float)
+    codec: Mapped[str] = mapped_column(String(20))
+    sha256: Mapped[str] = mapped_column(String(64))
+    size_bytes: Mapped[int] = mapped_column(Integer)
+    data: Mapped[bytes] = mapped_column(LargeBinary)
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
+
+
 class EepromWrite(Base):
     """A calibration image written into a unit's EEPROM.
 

@@ -40,6 +40,8 @@ import station
 from station.sequence.records import (
     Measured,
     Outcome,
+    PromptAnswered,
+    PromptShown,
     Record,
     RigReading,
     RunFinished,
@@ -227,7 +229,7 @@ class Recorder:
         if isinstance(record, RunStarted):
             self._run_started(record)
             return
-        if isinstance(record, RigReading):  # live telemetry for displays, not a state change
+        if isinstance(record, (RigReading, PromptShown, PromptAnswered)):  # for displays, not a state change
             return
         state = self._runs.get(record.run_id)
         if state is None:

@@ -9,6 +9,9 @@ Definitions (AIAG SPC manual; Montgomery, *Introduction to Statistical Quality C
   sigma overall = the sample standard deviation of all values;
 - Cp = (USL - LSL) / (6 sigma_within), Cpk = min(USL - mean, mean - LSL) / (3 sigma_within);
   Pp and Ppk the same with sigma overall. With one limit only, Cp/Pp are None and Cpk/Ppk use that side.
+- capability indices are shown from :data:`MIN_CAPABILITY_N` values on ("too few units" below): from a handful
+  of values a Cpk is mostly noise; with them goes the approximate confidence interval of Cpk
+  (:func:`cpk_interval`, Bissell 1990, as in the NIST/SEMATECH e-Handbook of Statistical Methods, 6.1.6).
 - X-bar chart per day: centre line the grand mean, limits grand mean +- 3 sigma_within / sqrt(n_day)
   (variable subgroup size); S chart: centre c4(n) sigma_within, limits (c4 +- 3 sqrt(1 - c4^2)) sigma_within.
 - run rules on z_i = (xbar_i - centre) / (sigma_within / sqrt(n_i)) (Nelson's numbering; 1-4 are Western
@@ -24,6 +27,7 @@ import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from statistics import NormalDist
 
 RULES: dict[int, str] = {
     1: "one point beyond 3 sigma",
@@ -78,6 +82,24 @@ def capability(n: int, s1: float, s2: float, within_ss: float, within_df: int, r
     cp, cpk = _index(mean, within, low, high)
     pp, ppk = _index(mean, overall, low, high)
     return Capability(n, mean, within, overall, low, high, cp, cpk, pp, ppk)
+
+
+#: Capability indices (Cp, Cpk, Pp, Ppk) are shown from this many values on; below, "too few units".
+MIN_CAPABILITY_N = 25
+
+
+def cpk_interval(cpk: float | None, n: int, confidence: float = 0.95) -> tuple[float, float] | None:
+    """The two-sided ``confidence`` interval of ``cpk`` estimated from ``n`` values (None: no Cpk, or n < 2).
+
+    Bissell's normal approximation: Cpk +- z sqrt(1 / (9 n) + Cpk^2 / (2 (n - 1))) (NIST/SEMATECH e-Handbook
+    6.1.6). Written here because neither scipy nor statsmodels has it; it assumes normal values and treats the
+    pooled within-subgroup sigma as the sample sigma of n values (close for many subgroups).
+    """
+    if cpk is None or n < 2 or not 0.0 < confidence < 1.0:
+        return None
+    z = NormalDist().inv_cdf(0.5 + confidence / 2.0)
+    half = z * math.sqrt(1.0 / (9.0 * n) + cpk * cpk / (2.0 * (n - 1)))
+    return cpk - half, cpk + half
 
 
 def c4(n: int) -> float:

@@ -1,7 +1,7 @@
 """Operator status page, engineer's unit and population pages and the JSON API (FastAPI, see :mod:`.app`)."""
 
 from station.web.app import create_app
-from station.web.diagnosis import DiagnosisService
+from station.web.diagnosis_worker import DiagnosisService
 from station.web.serve import ServerThread, serve
 from station.web.state import LiveStatus, ShiftStats, shift_stats
 

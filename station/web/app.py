@@ -10,9 +10,12 @@ Pages (server-rendered Jinja2 templates in ``templates/``, no front-end build st
 * ``/units/{serial}``: parameter set against limits (marginal values highlighted), run
   history and plots (``/units/{serial}/plots/{name}.svg``, see :mod:`station.web.plots`), and the
   diagnosis of each run's recording (loaded by the page from the API, figure at
-  ``/units/{serial}/diagnosis.svg``; computed in the background, see :mod:`station.web.diagnosis`);
+  ``/units/{serial}/diagnosis.svg``; computed in the background, see :mod:`station.web.diagnosis_worker`);
 * ``/units/{serial}/certificate.pdf`` and ``.html``: the unit's calibration certificate (see
   :mod:`station.web.routes.certificate`);
+* ``/operator``: the operator console (sign in, lot and serials by barcode scanner, the station's prompts, start
+  and abort, progress and the verdict per nest in plain words; see :mod:`station.web.routes.operator_console`);
+* ``/msa``: the measurement system analysis (Gage R&R) of a lot's runs (see :mod:`station.web.routes.msa`);
 * ``/population``: a histogram per limit-checked parameter over all units, with limits;
 * ``/quality``: yield (first pass, final; by station, shift, day, lot) and its trend, parameters ranked by Cpk,
   control charts with run rules, histograms, CSV exports; filters by date, station, lot, limits version.
@@ -30,23 +33,36 @@ from __future__ import annotations
 
 import asyncio
 import os
+import secrets
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from pathlib import Path
 
 from fastapi import FastAPI
+from starlette.middleware.sessions import SessionMiddleware
 
 from station.kernel.limits_file import load_limits
 from station.store.db import Database, open_database
 from station.store.quality import ShiftCalendar
+from station.web.console import ConsoleOperator, ConsoleSettings
 from station.web.context import WebContext
-from station.web.diagnosis import DiagnosisService
+from station.web.diagnosis_worker import DiagnosisService
 from station.web.openapi import StationAPI
-from station.web.routes import certificate, diagnosis, msa, population, quality, runs, status, units
+from station.web.routes import (
+    certificate,
+    diagnosis,
+    msa,
+    operator_console,
+    population,
+    quality,
+    runs,
+    status,
+    units,
+)
 from station.web.state import LiveStatus
 
 ROUTERS = (status.router, runs.router, units.router, certificate.router, diagnosis.router, population.router,
-           quality.router, msa.router)
+           quality.router, msa.router, operator_console.router)
 
 
 @asynccontextmanager
@@ -64,7 +80,9 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
 
 def create_app(db_url: str | None = None, *, token: str | None = None, live: LiveStatus | None = None,
                limits_path: Path | None = None, database: Database | None = None,
-               diagnosis: DiagnosisService | None = None, shifts: ShiftCalendar | str | None = None) -> FastAPI:
+               diagnosis: DiagnosisService | None = None, shifts: ShiftCalendar | str | None = None,
+               console: ConsoleSettings | None = None, prompter: ConsoleOperator | None = None,
+               session_key: str | None = None) -> FastAPI:
     """The web application on the station database at ``db_url`` (see :func:`station.store.open_database`).
 
     Args:
@@ -79,6 +97,11 @@ def create_app(db_url: str | None = None, *, token: str | None = None, live: Liv
             the recordings, the limits file's T_c range); started and stopped with the application.
         shifts: the shift calendar (a :class:`~station.store.quality.ShiftCalendar` or its text form
             ``"A=06:00,B=14:00,C=22:00"``; None: ``$STATION_SHIFTS`` or that default).
+        console: the operator console's settings (serial pattern, failed attempts, sign-in life; default: the
+            limits file's attempts).
+        prompter: the console as the station's prompt answerer (None: ``POST /api/prompts/...`` answers 503).
+        session_key: the key that signs the console's session cookie (None: ``$STATION_SESSION_KEY`` or a random
+            key for this application: a restart signs everyone out).
     """
     db = database if database is not None else open_database(db_url)
     live = live if live is not None else LiveStatus(db)
@@ -96,6 +119,11 @@ def create_app(db_url: str | None = None, *, token: str | None = None, live: Liv
     app = StationAPI(title="station", version="1", lifespan=lifespan,
                      description="End-of-line MEMS IMU calibration station: live status, units, runs, EEPROM images.")
     app.state.web = web
+    app.state.console = console if console is not None else ConsoleSettings(max_attempts=limits.retest.max_attempts)
+    app.state.prompter = prompter
+    key = session_key or os.environ.get("STATION_SESSION_KEY") or secrets.token_urlsafe(32)
+    app.add_middleware(SessionMiddleware, secret_key=key, session_cookie="station_operator",
+                       max_age=app.state.console.session_max_age_s, same_site="strict")
     app.state.db, app.state.live, app.state.diagnosis = db, live, diagnoses
     for router in ROUTERS:
         app.include_router(router)

@@ -9,14 +9,19 @@ go to the store's recorder first and then to the live status.
 from __future__ import annotations
 
 import threading
-from collections.abc import Callable
-from typing import Any
+from collections.abc import Callable, Mapping
+from typing import Any, Protocol
 
 from station.kernel.errors import StationBusy, StationError
 from station.sequence.runner import RunResult, SequenceRunner
 
-#: Runs the sequence once: ``run(on_runner, operator)``; calls ``on_runner`` with the runner before it starts.
-RunOnce = Callable[[Callable[[SequenceRunner], None], str | None], RunResult]
+
+class RunOnce(Protocol):
+    """Runs the sequence once (:meth:`station.compose.Station.run`); calls ``on_runner`` with the runner before it
+    starts. ``serials``: fixture slot -> the serial scanned for it."""
+
+    def __call__(self, on_runner: Callable[[SequenceRunner], None], operator: str | None = None, *,
+                 lot: str | None = None, serials: Mapping[int, str] | None = None) -> RunResult: ...
 
 
 class StationControl:
@@ -41,7 +46,10 @@ class StationControl:
         return self._thread is not None and self._thread.is_alive()
 
     def start(self, options: dict[str, Any] | None = None, timeout_s: float = 30.0) -> str:
-        """Start a run; returns its id once the runner exists. Raises :class:`StationBusy`."""
+        """Start a run; returns its id once the runner exists. Raises :class:`StationBusy`.
+
+        ``options``: ``operator``, ``lot``, ``serials`` (nest numbered from 1 -> scanned serial), as
+        :class:`~station.web.models.StartRunRequest`."""
         with self._lock:
             if self.busy:
                 raise StationBusy("a run is in progress")
@@ -54,8 +62,11 @@ class StationControl:
 
             def work() -> None:
                 try:
-                    operator = (options or {}).get("operator")
-                    self.last_result = self.run(handed, str(operator) if operator else None)
+                    opts = options or {}
+                    operator, lot = opts.get("operator"), opts.get("lot")
+                    serials = {int(nest) - 1: str(serial) for nest, serial in (opts.get("serials") or {}).items()}
+                    self.last_result = self.run(handed, str(operator) if operator else None,
+                                                lot=str(lot) if lot else None, serials=serials or None)
                 except StationError as exc:
                     failure.append(str(exc))
                     if self.on_error is not None:

@@ -9,7 +9,7 @@ from fastapi import HTTPException
 
 from station.store.db import Database
 from station.store.queries import UnitDetail, show_unit
-from station.web.diagnosis import Recording
+from station.web.diagnosis_worker import Recording
 
 
 def unit_or_404(db: Database, serial: str) -> UnitDetail:

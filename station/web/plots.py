@@ -32,7 +32,7 @@ from station.kernel.display import display_for
 from station.kernel.errors import FitError
 from station.kernel.parameters import ParameterSet
 from station.session.model import Kind, Session
-from station.web.diagnosis import Curve
+from station.web.diagnosis_worker import Curve
 
 AXES = "xyz"
 _DEG = 180.0 / math.pi

@@ -19,6 +19,7 @@ from fastapi import FastAPI
 
 from station.kernel.errors import StationError
 from station.web.app import create_app
+from station.web.console import ConsoleOperator
 from station.web.state import LiveStatus
 
 
@@ -41,7 +42,8 @@ class _Server(uvicorn.Server):
 
 
 def serve(host: str = "127.0.0.1", port: int = 8000, db_url: str | None = None, token: str | None = None,
-          live: LiveStatus | None = None, on_exit: Callable[[str], None] | None = None) -> None:
+          live: LiveStatus | None = None, on_exit: Callable[[str], None] | None = None,
+          prompter: ConsoleOperator | None = None) -> None:
     """Serve the web application on ``host``:``port`` until SIGINT, SIGTERM or SIGHUP.
 
     Args:
@@ -52,8 +54,9 @@ def serve(host: str = "127.0.0.1", port: int = 8000, db_url: str | None = None, 
         live: the live status of a sequence running in this process (None: an idle station).
         on_exit: called with the reason (``'aborted by SIGTERM'``) before the server shuts down: the
             station aborts a run in progress there and waits until the rig is at rest.
+        prompter: the operator console answering the station's prompts (None: the station runs without them).
     """
-    app = create_app(db_url, token=token, live=live)
+    app = create_app(db_url, token=token, live=live, prompter=prompter)
     server = _Server(uvicorn.Config(app, host=host, port=port, log_level="info"), on_exit)
     previous = signal.signal(signal.SIGHUP, server.handle_exit)
     try:

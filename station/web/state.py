@@ -10,9 +10,15 @@ thread-safely, which is what the server-sent events stream waits on.
 
 Times: ``t_s`` and step durations are station clock seconds (rig seconds, s). The time
 remaining is the unfinished part of the planned capture (``hold_s``) of the current
-step plus, for each step still to come, the hold time of the last step of its kind
-(rest, pose, rate; the current step's hold for a kind not seen yet) and the mean rig
-overhead (step duration minus hold: motion and settling) of the steps finished so far.
+step plus, for each step still to come, its planned capture time from the plan (the run's
+:class:`~station.sequence.records.RunStarted` carries every step's hold) and the mean rig
+overhead (step duration minus hold: motion and settling) of the steps finished so far; before
+the first step finished the motion is not known yet and the status says so
+(``remaining_basis``). A run whose start does not carry the plan's holds falls back to the hold
+of the last step of the same kind (rest, pose, rate; the current step's for a kind not seen yet).
+
+Units per hour are counted over a stated window (:data:`RATE_WINDOW_S`, the last hour), not since
+the shift's start: the figure does not fall while the station is idle at the start of a shift.
 
 The shift's figures come from the store's quality tables (:func:`shift_stats`, shift calendar
 :class:`~station.store.quality.ShiftCalendar`), so they include earlier runs and other stations' results in the
@@ -40,6 +46,8 @@ from sqlalchemy import and_, case, func, select
 from station.sequence.records import (
     Measured,
     Outcome,
+    PromptAnswered,
+    PromptShown,
     Record,
     RigReading,
     RunFinished,
@@ -53,8 +61,12 @@ from station.store.models import QualityResult
 from station.store.models import Station as StationRow
 from station.store.quality import ShiftCalendar
 from station.web.listing import list_runs
-from station.web.models import RigState, RunSummary, ShiftStats, SlotStatus, StationStatus, StepProgress
+from station.web.models import PromptStatus, RigState, RunSummary, ShiftStats, SlotStatus, StationStatus, StepProgress
 from station.web.models.status import StationState
+from station.web.verdicts import Missed, plain_reason
+
+#: The window of the units-per-hour figure (wall-clock s): the last hour.
+RATE_WINDOW_S = 3600.0
 
 
 def shift_start(now: datetime, shifts: ShiftCalendar | None = None) -> tuple[datetime, str]:
@@ -78,21 +90,26 @@ def shift_stats(db: Database, now: datetime | None = None, station: str | None =
     the database, or ``station``). Definitions: :mod:`station.store.quality_index` (tested, first pass)."""
     now = now if now is not None else datetime.now(UTC)
     since, name = shift_start(now, shifts)
+    window_start = now - timedelta(seconds=RATE_WINDOW_S)
     q = QualityResult
     first = q.attempt == 1
+    shift_q = select(func.count(), func.sum(case((q.tested, 0), else_=1)),
+                     func.count(func.distinct(case((q.tested, q.unit_id)))), func.sum(case((first, 1), else_=0)),
+                     func.sum(case((and_(first, q.outcome == Outcome.PASS.value), 1), else_=0))
+                     ).where(q.started_at >= since, q.started_at <= now)
+    window_q = select(func.count(func.distinct(q.unit_id))).where(q.tested, q.started_at >= window_start,
+                                                                  q.started_at <= now)
+    if station is not None:
+        shift_q = shift_q.join(StationRow, q.station_id == StationRow.id).where(StationRow.name == station)
+        window_q = window_q.join(StationRow, q.station_id == StationRow.id).where(StationRow.name == station)
     with db.transaction() as s:
-        stmt = select(func.count(), func.sum(case((q.tested, 0), else_=1)),
-                      func.count(func.distinct(case((q.tested, q.unit_id)))), func.sum(case((first, 1), else_=0)),
-                      func.sum(case((and_(first, q.outcome == Outcome.PASS.value), 1), else_=0))
-                      ).where(q.started_at >= since, q.started_at <= now)
-        if station is not None:
-            stmt = stmt.join(StationRow, q.station_id == StationRow.id).where(StationRow.name == station)
-        results, not_tested, units, first_tested, first_pass = (int(x or 0) for x in s.execute(stmt).one())
-    hours = max((now - since).total_seconds() / 3600.0, 1.0 / 60.0)
+        results, not_tested, units, first_tested, first_pass = (int(x or 0) for x in s.execute(shift_q).one())
+        in_window = int(s.scalar(window_q) or 0)
     return ShiftStats(shift=name, since=since.isoformat(), results=results, not_tested=not_tested,
                       units_tested=units, first_pass_units=first_tested,
                       first_pass_yield=first_pass / first_tested if first_tested else None,
-                      units_per_hour=units / hours)
+                      units_per_hour=in_window * 3600.0 / RATE_WINDOW_S, rate_window_s=RATE_WINDOW_S,
+                      units_in_window=in_window)
 
 
 def _aware(t: datetime) -> datetime:
@@ -119,6 +136,9 @@ class _Live:
     rig_state: RigState | None = None  # the rig's last reading in this run
     slots: list[SlotStatus] = field(default_factory=list)
     outcome: str | None = None
+    holds_s: tuple[float, ...] = ()  # every step's planned capture (s), from the run's start
+    prompt: PromptStatus | None = None
+    missed: dict[int, list[Missed]] = field(default_factory=dict)  # slot -> limit checks it did not pass
 
 
 def _kind_of(step_name: str) -> str:
@@ -149,6 +169,8 @@ class LiveStatus:
         """Starts a run when the API is asked to (returns its run id); None: the station cannot start runs."""
         self.on_abort: Callable[[str], bool] | None = None
         """Aborts the run with this id (False: no such run); None: the station cannot abort runs."""
+        self.nests = 0
+        """Nests of the station's fixture (0: unknown); set by the server that runs the station."""
 
     @property
     def version(self) -> int:
@@ -202,10 +224,17 @@ class LiveStatus:
         lv = self._live
         if isinstance(r, RunStarted):
             self._live = lv = _Live(state="running", run_id=r.run_id, station=r.station, rig=r.rig, steps=r.steps,
-                                    t_s=r.t_s, step_started_t_s=r.t_s,
+                                    t_s=r.t_s, step_started_t_s=r.t_s, holds_s=r.holds_s,
                                     slots=[SlotStatus(slot=k, sensor=s) for k, s in enumerate(r.sensors)])
             for sl in lv.slots:
-                sl.state = "measuring"
+                sl.state = "reading serial…"
+        elif isinstance(r, PromptShown):
+            if r.run_id == lv.run_id:
+                lv.prompt = PromptStatus(prompt_id=r.prompt_id, kind=r.kind, text=r.text, nests=list(r.nests),
+                                         timeout_s=r.timeout_s, shown_at=self._now().isoformat())
+        elif isinstance(r, PromptAnswered):
+            if lv.prompt is not None and lv.prompt.prompt_id == r.prompt_id:
+                lv.prompt = None
         elif isinstance(r, RigReading):
             if r.run_id == lv.run_id:
                 lv.rig_state = RigState(roll_deg=round(r.roll_deg, 3), pitch_deg=round(r.pitch_deg, 3),
@@ -215,6 +244,9 @@ class LiveStatus:
             lv.step_index, lv.step_name, lv.step_kind = r.index, r.name, r.kind
             lv.step_hold_s, lv.step_started_t_s, lv.t_s = r.hold_s, r.t_s, r.t_s
             lv.hold_by_kind[r.kind] = r.hold_s
+            for sl in lv.slots:
+                if sl.state == "reading serial…" and sl.verdict is None:
+                    sl.state = "measuring"
         elif isinstance(r, StepFinished):
             lv.t_s = r.t_s
             lv.steps_done = r.index + 1
@@ -231,10 +263,13 @@ class LiveStatus:
             m = r.measurement
             if not m.passed and r.step != "limits":
                 sl.state = f"{r.step}: {m.name} = {m.value:.4g} out of limits"
+            if not m.passed and not m.link:
+                lv.missed.setdefault(r.slot, []).append(Missed.of(m))
         elif isinstance(r, UnitFinished):
             sl = self._slot(r.slot)
             sl.serial = r.serial or sl.serial
             sl.verdict, sl.message, sl.state = r.outcome.value, r.message, "done"
+            sl.reason = plain_reason(r.outcome.value, r.message, tuple(lv.missed.get(r.slot, ())))
         elif isinstance(r, RunFinished):
             lv.t_s = r.t_s
             lv.outcome = r.outcome.value
@@ -243,6 +278,8 @@ class LiveStatus:
                 if sl.verdict is None:
                     sl.serial = u.serial or sl.serial
                     sl.verdict, sl.message, sl.state = u.outcome.value, u.message, "done"
+                    sl.reason = plain_reason(u.outcome.value, u.message, tuple(lv.missed.get(u.slot, ())))
+            lv.prompt = None
             lv.state = "fault" if r.outcome == Outcome.ERROR and not r.rig_at_rest else "idle"
             lv.message = r.message
             lv.step_name, lv.step_kind = "", ""
@@ -258,24 +295,42 @@ class LiveStatus:
         with self._lock:
             lv = self._live
             total = len(lv.steps)
-            remaining: float | None = None
-            if lv.state == "running" and total:
-                overhead = sum(lv.done_overheads) / len(lv.done_overheads) if lv.done_overheads else 0.0
-                current = 0.0
-                if lv.step_index >= lv.steps_done:  # a step is under way
-                    current = max(lv.step_hold_s - (lv.t_s - lv.step_started_t_s), 0.0)
-                future = lv.steps[max(lv.step_index + 1, lv.steps_done):]
-                remaining = current + sum(
-                    lv.hold_by_kind.get(_kind_of(name), lv.step_hold_s) + overhead for name in future)
+            remaining, basis = self._remaining(lv) if lv.state == "running" and total else (None, "")
             return StationStatus(
                 version=self._version, state=lv.state, run_id=lv.run_id, station=lv.station, rig=lv.rig,
                 message=lv.message, outcome=lv.outcome,
                 step=StepProgress(index=lv.step_index, name=lv.step_name, kind=lv.step_kind, hold_s=lv.step_hold_s),
                 steps_done=lv.steps_done, steps_total=total,
                 progress=lv.steps_done / total if total else (1.0 if lv.outcome else 0.0), remaining_s=remaining,
-                slots=[s.model_copy() for s in lv.slots], shift=shift, recent_runs=recent,
+                remaining_basis=basis, slots=[s.model_copy() for s in lv.slots], shift=shift, recent_runs=recent,
                 rig_state=lv.rig_state if lv.state == "running" else None,  # only while a run holds the rig
+                prompt=lv.prompt, nests=self.nests or len(lv.slots),
             )
+
+    @staticmethod
+    def _remaining(lv: _Live) -> tuple[float, str]:
+        """Estimated station clock seconds until the steps end, and how it was estimated (see the module docstring)."""
+        n_done = len(lv.done_overheads)
+        overhead = sum(lv.done_overheads) / n_done if n_done else 0.0
+        current = 0.0
+        if lv.step_index >= lv.steps_done:  # a step is under way
+            current = max(lv.step_hold_s - (lv.t_s - lv.step_started_t_s), 0.0)
+        first = max(lv.step_index + 1, lv.steps_done)
+        future = lv.steps[first:]
+        if len(lv.holds_s) == len(lv.steps):
+            holds = sum(lv.holds_s[first:])
+            basis = "estimated from the plan's capture times"
+        else:  # a start that did not carry the plan: the hold of the last step of the same kind
+            holds = sum(lv.hold_by_kind.get(_kind_of(name), lv.step_hold_s) for name in future)
+            basis = "estimated from the capture times of the steps seen so far"
+        motion = overhead * len(future)
+        if lv.steps_done >= len(lv.steps):
+            return 0.0, "the rig's steps are done; the fit, the limits and writing the units are not estimated"
+        if n_done:
+            basis += f" + rig motion {overhead:.0f} s per step (mean of {n_done} finished step(s))"
+        else:
+            basis += "; rig motion not measured yet (known after the first step)"
+        return current + holds + motion, basis
 
     def snapshot(self, *, with_store: bool = True) -> dict[str, Any]:
         """:meth:`status` as plain JSON-able data (the status page and its server-sent events)."""

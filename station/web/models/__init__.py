@@ -5,7 +5,7 @@ rad/s, s), and every field's description names its unit where it has one.
 """
 
 from station.web.models.common import ErrorDetail, problem
-from station.web.models.diagnosis import (
+from station.web.models.diagnosis_api import (
     DiagnosisFailed,
     DiagnosisPending,
     DiagnosisQueueFull,
@@ -21,7 +21,7 @@ from station.web.models.runs import (
     RunUnitOutcome,
     StartRunRequest,
 )
-from station.web.models.status import RigState, ShiftStats, SlotStatus, StationStatus, StepProgress
+from station.web.models.status import PromptStatus, RigState, ShiftStats, SlotStatus, StationStatus, StepProgress
 from station.web.models.units import (
     DispositionEntry,
     EepromWriteEntry,
@@ -35,7 +35,7 @@ from station.web.models.units import (
 __all__ = [
     "AllanNoise", "CalibrationParameters", "DiagnosisFailed", "DiagnosisPending", "DiagnosisQueueFull",
     "DiagnosisReady", "DiagnosisSummary", "DispositionEntry", "EepromWriteEntry", "ErrorDetail", "LimitCheckResult",
-    "RigState",
+    "PromptStatus", "RigState",
     "RunAbortAccepted", "RunAccepted", "RunFilter", "RunSummary", "RunUnitOutcome", "ShiftStats", "SlotStatus",
     "StartRunRequest", "StationStatus", "StepProgress", "TriadCalibration", "UnitFilter", "UnitOverview",
     "UnitRecord", "UnitRunResult", "problem",

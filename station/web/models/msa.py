@@ -30,7 +30,8 @@ class MsaParameter(BaseModel):
     verdict: str | None = Field(default=None, description="acceptable (<10 %), conditional (<=30 %), unacceptable, "
                                                           "or not determined")
     pooled_interaction: bool | None = Field(default=None, description="the interaction was pooled into the error")
-    components: list[MsaComponent] = Field(default_factory=list)
+    components: list[MsaComponent] = Field(default_factory=list, description="the sources of variation (empty: "
+                                                                              "not analysed)")
 
 
 class MsaStudy(BaseModel):
@@ -39,9 +40,9 @@ class MsaStudy(BaseModel):
     format: str = Field(description="station-msa/1")
     by: str = Field(description="what the appraisers are: nest, rig or operator")
     parts: list[str] = Field(description="the parts' serials")
-    appraisers: list[str]
+    appraisers: list[str] = Field(description="the appraisers: nests ('nest 1', ...), rigs or operators")
     confidence_level: float = Field(description="two-sided level of the intervals")
-    parameters: list[MsaParameter]
+    parameters: list[MsaParameter] = Field(description="one study per limited parameter")
 
 
 __all__ = ["MsaComponent", "MsaParameter", "MsaStudy"]

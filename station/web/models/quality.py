@@ -109,6 +109,12 @@ class CapabilityEntry(BaseModel):
     max: float = Field(description="largest value (unit)")
     rules: list[int] = Field(default_factory=list, description="run rules (Nelson 1-8) violated on the daily "
                                                                "X-bar chart")
+    enough: bool = Field(default=True, description="n reaches the minimum sample of the capability indices (25 "
+                                                   "values); below it the page says 'too few units' instead of "
+                                                   "Cp/Cpk/Pp/Ppk and does not flag the parameter for its Cpk")
+    cpk_low: float | None = Field(default=None, description="lower end of the 95 % confidence interval of Cpk (1; "
+                                                            "Bissell's approximation); null without a Cpk")
+    cpk_high: float | None = Field(default=None, description="upper end of the 95 % confidence interval of Cpk (1)")
 
 
 class ChartPointEntry(BaseModel):

@@ -49,7 +49,14 @@ class StartRunRequest(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     operator: str | None = Field(default=None, max_length=100,
-                                 description="who starts the run, recorded on it (default: the station's operator)")
+                                 description="who starts the run, recorded on it (default: the station's operator; "
+                                             "a signed-in operator's own name wins)")
+    lot: str | None = Field(default=None, max_length=40, pattern=r"^[A-Za-z0-9][A-Za-z0-9._/-]{0,39}$",
+                            description="the units' lot, recorded on the run (default: the station's)")
+    serials: dict[int, str] = Field(default_factory=dict,
+                                    description="nest (numbered from 1) -> the serial scanned for it; each is "
+                                                "checked as a scan is (422 when one is refused) and the unit in the "
+                                                "nest must report it, or it is REFUSED before anything moves")
 
 
 class RunAccepted(BaseModel):

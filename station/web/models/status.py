@@ -26,6 +26,8 @@ class SlotStatus(BaseModel):
                                               "step and value that went out of limits")
     verdict: str | None = Field(None, description="the unit's outcome (PASS, FAIL, ERROR, ABORTED); null until known")
     message: str = Field("", description="why the verdict is what it is ('' when there is nothing to say)")
+    reason: str = Field(default="", description="the verdict in plain words for the operator: what it means and "
+                                                "where the unit goes ('' until the verdict)")
 
 
 class RigState(BaseModel):
@@ -40,6 +42,19 @@ class RigState(BaseModel):
     status: str = Field(description="the rig's status flags, e.g. 'MOVING|REMOTE'")
     fault_code: int = Field(description="latched fault code (0: none)")
     t_s: float = Field(description="station clock time of the reading (s)")
+
+
+class PromptStatus(BaseModel):
+    """A prompt of the station waiting for the operator's answer (``POST /api/prompts/{prompt_id}``)."""
+
+    model_config = ConfigDict(frozen=True)
+
+    prompt_id: str = Field(description="the prompt's id within the run")
+    kind: str = Field(description="load, close-lid, unload or confirm")
+    text: str = Field(description="what the operator is asked to do, in plain words")
+    nests: list[int] = Field(description="the nests concerned (numbered from 1; empty: the whole fixture)")
+    timeout_s: float = Field(description="how long the station waits for the answer (wall-clock s)")
+    shown_at: str = Field(description="when the prompt was shown (UTC, ISO 8601)")
 
 
 class StepProgress(BaseModel):
@@ -66,7 +81,12 @@ class ShiftStats(BaseModel):
     first_pass_units: int = Field(description="units whose first tested result was in this shift")
     first_pass_yield: float | None = Field(description="fraction of those that passed that first test (1); null if "
                                                        "there were none")
-    units_per_hour: float = Field(description="distinct units tested per hour since the shift started (1/h)")
+    units_per_hour: float = Field(description="distinct units tested in the last ``rate_window_s`` seconds, per hour "
+                                              "(1/h); not since the shift's start, so it does not fall while idle "
+                                              "at the start of a shift")
+    rate_window_s: float = Field(default=3600.0, description="the window of ``units_per_hour``: the last this many "
+                                                             "seconds (wall clock, s)")
+    units_in_window: int = Field(default=0, description="distinct units tested in that window")
 
 
 class StationStatus(BaseModel):
@@ -86,11 +106,15 @@ class StationStatus(BaseModel):
     progress: float = Field(description="fraction of the plan's steps finished (1)")
     remaining_s: float | None = Field(description="estimated time until the run ends (station clock s); null when not "
                                                   "running")
+    remaining_basis: str = Field(default="", description="how ``remaining_s`` was estimated, in words (the "
+                                                         "plan's capture times, the rig motion measured so far)")
     slots: list[SlotStatus] = Field(description="one tile per fixture slot")
     rig_state: RigState | None = Field(description="the rig's last reading in this run; null before the first")
     shift: ShiftStats | None = Field(description="the current shift's figures; null without a database (or "
                                                      "when the store was not read)")
     recent_runs: list[RunSummary] = Field(description="the newest runs (at most 10), newest first")
+    prompt: PromptStatus | None = Field(default=None, description="the prompt waiting for the operator; null when none")
+    nests: int = Field(default=0, description="nests of the station's fixture (0: unknown, a read-only server)")
 
 
-__all__ = ["RigState", "ShiftStats", "SlotStatus", "StationState", "StationStatus", "StepProgress"]
+__all__ = ["PromptStatus", "RigState", "ShiftStats", "SlotStatus", "StationState", "StationStatus", "StepProgress"]

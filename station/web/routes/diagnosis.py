@@ -2,7 +2,7 @@
 ``/units/{serial}/diagnosis.svg`` (loaded by the unit page) and the diagnosis page ``/units/{serial}/diagnosis``
 (the typed summary, :class:`station.web.models.DiagnosisSummary`, as tables; it reloads itself while pending).
 
-A diagnosis is computed once per recording in the background (:class:`station.web.diagnosis.DiagnosisService`):
+A diagnosis is computed once per recording in the background (:class:`station.web.diagnosis_worker.DiagnosisService`):
 both answer 202 with ``Retry-After`` until it is ready, 422 when the recording cannot be diagnosed and 503 when
 too many recordings are waiting.
 """
@@ -16,7 +16,7 @@ from fastapi.responses import HTMLResponse, JSONResponse, Response
 
 from station.web import plots
 from station.web.context import Web
-from station.web.diagnosis import ERROR, PENDING, DiagnosisBusy
+from station.web.diagnosis_worker import ERROR, PENDING, READY, DiagnosisBusy
 from station.web.lookup import recording_or_404
 from station.web.models import (
     DiagnosisFailed,
@@ -82,9 +82,8 @@ def api_unit_diagnosis(web: Web, serial: str, run_id: RunQuery = None) -> Diagno
         return _json(DiagnosisPending(status=PENDING, **head), 202, {**_RETRY, **_NO_STORE})
     if result.status == ERROR:
         return _json(DiagnosisFailed(status=ERROR, detail=result.error or "", **head), 422, {})
-    report = result.report or {}
-    return DiagnosisReady(status=result.status, **head, elapsed_s=result.elapsed_s, report=report,
-                          summary=DiagnosisSummary.of(report))
+    return DiagnosisReady(status=READY, **head, elapsed_s=result.elapsed_s,
+                          report=result.json_report() or {}, summary=DiagnosisSummary.of(result.report))
 
 
 @router.get("/units/{serial}/diagnosis", response_class=HTMLResponse, include_in_schema=False)
@@ -104,7 +103,7 @@ def unit_diagnosis_page(request: Request, web: Web, serial: str, run_id: RunQuer
     if result.status == ERROR:
         context.update(state=ERROR, error=result.error or "")
         return templates.TemplateResponse(request, "diagnosis.html", context, status_code=422)
-    context.update(state=result.status, summary=DiagnosisSummary.of(result.report or {}), elapsed_s=result.elapsed_s)
+    context.update(state=result.status, summary=DiagnosisSummary.of(result.report), elapsed_s=result.elapsed_s)
     return templates.TemplateResponse(request, "diagnosis.html", context)
 
 

@@ -20,7 +20,7 @@ from station.kernel.display import display_of_check, limits_identity
 from station.store import quality as q
 from station.store.models import QualityDaily, QualityYield, Run
 from station.store.models import Station as StationRow
-from station.store.spc import RULES
+from station.store.spc import MIN_CAPABILITY_N, RULES, cpk_interval
 from station.web import charts
 from station.web.context import Web
 from station.web.labels import parameter_label, unit_label
@@ -67,11 +67,14 @@ def _capability(web: Web, query: QualityQuery,
     out = []
     for c in q.capabilities(web.db, query.filter()):
         k = c.cap
+        ci = cpk_interval(k.cpk, k.n)
         out.append(CapabilityEntry(name=c.name, label=parameter_label(c.name), unit=c.unit,
                                    limits_versions=c.limits_versions, n=k.n, mean=k.mean,
                                    sigma_within=k.sigma_within, sigma_overall=k.sigma_overall, low=k.low, high=k.high,
                                    cp=k.cp, cpk=k.cpk, pp=k.pp, ppk=k.ppk, n_below=c.n_below, n_above=c.n_above,
-                                   min=c.vmin, max=c.vmax, rules=list((rules or {}).get(c.name, ()))))
+                                   min=c.vmin, max=c.vmax, rules=list((rules or {}).get(c.name, ())),
+                                   enough=k.n >= MIN_CAPABILITY_N, cpk_low=ci[0] if ci else None,
+                                   cpk_high=ci[1] if ci else None))
     return out
 
 
@@ -158,7 +161,7 @@ def quality_page(request: Request, web: Web, query: Filters) -> HTMLResponse:
     chart_list = _charts(web, query)
     rules = {c.name: c.chart.violations for c in chart_list}
     caps = _capability(web, query, rules)
-    flagged = [c for c in caps if c.rules or (c.cpk is not None and c.cpk < CPK_TARGET)]
+    flagged = [c for c in caps if c.rules or (c.enough and c.cpk is not None and c.cpk < CPK_TARGET)]
     shown = {c.name for c in flagged}
     svgs = {c.name: charts.control_chart_svg(_displayed_chart(c)) for c in chart_list if c.name in shown}
     days = tables["day"].rows
@@ -169,7 +172,8 @@ def quality_page(request: Request, web: Web, query: Filters) -> HTMLResponse:
     qs = "&".join(f"{k}={v}" for k, v in params.multi_items() if v)
     return templates.TemplateResponse(request, "quality.html", {
         "query": query, "qs": qs, "tables": tables, "caps": [_displayed(c) for c in caps], "svgs": svgs,
-        "trend": trend, "rules": RULES, "cpk_target": CPK_TARGET, "shifts": cal.text(), "definitions": DEFINITIONS,
+        "trend": trend, "rules": RULES, "cpk_target": CPK_TARGET, "min_n": MIN_CAPABILITY_N, "shifts": cal.text(),
+        "definitions": DEFINITIONS,
         "choices": choices, "limits_labels": _limits_labels(web, choices["limits"]), "unit_label": unit_label,
         "flagged": flagged,
     })

@@ -29,7 +29,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import MISSING, dataclass, field, fields
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 
@@ -61,7 +61,7 @@ class SimulatorInput:
     def __init__(self, baseline: Baseline, rotation_known: Callable[[], bool]) -> None:
         self.baseline = baseline
         self.rotation_known = rotation_known
-        self.coefficients: dict[str, np.ndarray] = {name: np.zeros(3) for name in _TRUTH_VECTORS}
+        self.coefficients: dict[str, Any] = {name: np.zeros(3) for name in _TRUTH_VECTORS}
         self.g_sensitivity = np.nan_to_num(np.asarray(baseline.params.gyro.g_sensitivity, dtype=float)).copy()
         self.time_offset_s = dict.fromkeys(SENSORS, 0.0)
         self.tilt_force: np.ndarray | None = None
@@ -114,7 +114,7 @@ class Identifiability:
     Where the rules act: ``needs`` in the regressors (None or zeros: a rejection ``not testable``);
     ``profile_tc`` in :meth:`station.diagnose.likelihood.SensorProblem.test_mean`; ``base_twin`` and the
     pairs of candidates in :func:`station.diagnose.selection.select`; ``rig_free`` in
-    :mod:`station.diagnose.rigfree` (the candidates a hand-held recording tests, and the reasons for the
+    :mod:`station.diagnose.rigfree_diagnosis` (the candidates a hand-held recording tests, and the reasons for the
     others, :func:`rig_free_testable`). Which candidates a recording cannot
     tell apart (e.g. ``scale_asymmetry`` and ``scale_nonlinearity_even`` with fewer than three input
     magnitudes) is decided from the data, not from the plan: two candidates whose fitted signals explain
@@ -169,7 +169,7 @@ class Effect:
         engineering: a custom conversion of (theta, cov) to the report's parameters (replaces the generic one).
         extra: additional engineering values from theta (e.g. the lever arm's length).
         consistency: the splits of the recording its effect-specific consistency checks compare its
-            parameters across (:data:`station.diagnose.consistency.PARTS` names).
+            parameters across (:data:`station.diagnose.finding_consistency.PARTS` names).
         not_checked: why it has no consistency check (empty where it has one).
         simulate: the simulator mapping of fitted parameters, None when not simulated.
         not_simulated: why it is not simulated (empty when it is).
@@ -198,6 +198,10 @@ class Effect:
     extra: Callable[[np.ndarray], dict[str, object]] | None = None
     consistency: tuple[str, ...] = ()
     not_checked: str = ""
+
+    def regressors(self, baseline: Baseline, sd: SensorData) -> np.ndarray | None:
+        """The per-sample regressors (n, 3, p) of a mean candidate on ``sd`` (None: not a mean term, or no data)."""
+        return None if self.build is None else self.build(baseline, sd)
 
 
 def _both(accel: tuple[float, str], gyro: tuple[float, str]) -> dict[str, tuple[float, str]]:

@@ -6,7 +6,7 @@ finding, the recording's blocks are split in two parts that each reach the effec
 different way, and the parameters are compared between the parts:
 
 Which splits an effect is checked on is part of its registry entry
-(:attr:`station.diagnose.registry.Effect.consistency`; ``not_checked`` says why an effect has none):
+(:attr:`station.diagnose.effect_registry.Effect.consistency`; ``not_checked`` says why an effect has none):
 
 * ``tumbles_vs_ramps`` (``time_offset``): the rig's tumbles (moves that turn gravity in the sensor
   frame) against the rate ramps and other changes of the reference (the table spinning up and down
@@ -48,8 +48,10 @@ import numpy as np
 from scipy import linalg, stats
 
 from station.diagnose import robust
-from station.diagnose.likelihood import RCOND
-from station.diagnose.registry import REGISTRY, SHAPES, unit_factor
+from station.diagnose.effect_registry import REGISTRY, SHAPES, unit_factor
+from station.diagnose.likelihood import RCOND, SensorProblem
+from station.diagnose.residuals import Baseline
+from station.diagnose.results import CheckEntry, Rejection, Unexplained
 from station.diagnose.robust import AX
 from station.session.model import Kind
 
@@ -135,26 +137,25 @@ class Check:
             return f"{label}: not checked"
         return f"{label}: {self.result} (p {self.p_value:.2g})"
 
-    def to_dict(self) -> dict[str, Any]:
+    def entry(self) -> CheckEntry:
+        """This check as the finding's report entry."""
         if self.split is None:
-            return {"check": None, "result": "not checked", "reason": self.reason}
-        a, b = PARTS[self.split]
-        out: dict[str, Any] = {"check": self.split, "parts": [a, b], "result": self.result}
+            return CheckEntry(None, "not checked", reason=self.reason)
+        parts = PARTS[self.split]
         if not self.checked:
-            out["reason"] = self.reason
-            return out
-        out.update({"chi2": round(self.chi2, 2), "dof": self.dof, "critical_chi2": round(self.critical, 2),
-                    "p_value": float(f"{self.p_value:.3g}"), "power_chi2": round(self.power_chi2, 1),
-                    "tolerance": TOLERANCE})
+            return CheckEntry(self.split, self.result, parts, reason=self.reason)
+        reason = None
         if self.result == "not informative":
-            out["reason"] = (f"{b} could not have shown a disagreement as large as the finding "
-                             f"(power chi2 {self.power_chi2:.1f} <= {self.critical:.1f})")
-        if self.part_a is not None:
-            out["part_a"], out["part_b"] = self.part_a, self.part_b
-        return out
+            reason = (f"{parts[1]} could not have shown a disagreement as large as the finding "
+                      f"(power chi2 {self.power_chi2:.1f} <= {self.critical:.1f})")
+        return CheckEntry(self.split, self.result, parts, chi2=round(self.chi2, 2), dof=self.dof,
+                          critical_chi2=round(self.critical, 2), p_value=float(f"{self.p_value:.3g}"),
+                          power_chi2=round(self.power_chi2, 1), tolerance=TOLERANCE, reason=reason,
+                          part_a=self.part_a, part_b=self.part_b if self.part_a is not None else None)
 
 
-def _block_masks(prob: Any, baseline: Any, split: str, name: str, energy: np.ndarray) -> np.ndarray | None:
+def _block_masks(prob: SensorProblem, baseline: Baseline, split: str, name: str,
+                 energy: np.ndarray) -> np.ndarray | None:
     """Block mask of part B of ``split`` for finding ``name`` (energy: its whitened signal energy per block)."""
     sd = prob.sd
     session = baseline.session
@@ -216,7 +217,7 @@ def _part_values(name: str, sensor: str, x_rest: np.ndarray, wa: np.ndarray, wb:
 Fitted = tuple[Any, np.ndarray, np.ndarray, int, np.ndarray]
 
 
-def final_fit(prob: Any) -> Fitted:
+def final_fit(prob: SensorProblem) -> Fitted:
     """:data:`Fitted` of ``prob``'s accepted terms under the noise ``prob`` has now."""
     chols, yw = prob.whitened()
     x0, nbase = prob.design(chols, prob.accepted)
@@ -228,7 +229,8 @@ def _not_checked(name: str, sensor: str, split: str, reason: str) -> Check:
     return Check(name, sensor, split, critical=float(stats.chi2.isf(ALPHA, 1)), reason=reason)
 
 
-def check_finding(prob: Any, baseline: Any, j: int, name: str, split: str, fitted: Fitted | None = None) -> Check:
+def check_finding(prob: SensorProblem, baseline: Baseline, j: int, name: str, split: str,
+                  fitted: Fitted | None = None) -> Check:
     """The consistency check ``split`` of accepted term ``j`` (named ``name``) of ``prob``'s final model; the
     noise as ``prob`` has it now (the caller inflates it by the dispersion). ``fitted``: :func:`final_fit` where
     the caller has it."""
@@ -276,10 +278,11 @@ def check_finding(prob: Any, baseline: Any, j: int, name: str, split: str, fitte
     return Check(name, sd.sensor, split, chi2, dof, float(stats.chi2.isf(ALPHA, dof)), power, part_a, part_b)
 
 
-def check(prob: Any, baseline: Any, names: list[str], fitted: Fitted | None = None) -> dict[str, list[Check]]:
+def check(prob: SensorProblem, baseline: Baseline, names: list[str],
+          fitted: Fitted | None = None) -> dict[str, list[Check]]:
     """All consistency checks of the accepted findings ``names`` (order of ``prob.accepted``; nuisance terms,
     prefixed ``~``, are not checked), the splits each effect's registry entry names
-    (:attr:`station.diagnose.registry.Effect.consistency`), on one sensor's final model under the noise ``prob``
+    (:attr:`station.diagnose.effect_registry.Effect.consistency`), on one sensor's final model under the noise ``prob``
     has (``fitted``: :func:`final_fit` where the caller has it); an effect without checks gets one ``not checked``
     entry with the registry's reason."""
     out: dict[str, list[Check]] = {}
@@ -304,23 +307,20 @@ def not_checked(name: str, sensor: str) -> list[Check]:
     return [Check(name, sensor, None, reason=reason)]
 
 
-def review(prob: Any, baseline: Any, names: list[str], gains: dict[str, float] | None = None
-           ) -> tuple[dict[str, list[Check]], dict[str, Any] | None, robust.Unexplained | None]:
+def review(prob: SensorProblem, baseline: Baseline, names: list[str], gains: dict[str, float] | None = None
+           ) -> tuple[dict[str, list[Check]], Rejection | None, Unexplained | None]:
     """:func:`check` under the final model's dispersion (:func:`station.diagnose.robust.dispersion`), the
     rejection entry of the worst failing finding (None when every informative check passes) and, where that
     finding's drop-one chi^2 gain (``gains``) shows its structure above the noise, where that structure stays
     unexplained (:func:`locate`)."""
     phi, table = robust.dispersion(prob)
-    saved = robust._with_inflated_noise(prob, phi)
-    try:
+    with prob.inflated_noise(phi):
         fitted = final_fit(prob)
         checks = check(prob, baseline, names, fitted)
         worst = failed([c for cs in checks.values() for c in cs])
         where = None
-        if worst is not None and (gains or {}).get(worst.effect, 0.0) > 0.0:
+        if worst is not None and gains is not None and gains.get(worst.effect, 0.0) > 0.0:
             where = locate(prob, names.index(worst.effect), worst, gains[worst.effect], table, fitted)
-    finally:
-        robust._restore_noise(prob, saved)
     return checks, (rejection(worst) if worst is not None else None), where
 
 
@@ -328,8 +328,8 @@ def review(prob: Any, baseline: Any, names: list[str], gains: dict[str, float] |
 LOCATE_SHARE = 0.1
 
 
-def locate(prob: Any, j: int, c: Check, gain: float, table: dict[str, list[float]],
-           fitted: Fitted | None = None) -> robust.Unexplained:
+def locate(prob: SensorProblem, j: int, c: Check, gain: float, table: dict[str, list[float]],
+           fitted: Fitted | None = None) -> Unexplained:
     """Where the structure of accepted term ``j``, rejected by check ``c``, lies: the axes and segment kinds
     holding at least :data:`LOCATE_SHARE` of its whitened fitted signal energy; ``gain``: its chi^2 gain;
     ``fitted``: :func:`final_fit` where the caller has it."""
@@ -341,13 +341,13 @@ def locate(prob: Any, j: int, c: Check, gain: float, table: dict[str, list[float
     axes = tuple(AX[k] for k in range(3) if energy[:, k].sum() / total >= LOCATE_SHARE)
     kinds = tuple(sorted(Kind(k).label for k in np.unique(prob.sd.kind)
                          if energy[prob.sd.kind == k].sum() / total >= LOCATE_SHARE))
-    a, b = PARTS[c.split]
+    a, b = PARTS[c.split or ""]
     what = f"what the {c.effect} model fits, but {a} and {b} disagree on it"
     if c.part_a and c.part_b:
         def fmt(v: dict[str, Any]) -> str:
             return ", ".join(f"{x:.3g}+-{e:.2g}" for x, e in zip(v["value"], v["std"], strict=False)) + f" {v['unit']}"
         what += f" ({a} {fmt(c.part_a)}; {b} {fmt(c.part_b)})"
-    return robust.Unexplained(c.sensor, axes, kinds, what, table, float(gain))
+    return Unexplained(c.sensor, axes, kinds, what, table, float(gain))
 
 
 def failed(checks: list[Check]) -> Check | None:
@@ -356,13 +356,12 @@ def failed(checks: list[Check]) -> Check | None:
     return max(bad, key=lambda c: c.chi2 / c.critical) if bad else None
 
 
-def rejection(c: Check) -> dict[str, Any]:
-    """The report entry of a finding rejected by check ``c``."""
-    a, b = PARTS[c.split]
-    return {"effect": c.effect, "sensor": c.sensor, "consistency": c.to_dict(),
-            "reason": f"inconsistent between {a} and {b} (chi2 {c.chi2:.1f} > {c.critical:.1f} for {c.dof} "
-                      f"dof, {100 * TOLERANCE:g} % model tolerance): structure the parts disagree on is not "
-                      f"this effect"}
+def rejection(c: Check) -> Rejection:
+    """The rejection of a finding by check ``c``."""
+    a, b = PARTS[c.split or ""]
+    return Rejection(c.effect, c.sensor, f"inconsistent between {a} and {b} (chi2 {c.chi2:.1f} > {c.critical:.1f} "
+                     f"for {c.dof} dof, {100 * TOLERANCE:g} % model tolerance): structure the parts disagree on is "
+                     f"not this effect", {"consistency": c.entry().to_json()})
 
 
 __all__ = [

@@ -1,13 +1,13 @@
 """The diagnosis of a unit's recording in the JSON API (``GET /api/units/{serial}/diagnosis``).
 
-One answer per state of the background diagnosis (see :mod:`station.web.diagnosis`): ready
+One answer per state of the background diagnosis (see :mod:`station.web.diagnosis_worker`): ready
 (200), pending (202), failed (422: the recording cannot be diagnosed), queue full (503).
 
 A ready answer carries the ``station-diagnosis/1`` report as it is and its typed summary for people
 (:class:`DiagnosisSummary`, what the diagnosis page shows): findings with engineering values, their
 uncertainties and units and the confidence, what stays unexplained and where, effects the recording
 cannot tell apart with the rig step that would, and the candidates tested and rejected. The summary is
-read from the report with every key optional, so a report with more (or fewer) fields still gives one.
+read from the typed report (:class:`station.diagnose.results.DiagnosisReport`), attribute by attribute.
 """
 
 from __future__ import annotations
@@ -15,11 +15,14 @@ from __future__ import annotations
 import math
 import re
 from collections.abc import Mapping
-from typing import Annotated, Any, Literal
+from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 from pydantic import BaseModel, Field
 
 from station.web.models.common import Serial
+
+if TYPE_CHECKING:
+    from station.diagnose.results import DiagnosisReport, Finding, Rejection, Unexplained
 
 DiagnosedRun = Annotated[str, Field(description="the run whose recording is diagnosed")]
 SessionSha256 = Annotated[str, Field(description="hex SHA-256 of the recording as the run stored it")]
@@ -44,7 +47,7 @@ class ParameterValue(BaseModel):
 class FindingSummary(BaseModel):
     """An effect the recording supports."""
 
-    effect: str = Field(description="the candidate effect's name (station.diagnose.registry)")
+    effect: str = Field(description="the candidate effect's name (station.diagnose.effect_registry)")
     sensor: str = Field(description="'accel' or 'gyro'")
     axes: list[str] = Field(description="sensor axes the effect acts on")
     parameters: list[ParameterValue] = Field(description="fitted parameters with uncertainties and units")
@@ -107,18 +110,15 @@ class DiagnosisSummary(BaseModel):
     rejected: list[RejectionSummary] = Field(description="candidates tested and not named")
 
     @classmethod
-    def of(cls, report: Mapping[str, Any]) -> DiagnosisSummary:
-        """The summary of a ``station-diagnosis/1`` report (entries that are not objects are skipped)."""
-        def items(key: str) -> list[Mapping[str, Any]]:
-            return [x for x in report.get(key) or () if isinstance(x, Mapping)]
-
-        return cls(findings=[_finding(f) for f in items("findings")],
-                   unexplained=[_unexplained(u) for u in items("unexplained")],
-                   inseparable=[InseparableSummary(effects=[str(e) for e in i.get("effects") or ()],
-                                                   sensor=str(i.get("sensor", "")),
-                                                   rig_step=str(i.get("rig_step") or ""))
-                                for i in items("inseparable")],
-                   rejected=[_rejection(r) for r in items("rejected")])
+    def of(cls, report: DiagnosisReport | None) -> DiagnosisSummary:
+        """The summary of a diagnosis report (empty lists for None)."""
+        if report is None:
+            return cls(findings=[], unexplained=[], inseparable=[], rejected=[])
+        return cls(findings=[_finding(f) for f in report.findings],
+                   unexplained=[_unexplained(u) for u in report.unexplained],
+                   inseparable=[InseparableSummary(effects=list(i.effects), sensor=i.sensor, rig_step=i.rig_step)
+                                for i in report.inseparable],
+                   rejected=[_rejection(r) for r in report.rejected])
 
 
 _UNIT_SUFFIX = re.compile(r"_(mm|ms|deg|dps|mps2|ppm|k|s|m)$", re.IGNORECASE)
@@ -139,6 +139,8 @@ def _value(name: str, d: Mapping[str, Any], unit: str = "") -> ParameterValue:
 
 
 def _parameters(effect: str, params: Mapping[str, Any]) -> list[ParameterValue]:
+    """A finding's parameters (the effect's own shape, :func:`station.diagnose.effect_registry.engineering`) as a
+    flat list: the parameter vector, derived figures, and nested groups (e.g. pose_tilt's pairs)."""
     out = []
     unit = str(params.get("unit") or "")
     if "value" in params:
@@ -160,40 +162,36 @@ def _parameters(effect: str, params: Mapping[str, Any]) -> list[ParameterValue]:
     return out
 
 
-def _finding(f: Mapping[str, Any]) -> FindingSummary:
-    conf = f.get("confidence") if isinstance(f.get("confidence"), Mapping) else {}
-    ev = f.get("evidence") if isinstance(f.get("evidence"), Mapping) else {}
-    cal = f.get("calibration") if isinstance(f.get("calibration"), Mapping) else {}
-    params = f.get("parameters") if isinstance(f.get("parameters"), Mapping) else {}
-    effect = str(f.get("effect", ""))
+def _finding(f: Finding) -> FindingSummary:
+    conf, selected, cal = f.confidence, f.selection_test, f.calibration
     return FindingSummary(
-        effect=effect, sensor=str(f.get("sensor", "")), axes=[str(a) for a in f.get("axes") or ()],
-        parameters=_parameters(effect, params), confidence=conf.get("level"),
-        quasi_gain_chi2=_num(conf.get("quasi_gain_chi2")), threshold_chi2=_num(conf.get("threshold")),
-        bic_gain=_num(ev.get("bic_gain")), heldout_before=_num(ev.get("heldout_before")),
-        heldout_after=_num(ev.get("heldout_after")),
-        compensated=cal.get("compensated") if isinstance(cal.get("compensated"), bool) else None,
-        calibration_note=cal.get("note"))
+        effect=f.effect, sensor=f.sensor, axes=list(f.axes), parameters=_parameters(f.effect, f.parameters),
+        confidence=None if conf is None else conf.level,
+        quasi_gain_chi2=None if conf is None else _num(conf.quasi_gain_chi2),
+        threshold_chi2=None if conf is None else _num(conf.threshold),
+        bic_gain=None if selected is None else _num(selected.bic_gain),
+        heldout_before=None if selected is None else _num(selected.heldout_before),
+        heldout_after=None if selected is None else _num(selected.heldout_after),
+        compensated=None if cal is None else cal.compensated, calibration_note=None if cal is None else cal.note)
 
 
-def _unexplained(u: Mapping[str, Any]) -> UnexplainedSummary:
-    periodic = u.get("periodic") if isinstance(u.get("periodic"), Mapping) else {}
+def _unexplained(u: Unexplained) -> UnexplainedSummary:
+    periodic = u.periodic or {}
+    amplitude = periodic.get("amplitude")
     return UnexplainedSummary(
-        sensor=str(u.get("sensor", "")), axes=[str(a) for a in u.get("axes") or ()],
-        segment_kinds=[str(k) for k in u.get("segment_kinds") or ()], covariate=str(u.get("covariate") or ""),
-        excess_chi2=_num(u.get("excess_chi2")),
-        amplitude=_num(periodic["amplitude"]) if isinstance(periodic.get("amplitude"), list) else None,
+        sensor=u.sensor, axes=list(u.axes), segment_kinds=list(u.segment_kinds), covariate=u.covariate,
+        excess_chi2=_num(u.excess_chi2), amplitude=_num(amplitude) if isinstance(amplitude, list) else None,
         unit=periodic.get("unit"))
 
 
-def _rejection(r: Mapping[str, Any]) -> RejectionSummary:
-    d = r.get("detectable_from")
+def _rejection(r: Rejection) -> RejectionSummary:
+    d = r.detectable_from
     size = None
-    if isinstance(d, Mapping) and "value" in d:
-        power = d.get("power")
-        size = _value("detectable from" + (f" ({100 * power:.0f} % power)" if isinstance(power, float) else ""), d)
-    return RejectionSummary(effect=str(r.get("effect", "")), sensor=str(r.get("sensor", "")),
-                            reason=str(r.get("reason", "")), rig_step=r.get("rig_step"), detectable_from=size)
+    if d is not None and d.determined:
+        size = ParameterValue(name=f"detectable from ({100 * d.power:.0f} % power)", value=_num(d.value), std=None,
+                              unit=d.unit)
+    return RejectionSummary(effect=r.effect, sensor=r.sensor, reason=r.reason, rig_step=r.rig_step,
+                            detectable_from=size)
 
 
 class DiagnosisReady(BaseModel):

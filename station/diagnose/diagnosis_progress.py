@@ -3,7 +3,7 @@
 The diagnosis does no I/O: a caller that wants to show progress (the CLI on a long recording) passes a
 :class:`Progress` callable, which receives one :class:`Stage` when each stage starts and a last one when
 the diagnosis is done. The ``index`` of the calls rises by one each time, from 0 to ``total`` (a rig-free
-recording's diagnosis, :mod:`station.diagnose.rigfree`, tells only 0 and ``total``).
+recording's diagnosis, :mod:`station.diagnose.rigfree_diagnosis`, tells only 0 and ``total``).
 """
 
 from __future__ import annotations

@@ -11,7 +11,7 @@ between them (Tedaldi et al. 2014; :mod:`station.fit.rigfree_fit`). The diagnosi
    blocks of the diagnosis are the still segments only; the moves' information (the rotation between
    two stills) is already spent on the gyroscope's M in the base fit.
 2. **Candidates** restricted to those such a recording can test: the registry's identifiability rules
-   (``Identifiability.rig_free``, :func:`station.diagnose.registry.rig_free_testable`) and what the recording
+   (``Identifiability.rig_free``, :func:`station.diagnose.effect_registry.rig_free_testable`) and what the recording
    holds (``Identifiability.needs``: e.g. a temperature span); the others are listed as :class:`Untestable`
    with the reason. ``bias_random_walk`` and ``outliers`` are tested as on any recording.
 3. **Earth rate**: a still gyro sees the Earth rate, whose vertical part ``Omega sin(lat)`` lies along
@@ -30,22 +30,29 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Any
+from dataclasses import replace
+from typing import Any
 
 import numpy as np
 from scipy import stats
 from threadpoolctl import threadpool_limits
 
-from station.diagnose.registry import REGISTRY, rig_free_testable
-from station.diagnose.residuals import SENSORS, Baseline, baseline_from_params
+from station.diagnose.effect_registry import REGISTRY, rig_free_testable
+from station.diagnose.outcome import Diagnosis, ResidualCurve
+from station.diagnose.residuals import SENSORS, BaseFitNoise, Baseline, baseline_from_params, locate, warmup_ranges
+from station.diagnose.results import (
+    Compensation,
+    DiagnosisReport,
+    Finding,
+    Rejection,
+    RerunError,
+    RigFreeSection,
+    Untestable,
+)
 from station.diagnose.selection import select
 from station.fit.rigfree_fit import RigFreeOptions, fit_rig_free
 from station.kernel.constants import EARTH_RATE_RADPS
 from station.session.model import Kind, Session
-
-if TYPE_CHECKING:
-    from station.diagnose.report import Diagnosis
 
 __all__ = ["EARTH_P", "EDGE_S", "Untestable", "diagnose_rig_free", "earth_horizontal_radps", "earth_vertical_radps",
            "horizontal_earth_var", "rig_free_baseline", "rig_free_candidates", "rig_free_references", "trimmed_kinds"]
@@ -54,18 +61,6 @@ __all__ = ["EARTH_P", "EDGE_S", "Untestable", "diagnose_rig_free", "earth_horizo
 EDGE_S = 0.5
 #: A g-sensitivity consistent with the vertical Earth rate at this p-value (or more) is rejected as Earth rate.
 EARTH_P = 1e-3
-
-
-@dataclass(frozen=True)
-class Untestable:
-    """A candidate this kind of recording cannot test, and why."""
-
-    effect: str
-    sensor: str
-    reason: str
-
-    def to_dict(self) -> dict[str, str]:
-        return {"effect": self.effect, "sensor": self.sensor, "reason": self.reason}
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -196,12 +191,11 @@ def rig_free_candidates(baseline: Baseline) -> tuple[dict[str, tuple[str, ...]],
     return keep, sorted(out, key=lambda u: (u.sensor, u.effect))
 
 
-def _earth_check(finding: dict[str, Any]) -> tuple[float, float] | None:
+def _earth_check(parameters: Mapping[str, Any]) -> tuple[float, float] | None:
     """(c in deg/s per g, p-value) of ``G = c I`` with ``|c| <= Omega / g`` against the fitted g-sensitivity
     (engineering units, per-element std); None when the finding carries no 3x3 matrix."""
-    p = finding.get("parameters", {})
-    g = np.asarray(p.get("value", []), dtype=float)
-    s = np.asarray(p.get("std", []), dtype=float)
+    g = np.asarray(parameters.get("value", []), dtype=float)
+    s = np.asarray(parameters.get("std", []), dtype=float)
     if g.shape != (3, 3) or s.shape != (3, 3) or not np.all(s > 0):
         return None
     w = 1.0 / s**2
@@ -211,59 +205,54 @@ def _earth_check(finding: dict[str, Any]) -> tuple[float, float] | None:
     return c, float(stats.chi2.sf(chi2, 8))
 
 
+def _earth_rate_rejection(f: Finding, vertical: float | None) -> Rejection | None:
+    """A g-sensitivity finding that the vertical Earth rate explains while the latitude is unknown, rejected."""
+    if f.effect != "g_sensitivity" or vertical is not None:
+        return None
+    check = _earth_check(f.parameters)
+    if check is None or check[1] < EARTH_P:
+        return None
+    return Rejection(f.effect, f.sensor, "consistent with the vertical Earth rate (c I, |c| <= 15.04 deg/h per g) "
+                     "and the latitude is unknown: give --latitude to the import (latitude_deg in the metadata) to "
+                     "test it", {"earth_rate_c_dps_per_g": round(check[0], 6), "p_value": round(check[1], 4),
+                                 "parameters": dict(f.parameters)})
+
+
 def diagnose_rig_free(session: Session, *,
                       warmup_tc_s: Mapping[str, tuple[float, float]] | None = None,
                       resamples: int | None = None, seed: int | None = None) -> Diagnosis:
-    """Diagnose a rig-free recording (see the module docstring): a :class:`station.diagnose.report.Diagnosis`
+    """Diagnose a rig-free recording (see the module docstring): a :class:`~station.diagnose.outcome.Diagnosis`
     whose report has the keys of ``station-diagnosis/1`` plus ``untestable`` and ``rig_free``.
     ``resamples``, ``seed``: the bootstrap's, as in :func:`station.diagnose.report.diagnose` (None: its defaults).
 
     Raises :class:`~station.kernel.errors.FitError` when the rig-free fit refuses the recording.
     """
-    from station.diagnose.report import FORMAT, Diagnosis, common_sections  # here: report imports this module
-
     with threadpool_limits(limits=1, user_api="blas"):
         baseline = rig_free_baseline(session, warmup_tc_s=warmup_tc_s)
         candidates, untestable = rig_free_candidates(baseline)
         boot = {k: v for k, v in (("resamples", resamples), ("seed", seed)) if v is not None}
         decision = select(baseline, candidates=candidates, **boot)
     findings, curves = [], []
-    rejected = [r.to_dict() for r in decision.rejected]
+    rejected = list(decision.rejected)
     vertical = earth_vertical_radps(session)
     for f in decision.findings:
-        entry = f.to_dict()
-        if f.effect == "g_sensitivity" and vertical is None:
-            check = _earth_check(entry)
-            if check is not None and check[1] >= EARTH_P:
-                rejected.append({"effect": f.effect, "sensor": f.sensor, "earth_rate_c_dps_per_g": round(check[0], 6),
-                                 "p_value": round(check[1], 4), "parameters": entry["parameters"],
-                                 "reason": "consistent with the vertical Earth rate (c I, |c| <= 15.04 deg/h per g) "
-                                           "and the latitude is unknown: give --latitude to the import "
-                                           "(latitude_deg in the metadata) to test it"})
-                continue
+        earth = _earth_rate_rejection(f, vertical)
+        if earth is not None:
+            rejected.append(earth)
+            continue
         if f.block_residual is not None:
-            sd = baseline.sensor(f.sensor)
-            curves.append((f"{f.sensor} {f.effect}", sd.t_s, *f.block_residual))
-        entry["calibration"] = {"compensated": False, "note": "not assessed on a rig-free recording"}
-        findings.append(entry)
-    p = baseline.params
-    rf = p.quality.rig_free or {}
-    report = {
-        "format": FORMAT,
-        "serial": session.serial,
-        "method": "rig-free",
-        "findings": findings,
-        "rejected": rejected,
-        "untestable": [u.to_dict() for u in untestable],
-        **common_sections(baseline, decision),
-        "rig_free": {
-            "still_segments": rf.get("still_segments"), "moves": rf.get("moves"),
-            "accel_norm_rms_mps2": rf.get("accel_norm_rms_mps2"),
-            "gyro_direction_rms_deg": rf.get("gyro_direction_rms_deg"),
-            "earth_vertical_removed_dps": None if vertical is None else round(math.degrees(vertical), 6),
-            "read_timing": rf.get("read_timing"),
-            "blocks": "still segments only (the moves carry no sample-level reference)",
-        },
-        "rerun": {"error": "the simulator re-run needs the rig's motion; a hand-held recording's is unknown"},
-    }
+            curves.append(ResidualCurve(f"{f.sensor} {f.effect}", baseline.sensor(f.sensor).t_s, *f.block_residual))
+        findings.append(replace(f, calibration=Compensation(f.effect, False, "not assessed on a rig-free recording")))
+    rf = baseline.params.quality.rig_free or {}
+    report = DiagnosisReport(
+        serial=session.serial, method="rig-free", findings=tuple(findings), rejected=tuple(rejected),
+        untestable=tuple(untestable), inseparable=decision.inseparable, unexplained=decision.unexplained,
+        location=locate(baseline), warmup_tc_range_s=warmup_ranges(baseline), base_fit=BaseFitNoise.of(baseline),
+        rig_free=RigFreeSection(
+            still_segments=rf.get("still_segments"), moves=rf.get("moves"),
+            accel_norm_rms_mps2=rf.get("accel_norm_rms_mps2"), gyro_direction_rms_deg=rf.get("gyro_direction_rms_deg"),
+            earth_vertical_removed_dps=None if vertical is None else round(math.degrees(vertical), 6),
+            read_timing=rf.get("read_timing"),
+            blocks="still segments only (the moves carry no sample-level reference)"),
+        rerun=RerunError("the simulator re-run needs the rig's motion; a hand-held recording's is unknown"))
     return Diagnosis(report=report, baseline=baseline, curves=curves, rerun=None)

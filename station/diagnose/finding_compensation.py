@@ -10,11 +10,11 @@ parameter for the effect, or the recording does not let the fit identify it (the
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
 
 import numpy as np
 
-from station.diagnose.registry import REGISTRY
+from station.diagnose.effect_registry import REGISTRY
+from station.diagnose.results import Compensation
 from station.fit.calibrate import FitOptions, fit_session
 from station.fit.compensation import APPLIED, COMPENSATION, compensated_by, field_value
 from station.kernel.errors import StationError
@@ -35,18 +35,6 @@ def _physics(name: str) -> str:
 def _not_compensated(name: str) -> str:
     effect = REGISTRY.get(name)
     return effect.not_compensated if effect is not None and effect.not_compensated else NO_PARAMETER
-
-
-@dataclass(frozen=True)
-class Compensation:
-    """Whether the calibration compensates one finding, and why (not)."""
-
-    effect: str
-    compensated: bool
-    note: str
-
-    def to_dict(self) -> dict[str, object]:
-        return {"compensated": self.compensated, "note": self.note}
 
 
 def _fields(effect: str, sensor: str) -> tuple[str, ...]:

@@ -14,7 +14,9 @@ of the code that computes it, both are in that file, so a restarted server (or a
 one on the same store) reads it instead of spending the seconds again; a file from other
 code (a different :func:`code_digest`) or for other bytes is ignored and replaced. Where
 the directory is not writable the result is kept in memory only. The file holds the report
-and the figure's block residuals (SI: m/s^2, rad/s, time s since power-on).
+(``station-diagnosis/1``, :meth:`~station.diagnose.results.DiagnosisReport.to_json`, read back into the types by
+:func:`~station.diagnose.results.load_report`, which refuses another format: the file is then ignored) and the
+figure's block residuals (SI: m/s^2, rad/s, time s since power-on).
 
 A diagnosis that the recording refuses (:class:`~station.kernel.errors.FitError`, a session format
 error, a recording changed since its run) is a result too: status ``error`` with the
@@ -24,7 +26,6 @@ one-line reason.
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import functools
 import hashlib
 import json
@@ -40,19 +41,25 @@ from collections import OrderedDict
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, Final
 
 import numpy as np
 
 from station.kernel.errors import StationError
 from station.store.recorder import sha256_file
 
+if TYPE_CHECKING:
+    from station.diagnose.outcome import Diagnosis
+    from station.diagnose.results import DiagnosisReport
+
 log = logging.getLogger(__name__)
 
 #: Format tag of the file next to the recording.
 FORMAT = "station-web-diagnosis/1"
 SIDECAR_SUFFIX = ".diagnosis.json"
-PENDING, READY, ERROR = "pending", "ready", "error"
+PENDING: Final = "pending"
+READY: Final = "ready"
+ERROR: Final = "error"
 #: Packages whose source a diagnosis depends on (their digest invalidates persisted results).
 _CODE_PACKAGES = ("diagnose", "fit", "session", "sim")
 
@@ -103,7 +110,7 @@ class Result:
 
     Attributes:
         status: ``pending``, ``ready`` or ``error``.
-        report: the ``station-diagnosis/1`` report (JSON-ready, NaN as None) when ready.
+        report: the typed report when ready (:meth:`json_report` gives its strict-JSON object).
         error: the one-line reason when status is ``error``.
         curves: the figure's residuals when ready.
         elapsed_s: wall time the diagnosis took (s), when computed.
@@ -112,11 +119,15 @@ class Result:
     """
 
     status: str
-    report: dict[str, Any] | None = None
+    report: DiagnosisReport | None = None
     error: str | None = None
     curves: tuple[Curve, ...] = ()
     elapsed_s: float | None = None
     lasting: bool = True
+
+    def json_report(self) -> dict[str, Any] | None:
+        """The ``station-diagnosis/1`` object of the report, strict JSON (non-finite numbers as None)."""
+        return None if self.report is None else json_safe(self.report.to_json())
 
 
 def sidecar_path(recording: Path) -> Path:
@@ -151,10 +162,10 @@ def json_safe(obj: Any) -> Any:
     return obj
 
 
-def _curves_of(diagnosis: Any) -> tuple[Curve, ...]:
-    """The figure rows of a :class:`station.diagnose.Diagnosis` (base model residuals without findings)."""
+def _curves_of(diagnosis: Diagnosis) -> tuple[Curve, ...]:
+    """The figure rows of a :class:`station.diagnose.outcome.Diagnosis` (base model residuals without findings)."""
     out = []
-    for item in getattr(diagnosis, "curves", None) or ():
+    for item in diagnosis.curves:
         try:
             title, t, before, after = item[:4]
             t, before, after = (np.asarray(a, dtype=float) for a in (t, before, after))
@@ -162,8 +173,8 @@ def _curves_of(diagnosis: Any) -> tuple[Curve, ...]:
             continue
         if before.ndim == 2 and before.shape == after.shape and before.shape[0] == t.size:
             out.append(Curve(str(title), "rad/s" if str(title).startswith("gyro") else "m/s^2", t, before, after))
-    baseline = getattr(diagnosis, "baseline", None)
-    runs = getattr(diagnosis, "rerun", None)  # the simulator re-run with the findings switched on, when present
+    baseline = diagnosis.baseline
+    runs = diagnosis.rerun  # the simulator re-run with the findings switched on, when present
     if out and baseline is not None and runs is not None and runs.extended is not runs.base:
         n = len(runs.extended.effects)
         for sensor, unit in (("accel", "m/s^2"), ("gyro", "rad/s")):
@@ -190,7 +201,7 @@ def compute(recording: Recording, *, warmup_tc_s: Mapping[str, tuple[float, floa
     ``warmup_tc_s``: the sensor class's T_c range per sensor (s), see :func:`station.diagnose.diagnose`.
     Raises OSError when the file cannot be read.
     """
-    from station.diagnose import diagnose
+    from station.diagnose.report import diagnose
     from station.session.csv_v1 import read_session
 
     digest, _ = sha256_file(recording.path)
@@ -203,7 +214,7 @@ def compute(recording: Recording, *, warmup_tc_s: Mapping[str, tuple[float, floa
         diagnosis = diagnose(read_session(recording.path), warmup_tc_s=warmup_tc_s)
     except StationError as exc:
         return Result(ERROR, error=f"{type(exc).__name__}: {exc}", elapsed_s=time.perf_counter() - t0)
-    return Result(READY, report=json_safe(diagnosis.report), curves=_curves_of(diagnosis),
+    return Result(READY, report=diagnosis.report, curves=_curves_of(diagnosis),
                   elapsed_s=time.perf_counter() - t0)
 
 
@@ -226,7 +237,8 @@ def _dump(recording: Recording, result: Result, settings: dict[str, Any]) -> str
                "before": _round(c.before), "after": None if c.after is None else _round(c.after)}
               for c in result.curves]
     return json.dumps({"format": FORMAT, "session_sha256": recording.sha256, "code": code_digest(),
-                       "settings": settings, "status": result.status, "report": result.report, "error": result.error,
+                       "settings": settings, "status": result.status, "report": result.json_report(),
+                       "error": result.error,
                        "elapsed_s": result.elapsed_s, "curves": curves}, allow_nan=False)
 
 
@@ -236,7 +248,10 @@ def _array(v: Any) -> np.ndarray:
 
 
 def _load(recording: Recording, settings: dict[str, Any]) -> Result | None:
-    """The persisted result of ``recording`` when it is for these bytes, this code and these settings, else None."""
+    """The persisted result of ``recording`` when it is for these bytes, this code and these settings, else None
+    (also for a report of another format: :func:`~station.diagnose.results.load_report` refuses it)."""
+    from station.diagnose.results import ReportFormatError, load_report
+
     path = sidecar_path(recording.path)
     try:
         d = json.loads(path.read_text(encoding="utf-8"))
@@ -246,11 +261,11 @@ def _load(recording: Recording, settings: dict[str, Any]) -> Result | None:
         curves = tuple(Curve(c["title"], c["unit"], _array(c["t_s"]), _array(c["before"]),
                              None if c["after"] is None else _array(c["after"]), tuple(c["labels"]))
                        for c in d.get("curves") or ())
-        return Result(d["status"], report=d.get("report"), error=d.get("error"), curves=curves,
-                      elapsed_s=d.get("elapsed_s"))
+        report = None if d.get("report") is None else load_report(d["report"])
+        return Result(d["status"], report=report, error=d.get("error"), curves=curves, elapsed_s=d.get("elapsed_s"))
     except FileNotFoundError:
         return None
-    except (OSError, ValueError, KeyError, TypeError, IndexError) as exc:
+    except (OSError, ValueError, KeyError, TypeError, IndexError, ReportFormatError) as exc:
         log.info("ignoring %s: %s", path, exc)
         return None
 
@@ -315,7 +330,7 @@ class DiagnosisService:
         with self._lock:
             if self._queue is not None:
                 return
-            self._queue = q = queue.Queue()
+            self._queue = q = queue.Queue[Recording | None]()
             self._threads = [threading.Thread(target=self._work, args=(q,), name=f"station-diagnosis-{k}",
                                               daemon=True) for k in range(self.workers)]
         for t in self._threads:
@@ -397,7 +412,6 @@ class DiagnosisService:
             except Exception as exc:  # a worker outlives any bug in the diagnosis; the page shows it
                 log.exception("diagnosis of %s failed", rec.path)
                 result = Result(ERROR, error=f"the diagnosis failed: {type(exc).__name__}: {exc}", lasting=False)
-            result = dataclasses.replace(result, report=json_safe(result.report))
             if self.persist and result.lasting and result.status in (READY, ERROR):
                 _save(rec, result, self._settings)
             self._keep(rec.sha256, result)

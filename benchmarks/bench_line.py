@@ -1,0 +1,244 @@
+"""The calibration line against the full rig plan: rig time per unit and verified accuracy.
+
+Two parts, one command, one table each:
+
+1. **Rig time per unit** at N = 1, 4, 16 units on one rig, for the full plan (300 s power-on
+   rest, six 30 s poses, 18 rate steps of 12 s) and the line's rig part (a 2 s rest, six 25 s
+   poses, +-100 deg/s about each axis held 3 s: :func:`station.kernel.line_plan.line_rig_plan`): the real station
+   code on a simulated clock
+   (:func:`bench_sequence.run_one`: a simulated Modbus rig on 127.0.0.1, sensors on ptys), rig time
+   = station-clock seconds from start until the rig is confirmed at rest, divided by N.
+
+2. **Verified accuracy** over ``--units`` simulated units (Table 1) drawn from report seeds
+   (``--seed0``; the tests and development used seeds 1000-1049, 2001-2008 and 2001 here). Per unit,
+   four independent recordings of the same unit (own noise and drift realization each):
+
+   * the full plan's recording, fitted by the rig fit (:func:`station.fit.calibrate.fit_session`);
+   * the line's rack rest (``--rack-s``, from power-on, unknown orientation) and rig recording of one
+     power-on, fitted together (:func:`station.fit.joint.fit_joint`);
+   * validation A, a full-plan recording: each fit corrects it (eq. 1 inverted with eq. 3's drift,
+     Algorithm 1 without the moving average) and the corrected output is compared with the rig's
+     reference: **pose RMS** (RMS over the six poses and three axes of the pose-mean specific-force
+     error, mm/s^2), **worst rate-step error** (per unit the largest |mean rate about the step's axis -
+     commanded| / commanded over the 18 steps, %; median and largest over the units), **first-minute
+     error** (RMS over the first 60 s of the norm of
+     10 s means of the specific-force error during the power-on rest, mm/s^2);
+   * validation B, one hour at rest from power-on: **gyro bias error over the first hour** (RMS over
+     the hour of the norm of 60 s means of the corrected rate; the true rate is 0: the simulation
+     has no Earth rate by default), deg/s; also the fitted eq. 3 bias against the true one (same RMS,
+     without the recording's noise and stochastic drift: ``model``).
+
+   The row "truth" corrects with the unit's true parameters: the floor of each figure.
+
+    PYTHONPATH=. python benchmarks/bench_line.py [--units 30] [--seed0 900000] [--rig-units 1 4 16]
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from station.fit.calibrate import FitOptions, fit_session
+from station.fit.joint import fit_joint
+from station.kernel.limits_file import load_limits
+from station.kernel.line_plan import LinePlan, line_rig_plan
+from station.kernel.parameters import ParameterSet
+from station.kernel.plan import RigPlan, default_plan
+from station.physics.unit import UnitTruth
+from station.session.model import Kind, Session
+from station.sim.line_sim import simulate_line
+from station.sim.session_sim import simulate_session
+
+_DEG = 180.0 / math.pi
+
+
+def line_rig(rest_s: float = 2.0) -> RigPlan:
+    """The line's rig part as the sequence runs it: a short rest first (the runner's first step)."""
+    return replace(line_rig_plan(), rest_s=rest_s)
+
+
+# --- correction ------------------------------------------------------------------------------------
+
+def _triad_model(p: object) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    m = np.asarray(p.misalignment, dtype=float)  # type: ignore[attr-defined]
+    b = np.asarray(p.bias_static, dtype=float)  # type: ignore[attr-defined]
+    d = np.asarray(p.bias_drift, dtype=float)  # type: ignore[attr-defined]
+    tc = np.asarray(p.correlation_time_s, dtype=float)  # type: ignore[attr-defined]
+    d = np.where(np.isfinite(tc), d, 0.0)
+    tc = np.where(np.isfinite(tc) & (tc > 0), tc, 1.0)
+    return m, b, d, tc
+
+
+def bias_at(p: object, t: np.ndarray) -> np.ndarray:
+    _, b, d, tc = _triad_model(p)
+    return b + d * np.exp(-t[:, None] / tc)
+
+
+def correct(p: object, t: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """x = M^-1 (y - b_stat - b_drift exp(-t/T_c)): eq. 1 inverted (Algorithm 1 lines 4-6 and 8)."""
+    m = _triad_model(p)[0]
+    return np.linalg.solve(m, (y - bias_at(p, t)).T).T
+
+
+# --- figures ---------------------------------------------------------------------------------------
+
+def pose_rms_mm(acc: object, s: Session) -> float:
+    x = correct(acc, s.t_s, s.accel_mps2)
+    errs = [x[g.slice].mean(axis=0) - s.ref_accel_mps2[g.start] for g in s.segments_of(Kind.POSE)]
+    return 1e3 * float(np.sqrt(np.mean(np.square(errs))))
+
+
+def worst_rate_pct(gyr: object, s: Session) -> float:
+    x = correct(gyr, s.t_s, s.gyro_radps)
+    worst = 0.0
+    for g in s.segments_of(Kind.RATE):
+        ref = s.ref_gyro_radps[g.start]
+        k = int(np.argmax(np.abs(ref)))
+        worst = max(worst, abs(float(x[g.slice, k].mean()) - ref[k]) / abs(ref[k]) * 100.0)
+    return worst
+
+
+def first_minute_mm(acc: object, s: Session) -> float:
+    rest = s.segments_of(Kind.REST)[0]
+    sel = np.arange(rest.start, rest.stop)[s.t_s[rest.start:rest.stop] < 60.0]
+    err = correct(acc, s.t_s[sel], s.accel_mps2[sel]) - s.ref_accel_mps2[sel]
+    n = round(10.0 * s.sample_rate_hz)
+    k = len(err) // n
+    means = err[: k * n].reshape(k, n, 3).mean(axis=1)
+    return 1e3 * float(np.sqrt(np.mean(np.sum(means**2, axis=1))))
+
+
+def gyro_hour_dps(gyr: object, s: Session) -> float:
+    x = correct(gyr, s.t_s, s.gyro_radps)
+    n = round(60.0 * s.sample_rate_hz)
+    k = len(x) // n
+    means = x[: k * n].reshape(k, n, 3).mean(axis=1)
+    return _DEG * float(np.sqrt(np.mean(np.sum(means**2, axis=1))))
+
+
+def gyro_model_dps(gyr: object, truth: UnitTruth, hour_s: float = 3600.0) -> float:
+    t = np.arange(0.0, hour_s, 10.0)
+    m = _triad_model(gyr)[0]
+    e = np.linalg.solve(m, (truth.gyro.bias_at(t) - bias_at(gyr, t)).T).T
+    return _DEG * float(np.sqrt(np.mean(np.sum(e**2, axis=1))))
+
+
+# --- part 1: rig time ------------------------------------------------------------------------------
+
+def rig_times(units: list[int], scale: float, max_frames: float) -> list[dict[str, object]]:
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    import bench_sequence
+
+    rows = []
+    for name, plan in (("full", default_plan()), ("line", line_rig())):
+        for n in units:
+            s = min(scale, max_frames / (n * plan.sample_rate_hz))
+            original = bench_sequence.default_plan
+            bench_sequence.default_plan = lambda p=plan: p  # type: ignore[assignment]
+            try:
+                r = bench_sequence.run_one(n, s, 1)
+            finally:
+                bench_sequence.default_plan = original  # type: ignore[assignment]
+            rows.append({"plan": name, **r})
+            note = " of a fit of the rig recording alone (this runner has no rack recording)" if name == "line" else ""
+            print(f"  {name:5s} N={n:2d}: rig {float(r['rig_s']):7.1f} s, per unit {float(r['rig_s']) / n:6.1f} s, "
+                  f"{r['outcome']}{note} ({float(r['wall_s']):.0f} s wall)", flush=True)
+    return rows
+
+
+# --- part 2: accuracy ------------------------------------------------------------------------------
+
+def study_unit(seed: int, rack_s: float, options: FitOptions) -> dict[str, dict[str, float]]:
+    line = simulate_line(seed, plan=LinePlan(rack_s=rack_s, rig=line_rig(0.0)))
+    truth = line.truth
+    full = simulate_session(seed + 101, plan=default_plan(), unit=truth).session
+    val_a = simulate_session(seed + 202, plan=default_plan(), unit=truth).session
+    val_b = simulate_session(seed + 303, plan=replace(default_plan(), rest_s=3600.0, poses=(), rate_steps=()),
+                             unit=truth).session
+    fits: dict[str, object] = {
+        "truth": truth,
+        "full": fit_session(full, options),
+        "line": fit_joint(line.rack, line.rig, options),
+    }
+    out: dict[str, dict[str, float]] = {}
+    for name, p in fits.items():
+        acc, gyr = p.accel, p.gyro  # type: ignore[attr-defined]
+        out[name] = {
+            "pose": pose_rms_mm(acc, val_a),
+            "rate": worst_rate_pct(gyr, val_a),
+            "minute": first_minute_mm(acc, val_a),
+            "gyro_hour": gyro_hour_dps(gyr, val_b),
+            "gyro_model": gyro_model_dps(gyr, truth),
+        }
+        if isinstance(p, ParameterSet):
+            out[name]["gyro_bstat_u"] = float(np.max(p.gyro.bias_static_std)) * _DEG
+            out[name]["gyro_tc_resolved"] = float(np.isfinite(p.gyro.correlation_time_s).sum())
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--units", type=int, default=30, help="simulated units for the accuracy part")
+    ap.add_argument("--seed0", type=int, default=900000, help="first report seed (units use seed0 + 1000 i)")
+    ap.add_argument("--rack-s", type=float, default=3600.0, help="rest in the rack from power-on (s)")
+    ap.add_argument("--rig-units", type=int, nargs="*", default=[1, 4, 16], help="N for the rig-time part (none: skip)")
+    ap.add_argument("--scale", type=float, default=30.0)
+    ap.add_argument("--max-frames", type=float, default=12000.0)
+    args = ap.parse_args()
+
+    t0 = time.monotonic()
+    if args.rig_units:
+        print("rig time (real station code, simulated rig and sensors):", flush=True)
+        rows = rig_times(args.rig_units, args.scale, args.max_frames)
+        print("\n| plan | " + " | ".join(f"N={n}" for n in args.rig_units) + " |")
+        print("|---|" + "---|" * len(args.rig_units))
+        for name in ("full", "line"):
+            cells = [f"{float(r['rig_s']) / int(r['n']):.0f} s"  # type: ignore[call-overload]
+                     for r in rows if r["plan"] == name]
+            print(f"| {name} | " + " | ".join(cells) + " |")
+        print()
+
+    limits = load_limits()
+    options = FitOptions(tc_range_s=dict(limits.correlation_time_s))
+    per: dict[str, dict[str, list[float]]] = {}
+    for i in range(args.units):
+        seed = args.seed0 + 1000 * i
+        res = study_unit(seed, args.rack_s, options)
+        for name, figs in res.items():
+            for k, v in figs.items():
+                per.setdefault(name, {}).setdefault(k, []).append(v)
+        print(f"  unit {i + 1}/{args.units} (seed {seed}): pose full {res['full']['pose']:.2f} line "
+              f"{res['line']['pose']:.2f} mm/s^2; gyro hour full {res['full']['gyro_hour']:.4f} line "
+              f"{res['line']['gyro_hour']:.4f} deg/s", flush=True)
+
+    def med(name: str, k: str) -> float:
+        return float(np.median(per[name][k]))
+
+    def p90(name: str, k: str) -> float:
+        return float(np.percentile(per[name][k], 90))
+
+    print(f"\naccuracy over {args.units} units (seeds {args.seed0} + 1000 i), rack {args.rack_s:.0f} s:\n")
+    print("| fit | pose RMS median (mm/s^2) | vs full | worst rate error median / max (%) "
+          "| first minute median (mm/s^2) | gyro bias 1st hour median / p90 (deg/s) "
+          "| model-only median / p90 (deg/s) | gyro T_c resolved |")
+    print("|---|---|---|---|---|---|---|---|")
+    for name in ("truth", "full", "line"):
+        resolved = (f"{np.mean(per[name]['gyro_tc_resolved']) / 3 * 100:.0f} % of axes"
+                    if "gyro_tc_resolved" in per[name] else "-")
+        print(f"| {name} | {med(name, 'pose'):.3f} | {med(name, 'pose') / med('full', 'pose'):.2f} | "
+              f"{med(name, 'rate'):.4f} / {max(per[name]['rate']):.4f} | {med(name, 'minute'):.3f} | "
+              f"{med(name, 'gyro_hour'):.5f} / {p90(name, 'gyro_hour'):.5f} | "
+              f"{med(name, 'gyro_model'):.5f} / {p90(name, 'gyro_model'):.5f} | {resolved} |")
+    g = (med("full", "gyro_hour") / med("line", "gyro_hour"), p90("full", "gyro_hour") / p90("line", "gyro_hour"))
+    print(f"\ngyro bias over the first hour, full / line: median {g[0]:.2f}x, p90 {g[1]:.2f}x")
+    print(f"wall time {time.monotonic() - t0:.0f} s")
+
+
+if __name__ == "__main__":
+    main()

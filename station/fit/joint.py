@@ -1,0 +1,343 @@
+"""One fit over a unit's soak-rack rest and its rig recording, on the sensor's own time base.
+
+In a calibration line the warm-up of eq. 3 is observed in a powered soak rack: a long rest from
+power-on in a fixed orientation nobody measured, no reference. The rig then records the poses and
+rate steps of the same power-on. Both recordings carry the sensor's time since power-on (its sample
+counter), so one model of eq. 1 with the drift of eq. 3 explains both:
+
+* rig samples: ``y = M ref + b_stat + b_drift exp(-t/T_c) + s(t) + e`` as in :mod:`station.fit.calibrate`;
+* rack samples: ``y = M c + b_stat + b_drift exp(-t/T_c) + s(t) + e`` with ``c`` the unknown, constant
+  specific force (gravity in the slot's orientation) or angular rate (Earth's rate in it).
+
+``M c`` is constant over the rack's rest, so per output axis it is one nuisance offset ``o_k`` (a
+regressor that is 1 on the rack's samples, 0 on the rig's): the rack then says nothing about M and
+b_stat (they come from the rig) but everything about the shape of the warm-up, ``b_drift``, ``T_c``
+and the stochastic drift ``s``. This is the rig-free fit's treatment of unknown gravity directions
+(:mod:`station.fit.rigfree_fit`: one direction per still segment) without its norm constraint ``|c| = g``,
+which would add one equation against three offsets and couple the axes into a non-linear problem;
+the constraint is instead checked afterwards (``quality["line"]["rack_gravity_mps2"]``: ``|M^-1 (o -
+b_stat)|`` must be local gravity). The per-axis maximum-likelihood fit (:func:`station.fit.axis_ml.fit_axis`,
+the Gauss-Markov drift started at 0 at power-on) is used unchanged over the block means of both
+recordings (:func:`station.fit.blocks.make_blocks`); the rack's rest is cut into runs that double in
+length from power-on so the fast accelerometer warm-up (T_c 50-167 s) gets short blocks.
+
+A power interruption between rack and rig (:func:`check_power`) breaks the shared time base: the fit
+is refused, and the line gives the unit the full rig plan or sends it back to the rack.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+from threadpoolctl import threadpool_limits
+
+from station import __version__
+from station.fit.axis_ml import fit_axis
+from station.fit.blocks import Blocks, make_blocks
+from station.fit.boundary import numerics
+from station.fit.calibrate import (
+    FitOptions,
+    NoiseEstimate,
+    TriadLinear,
+    mean_model,
+    residual_allan,
+    residual_figures,
+    settled_runs,
+    unpack_triad,
+    white_noise,
+)
+from station.fit.checks import check_finite, check_session, check_time
+from station.fit.determinability import assess
+from station.kernel.errors import FitError
+from station.kernel.parameters import FitQuality, ParameterSet, TriadParams
+from station.session.model import Kind, Session
+
+#: Metadata keys the line's recordings carry (see :func:`check_power`).
+WALL_KEY = "wall_clock_at_start_s"
+BOOT_KEY = "boot_count"
+OFFSET_KEY = "clock_offset_s"
+#: Offset added to the rig's segment indices in the merged recording (rack segments keep theirs).
+_RIG_SEGMENT_OFFSET = 1_000_000
+#: First rack run length (s); each later run is twice as long (see the module docstring).
+_FIRST_RUN_S = 10.0
+
+
+@dataclass(frozen=True)
+class PowerContinuity:
+    """Whether the rack's and the rig's recordings belong to one power-on of the unit.
+
+    Attributes:
+        continuous: one power-on: the joint fit may use both.
+        reason: why not (empty when continuous).
+        sensor_gap_s: rig's first sample time minus rack's last (sensor time, s).
+        wall_gap_s: the same on the station's clock (s), NaN when a recording lacks it.
+    """
+
+    continuous: bool
+    reason: str
+    sensor_gap_s: float
+    wall_gap_s: float
+
+
+def _meta(session: Session, key: str) -> str | None:
+    value = session.metadata.get(key)
+    return None if value is None or str(value).strip() == "" else str(value).strip()
+
+
+def _wall_start(session: Session) -> float:
+    """Station clock at the first sample: ``wall_clock_at_start_s``, or ``clock_offset_s`` (station clock minus
+    sensor time, what the sequence's clock sync measures) plus the first sample's sensor time; NaN if neither."""
+    for key, plus in ((WALL_KEY, 0.0), (OFFSET_KEY, float(session.t_s[0]) if len(session) else math.nan)):
+        text = _meta(session, key)
+        try:
+            value = float(text) + plus if text is not None else math.nan
+        except ValueError:
+            value = math.nan
+        if math.isfinite(value):
+            return value
+    return math.nan
+
+
+def power_continuity(
+    *, rack_serial: str, rig_serial: str, rack_boot: str | None, rig_boot: str | None, rack_end_s: float,
+    rack_end_clock_s: float, rig_start_s: float, rig_start_clock_s: float, max_transfer_s: float = 1800.0,
+    clock_tolerance: float = 1e-3, clock_slack_s: float = 2.0,
+) -> PowerContinuity:
+    """The rules of :func:`check_power` on plain numbers: the rack's last sample (sensor time ``rack_end_s``,
+    station clock ``rack_end_clock_s``) and the rig's first (``rig_start_s``, ``rig_start_clock_s``; NaN clock
+    values skip the clock comparison), the power-on counters (None: unknown). The rig role also uses it
+    before it runs anything: the unit's current uptime and boot count against its rack recording."""
+    gap = float(rig_start_s - rack_end_s)
+    wall_gap = float(rig_start_clock_s - rack_end_clock_s)
+
+    def broken(reason: str) -> PowerContinuity:
+        return PowerContinuity(False, reason, gap, wall_gap)
+
+    if rack_serial != rig_serial:
+        return broken(f"the recordings are of two units ({rack_serial!r} in the rack, {rig_serial!r} on the rig)")
+    if rack_boot is not None and rig_boot is not None and rack_boot != rig_boot:
+        return broken(f"power-on counter changed between rack and rig ({rack_boot} -> {rig_boot}): the unit lost power")
+    if not gap > 0:
+        return broken(f"sensor time restarted: the rig's first sample ({rig_start_s:.3f} s since power-on) is not "
+                      f"after the rack's last ({rack_end_s:.3f} s): the unit lost power")
+    if math.isfinite(wall_gap):
+        allowed = clock_slack_s + clock_tolerance * abs(wall_gap)
+        if abs(gap - wall_gap) > allowed:
+            return broken(f"sensor time and station clock disagree between rack and rig (sensor {gap:.1f} s, "
+                          f"station {wall_gap:.1f} s, allowed +-{allowed:.1f} s): the unit lost power or its "
+                          "counter jumped")
+    if gap > max_transfer_s:
+        return broken(f"transfer from rack to rig took {gap:.0f} s (limit {max_transfer_s:.0f} s)")
+    return PowerContinuity(True, "", gap, wall_gap)
+
+
+def check_power(
+    rack: Session, rig: Session, *, max_transfer_s: float = 1800.0, clock_tolerance: float = 1e-3,
+    clock_slack_s: float = 2.0,
+) -> PowerContinuity:
+    """Did the unit stay powered from the rack's first sample to the rig's last?
+
+    Interrupted when the serials differ, the sensor's power-on counter (``boot_count``) changed, the
+    sensor time restarted (the rig's first sample is not after the rack's last: a counter reset), the
+    sensor time between the two recordings disagrees with the station's clock (``wall_clock_at_start_s``
+    of both; allowed: ``clock_slack_s`` plus ``clock_tolerance`` of the gap, the sensor's clock error),
+    or the transfer took longer than ``max_transfer_s``.
+    """
+    if not len(rack) or not len(rig):
+        return PowerContinuity(False, "an empty recording", math.nan, math.nan)
+    return power_continuity(
+        rack_serial=rack.serial, rig_serial=rig.serial, rack_boot=_meta(rack, BOOT_KEY), rig_boot=_meta(rig, BOOT_KEY),
+        rack_end_s=float(rack.t_s[-1]), rack_end_clock_s=_wall_start(rack) + float(rack.t_s[-1] - rack.t_s[0]),
+        rig_start_s=float(rig.t_s[0]), rig_start_clock_s=_wall_start(rig), max_transfer_s=max_transfer_s,
+        clock_tolerance=clock_tolerance, clock_slack_s=clock_slack_s)
+
+
+def _rack_runs(rack: Session, offset: int) -> list[tuple[int, int, int]]:
+    """The rack's still segments cut into runs doubling in length from power-on (indices into the merged
+    recording, ``offset`` = the rack's first sample there)."""
+    runs: list[tuple[int, int, int]] = []
+    for seg in rack.segments_of(Kind.REST, Kind.POSE):
+        t = rack.t_s[seg.start:seg.stop]
+        edges = [0]
+        length = _FIRST_RUN_S
+        boundary = float(t[0]) + length
+        while boundary < float(t[-1]):
+            i = int(np.searchsorted(t, boundary))
+            if i - edges[-1] >= 2:
+                edges.append(i)
+            length *= 2.0
+            boundary += length
+        edges.append(len(t))
+        runs.extend((seg.index, offset + seg.start + a, offset + seg.start + b)
+                    for a, b in itertools.pairwise(edges) if b > a)
+    return runs
+
+
+def _merge(rack: Session, rig: Session) -> Session:
+    """One recording on the sensor's time base: the rack's samples, then the rig's (segments renumbered)."""
+    def cat(name: str) -> np.ndarray:
+        return np.concatenate([getattr(rack, name), getattr(rig, name)])
+
+    return Session(
+        metadata={**rig.metadata},
+        t_s=cat("t_s"),
+        segment=np.concatenate([rack.segment, rig.segment + _RIG_SEGMENT_OFFSET]),
+        kind=cat("kind"),
+        accel_mps2=cat("accel_mps2"),
+        gyro_radps=cat("gyro_radps"),
+        temp_degc=cat("temp_degc"),
+        ref_accel_mps2=np.concatenate([np.full((len(rack), 3), np.nan), rig.ref_accel_mps2]),
+        ref_gyro_radps=np.concatenate([np.full((len(rack), 3), np.nan), rig.ref_gyro_radps]),
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class _JointTriad:
+    p: dict[str, np.ndarray]
+    tri: TriadLinear
+    blocks: Blocks
+    offsets: np.ndarray  # (3, n_rack_segments) nuisance offsets M c (+ nothing else)
+    offsets_std: np.ndarray
+    noise: NoiseEstimate
+    runs: list[tuple[int, int, int]]
+
+
+def _fit_triad(
+    merged: Session, data: np.ndarray, ref: np.ndarray, rig_runs: list[tuple[int, int, int]],
+    rack_runs: list[tuple[int, int, int]], indicator: np.ndarray, options: FitOptions, triad: str,
+) -> _JointTriad:
+    runs = sorted(rig_runs + rack_runs, key=lambda r: r[1])
+    noise = white_noise(merged, data, runs, options.outlier_sigma)
+    blocks = make_blocks(merged.t_s, data, np.nan_to_num(ref), np.nan_to_num(merged.ref_accel_mps2), noise.keep,
+                         runs, 1.0 / merged.sample_rate_hz, options.max_blocks, extra=indicator)
+    assert blocks.extra is not None
+    design = np.column_stack([blocks.ref, np.ones((len(blocks), 1)), blocks.extra])
+    tc_range = options.tc_range_s.get(triad)
+    fits = [fit_axis(blocks, k, design, float(noise.sigma[k]), lr_threshold=options.drift_lr_threshold,
+                     tc_range_s=tc_range) for k in range(3)]
+    tri = TriadLinear(fits=fits, n_ref=3, extra=0)
+    n_off = indicator.shape[1]
+    offsets = np.array([f.beta[4:4 + n_off] for f in fits])
+    offsets_std = np.array([np.sqrt(np.clip(np.diag(f.beta_cov)[4:4 + n_off], 0.0, None)) for f in fits])
+    return _JointTriad(unpack_triad(tri), tri, blocks, offsets, offsets_std, noise, runs)
+
+
+def fit_joint(
+    rack: Session, rig: Session, options: FitOptions | None = None, *, max_transfer_s: float = 1800.0,
+    max_blocks: int = 140, clock_slack_s: float = 2.0,
+) -> ParameterSet:
+    """Fit eq. 1 with eq. 3's drift to a unit's rack rest and rig recording together.
+
+    ``rack``: rest from power-on, references NaN (any orientation, constant); ``rig``: poses and rate
+    steps (and optionally a rest) with references, its ``t_s`` the same sensor time since power-on.
+    ``options.max_blocks`` is replaced by ``max_blocks`` (the long rack rest needs more blocks than a rig
+    session); thermal terms, g-sensitivity and the scale nonlinearity are not fitted here.
+
+    Raises :class:`~station.kernel.errors.FitError` with a one-line reason when the recordings cannot
+    give a trustworthy result, including a power interruption between them (:func:`check_power`).
+    """
+    opts = options or FitOptions()
+    with threadpool_limits(limits=1, user_api="blas"), numerics(f"joint fit of {rig.serial!r}"):
+        return _fit_joint(rack, rig, opts, max_transfer_s, max_blocks, clock_slack_s)
+
+
+def _fit_joint(rack: Session, rig: Session, options: FitOptions, max_transfer_s: float,
+               max_blocks: int, clock_slack_s: float) -> ParameterSet:
+    check_time(rack)
+    check_finite(rack)
+    if not rack.segments_of(Kind.REST, Kind.POSE):
+        raise FitError("the rack recording has no rest segment")
+    power = check_power(rack, rig, max_transfer_s=max_transfer_s, clock_slack_s=clock_slack_s)
+    if not power.continuous:
+        raise FitError(f"rack and rig recordings are not one power-on: {power.reason}")
+    gyro_method = check_session(rig, min_pose_samples=options.min_pose_samples)
+    if gyro_method != "rate":
+        raise FitError("the joint fit needs rate steps on the rig (M_w from known angles is not supported here)")
+    options = replace(options, max_blocks=max_blocks)
+    merged = _merge(rack, rig)
+    n_rack = len(rack)
+    rack_runs = _rack_runs(rack, 0)
+    rack_segments = sorted({seg for seg, _, _ in rack_runs})
+    indicator = np.zeros((len(merged), len(rack_segments)))
+    for j, seg in enumerate(rack_segments):
+        indicator[:n_rack, j] = rack.segment == seg
+    shift = [(s + _RIG_SEGMENT_OFFSET, a + n_rack, b + n_rack) for s, a, b in
+             settled_runs(rig, (Kind.REST, Kind.POSE), rig.ref_accel_mps2)]
+    with numerics("accelerometer joint fit (rack rest, rig rest and poses)"):
+        a = _fit_triad(merged, merged.accel_mps2, merged.ref_accel_mps2, shift, rack_runs, indicator, options, "accel")
+    g_shift = [(s + _RIG_SEGMENT_OFFSET, a0 + n_rack, b0 + n_rack) for s, a0, b0 in
+               settled_runs(rig, (Kind.REST, Kind.POSE, Kind.RATE), rig.ref_gyro_radps)]
+    with numerics("gyroscope joint fit (rack rest, rig rest, poses and rate steps)"):
+        g = _fit_triad(merged, merged.gyro_radps, merged.ref_gyro_radps, g_shift, rack_runs, indicator, options,
+                       "gyro")
+
+    def residual(j: _JointTriad, data: np.ndarray, ref: np.ndarray) -> np.ndarray:
+        return data - mean_model(j.p, merged.t_s, ref, merged.ref_accel_mps2) - indicator @ j.offsets.T
+
+    a_res = residual(a, merged.accel_mps2, merged.ref_accel_mps2)
+    g_res = residual(g, merged.gyro_radps, merged.ref_gyro_radps)
+
+    def implied(j: _JointTriad) -> list[list[float]]:
+        """The rack's constant input per rack segment, ``M^-1 o`` (the offsets hold ``M c``)."""
+        try:
+            return np.linalg.solve(j.p["misalignment"], j.offsets).T.round(9).tolist()
+        except np.linalg.LinAlgError:
+            return []
+
+    rack_force = implied(a)
+    line: dict[str, Any] = {
+        "rack_samples": n_rack,
+        "rack_span_s": round(float(rack.t_s[-1] - rack.t_s[0]), 6),
+        "rig_start_s": round(float(rig.t_s[0]), 6),
+        "transfer_s": round(power.sensor_gap_s, 6),
+        "rack_segments": [int(s) for s in rack_segments],
+        "rack_specific_force_mps2": rack_force,
+        "rack_gravity_mps2": [round(float(np.linalg.norm(c)), 6) for c in rack_force],
+        "rack_angular_rate_radps": implied(g),
+        "rule": "rack rest: M c + b_stat + b_drift exp(-t/T_c) with M c one free offset per axis and rack segment",
+    }
+    quality = FitQuality(
+        accel=residual_figures(a_res, a.runs, a.noise.keep),
+        gyro=residual_figures(g_res, g.runs, g.noise.keep),
+        gyro_scale_method=gyro_method,
+        outliers={"accel": tuple(a.noise.outliers.tolist()), "gyro": tuple(g.noise.outliers.tolist())},
+        drift_likelihood_ratio={"accel": tuple(round(f.lr, 3) for f in a.tri.fits),
+                                "gyro": tuple(round(f.lr, 3) for f in g.tri.fits)},
+        extra={"line": line},  # the line's section (read as quality.extra["line"])
+    )
+
+    def triad(j: _JointTriad, res: np.ndarray) -> TriadParams:
+        mask = np.zeros(len(merged), dtype=bool)
+        for _, s0, s1 in j.runs:
+            mask[s0:s1] = True
+        mask &= j.noise.keep
+        return TriadParams(noise_std=j.noise.sigma, noise_std_std=j.noise.sigma_std,
+                           allan=residual_allan(merged, res, j.noise.keep),
+                           residual_rms=np.sqrt(np.mean(res[mask] ** 2, axis=0)), **j.p)
+
+    params = ParameterSet(
+        serial=rig.serial,
+        sample_period_s=1.0 / rig.sample_rate_hz,
+        moving_average_length=options.moving_average_length,
+        accel=triad(a, a_res),
+        gyro=triad(g, g_res),
+        quality=quality,
+        source={
+            "software": f"station {__version__}",
+            "fit": "joint (rack + rig)",
+            "samples": len(merged),
+            "rack_samples": n_rack,
+            "duration_s": round(float(merged.t_s[-1] - merged.t_s[0]), 6),
+            "sample_rate_hz": rig.sample_rate_hz,
+            **({"tc_prior_s": {k: [float(v[0]), float(v[1])] for k, v in options.tc_range_s.items()}}
+               if options.tc_range_s else {}),
+        },
+    )
+    return assess(params, float(merged.t_s[-1]))
+
+
+__all__ = ["BOOT_KEY", "OFFSET_KEY", "WALL_KEY", "PowerContinuity", "check_power", "fit_joint", "power_continuity"]

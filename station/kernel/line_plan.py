@@ -1,0 +1,109 @@
+"""The calibration line's plan: how long a unit soaks in the rack, and what the rig does after.
+
+In a line the warm-up of eq. 3 is observed in a powered soak rack (a rest in a fixed, unknown
+orientation, logged from power-on) and only the poses and rate steps run on the rig. A
+:class:`LinePlan` holds both parts: ``rack_s`` of rest from power-on, at most ``max_transfer_s``
+to move the still-powered unit from its rack slot to the rig, then ``rig`` (a
+:class:`~station.kernel.plan.RigPlan` whose ``rest_s`` is the short rest the rig itself holds).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass, field, fields
+from typing import Any
+
+from station.kernel.plan import PlanError, RigPlan
+
+#: Format of a line plan written to a file (``station-line-plan/1``).
+LINE_PLAN_FORMAT = "station-line-plan/1"
+
+
+def line_rig_plan() -> RigPlan:
+    """The rig part of the default line: no rest, six 25 s poses in an order whose every tumble is 90 deg
+    (+z +x +y -x -y -z), +-100 deg/s about each axis held 3 s.
+
+    Chosen on development units (``benchmarks/bench_line.py``): the accelerometer's M and b_stat come from the
+    poses alone (the rack's orientation is unknown), and 20 s poses left the corrected pose error 1.13-1.24x the
+    full plan's, 25 s about 1.0x; the rate holds are far above what the gyro's white noise needs (3 s at 100 Hz:
+    7e-6 of 100 deg/s), so they paid for the longer poses.
+    """
+    return RigPlan(
+        rest_s=0.0,
+        poses=("+z", "+x", "+y", "-x", "-y", "-z"),
+        pose_hold_s=25.0,
+        rate_steps=tuple((axis, sign * 100.0) for axis in "xyz" for sign in (1.0, -1.0)),
+        rate_hold_s=3.0,
+    )
+
+
+@dataclass(frozen=True)
+class LinePlan:
+    """A soak in the rack, then the rig.
+
+    Attributes:
+        rack_s: rest logged in the rack from power-on (s); long enough for the gyro's T_c
+            (Table 1: 1030-3760 s) to show.
+        max_transfer_s: longest time (sensor seconds) between the rack's last sample and the rig's
+            first that still counts as one power-on (the unit must stay powered while it moves).
+        rig: what the rig does.
+    """
+
+    rack_s: float = 3600.0
+    max_transfer_s: float = 1800.0
+    rig: RigPlan = field(default_factory=line_rig_plan)
+
+    def __post_init__(self) -> None:
+        if not self.rack_s > 0:
+            raise PlanError(f"line plan: rack_s must be > 0, got {self.rack_s!r}")
+        if not self.max_transfer_s > 0:
+            raise PlanError(f"line plan: max_transfer_s must be > 0, got {self.max_transfer_s!r}")
+        if not self.rig.poses or not self.rig.rate_steps:
+            raise PlanError("line plan: the rig part needs poses and rate steps (M and b_stat come from the rig)")
+
+
+def line_plan_to_json(plan: LinePlan) -> str:
+    """The plan as a versioned JSON document (``format``: :data:`LINE_PLAN_FORMAT`)."""
+    rig = asdict(plan.rig)
+    rig["rate_steps"] = [list(step) for step in plan.rig.rate_steps]
+    return json.dumps({"format": LINE_PLAN_FORMAT, "rack_s": plan.rack_s, "max_transfer_s": plan.max_transfer_s,
+                       "rig": rig}, indent=2, sort_keys=True)
+
+
+def line_plan_from_json(text: str) -> LinePlan:
+    """Read a plan written by :func:`line_plan_to_json`; refuses (:class:`PlanError`) another format or version,
+    unknown keys and values the plan does not accept."""
+    try:
+        doc: Any = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise PlanError(f"line plan: not JSON ({exc})") from None
+    if not isinstance(doc, dict) or doc.get("format") != LINE_PLAN_FORMAT:
+        found = doc.get("format") if isinstance(doc, dict) else None
+        raise PlanError(f"line plan: format {found!r} is not {LINE_PLAN_FORMAT!r}")
+    rig = doc.get("rig")
+    if not isinstance(rig, dict):
+        raise PlanError("line plan: 'rig' must be a table of the rig plan's fields")
+    known = {f.name for f in fields(RigPlan)}
+    unknown = sorted(set(rig) - known) + sorted(set(doc) - {"format", "rack_s", "max_transfer_s", "rig"})
+    if unknown:
+        raise PlanError(f"line plan: unknown key(s) {', '.join(unknown)}")
+    try:
+        rig_kwargs = dict(rig)
+        if "rate_steps" in rig_kwargs:
+            rig_kwargs["rate_steps"] = tuple((str(a), float(r)) for a, r in rig_kwargs["rate_steps"])
+        for key in ("poses", "rate_flip"):
+            if key in rig_kwargs:
+                rig_kwargs[key] = tuple(rig_kwargs[key])
+        return LinePlan(rack_s=float(doc.get("rack_s", 3600.0)),
+                        max_transfer_s=float(doc.get("max_transfer_s", 1800.0)), rig=RigPlan(**rig_kwargs))
+    except (TypeError, ValueError) as exc:
+        raise PlanError(f"line plan: {exc}") from None
+
+
+def default_line_plan() -> LinePlan:
+    """One hour in the rack, then :func:`line_rig_plan`."""
+    return LinePlan()
+
+
+__all__ = ["LINE_PLAN_FORMAT", "LinePlan", "default_line_plan", "line_plan_from_json", "line_plan_to_json",
+           "line_rig_plan"]

@@ -1,0 +1,111 @@
+"""A simulated unit through the line: its rack recording and its rig recording, seeded.
+
+One unit, one power-on: the unit rests ``rack_s`` in the rack (a fixed orientation the station does
+not know: the recording carries no reference), is carried to the rig still powered (``transfer_s``;
+those samples are not recorded), and the rig runs its plan. Both recordings are cut from one
+simulated session of the unit, so they share its drift realization and its sensor time since
+power-on, as a real unit's two recordings do.
+
+``power_cycled=True``: the unit loses power during the transfer; the rig recording is then a new
+power-on of the same unit (its sensor time restarts at 0, its warm-up starts again).
+
+Each recording carries ``wall_clock_at_start_s`` (POSIX seconds of its first sample, on the station's
+clock) and ``boot_count`` (the sensor's power-on counter); :func:`station.fit.joint.check_power` reads them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from station.kernel.line_plan import LinePlan, default_line_plan
+from station.kernel.plan import RigPlan
+from station.kernel.sensor_class import TABLE1, SensorClass
+from station.physics.unit import UnitTruth
+from station.session.model import Kind, Session
+from station.sim.session_sim import SimResult, simulate_session
+
+#: Wall clock (POSIX s) of the simulated units' power-on: a fixed date keeps the bytes deterministic.
+POWER_ON_WALL_S = 1_790_000_000.0
+
+
+@dataclass(frozen=True, eq=False)
+class LineSim:
+    """A unit's two recordings and what made them.
+
+    Attributes:
+        rack: the rack's rest from power-on, references NaN.
+        rig: the rig's recording, sensor time since power-on.
+        truth: the unit's true parameters.
+        rack_up: the pose pointing up in the rack (not known to the station).
+        power_cycled: whether the unit lost power between rack and rig.
+        source: the simulated session(s) the recordings were cut from.
+    """
+
+    rack: Session
+    rig: Session
+    truth: UnitTruth
+    rack_up: str
+    power_cycled: bool
+    source: tuple[SimResult, ...]
+
+
+_POSES = ("+z", "-z", "+x", "-x", "+y", "-y")
+
+
+def _cut(session: Session, sel: np.ndarray, **meta: str) -> Session:
+    return Session(
+        metadata={**session.metadata, **meta},
+        t_s=session.t_s[sel],
+        segment=session.segment[sel],
+        kind=session.kind[sel],
+        accel_mps2=session.accel_mps2[sel],
+        gyro_radps=session.gyro_radps[sel],
+        temp_degc=session.temp_degc[sel],
+        ref_accel_mps2=session.ref_accel_mps2[sel],
+        ref_gyro_radps=session.ref_gyro_radps[sel],
+    )
+
+
+def _unknown(session: Session) -> Session:
+    """The rack's view: no reference, every sample one rest segment."""
+    n = len(session)
+    nan = np.full((n, 3), np.nan)
+    return session.replace(segment=np.zeros(n, dtype=np.int64), kind=np.full(n, int(Kind.REST)),
+                           ref_accel_mps2=nan, ref_gyro_radps=nan)
+
+
+def simulate_line(
+    seed: int,
+    *,
+    plan: LinePlan | None = None,
+    transfer_s: float = 60.0,
+    sensor_class: SensorClass = TABLE1,
+    unit: UnitTruth | None = None,
+    power_cycled: bool = False,
+) -> LineSim:
+    """Simulate a unit's rack and rig recordings (the unit drawn with ``seed`` unless given)."""
+    plan = plan if plan is not None else default_line_plan()
+    rig: RigPlan = plan.rig
+    rack_up = _POSES[int(np.random.default_rng(np.random.SeedSequence([seed, 7])).integers(len(_POSES)))]
+    if not power_cycled:
+        whole = replace(rig, rest_pose=rack_up, rest_s=plan.rack_s + transfer_s + rig.rest_s)
+        res = simulate_session(seed, plan=whole, sensor_class=sensor_class, unit=unit)
+        s = res.session
+        t0_rig = plan.rack_s + transfer_s
+        rack = _cut(s, s.t_s < plan.rack_s, wall_clock_at_start_s=repr(POWER_ON_WALL_S), boot_count="1")
+        # the rig's own short rest (if any) keeps its reference; its segment index stays that of the long rest
+        rig_s = _cut(s, s.t_s >= t0_rig, wall_clock_at_start_s=repr(POWER_ON_WALL_S + t0_rig), boot_count="1")
+        return LineSim(_unknown(rack), rig_s, res.truth, rack_up, False, (res,))
+    first = simulate_session(seed, plan=replace(rig, rest_pose=rack_up, rest_s=plan.rack_s, poses=(),
+                                                rate_steps=()), sensor_class=sensor_class, unit=unit)
+    second = simulate_session(seed + 1_000_003, plan=rig, sensor_class=sensor_class, unit=first.truth)
+    s1 = first.session
+    rack = _cut(s1, s1.t_s < plan.rack_s, wall_clock_at_start_s=repr(POWER_ON_WALL_S), boot_count="1")
+    rig_s = _cut(second.session, np.ones(len(second.session), dtype=bool), serial=s1.serial,
+                 wall_clock_at_start_s=repr(POWER_ON_WALL_S + plan.rack_s + transfer_s), boot_count="2")
+    return LineSim(_unknown(rack), rig_s, first.truth, rack_up, True, (first, second))
+
+
+__all__ = ["POWER_ON_WALL_S", "LineSim", "simulate_line"]
