@@ -14,6 +14,7 @@ is real hardware or a simulation.
 
 from __future__ import annotations
 
+import logging
 import math
 import signal
 import sys
@@ -38,11 +39,11 @@ from station.rig_lock import RigLock
 from station.sensor import open_sensor
 from station.sensor.protocol import Sensor
 from station.sequence.options import SequenceOptions
-from station.sequence.provision import EepromProvisioner, ProvisionRecord
+from station.sequence.provision import EepromProvisioner, ProvisionJournal, ProvisionRecord, reconcile_unit
 from station.sequence.records import Record
 from station.sequence.runner import RunResult, SequenceRunner
 from station.sequence.steps import plan_steps
-from station.sequence.thermal import ThermalRunner
+from station.sequence.thermal_sequence import thermal_runner
 from station.sequence.verify import RigVerifier
 
 if TYPE_CHECKING:  # the database code loads only when a station records
@@ -50,6 +51,8 @@ if TYPE_CHECKING:  # the database code loads only when a station records
 
 Subscriber = Callable[[Record], None]
 CONFIG_FORMAT = "station-config/1"
+
+log = logging.getLogger(__name__)
 
 
 class ConfigError(StationError):
@@ -363,9 +366,13 @@ class Station:
 
             admit = retest_gate(self.recorder.db, self.limits.retest.max_attempts)
         self.admit = admit
-        if on_provision is None and self.recorder is not None:
-            on_provision = self.recorder.provisioned
         self.on_provision = on_provision
+        self.journal: ProvisionJournal | None = None  # EEPROM writes recorded ahead (the recorder's database)
+        if self.recorder is not None:
+            from station.store.write_ahead import StoreJournal
+
+            self.journal = StoreJournal(self.recorder.db, self.recorder.current_run)
+        self.reconciled: list[str] = []  # unfinished EEPROM writes found and closed when the last run started
         self.provisioner: EepromProvisioner | None = None  # the last run's, with its records
 
     def subscribe(self, fn: Subscriber) -> None:
@@ -382,23 +389,39 @@ class Station:
         plan = self.config.plan
         verifier = RigVerifier(hw.rig, self.clock, self.limits.verification, gravity_mps2=plan.gravity_mps2,
                                sample_rate_hz=int(plan.sample_rate_hz), options=self.options)
-        return EepromProvisioner(self.config.station_id, verifier=verifier, on_record=self.on_provision)
+        return EepromProvisioner(self.config.station_id, verifier=verifier, journal=self.journal,
+                                 on_record=self.on_provision)
 
     def _verifier(self, hw: Hardware) -> RigVerifier:
         plan = self.config.plan
         return RigVerifier(hw.rig, self.clock, self.limits.verification, gravity_mps2=plan.gravity_mps2,
                            sample_rate_hz=int(plan.sample_rate_hz), options=self.options)
 
-    def _thermal_runner(self, hw: Hardware, chamber: Any) -> ThermalRunner:
+    def _thermal_runner(self, hw: Hardware, chamber: Any) -> SequenceRunner:
         c = self.config
         assert c.thermal is not None
-        self.provisioner = (EepromProvisioner(c.station_id, on_record=self.on_provision) if c.provision else None)
-        return ThermalRunner(
-            hw.rig, hw.sensors, self.clock, chamber, c.thermal, verifier=self._verifier(hw) if c.provision else None,
+        self.provisioner = (EepromProvisioner(c.station_id, verifier=self._verifier(hw), journal=self.journal,
+                                              on_record=self.on_provision) if c.provision else None)
+        return thermal_runner(
+            hw.rig, hw.sensors, self.clock, chamber, c.thermal,
             options=self.options, limits=self.limits.product, out_dir=c.out_dir, station=c.station_id,
             rig_name=hw.rig_name, sensor_urls=list(c.sensor_urls), subscribers=self.subscribers,
             provisioner=self.provisioner, admit=self.admit, fit_options=self.fit_options,
         )
+
+    def reconcile(self, sensors: Sequence[Sensor]) -> list[str]:
+        """Close the unfinished EEPROM writes (a crash between a write and its record) of the units on the
+        fixture against what they hold; one line per write closed (also logged). A unit that cannot be read
+        keeps its intents open (the run itself will report it)."""
+        if self.journal is None or not self.journal.any_open():
+            return []
+        lines: list[str] = []
+        for sensor in sensors:
+            try:
+                lines += reconcile_unit(self.journal, sensor)
+            except StationError as exc:
+                log.warning("could not reconcile the EEPROM writes of %s: %s", getattr(sensor, "url", sensor), exc)
+        return lines
 
     def run(self, on_runner: Callable[[SequenceRunner], None] | None = None, operator: str | None = None) -> RunResult:
         """Take the rig, open the hardware, run the sequence once, close everything; the run's result.
@@ -416,6 +439,7 @@ class Station:
         with RigLock(c.rig_url, c.station_id, db), open_hardware(
             c.rig_url, c.sensor_urls, self.clock, rig_options=self._rig_options(), sensor_options=c.sensor_options
         ) as hw:
+            self.reconciled = self.reconcile(hw.sensors)
             if c.thermal is not None:
                 assert c.chamber_url is not None
                 options = c.chamber_options if c.chamber_options is not None else chamber_client_options(

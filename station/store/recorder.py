@@ -195,6 +195,10 @@ class Recorder:
         """Close stale UNFINISHED runs (of ``station_name``, or all); returns their run ids."""
         return recover_unfinished(self.db, station_name, outcome=outcome, exclude=set(self._runs))
 
+    def current_run(self) -> str | None:
+        """The run in progress on this recorder (the last started), or None."""
+        return next(reversed(self._runs), None)
+
     def provisioned(self, record: object) -> None:
         """Store one unit's EEPROM write and verification (an ``EepromProvisioner`` ``on_record``).
 
