@@ -23,15 +23,16 @@ DbOption = Annotated[
 ]
 
 
-def _query(db_url: str | None, query: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
+def _query(db_url: str | None, query: Callable[..., Any], *args: Any, writes: bool = False, **kwargs: Any) -> Any:
     """Open the existing store, run ``query(database, *args, **kwargs)``, close it.
 
-    A missing SQLite file is refused, never created; a StationError is one line, exit 2.
+    A missing SQLite file is refused, never created; ``writes``: so is one that keeps nothing (in memory); a
+    StationError (a locked database after the stated wait, a full disk) is one line, exit 2.
     """
     from station.store.db import open_database
 
     try:
-        with open_database(db_url, must_exist=True) as database:
+        with open_database(db_url, must_exist=True, for_writing=writes) as database:
             return query(database, *args, **kwargs)
     except StationError as exc:
         typer.echo(f"error: {exc}", err=True)
@@ -130,5 +131,5 @@ def units_disposition(
     """
     from station.store.recorder import record_disposition
 
-    _query(db, record_disposition, serial, decision, operator=operator, note=reason)
+    _query(db, record_disposition, serial, decision, operator=operator, note=reason, writes=True)
     typer.echo(f"recorded disposition {decision!r} for {serial}")
