@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 import signal
 import sys
 import threading
@@ -26,17 +27,17 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from station.chamber import chamber_client_options, open_chamber
+from station.chamber import CHAMBERS, chamber_client_options, open_chamber
 from station.fit.calibrate import FitOptions
 from station.kernel.clock import Clock, SimClock, WallClock
-from station.kernel.errors import StationError
+from station.kernel.errors import StationError, path_problem, shorten
 from station.kernel.limits_file import LimitsFile, load_limits
 from station.kernel.plan import RigPlan, default_plan
 from station.kernel.thermal_plan import ThermalPlan
-from station.rig import open_rig, rig_client_options
+from station.rig import RIGS, open_rig, rig_client_options
 from station.rig.protocol import Rig, RigIdentity
 from station.rig_lock import RigLock
-from station.sensor import open_sensor
+from station.sensor import SENSORS, open_sensor
 from station.sensor.protocol import Sensor
 from station.sequence.options import SequenceOptions
 from station.sequence.provision import EepromProvisioner, ProvisionJournal, ProvisionRecord, reconcile_unit
@@ -119,6 +120,14 @@ class StationConfig:
             raise ConfigError("a station needs at least one sensor URL")
         if not (math.isfinite(self.clock_scale) and self.clock_scale > 0):
             raise ConfigError(f"clock scale must be a positive number, got {self.clock_scale!r}")
+        # every URL and path before anything starts: a bad one is one line, not a traceback minutes later
+        RIGS.check(self.rig_url)
+        for url in self.sensor_urls:
+            SENSORS.check(url)
+        if self.chamber_url:
+            CHAMBERS.check(self.chamber_url)
+        if self.out_dir is not None:
+            check_out_dir(self.out_dir)
 
     @classmethod
     def from_file(cls, path: Path, **overrides: Any) -> StationConfig:
@@ -317,6 +326,38 @@ def abort_on_signals(runner: Callable[[], SequenceRunner | None]) -> Iterator[No
             signal.signal(sig, old)
 
 
+def check_out_dir(path: Path, what: str = "output directory") -> None:
+    """Refuse an output directory that cannot be one: a file, under a file, or a name too long (no side effect)."""
+    text = str(path)
+    shown = shorten(text, 120)
+    try:
+        if path.exists() and not path.is_dir():
+            raise ConfigError(f"{what} {shown} is a file, not a directory")
+        for parent in path.parents:
+            if parent.exists():
+                if not parent.is_dir():
+                    raise ConfigError(f"{what} {shown}: {parent} is a file, not a directory")
+                break
+    except (OSError, ValueError) as exc:
+        raise ConfigError(f"{what} {shown}: {path_problem(exc, text)}") from None
+
+
+def prepare_out_dir(path: Path, what: str = "output directory") -> None:
+    """Create the output directory and write a probe file in it now, not after the cycle; refuses one the
+    station cannot write (e.g. under /proc, read-only, a full disk)."""
+    import tempfile
+
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=path) as probe:
+            probe.write(b"\0" * 4096)
+            probe.flush()
+            os.fsync(probe.fileno())
+    except (OSError, ValueError) as exc:
+        raise ConfigError(f"{what} {shorten(str(path), 120)}: cannot write there "
+                          f"({path_problem(exc, str(path))})") from None
+
+
 class Station:
     """A station built from its configuration; :meth:`run` runs the sequence once on its hardware.
 
@@ -345,6 +386,8 @@ class Station:
         on_provision: Callable[[ProvisionRecord], None] | None = None,
     ) -> None:
         self.config = config
+        if config.out_dir is not None:
+            prepare_out_dir(config.out_dir)
         self.clock = clock if clock is not None else make_clock(config.clock_scale)
         self.limits = limits if limits is not None else load_limits(config.limits_path)
         self.options = (options if options is not None else SequenceOptions()).for_scale(self.clock.scale)

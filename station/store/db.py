@@ -27,6 +27,7 @@ from sqlalchemy.exc import ArgumentError, OperationalError, SQLAlchemyError
 from sqlalchemy.orm import Session, sessionmaker
 
 from station.kernel.datafiles import data_path
+from station.kernel.errors import path_problem, shorten
 from station.store.opening import (
     DatabaseRefused,
     StoreError,
@@ -189,10 +190,16 @@ def open_database(url: str | None = None, *, migrate: bool = True, must_exist: b
 def _require_existing(url: str, shown: str) -> None:
     try:
         parsed = make_url(url)
-    except ArgumentError:
+    except (ArgumentError, ValueError):
         return  # check_url names what is wrong with it
     file = parsed.database if parsed.get_backend_name() == "sqlite" else None
-    if file not in (None, "", ":memory:") and not Path(str(file)).exists():
+    if file in (None, "", ":memory:"):
+        return
+    try:
+        exists = Path(str(file)).exists()
+    except (OSError, ValueError) as exc:
+        raise DatabaseRefused(f"{shown}: {path_problem(exc, str(file))}") from None
+    if not exists:
         raise StoreError(f"no station database at {shown} (nothing is created by a command that only reads; "
                          f"give --db or set ${ENV_VAR})")
 
@@ -201,12 +208,15 @@ def store_exists(url: str) -> bool:
     """Whether a station database may be there: a SQLite file that exists, or any server URL."""
     try:
         parsed = make_url(url)
-    except ArgumentError:
+    except (ArgumentError, ValueError):
         return False
     if parsed.get_backend_name() != "sqlite":
         return True
     file = parsed.database or ""
-    return file not in ("", ":memory:") and not file.startswith("file:") and Path(file).is_file()
+    try:
+        return file not in ("", ":memory:") and not file.startswith("file:") and Path(file).is_file()
+    except (OSError, ValueError):
+        return False
 
 
 def shown_url(url: str | None = None) -> str:
@@ -218,9 +228,9 @@ def _redact(url: str) -> str:
     from sqlalchemy.engine import make_url
 
     try:
-        return make_url(url).render_as_string(hide_password=True)
+        return shorten(make_url(url).render_as_string(hide_password=True), 200)
     except Exception:
-        return "<bad URL>"
+        return shorten(url.split("@")[-1] if "@" in url else url, 200)
 
 
 def _first_line(exc: BaseException) -> str:

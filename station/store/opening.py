@@ -19,7 +19,7 @@ from sqlalchemy import Engine, inspect, text
 from sqlalchemy.engine import make_url
 from sqlalchemy.exc import ArgumentError
 
-from station.kernel.errors import StationError
+from station.kernel.errors import StationError, path_problem
 
 #: URL schemes (dialect names) the station's store works with
 SUPPORTED_SCHEMES = ("sqlite", "postgresql")
@@ -127,6 +127,10 @@ def _check_sqlite_file(database: str, shown: str) -> None:
     if database in ("", ":memory:") or database.startswith("file:"):
         return
     path = Path(database)
+    try:
+        path.exists()
+    except (OSError, ValueError) as exc:
+        raise DatabaseRefused(f"{shown}: {path_problem(exc, database)}") from None
     if path.is_dir():
         raise DatabaseRefused(f"{shown}: {path} is a directory, not a database file")
     parent = path.parent if str(path.parent) else Path(".")
