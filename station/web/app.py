@@ -39,11 +39,14 @@ from station.store.db import Database, open_database
 from station.store.quality import ShiftCalendar
 from station.web.context import WebContext
 from station.web.diagnosis import DiagnosisService
-from station.web.openapi import StationAPI
+from station.web.openapi import StationAPI, add_store_errors
 from station.web.routes import diagnosis, population, quality, runs, status, units
+from station.web.security import SecurityHeaders
 from station.web.state import LiveStatus
 
-ROUTERS = (status.router, runs.router, units.router, diagnosis.router, population.router, quality.router)
+# a serial may hold any printable character, "/" too ({serial:path}): the routes with something after the serial
+# (diagnosis, plots, eeprom.bin) are matched before the unit's own page and record
+ROUTERS = (status.router, runs.router, diagnosis.router, units.router, population.router, quality.router)
 
 
 @asynccontextmanager
@@ -92,6 +95,8 @@ def create_app(db_url: str | None = None, *, token: str | None = None, live: Liv
                      owns_db=database is None, shifts=calendar)
     app = StationAPI(title="station", version="1", lifespan=lifespan,
                      description="End-of-line MEMS IMU calibration station: live status, units, runs, EEPROM images.")
+    app.add_middleware(SecurityHeaders)
+    add_store_errors(app)
     app.state.web = web
     app.state.db, app.state.live, app.state.diagnosis = db, live, diagnoses
     for router in ROUTERS:
