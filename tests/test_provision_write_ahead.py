@@ -38,7 +38,6 @@ from station.sequence.options import SequenceOptions
 from station.sequence.provision import EepromProvisioner, reconcile_unit
 from station.sequence.records import Outcome
 from station.sequence.runner import SequenceRunner, UnitResult
-from station.sequence.verify import RigVerifier
 from station.sim.eeprom import Eeprom
 from station.sim.fakes import FakeSensorDevice, FakeStation, publish, withdraw
 from station.sim.firmware import install_firmware

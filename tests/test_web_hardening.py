@@ -125,18 +125,29 @@ def test_post_runs_without_a_rig_answers_the_documented_503(client: tuple[TestCl
 
 def test_a_locked_database_is_503_in_one_line(client: tuple[TestClient, str], monkeypatch: pytest.MonkeyPatch,
                                               tmp_path: Path) -> None:
-    c, _url = client
+    """The store held locked past the stated wait (a real second connection holding BEGIN EXCLUSIVE): the write
+    gives DatabaseLocked, and any answer that meets it is a documented 503 with one line, not a 500."""
+    from station.store.opening import DatabaseLocked
+    from station.store.recorder import record_disposition
+    from station.web import lookup
+
+    c, _ = client
     monkeypatch.setenv("STATION_DB_LOCK_TIMEOUT_S", "0.2")
     url = f"sqlite:///{tmp_path / 'locked.sqlite'}"
     _fill(url, ["U1"])
-    with TestClient(create_app(url)) as locked_client:
-        holder = sqlite3.connect(tmp_path / "locked.sqlite", isolation_level=None)
-        holder.execute("BEGIN EXCLUSIVE")
-        try:
-            from station.store.recorder import record_disposition
+    holder = sqlite3.connect(tmp_path / "locked.sqlite", isolation_level=None)
+    holder.execute("BEGIN EXCLUSIVE")
+    try:
+        with open_database(url) as db, pytest.raises(DatabaseLocked, match=r"waited 0\.2 s") as info:
+            record_disposition(db, "U1", "retest", operator="a", note="b")
+    finally:
+        holder.execute("ROLLBACK")
+        holder.close()
 
-            with pytest.raises(Exception, match="locked"):
-                record_disposition(locked_client.app.state.db, "U1", "retest", operator="a", note="b")  # type: ignore[attr-defined]
-        finally:
-            holder.execute("ROLLBACK")
-            holder.close()
+    def locked(*_args: object) -> None:
+        raise info.value
+
+    monkeypatch.setattr(lookup, "show_unit", locked)
+    r = c.get(f"/api/units/{quote(ODD[0], safe='')}")
+    assert r.status_code == 503 and r.json() == {"detail": str(info.value)}
+    assert "\n" not in r.json()["detail"]
