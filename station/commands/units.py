@@ -94,7 +94,8 @@ def units_show(
             typer.echo(f"      recording {r.session_path} sha256 {r.session_sha256}")
     for w in detail.eeprom_writes:
         typer.echo(f"  EEPROM {w['written_at']}: image {w['image_sha256'][:16]}..., {w['attempts']} attempt(s), "
-                   f"{'verified' if w['verified'] else 'NOT verified'}")
+                   f"{'verified' if w['verified'] else 'NOT verified'}"
+                   + ("" if w.get("state", "complete") == "complete" else f" ({w['state']})"))
     for d in detail.dispositions:
         typer.echo(f"  disposition {d['decided_at']}: {d['decision']} by {d['operator'] or '-'} {d['note']}")
     if detail.latest_params_json:

@@ -589,11 +589,12 @@ class SequenceRunner:
                 texts.append(None)
                 sessions.append(None)
         params: list[ParameterSet | None] = [None] * len(channels)
-        to_fit = [k for k, v in enumerate(verdicts) if v.outcome is None and sessions[k] is not None]
+        to_fit = {k: s for k, (v, s) in enumerate(zip(verdicts, sessions, strict=True))
+                  if v.outcome is None and s is not None}
         if to_fit:
             assert self._fixture is not None
             futures: dict[int, Future[ParameterSet]] = {
-                k: self._fixture.pool.submit(self._fit_one, sessions[k]) for k in to_fit  # type: ignore[arg-type]
+                k: self._fixture.pool.submit(self._fit_one, session) for k, session in to_fit.items()
             }
             try:
                 wait(futures.values())
@@ -610,8 +611,9 @@ class SequenceRunner:
                 elif err is not None:
                     raise err
                 else:
-                    params[k] = fut.result()
-                    self._check_unit_limits(channels[k], v, params[k])  # type: ignore[arg-type]
+                    fitted = fut.result()
+                    params[k] = fitted
+                    self._check_unit_limits(channels[k], v, fitted)
         results: list[UnitResult] = []
         for k, (unit, v) in enumerate(zip(channels, verdicts, strict=True)):
             if v.outcome is None:

@@ -15,6 +15,7 @@ from collections.abc import Callable
 from datetime import UTC, datetime
 
 from sqlalchemy import select
+from sqlalchemy.orm import Session
 
 from station.eeprom.provision import WritePlan, WriteReport
 from station.sequence.provision import OpenIntent
@@ -69,8 +70,8 @@ class StoreJournal:
             s.flush()
             return row.id
 
-    def _row(self, s: object, intent: int) -> EepromWrite:
-        row = s.get(EepromWrite, intent)  # type: ignore[attr-defined]  # s is a sqlalchemy Session
+    def _row(self, s: Session, intent: int) -> EepromWrite:
+        row = s.get(EepromWrite, intent)
         if row is None:
             raise StoreError(f"no EEPROM write intent {intent} in {self.db.url}")
         return row
