@@ -30,6 +30,8 @@ class SessionFormatError(FormatError):
     """A session CSV violates the v1 spec; ``line`` is the 1-based line number."""
 
     def __init__(self, message: str, line: int | None = None, path: str | None = None) -> None:
+        # a message that quotes its input whole (a line of megabytes) is cut: readers quote with quote_input
+        message = shorten(message, MESSAGE_LIMIT)
         where = ""
         if path is not None:
             where = f"{path}:"
@@ -69,6 +71,8 @@ class StationBusy(StationError):
 
 #: How much of a piece of input an error message quotes (characters).
 QUOTE_LIMIT = 60
+#: The longest reason a :class:`SessionFormatError` keeps (characters); longer ones are cut with their length.
+MESSAGE_LIMIT = 300
 
 
 def shorten(text: str, limit: int = QUOTE_LIMIT) -> str:

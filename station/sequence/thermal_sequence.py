@@ -229,6 +229,7 @@ class ThermalSequence:
 
     def after_run(self, run: SequenceRunner, result: RunResult | None) -> RunResult | None:
         """The chamber back to ambient (also when the run raised), the batch's timing, a chamber teardown fault."""
+        self._run = run
         self._chamber_home()
         if result is None:
             return None
