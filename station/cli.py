@@ -26,11 +26,17 @@ app.add_typer(import_app, name="import")
 def _add_subapps() -> None:
     from station.commands.diagnose import diagnose as diagnose_command
     from station.commands.eeprom import eeprom_app
+    from station.commands.golden import golden_app
+    from station.commands.msa import msa_app
+    from station.commands.nest_cal import nest_app
     from station.commands.rigfree import export_command, import_imu_tk_command, import_openaxes_command
     from station.commands.units import units_app
 
     app.add_typer(eeprom_app, name="eeprom")
     app.add_typer(units_app, name="units")
+    app.add_typer(msa_app, name="msa")
+    app.add_typer(nest_app, name="nest-cal")
+    app.add_typer(golden_app, name="golden")
     app.command(name="diagnose")(diagnose_command)
     app.command(name="export")(export_command)
     import_app.command("openaxes")(import_openaxes_command)
@@ -64,45 +70,57 @@ def fail(exc: StationError, code: int = 2) -> typer.Exit:
 
 
 def _print_params(params: object) -> None:
+    """The parameter set for people, in the display convention (:mod:`station.kernel.display`)."""
     from rich.console import Console
     from rich.table import Table
 
     from station.fit.params import ParameterSet
+    from station.kernel.display import display_for, display_of_check
 
     assert isinstance(params, ParameterSet)
     console = Console()
-    for name, tri, unit, scale in (("accelerometer", params.accel, "m/s^2", 1.0),
-                                   ("gyroscope", params.gyro, "deg/s", float(np.degrees(1.0)))):
-        table = Table(title=f"{params.serial} {name} ({unit}; uncertainties are 1 sigma)")
+    for key, name, tri, unit in (("accel", "accelerometer", params.accel, "m/s^2"),
+                                 ("gyro", "gyroscope", params.gyro, "rad/s")):
+        shown = display_of_check(f"{key}.bias_static.x", unit)
+        table = Table(title=f"{params.serial} {name} (value ± u, u the standard uncertainty; biases and noise in "
+                            f"{shown.unit}, M as ppm: diagonal M_ii - 1, off-diagonal M_ij)")
         table.add_column("parameter")
         for ax in "xyz":
             table.add_column(ax, justify="right")
 
-        def row(
-            label: str, v: np.ndarray, s: np.ndarray, k: float = scale, fmt: str = "{:.6f}", table: Table = table
-        ) -> None:
+        def row(label: str, v: np.ndarray, s: np.ndarray | None, names: list[str], si: str,
+                table: Table = table) -> None:
             cells = []
-            for a, b in zip(v, s, strict=True):
+            for i, a in enumerate(v):
+                d = display_of_check(names[i], si)
                 if not np.isfinite(a):
                     cells.append("unresolved")
                 else:
-                    cells.append(f"{fmt.format(a * k)} ± {fmt.format(b * k)}")
+                    cells.append(d.format(float(a), float(s[i]) if s is not None else None, unit=False))
             table.add_row(label, *cells)
 
         for i, ax in enumerate("xyz"):
-            row(f"M row {ax}", tri.misalignment[i], tri.misalignment_std[i], 1.0)
-        row("bias static", tri.bias_static, tri.bias_static_std)
-        row("bias drift", tri.bias_drift, tri.bias_drift_std)
-        row("T_c (s)", tri.correlation_time_s, tri.correlation_time_s_std, 1.0, "{:.1f}")
-        row("noise std", tri.noise_std, tri.noise_std_std)
-        row("residual rms", tri.residual_rms, np.zeros(3))
+            row(f"M row {ax} (ppm)", tri.misalignment[i], tri.misalignment_std[i],
+                [f"{key}.M.{ax}{b}" for b in "xyz"], "1")
+        each = [f"{key}.x"] * 3
+        row(f"bias static ({shown.unit})", tri.bias_static, tri.bias_static_std, each, unit)
+        row(f"bias drift ({shown.unit})", tri.bias_drift, tri.bias_drift_std, each, unit)
+        row("T_c (s)", tri.correlation_time_s, tri.correlation_time_s_std, each, "s")
+        row(f"noise std ({shown.unit})", tri.noise_std, tri.noise_std_std, each, unit)
+        row(f"residual rms ({shown.unit})", tri.residual_rms, None, each, unit)
+        tempco = display_of_check("x", f"{unit}/K")
         for j in range(tri.temp_bias_coeff.shape[1]):  # the temperature terms (station-params/2), where fitted
             if np.any(tri.temp_bias_coeff[:, j]):
-                row(f"T bias /K^{j + 1}", tri.temp_bias_coeff[:, j], tri.temp_bias_coeff_std[:, j], fmt="{:.3e}")
+                unit_j = f"{shown.unit}/K" if j == 0 else f"{shown.unit}/K^{j + 1}"
+                table.add_row(f"T bias ({unit_j})", *[
+                    tempco.format(float(a), float(b), unit=False)
+                    for a, b in zip(tri.temp_bias_coeff[:, j], tri.temp_bias_coeff_std[:, j], strict=True)])
         for j in range(tri.temp_scale_coeff.shape[1]):
             if np.any(tri.temp_scale_coeff[:, j]):
-                row(f"T scale ppm/K^{j + 1}", tri.temp_scale_coeff[:, j], tri.temp_scale_coeff_std[:, j], 1e6,
-                    "{:.3f}")
+                unit_j = "ppm/K" if j == 0 else f"ppm/K^{j + 1}"
+                table.add_row(f"T scale ({unit_j})", *[
+                    display_for("scale_tempco").format(float(a), float(b), unit=False)
+                    for a, b in zip(tri.temp_scale_coeff[:, j], tri.temp_scale_coeff_std[:, j], strict=True)])
         console.print(table)
     note = params.thermal
     if note.fitted:
@@ -113,9 +131,11 @@ def _print_params(params: object) -> None:
     nl = params.quality.get("scale_nonlinearity")
     if isinstance(nl, dict):
         if nl.get("status") == "fitted":
+            from station.kernel.display import format_value
+
             k = params.gyro.scale_nonlinearity
             k_std = params.gyro.scale_nonlinearity_std
-            parts = [f"{a} {100 * k[i] * REF_RATE_RADPS:+.4f} +- {100 * k_std[i] * REF_RATE_RADPS:.4f} %"
+            parts = [f"{a} " + format_value(1e6 * k[i] * REF_RATE_RADPS, 1e6 * k_std[i] * REF_RATE_RADPS, "ppm")
                      for i, a in enumerate("xyz") if a in nl.get("axes", [])]
             console.print("gyro scale nonlinearity u + k u|u| fitted (relative error k|u| at 200 deg/s): "
                           + ", ".join(parts))
@@ -285,7 +305,8 @@ def import_imucal(
 
 ConfigOption = Annotated[
     Path | None, typer.Option("--config", help="station configuration file (TOML, station-config/1): rig, sensors, "
-                                                "station, db, limits, out, scale, operator; options given here win")
+                                                "station, db, limits, out, scale, operator, lot; options given here "
+                                                "win")
 ]
 LimitsOption = Annotated[
     Path | None, typer.Option("--limits", help="limits file (default: fixtures/limits/default.toml)")
@@ -326,6 +347,9 @@ def run_station(
     name: Annotated[str | None, typer.Option("--station", help="station id for the records and images")] = None,
     db: DbOption = None,
     operator: Annotated[str | None, typer.Option(help="operator name for the records")] = None,
+    lot: Annotated[str | None, typer.Option("--lot", help="production lot of the units, recorded with the run "
+                                                          "(quality page filter, certificate); overrides the "
+                                                          "configuration's lot")] = None,
     chamber: Annotated[str | None, typer.Option("--chamber", help="climate chamber URL (modbus-tcp://HOST:PORT): "
                                                 "run the thermal plan (plateaus 5/15/25/45 degC, verification at "
                                                 "35 degC) instead of the room-temperature sequence")] = None,
@@ -348,6 +372,7 @@ def run_station(
     from rich.console import Console
 
     from station.compose import Station, abort_on_signals
+    from station.kernel.display import limits_identity
     from station.kernel.plan import default_plan
     from station.kernel.thermal_plan import default_thermal_plan
     from station.sequence.runner import SequenceRunner
@@ -365,13 +390,15 @@ def run_station(
     console = Console()
     try:
         cfg = station_config(config, rig, sensor, station_id=name, db_url=db, out_dir=out, clock_scale=scale,
-                             plan=plan, operator=operator, limits_path=limits, provision=True,
+                             plan=plan, operator=operator, lot=lot, limits_path=limits, provision=True,
                              chamber_url=chamber, thermal=thermal)
         display = ProgressDisplay(console, list(cfg.sensor_urls), cfg.clock_scale)
         with abort_on_signals(lambda: runners[-1] if runners else None):
             station = Station(cfg, subscribers=[display])
+            lim = station.limits
             console.print(f"station {cfg.station_id}: database {station.recorder.db.url if station.recorder else '-'}, "
-                          f"limits {station.limits.name} {station.limits.version}")
+                          f"limits {limits_identity(f'{lim.name} {lim.version}', lim.sha256)}"
+                          + (f", lot {cfg.lot}" if cfg.lot else ""), soft_wrap=True)
             with display:
                 result = station.run(on_runner=runners.append)
     except StationError as exc:

@@ -31,7 +31,9 @@ from station.chamber import CHAMBERS, chamber_client_options, open_chamber
 from station.fit.calibrate import FitOptions
 from station.kernel.clock import Clock, SimClock, WallClock
 from station.kernel.errors import StationError, path_problem, shorten
+from station.kernel.golden import GoldenCheck
 from station.kernel.limits_file import LimitsFile, load_limits
+from station.kernel.nest_frames import NestCalibration
 from station.kernel.plan import RigPlan, default_plan
 from station.kernel.thermal_plan import ThermalPlan
 from station.rig import RIGS, open_rig, rig_client_options
@@ -87,6 +89,13 @@ class StationConfig:
             :func:`~station.chamber.chamber_client_options` for ``clock_scale``).
         thermal: run this thermal plan (its ``base`` becomes ``plan``) in the chamber instead of the plain
             sequence; with ``provision`` the corrected output is verified at its ``verify_degc``.
+        rig_key: the rig's name for its nest calibrations (None: ``rig_url``).
+        nest_calibration: take each unit's references into its sensor frame with the rig's newest nest
+            calibration in the database (:mod:`station.kernel.nest_frames`); the plain sequence only.
+        golden: ``"off"``, or ``"per-shift"``: production units are admitted only after a golden unit passed its
+            check on this station in the current shift, and never after a golden check failed
+            (:mod:`station.kernel.golden`); every golden unit a run measures is checked and recorded.
+        shifts: the shift calendar (``"A=06:00,B=14:00,C=22:00"``, UTC starts) for ``golden``.
     """
 
     rig_url: str
@@ -106,6 +115,15 @@ class StationConfig:
     chamber_url: str | None = None
     chamber_options: Mapping[str, Any] | None = None
     thermal: ThermalPlan | None = None
+    rig_key: str | None = None
+    nest_calibration: bool = True
+    golden: str = "off"
+    shifts: str = "A=06:00,B=14:00,C=22:00"
+
+    @property
+    def nest_rig(self) -> str:
+        """The key the rig's nest calibrations are stored under."""
+        return self.rig_key if self.rig_key else self.rig_url
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "sensor_urls", tuple(self.sensor_urls))
@@ -120,6 +138,8 @@ class StationConfig:
             raise ConfigError("a station needs at least one sensor URL")
         if not (math.isfinite(self.clock_scale) and self.clock_scale > 0):
             raise ConfigError(f"clock scale must be a positive number, got {self.clock_scale!r}")
+        if self.golden not in ("off", "per-shift"):
+            raise ConfigError(f"golden {self.golden!r}: 'off' or 'per-shift'")
         # every URL and path before anything starts: a bad one is one line, not a traceback minutes later
         RIGS.check(self.rig_url)
         for url in self.sensor_urls:
@@ -134,7 +154,9 @@ class StationConfig:
         """A station configuration file (TOML, ``format = "station-config/1"``); ``overrides`` win.
 
         Keys: ``rig`` (URL), ``sensors`` (list of URLs), ``station`` (id), ``db`` (URL), ``limits``
-        (path, relative to the file), ``out`` (directory, relative to the file), ``scale``, ``operator``, ``lot``.
+        (path, relative to the file), ``out`` (directory, relative to the file), ``scale``, ``operator``, ``lot``,
+        ``rig_key`` (the rig's name for its nest calibrations; default the rig URL), ``golden`` ("off" or
+        "per-shift") and ``shifts`` (the shift calendar, e.g. "A=06:00,B=14:00,C=22:00").
         Unknown keys are refused, as in a limits file.
         """
         try:
@@ -145,7 +167,8 @@ class StationConfig:
             raise ConfigError(f"{path}: not valid TOML: {exc}") from None
         if data.get("format") != CONFIG_FORMAT:
             raise ConfigError(f"{path}: format {data.get('format')!r}; this station reads {CONFIG_FORMAT!r}")
-        known = {"format", "rig", "sensors", "station", "db", "limits", "out", "scale", "operator", "lot"}
+        known = {"format", "rig", "sensors", "station", "db", "limits", "out", "scale", "operator", "lot",
+                 "rig_key", "golden", "shifts"}
         extra = sorted(set(data) - known)
         if extra:
             raise ConfigError(f"{path}: unknown key(s) {', '.join(extra)}")
@@ -166,8 +189,11 @@ class StationConfig:
         kw: dict[str, Any] = {
             "rig_url": text("rig"), "sensor_urls": tuple(sensors), "station_id": text("station") or "station",
             "db_url": text("db"), "clock_scale": float(scale), "operator": text("operator") or "",
-            "lot": text("lot") or "",
+            "lot": text("lot") or "", "rig_key": text("rig_key"),
         }
+        for key in ("golden", "shifts"):
+            if text(key):
+                kw[key] = text(key)
         if text("limits"):
             kw["limits_path"] = base / str(data["limits"])
         if text("out"):
@@ -408,7 +434,19 @@ class Station:
             from station.store.queries import retest_gate
 
             admit = retest_gate(self.recorder.db, self.limits.retest.max_attempts)
+        if config.golden == "per-shift":
+            if self.recorder is None:
+                raise ConfigError("golden = 'per-shift' needs the database (record = true)")
+            from station.store.golden_records import golden_gate
+            from station.store.quality import QualityFilterError, ShiftCalendar
+
+            try:
+                calendar = ShiftCalendar.parse(config.shifts)
+            except QualityFilterError as exc:
+                raise ConfigError(str(exc)) from None
+            admit = golden_gate(self.recorder.db, config.station_id, calendar, inner=admit)
         self.admit = admit
+        self.golden_checks: list[GoldenCheck] = []  # the last run's golden-unit checks
         self.on_provision = on_provision
         self.journal: ProvisionJournal | None = None  # EEPROM writes recorded ahead (the recorder's database)
         if self.recorder is not None:
@@ -426,12 +464,21 @@ class Station:
         c = self.config
         return c.rig_options if c.rig_options is not None else rig_client_options(self.clock.scale)
 
-    def _provisioner(self, hw: Hardware) -> EepromProvisioner | None:
+    def nests(self) -> NestCalibration | None:
+        """The rig's newest nest calibration in the database (None: none, not recording, or switched off)."""
+        if not self.config.nest_calibration or self.recorder is None:
+            return None
+        from station.store.nest_records import latest_nest_calibration
+
+        return latest_nest_calibration(self.recorder.db, self.config.nest_rig)
+
+    def _provisioner(self, hw: Hardware, nests: NestCalibration | None = None) -> EepromProvisioner | None:
         if not self.config.provision:
             return None
         plan = self.config.plan
         verifier = RigVerifier(hw.rig, self.clock, self.limits.verification, gravity_mps2=plan.gravity_mps2,
-                               sample_rate_hz=int(plan.sample_rate_hz), options=self.options)
+                               sample_rate_hz=int(plan.sample_rate_hz), options=self.options, nests=nests,
+                               sensors=hw.sensors)
         return EepromProvisioner(self.config.station_id, verifier=verifier, journal=self.journal,
                                  on_record=self.on_provision)
 
@@ -495,16 +542,39 @@ class Station:
                     return runner.run()
                 finally:
                     chamber.close()
-            self.provisioner = self._provisioner(hw)
+            nests = self.nests()
+            self.provisioner = self._provisioner(hw, nests)
             runner = SequenceRunner(
                 hw.rig, hw.sensors, self.clock, plan=c.plan, options=self.options, limits=self.limits.product,
                 out_dir=c.out_dir, station=c.station_id, rig_name=hw.rig_name, sensor_urls=list(c.sensor_urls),
                 subscribers=self.subscribers, provisioner=self.provisioner, admit=self.admit,
-                fit_options=self.fit_options,
+                fit_options=self.fit_options, nests=nests,
             )
             if on_runner is not None:
                 on_runner(runner)
-            return runner.run()
+            result = runner.run()
+        self._check_golden_units(result)
+        return result
+
+    def _check_golden_units(self, result: RunResult) -> None:
+        """Judge every registered golden unit the run fitted against its references, and record it."""
+        self.golden_checks = []
+        if self.recorder is None:
+            return
+        from station.kernel.golden import check_golden
+        from station.sequence.limits import check_limits
+        from station.store.golden_records import golden_units, record_golden_check
+
+        goldens = golden_units(self.recorder.db)
+        for r in result.units:
+            if r.serial not in goldens or r.params is None:
+                continue
+            version, golden = goldens[r.serial]
+            measured = {m.name: m.value for m in check_limits(r.params, self.limits.product)}
+            check = check_golden(golden, measured)
+            record_golden_check(self.recorder.db, check, station=self.config.station_id, version=version,
+                                run_uid=result.run_id, slot=r.slot)
+            self.golden_checks.append(check)
 
 
 __all__ = [

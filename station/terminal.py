@@ -11,6 +11,7 @@ from rich.live import Live
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
+from station.kernel.display import display_for
 from station.sequence.provision import EepromProvisioner
 from station.sequence.records import (
     Measured,
@@ -102,7 +103,7 @@ class ProgressDisplay:
         elif isinstance(record, Measured):
             m = record.measurement
             if not m.passed and record.step != "limits":
-                self.state[record.slot] = f"[red]{record.step}: {m.name} = {m.value:.4g} out of limits"
+                self.state[record.slot] = f"[red]{record.step}: {m.describe()}"
         elif isinstance(record, UnitFinished):
             style = _STYLE[record.outcome]
             text = f"[{style}]{record.outcome.value}[/{style}]"
@@ -116,8 +117,12 @@ class ProgressDisplay:
             self.progress.update(self.task, description=f"done: {record.outcome.value}")
 
 
-def _fmt(values: Any, scale: float = 1.0, digits: int = 4) -> str:
-    return "\n".join("—" if not math.isfinite(float(v)) else f"{float(v) * scale:+.{digits}f}" for v in values)
+def _fmt(values: Any, scale: float = 1.0, digits: int = 4, offset: float = 0.0) -> str:
+    return "\n".join("—" if not math.isfinite(float(v)) else f"{(float(v) + offset) * scale:+.{digits}f}"
+                     for v in values)
+
+
+_MG, _DPS, _PPM = display_for("acceleration"), display_for("angular_rate"), display_for("scale_error")
 
 
 def summary_table(result: RunResult) -> Table:
@@ -126,16 +131,17 @@ def summary_table(result: RunResult) -> Table:
     table.add_column("slot", justify="right")
     table.add_column("serial", no_wrap=True)
     table.add_column("outcome")
-    table.add_column("scale-1 (ppm)\nM_a xx yy zz", justify="right")
-    table.add_column("b_stat a\n(m/s²) x y z", justify="right")
-    table.add_column("b_stat w\n(deg/s) x y z", justify="right")
+    table.add_column(f"scale-1 ({_PPM.unit})\nM_a xx yy zz", justify="right")
+    table.add_column(f"b_stat a\n({_MG.unit}) x y z", justify="right")
+    table.add_column(f"b_stat w\n({_DPS.unit}) x y z", justify="right")
     for u in result.units:
         style = _STYLE[u.outcome]
         cells = ["", "", ""]
         if u.params is not None:
             a, g = u.params.accel, u.params.gyro
-            diag = [a.misalignment[i, i] - 1.0 for i in range(3)]
-            cells = [_fmt(diag, 1e6, 0), _fmt(a.bias_static), _fmt(g.bias_static, 180.0 / math.pi, 3)]
+            diag = [a.misalignment[i, i] for i in range(3)]
+            cells = [_fmt(diag, _PPM.scale, 0, _PPM.offset), _fmt(a.bias_static, _MG.scale, 2),
+                     _fmt(g.bias_static, _DPS.scale, 3)]
         outcome = f"[{style}]{u.outcome.value}[/{style}]"
         if u.message:
             outcome += f"\n{u.message}"
@@ -156,8 +162,9 @@ def summary_table(result: RunResult) -> Table:
 def provisioning_table(provisioner: EepromProvisioner) -> Table:
     """One row per provisioned unit: EEPROM slot and update count, write attempts, verification residuals."""
     table = Table(title="EEPROM write and verification of the corrected output")
-    for name, justify in (("serial", "left"), ("slot #", "left"), ("tries", "right"), ("accel err\n(m/s²)", "right"),
-                          ("gyro err\n(deg/s)", "right"), ("rate err\n(deg/s)", "right"), ("verified", "left")):
+    for name, justify in (("serial", "left"), ("slot #", "left"), ("tries", "right"),
+                          (f"accel err\n({_MG.unit})", "right"), (f"gyro err\n({_DPS.unit})", "right"),
+                          (f"rate err\n({_DPS.unit})", "right"), ("verified", "left")):
         table.add_column(name, justify=justify)  # type: ignore[arg-type]
     for serial, rec in provisioner.records.items():
         v = rec.verification
@@ -165,7 +172,7 @@ def provisioning_table(provisioner: EepromProvisioner) -> Table:
         if v is not None:
             c = {k.name: k.value for k in v.checks}
             acc = max(c.get("verify.pose.accel_error", math.nan), c.get("verify.rate.accel_error", math.nan))
-            cells = [f"{acc:.4f}", f"{math.degrees(c.get('verify.pose.gyro_error', math.nan)):.4f}",
+            cells = [f"{acc * _MG.scale:.3f}", f"{math.degrees(c.get('verify.pose.gyro_error', math.nan)):.4f}",
                      f"{math.degrees(c.get('verify.rate.rate_error', math.nan)):+.4f}",
                      "[green]yes[/green]" if v.passed else f"[red]no[/red] {v.describe()}"]
         table.add_row(serial, f"{rec.write.slot} #{rec.write.update_count}", str(rec.write.attempts), *cells)

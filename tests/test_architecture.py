@@ -19,7 +19,7 @@ import station
 ROOT = Path(station.__file__).resolve().parent
 
 # what each top-level package (or module) of station/ may import, besides itself
-NUMERICS = {"kernel", "session", "fit", "correct", "physics", "diagnose"}
+NUMERICS = {"kernel", "session", "fit", "correct", "physics", "diagnose", "msa"}
 ALLOWED: dict[str, set[str]] = {
     # the kernel: clock, geometry, plan, sensor class, limits, errors; no I/O, no simulation
     "kernel": set(),
@@ -29,6 +29,8 @@ ALLOWED: dict[str, set[str]] = {
     "correct": {"kernel", "session", "fit"},
     "physics": {"kernel", "session", "fit"},
     "diagnose": {"kernel", "session", "fit", "correct", "physics"},
+    # measurement system analysis (Gage R&R by ANOVA): numbers in, a frozen study out
+    "msa": {"kernel"},
     # what the Modbus devices share: URL parsing, the pymodbus transport, the heartbeat
     "modbus": {"kernel"},
     # hardware behind protocols, selected by URL scheme
@@ -53,7 +55,7 @@ ALLOWED: dict[str, set[str]] = {
     "__init__": set(),
 }
 # the simulator's own applications (the demo and its commands) sit on top of everything
-SIM_APPS = {"station.sim.demo", "station.sim.cli"}
+SIM_APPS = {"station.sim.demo", "station.sim.cli", "station.sim.msa_study", "station.sim.golden_study"}
 EVERYTHING = set(ALLOWED)
 
 

@@ -159,7 +159,7 @@ def test_import_fit_export_on_the_command_line(tmp_path: Path) -> None:
     assert np.allclose(np.linalg.inv(tk) @ values[9:12], params.accel.bias_static, atol=1e-6)
     assert np.allclose(values[12:21].reshape(3, 3, order="F"), np.linalg.inv(params.gyro.misalignment), atol=1e-7)
     assert np.allclose(values[21:24], params.gyro.bias_static, atol=1e-9)
-    r = RUN.invoke(app, ["export", str(pj), "--format", "imu-tk"])
+    r = RUN.invoke(app, ["export", str(pj), "--format", "imu-tk-json"])
     assert r.exit_code == 0 and '"format": "station-imutk/1"' in r.stdout
 
 

@@ -1,6 +1,6 @@
 """``station diagnose SESSION.csv [--json] [--plot OUT.png] [--resamples N]``: the CLI front of :mod:`station.diagnose`.
 
-Wire it into ``station/cli.py`` with ``app.command()(diagnose)`` (see the report of issue 6).
+Wire it into ``station/cli.py`` with ``app.command()(diagnose)``.
 """
 
 from __future__ import annotations

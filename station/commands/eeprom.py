@@ -1,4 +1,4 @@
-"""``station eeprom ...``: make, inspect and write calibration images; export noise parameters for Kalibr.
+"""``station eeprom ...``: make, inspect and write calibration images (``kalibr``: an alias of ``station export``).
 
 A Typer sub-app; ``station/cli.py`` mounts it with ``app.add_typer(eeprom_app, name="eeprom")``.
 Parameter sets come from the unit store (the newest PASS parameter set of the serial, in
@@ -19,7 +19,8 @@ from typing import TYPE_CHECKING, Annotated, Any, TypeVar
 import numpy as np
 import typer
 
-from station.fit.params import ParameterSet, TriadParams
+from station.fit.export import kalibr_imu_yaml
+from station.fit.params import ParameterSet
 from station.kernel.errors import StationError
 
 if TYPE_CHECKING:
@@ -66,10 +67,40 @@ def _from_store(db_url: str | None, serial: str | None, query: Callable[[Any, st
     return found
 
 
+def _refuse_scrapped(serial: str | None, db_url: str | None, *, required: bool) -> None:
+    """Refuse a scrapped unit (its 'scrap' disposition in the store): no image is made or written for it.
+
+    ``required``: the store must exist (the image comes from it); with parameters from a file and no store
+    there is no record to check.
+    """
+    if serial is None:
+        return
+    from station.kernel.display import local_time
+    from station.store.db import open_database
+    from station.store.queries import scrapped_at
+
+    try:
+        db = open_database(db_url, must_exist=True)
+    except StationError:
+        if required:
+            raise
+        return
+    try:
+        when = scrapped_at(db, serial)
+    finally:
+        db.close()
+    if when is not None:
+        raise StationError(f"{serial} was scrapped ({local_time(when)}): no calibration image is made or written "
+                           "for a scrapped unit")
+
+
 def _unit_image(serial: str | None, path: Path | None, db_url: str | None, station_id: str) -> CalibrationImage:
-    """The image to write or save: of the file at ``path`` (station ``station_id``, now), else the store's."""
+    """The image to write or save: of the file at ``path`` (station ``station_id``, now), else the store's.
+
+    A scrapped unit is refused (:func:`_refuse_scrapped`)."""
     from station.eeprom.image import CalibrationImage, decode_image
 
+    _refuse_scrapped(serial if serial is not None else None, db_url, required=path is None)
     if path is not None:
         return CalibrationImage.from_params(_load_params(path, serial), station_id, datetime.now(UTC))
     from station.store.queries import unit_image
@@ -134,6 +165,8 @@ def image_cmd(
 ) -> None:
     """Make the EEPROM image of a unit: the one its newest PASS run wrote (or would write), or of --params.
 
+    A scrapped unit is refused (exit 2), with --params too when the store knows the serial.
+
     From the store the image is byte for byte the one the run wrote (as the API's ``eeprom.bin``); with
     ``--params`` it is built from the file, with ``--station`` and the current time.
     """
@@ -193,8 +226,8 @@ def write_cmd(
 ) -> None:
     """Write a unit's image into its EEPROM (free A/B slot, page by page, read back and compared).
 
-    The write is recorded ahead in the unit store: the intent before the first page, the write after the
-    read-back (see docs/provisioning.md)."""
+    A scrapped unit is refused before the sensor is touched (exit 2). The write is recorded ahead in the unit
+    store: the intent before the first page, the write after the read-back (see docs/provisioning.md)."""
     from station.eeprom.provision import plan_write, program_image
     from station.sensor import open_sensor
     from station.sequence.provision import reconcile_unit
@@ -292,65 +325,9 @@ def read_cmd(
     typer.echo(json.dumps(out, indent=2))
 
 
-# --- Kalibr ---------------------------------------------------------------------------------------
+# --- Kalibr (moved to `station export --format kalibr`) --------------------------------------------
 
-
-def _noise_density(t: TriadParams, sample_period_s: float) -> float:
-    """Continuous-time white-noise density (U/sqrt(Hz)): Allan N if fitted, else sigma * sqrt(T_sampl)."""
-    n = np.asarray(t.allan.random_walk, dtype=np.float64)
-    if np.isfinite(n).all() and (n > 0).all():
-        return float(n.max())
-    sigma = np.asarray(t.noise_std, dtype=np.float64)
-    if not np.isfinite(sigma).all():
-        raise StationError("noise std is not resolved; cannot give a noise density")
-    return float(sigma.max() * math.sqrt(sample_period_s))
-
-
-def _random_walk(t: TriadParams) -> float:
-    """Bias random walk (U/s/sqrt(Hz)): Allan K if fitted, else the Gauss-Markov drive of eq. (3).
-
-    The drift's stochastic part with stationary std sigma_gm and correlation time T_c is
-    driven by white noise of density sigma_gm * sqrt(2 / T_c); over times << T_c it is a
-    random walk of that density.
-    """
-    k = np.asarray(t.allan.rate_random_walk, dtype=np.float64)
-    if np.isfinite(k).all() and (k > 0).all():  # an Allan fit that found no random walk gives 0
-        return float(k.max())
-    sg = np.asarray(t.drift_noise, dtype=np.float64)
-    tc = np.asarray(t.correlation_time_s, dtype=np.float64)
-    ok = np.isfinite(sg) & np.isfinite(tc) & (tc > 0) & (sg > 0)
-    if not ok.any():
-        raise StationError("neither an Allan rate random walk nor a resolved drift; cannot give a random walk")
-    return float(np.max(sg[ok] * np.sqrt(2.0 / tc[ok])))
-
-
-def kalibr_imu_yaml(params: ParameterSet, rostopic: str = "/imu0", update_rate_hz: float | None = None) -> str:
-    """The unit's noise parameters in Kalibr's ``imu.yaml`` form (SI; the largest axis of each triad).
-
-    ``accelerometer_noise_density`` (m/s^2/sqrt(Hz)), ``accelerometer_random_walk``
-    (m/s^3/sqrt(Hz)), ``gyroscope_noise_density`` (rad/s/sqrt(Hz)),
-    ``gyroscope_random_walk`` (rad/s^2/sqrt(Hz)), ``update_rate`` (Hz, default 1/T_sampl).
-    """
-    ts = float(params.sample_period_s)
-    rate = update_rate_hz if update_rate_hz is not None else 1.0 / ts
-    values = {
-        "accelerometer_noise_density": _noise_density(params.accel, ts),
-        "accelerometer_random_walk": _random_walk(params.accel),
-        "gyroscope_noise_density": _noise_density(params.gyro, ts),
-        "gyroscope_random_walk": _random_walk(params.gyro),
-    }
-    lines = [
-        f"# Kalibr IMU noise model of unit {params.serial} (station calibration; SI units)",
-        "#Accelerometers",
-        f"accelerometer_noise_density: {values['accelerometer_noise_density']:.6e}   #Noise density (continuous-time)",
-        f"accelerometer_random_walk:   {values['accelerometer_random_walk']:.6e}   #Bias random walk",
-        "#Gyroscopes",
-        f"gyroscope_noise_density:     {values['gyroscope_noise_density']:.6e}   #Noise density (continuous-time)",
-        f"gyroscope_random_walk:       {values['gyroscope_random_walk']:.6e}   #Bias random walk",
-        f"rostopic:                    {rostopic}   #the IMU ROS topic",
-        f"update_rate:                 {rate:.1f}   #Hz (for discretization of the values above)",
-    ]
-    return "\n".join(lines) + "\n"
+KALIBR_MOVED = "note: `station eeprom kalibr` moved to `station export --format kalibr`; this alias will go"
 
 
 @eeprom_app.command("kalibr")
@@ -361,7 +338,8 @@ def kalibr_cmd(
     output: Annotated[Path | None, typer.Option("-o", "--output", help="imu.yaml to write (default: stdout)")] = None,
     rostopic: Annotated[str, typer.Option(help="IMU topic written into the file")] = "/imu0",
 ) -> None:
-    """Export the unit's noise parameters as a Kalibr imu.yaml."""
+    """Export the unit's noise parameters as a Kalibr imu.yaml (moved: `station export --format kalibr`)."""
+    typer.echo(KALIBR_MOVED, err=True)
     try:
         text = kalibr_imu_yaml(_unit_params(serial, params_path, db), rostopic)
     except StationError as exc:

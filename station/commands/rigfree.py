@@ -2,19 +2,23 @@
 
 The importers label rest, pose and move segments with the still detector
 (:mod:`station.session.still`, its knobs as options) and write session CSV v1 whose poses carry no
-reference, which ``station fit`` then fits rig-free. ``station export`` writes a parameter set in
-imu_tk's convention (``station-imutk/1`` JSON) or as OpenAXES's coefficient list.
+reference, which ``station fit`` then fits rig-free. ``station export`` writes a parameter set for Kalibr
+(imu.yaml), imu_tk (its own ``CalibratedTriad`` files, or ``station-imutk/1`` JSON) or OpenAXES (its
+coefficient list).
 """
 
 from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from station.kernel.errors import StationError
+
+if TYPE_CHECKING:
+    from station.fit.params import ParameterSet
 
 WindowOption = Annotated[float, typer.Option("--still-window", help="still detector: moving window (s)")]
 ThresholdOption = Annotated[float, typer.Option(
@@ -161,30 +165,64 @@ def import_imu_tk_command(
     _report(session, output)
 
 
+EXPORT_FORMATS = ("kalibr", "imu-tk", "imu-tk-json", "openaxes")
+
+
 def export_command(
-    params: Annotated[list[Path], typer.Argument(
-        metavar="PARAMS.json...", help="parameter set(s) (station-params/1); for openaxes: one per accelerometer, "
-                                       "the gyro from the last")],
-    fmt: Annotated[str, typer.Option("--format", help="imu-tk (station-imutk/1 JSON) or openaxes (coefficient list)")],
-    output: Annotated[Path | None, typer.Option("-o", "--output", help="file to write (default: stdout)")] = None,
+    params: Annotated[list[Path] | None, typer.Argument(
+        metavar="[PARAMS.json...]", help="parameter set(s) (station-params/2; /1 still read); for openaxes: one per "
+                                         "accelerometer, the gyro from the last. Or --serial")] = None,
+    fmt: Annotated[str, typer.Option("--format", help="kalibr (imu.yaml noise model), imu-tk (imu_tk's own "
+                                                      "PREFIX_acc.calib and PREFIX_gyro.calib), imu-tk-json "
+                                                      "(station-imutk/1, with uncertainties) or openaxes "
+                                                      "(coefficient list)")] = "",
+    output: Annotated[Path | None, typer.Option(
+        "-o", "--output", help="file to write (default: stdout); for imu-tk the PREFIX of the two files")] = None,
+    serial: Annotated[str | None, typer.Option(
+        "--serial", help="the unit's newest PASS parameter set from the store instead of PARAMS.json")] = None,
+    db: Annotated[str | None, typer.Option("--db", help="database URL for --serial (default $STATION_DB or "
+                                                        "sqlite:///station.sqlite)")] = None,
+    rostopic: Annotated[str, typer.Option(help="kalibr: the IMU topic written into the file")] = "/imu0",
 ) -> None:
-    """Write a parameter set in imu_tk's convention or as OpenAXES's coefficient list."""
+    """Write a parameter set for another tool: Kalibr, imu_tk, OpenAXES.
+
+    ``--format imu-tk`` writes the two files imu_tk's ``CalibratedTriad::load`` reads (misalignment T, scale K,
+    bias B; imu_tk corrects X' = T K (X - B), in the station's SI units). ``station eeprom kalibr`` is an
+    alias of ``--format kalibr`` that will go.
+    """
     from station.commands.output import check_output
-    from station.fit.export import imu_tk_document, openaxes_text
+    from station.fit.export import imu_tk_calib_files, imu_tk_document, kalibr_imu_yaml, openaxes_text
     from station.fit.params import ParameterSet
 
+    written: list[Path] = []
     try:
-        if fmt not in ("imu-tk", "openaxes"):
-            raise StationError(f"--format {fmt!r}: imu-tk or openaxes")
-        if output is not None:
-            check_output(output, inputs=params)
-        sets = [ParameterSet.read(p) for p in params]
+        if fmt not in EXPORT_FORMATS:
+            raise StationError(f"--format {fmt!r}: {', '.join(EXPORT_FORMATS)}")
+        if bool(params) == (serial is not None):
+            raise StationError("give parameter file(s) PARAMS.json or --serial (from the store), one of them")
+        if fmt == "imu-tk" and output is None:
+            raise StationError("--format imu-tk writes two files: give their prefix with -o (e.g. -o out/unit: "
+                               "out/unit_acc.calib, out/unit_gyro.calib)")
+        inputs = list(params or [])
+        if output is not None and fmt != "imu-tk":
+            check_output(output, inputs=inputs)
+        sets = [_store_params(serial, db)] if serial is not None else [ParameterSet.read(p) for p in inputs]
+        if fmt != "openaxes" and len(sets) != 1:
+            raise StationError(f"--format {fmt} exports one parameter set")
         if fmt == "imu-tk":
-            if len(sets) != 1:
-                raise StationError("--format imu-tk exports one parameter set")
-            text = imu_tk_document(sets[0])
-        else:
-            text = openaxes_text(sets)
+            assert output is not None
+            files = imu_tk_calib_files(sets[0])
+            targets = {name: output.with_name(f"{output.name}_{name}.calib") for name in files}
+            for target in targets.values():
+                check_output(target, inputs=inputs)
+            for name, target in targets.items():
+                target.write_text(files[name], encoding="utf-8")
+                written.append(target)
+            typer.echo("wrote " + ", ".join(str(w) for w in written) + " (imu_tk CalibratedTriad files: T, K, B; "
+                       "X' = T K (X - B), SI)")
+            return
+        text = {"kalibr": lambda: kalibr_imu_yaml(sets[0], rostopic), "imu-tk-json": lambda: imu_tk_document(sets[0]),
+                "openaxes": lambda: openaxes_text(sets)}[fmt]()
         if output is None:
             sys.stdout.write(text)
         else:
@@ -194,3 +232,15 @@ def export_command(
         raise _fail(exc) from None
     except OSError as exc:
         raise _fail(StationError(f"cannot write {output}: {exc.strerror or exc}")) from None
+
+
+def _store_params(serial: str, db_url: str | None) -> ParameterSet:
+    """The newest PASS parameter set of ``serial`` in the existing store (refused in one line if none)."""
+    from station.store.db import open_database
+    from station.store.queries import latest_parameter_set
+
+    with open_database(db_url, must_exist=True) as database:
+        found = latest_parameter_set(database, serial)
+    if found is None:
+        raise StationError(f"no PASS parameter set of serial {serial!r} in the store")
+    return found

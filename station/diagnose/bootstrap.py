@@ -1,4 +1,4 @@
-"""A bootstrap over segments of the accepted findings (issue 16, item 1): how confident each one is.
+"""A bootstrap over segments of the accepted findings: how confident each one is.
 
 Per sensor, on the final model: the recording's segments (rest, each pose, each rate step, each move)
 are drawn with replacement, :data:`RESAMPLES` times, from a generator seeded with :data:`SEED` and the

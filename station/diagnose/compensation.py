@@ -1,4 +1,4 @@
-"""Which of a diagnosis's findings the station's calibration compensates (issue 18, item 4).
+"""Which of a diagnosis's findings the station's calibration compensates.
 
 For each finding the report says whether the calibration the station would write for this recording removes
 the effect from the corrected output: the effect has parameters in the parameter set that Algorithm 1 applies

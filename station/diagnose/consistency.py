@@ -1,4 +1,4 @@
-"""Effect-specific consistency checks of the accepted findings (issue 16, item 1).
+"""Effect-specific consistency checks of the accepted findings.
 
 A physical effect has one set of parameters for the whole recording; structure that another
 effect's imperfect model (or physics outside the library) left behind usually does not. Per

@@ -61,7 +61,7 @@ WARMUP_SIGMAS = 2.0
 REFIT_ROUNDS = 8
 #: Drift-noise correlation matrices kept per T_c (each (m, m) for m blocks).
 GM_CACHE = 48
-#: Whether the drift noise q of eq. 3 is bounded in every fit (off: the base model as before; tried for issue 16):
+#: Whether eq. 3's drift noise q is bounded in every fit (off: the base model as before; tried with the robust checks):
 #: its wander over the record at most ``Q_BOUND`` times the random-walk test's bound
 #: (:meth:`SensorProblem.drift_noise_max`), i.e. at most the warm-up's own change over the record. Unbounded,
 #: a large q takes any unmodelled mean structure (e.g. pose tilts) for drift noise and hides it from every test

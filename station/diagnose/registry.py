@@ -1,4 +1,4 @@
-"""One registry of the diagnosis's candidate effects (issue 16, item 4).
+"""One registry of the diagnosis's candidate effects: each one's regressors, parameters, units and rules.
 
 One :class:`Effect` per candidate owns everything the diagnosis knows about it:
 
@@ -169,7 +169,7 @@ class Effect:
         engineering: a custom conversion of (theta, cov) to the report's parameters (replaces the generic one).
         extra: additional engineering values from theta (e.g. the lever arm's length).
         consistency: the splits of the recording its effect-specific consistency checks compare its
-            parameters across (:data:`station.diagnose.consistency.PARTS` names; issue 16, item 1).
+            parameters across (:data:`station.diagnose.consistency.PARTS` names).
         not_checked: why it has no consistency check (empty where it has one).
         simulate: the simulator mapping of fitted parameters, None when not simulated.
         not_simulated: why it is not simulated (empty when it is).

@@ -1,4 +1,4 @@
-"""Checks of the forward selection that hold when the model is wrong (issue 16), and what stays unexplained.
+"""Checks of the forward selection that hold when the model is wrong, and what stays unexplained.
 
 The nested tests of :mod:`station.diagnose.likelihood` assume the extended model is right. When it is
 not (an effect whose shape a candidate only approximates, or physics outside the library), the

@@ -70,7 +70,7 @@ class FitOptions:
             :mod:`station.fit.thermal`): ``'auto'`` fits them when the recording's temperature course
             separates them from the warm-up (else :class:`~station.fit.params.ThermalFit` says why not,
             status ``'not_separable'``), ``'require'`` refuses (FitError) a recording that cannot separate
-            them, ``'off'`` (the default: eq. 1 alone, as every caller before issue 18 expects, e.g. the
+            them, ``'off'`` (the default: eq. 1 alone, as callers from before the thermal model expect, e.g. the
             diagnosis's base model) never. ``station fit`` uses ``'auto'``.
         thermal_max_order: highest polynomial order tried (1..3).
         thermal_order_wald: Wald statistic (z^2) an order's coefficient must exceed to be kept (9: 3 sigma).

@@ -1,4 +1,4 @@
-"""Exports of a parameter set in the conventions of imu_tk and OpenAXES (beside ``station-params``).
+"""Exports of a parameter set for other tools: imu_tk, OpenAXES, Kalibr (beside ``station-params/2``).
 
 Our model (eq. 1) is ``y = M x + b`` (y the measurement); the corrections these tools apply:
 
@@ -10,6 +10,13 @@ Our model (eq. 1) is ``y = M x + b`` (y the measurement); the corrections these 
   as JSON in our own format ``station-imutk/1`` (:data:`IMU_TK_FORMAT`): matrices row-major, vectors
   x, y, z, SI units. The drift of eq. (3) has no place in it (``b_drift``, ``T_c`` are left out: the
   bias is the settled one, b_stat).
+* **imu_tk's own parameter files** (:func:`imu_tk_calib_files`): what imu_tk's ``CalibratedTriad::save``
+  writes and ``CalibratedTriad::load`` reads, one file per triad (imu_tk's programs name them
+  ``*_acc.calib`` and ``*_gyro.calib``): the misalignment matrix T (3 x 3, unit diagonal), the scale matrix
+  K (3 x 3, diagonal), the bias vector B (3), as whitespace-separated numbers, matrices row by row. imu_tk
+  (C++) corrects both triads as ``X' = T K (X - B)``, the bias *before* the matrix: ``T K = M^-1``, ``B =
+  b_stat`` for the accelerometer as for the gyro. Units are those of the station's measurement (m/s^2,
+  rad/s): X is the unit's output in SI, as the station records it.
 * **OpenAXES coefficient list** (:func:`openaxes_coefficients`): per accelerometer its 3x3 matrix
   ``T K`` column-major (9) and its bias after the matrix (3), then the gyro matrix column-major (9) and
   its bias (3, rad/s): 24 numbers for one parameter set, 36 for OpenAXES's two accelerometers (the gyro
@@ -22,15 +29,17 @@ through the inverse; from the full covariance of a rig-free fit when it is in ``
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
-from station.fit.params import ParameterSet
+from station.fit.params import ParameterSet, TriadParams
 from station.kernel.errors import FormatError
 
-__all__ = ["IMU_TK_FORMAT", "imu_tk_document", "imu_tk_terms", "openaxes_coefficients", "openaxes_text"]
+__all__ = ["IMU_TK_FORMAT", "imu_tk_calib_files", "imu_tk_document", "imu_tk_terms", "kalibr_imu_yaml",
+           "openaxes_coefficients", "openaxes_text"]
 
 IMU_TK_FORMAT = "station-imutk/1"
 
@@ -134,3 +143,93 @@ def openaxes_text(param_sets: Sequence[ParameterSet]) -> str:
     """The coefficient list as OpenAXES's script prints it: numbers separated by spaces, one line."""
     values, _ = openaxes_coefficients(param_sets)
     return " ".join(f"{v:.8g}" for v in values) + "\n"
+
+
+def _calib_text(t: np.ndarray, k: np.ndarray, b: np.ndarray) -> str:
+    """One triad as ``CalibratedTriad::save`` writes it: T rows, a blank line, K rows, a blank line, B one value
+    per line (Eigen prints a column vector that way), a blank line."""
+    def rows(m: np.ndarray) -> str:
+        return "\n".join(" ".join(f"{float(v):.17g}" for v in row) for row in np.atleast_2d(m)) + "\n"
+
+    return rows(t) + "\n" + rows(k) + "\n" + "\n".join(f"{float(v):.17g}" for v in b) + "\n\n"
+
+
+def imu_tk_calib_files(params: ParameterSet) -> dict[str, str]:
+    """imu_tk's parameter files of the set: ``{"acc": text, "gyro": text}`` (see the module docstring).
+
+    ``T K = M^-1`` is split into K = its diagonal and T = ``M^-1 K^-1`` (unit diagonal, imu_tk's general
+    misalignment); B = b_stat. Refused (:class:`FormatError`) when M is not resolved or singular."""
+    out: dict[str, str] = {}
+    for name, tri in (("acc", params.accel), ("gyro", params.gyro)):
+        m = np.asarray(tri.misalignment, dtype=np.float64)
+        b = np.asarray(tri.bias_static, dtype=np.float64)
+        if not (np.isfinite(m).all() and np.isfinite(b).all()):
+            raise FormatError(f"the parameter set's {name} misalignment or bias is unresolved; nothing to export")
+        try:
+            tk = np.linalg.inv(m)
+        except np.linalg.LinAlgError:
+            raise FormatError(f"the {name} matrix M is singular; nothing to export") from None
+        k = np.diag(np.diag(tk))
+        out[name] = _calib_text(tk @ np.linalg.inv(k), k, b)
+    return out
+
+
+# --- Kalibr ---------------------------------------------------------------------------------------
+
+
+def _noise_density(t: TriadParams, sample_period_s: float) -> float:
+    """Continuous-time white-noise density (U/sqrt(Hz)): Allan N if fitted, else sigma * sqrt(T_sampl)."""
+    n = np.asarray(t.allan.random_walk, dtype=np.float64)
+    if np.isfinite(n).all() and (n > 0).all():
+        return float(n.max())
+    sigma = np.asarray(t.noise_std, dtype=np.float64)
+    if not np.isfinite(sigma).all():
+        raise FormatError("noise std is not resolved; cannot give a noise density")
+    return float(sigma.max() * math.sqrt(sample_period_s))
+
+
+def _random_walk(t: TriadParams) -> float:
+    """Bias random walk (U/s/sqrt(Hz)): Allan K if fitted, else the Gauss-Markov drive of eq. (3).
+
+    The drift's stochastic part with stationary std sigma_gm and correlation time T_c is
+    driven by white noise of density sigma_gm * sqrt(2 / T_c); over times << T_c it is a
+    random walk of that density.
+    """
+    k = np.asarray(t.allan.rate_random_walk, dtype=np.float64)
+    if np.isfinite(k).all() and (k > 0).all():  # an Allan fit that found no random walk gives 0
+        return float(k.max())
+    sg = np.asarray(t.drift_noise, dtype=np.float64)
+    tc = np.asarray(t.correlation_time_s, dtype=np.float64)
+    ok = np.isfinite(sg) & np.isfinite(tc) & (tc > 0) & (sg > 0)
+    if not ok.any():
+        raise FormatError("neither an Allan rate random walk nor a resolved drift; cannot give a random walk")
+    return float(np.max(sg[ok] * np.sqrt(2.0 / tc[ok])))
+
+
+def kalibr_imu_yaml(params: ParameterSet, rostopic: str = "/imu0", update_rate_hz: float | None = None) -> str:
+    """The unit's noise parameters in Kalibr's ``imu.yaml`` form (SI; the largest axis of each triad).
+
+    ``accelerometer_noise_density`` (m/s^2/sqrt(Hz)), ``accelerometer_random_walk``
+    (m/s^3/sqrt(Hz)), ``gyroscope_noise_density`` (rad/s/sqrt(Hz)),
+    ``gyroscope_random_walk`` (rad/s^2/sqrt(Hz)), ``update_rate`` (Hz, default 1/T_sampl).
+    """
+    ts = float(params.sample_period_s)
+    rate = update_rate_hz if update_rate_hz is not None else 1.0 / ts
+    values = {
+        "accelerometer_noise_density": _noise_density(params.accel, ts),
+        "accelerometer_random_walk": _random_walk(params.accel),
+        "gyroscope_noise_density": _noise_density(params.gyro, ts),
+        "gyroscope_random_walk": _random_walk(params.gyro),
+    }
+    lines = [
+        f"# Kalibr IMU noise model of unit {params.serial} (station calibration; SI units)",
+        "#Accelerometers",
+        f"accelerometer_noise_density: {values['accelerometer_noise_density']:.6e}   #Noise density (continuous-time)",
+        f"accelerometer_random_walk:   {values['accelerometer_random_walk']:.6e}   #Bias random walk",
+        "#Gyroscopes",
+        f"gyroscope_noise_density:     {values['gyroscope_noise_density']:.6e}   #Noise density (continuous-time)",
+        f"gyroscope_random_walk:       {values['gyroscope_random_walk']:.6e}   #Bias random walk",
+        f"rostopic:                    {rostopic}   #the IMU ROS topic",
+        f"update_rate:                 {rate:.1f}   #Hz (for discretization of the values above)",
+    ]
+    return "\n".join(lines) + "\n"

@@ -53,7 +53,7 @@ class FitQualityLimits:
 
 @dataclass(frozen=True)
 class ThermalLimits:
-    """Limits of the temperature terms (issue 18), checked only where the fit fitted them (SI).
+    """Limits of the temperature terms (the thermal model), checked only where the fit fitted them (SI).
 
     Attributes:
         accel_temp_bias_mps2_per_k, gyro_temp_bias_radps_per_k: range of the first-order temperature

@@ -85,11 +85,21 @@ class Measurement:
         return self.k * self.std if self.k > 0 and math.isfinite(self.std) else 0.0
 
     def describe(self) -> str:
-        """One line: the value, its unit and the limits it missed or met."""
+        """One line for people, in the display convention (:mod:`station.kernel.display`): the quantity, its
+        value ± k u in its engineering unit and the limits it missed or met, e.g. "accel.M.xx (scale-factor
+        error) = 10820 ± 100 ppm outside [-2000, 5000] ppm"."""
+        from station.kernel.display import display_of_check, format_number
+
+        d = display_of_check(self.name, self.unit)
         ku = self.expanded_uncertainty
-        value = f"{self.value:.6g} +- {ku:.2g}" if ku > 0 else f"{self.value:.6g}"
+        value = d.format(self.value, ku if ku > 0 else None)
         where = {Verdict.FAIL: "outside", Verdict.INCONCLUSIVE: "straddles"}.get(self.verdict, "within")
-        return f"{self.name} = {value} {self.unit} {where} [{self.low:.6g}, {self.high:.6g}]"
+        lo = d.value(self.low) if math.isfinite(self.low) else None
+        hi = d.value(self.high) if math.isfinite(self.high) else None
+        low = format_number(lo) if lo is not None else "-inf"
+        bounds = f"[{low}, {format_number(hi) if hi is not None else 'inf'}]"
+        what = f" ({d.label})" if d.quantity in ("scale_error", "cross_axis") else ""
+        return f"{self.name}{what} = {value} {where} {bounds}{' ' + d.unit if d.unit else ''}"
 
 
 __all__ = ["Measurement", "Verdict"]

@@ -141,7 +141,7 @@ def check_limits(params: ParameterSet, limits: ProductLimits) -> list[Measuremen
 
 
 def check_thermal(params: ParameterSet, thermal: ThermalLimits, limits: ProductLimits) -> list[Measurement]:
-    """The first-order temperature coefficients of ``params`` (issue 18) against ``thermal``: each value by
+    """The first-order temperature coefficients of ``params`` (the thermal model) against ``thermal``: each value by
     the product's rule (:func:`conformance`), each standard uncertainty as a one-sided limit ``[0, max]``.
     Names ``accel.temp_bias_coeff.x``, ``fit.gyro.temp_scale_coeff_std.z``, ...; call only for a fitted set."""
     t = thermal

@@ -42,11 +42,13 @@ from station.kernel.clock import Clock
 from station.kernel.errors import FitError, HardwareError, StationError, UnitRejected
 from station.kernel.limits import ProductLimits, table1_limits
 from station.kernel.measurement import Measurement, Verdict
+from station.kernel.nest_frames import NestCalibration
 from station.kernel.plan import RigPlan, default_plan
 from station.rig.protocol import Rig, RigState
 from station.sensor.protocol import Sensor
 from station.sequence.capture import UnitChannel, build_session
 from station.sequence.limits import check_limits
+from station.sequence.nest_correction import in_sensor_frame
 from station.sequence.options import SequenceOptions
 from station.sequence.records import (
     Measured,
@@ -286,6 +288,8 @@ class SequenceRunner:
         station, rig_name: names for records and session metadata.
         sensor_urls: for records and results (default ``slotN``).
         subscribers: called with every record, in order, from the thread calling :meth:`run`.
+        nests: the rig's nest calibration: each unit's references are taken into its sensor frame before
+            the session is saved and fitted (:mod:`station.sequence.nest_correction`); None: perfect nests.
         sequence: what runs on the rig and around it (default :class:`RigSequence` of ``plan``; a thermal
             plan: :class:`station.sequence.thermal_sequence.ThermalSequence`).
     """
@@ -307,6 +311,7 @@ class SequenceRunner:
         rig_name: str = "rig",
         sensor_urls: Sequence[str] | None = None,
         subscribers: Sequence[Subscriber] = (),
+        nests: NestCalibration | None = None,
         sequence: RunSequence | None = None,
     ) -> None:
         if not sensors:
@@ -324,6 +329,7 @@ class SequenceRunner:
         self.station = station
         self.rig_name = rig_name
         self.sensor_urls = list(sensor_urls) if sensor_urls is not None else [f"slot{k}" for k in range(len(sensors))]
+        self.nests = nests
         self.sequence: RunSequence = RigSequence(self.plan) if sequence is None else sequence
         self.steps = self.sequence.steps
         self.verification: dict[int, Any] = {}  # slot -> the provisioner's verification result
@@ -464,8 +470,14 @@ class SequenceRunner:
                               flags, state.fault_code))
 
     def apply_report(self, fx: Fixture, step: NamedStep, report: StepReport, verdicts: list[UnitVerdict]) -> list[str]:
-        """Emit the step's measurements; end units with a sensor fault (ERROR) or a failed gate."""
+        """Emit the step's measurements; end units with a sensor fault (ERROR) or a failed gate.
+
+        A physics gate that every measured unit of the step fails (two units or more) is a common cause, the
+        rig or the station's timing, not the units: those units end ERROR, which the retest policy does not
+        count, with the gate named.
+        """
         problems: list[str] = []
+        common = common_cause(report)
         for unit in fx.units:
             v = verdicts[unit.slot]
             if unit.slot in report.errors:
@@ -483,8 +495,11 @@ class SequenceRunner:
             failed = [g for g in gates if not g.passed]
             if failed:
                 link = [g for g in failed if g.link]
-                outcome = Outcome.ERROR if link else Outcome.FAIL
+                outcome = Outcome.ERROR if link or common else Outcome.FAIL
                 text = "; ".join(g.describe() for g in (link or failed))
+                if common and not link:
+                    text = (f"station fault: every unit failed {', '.join(sorted(common))} in this step "
+                            f"(the rig or the station's timing, not the unit): {text}")
                 self._end_unit(fx, unit, v, outcome, f"step '{step.name}': {text}")
                 problems.append(f"slot {unit.slot}: {text}")
         return problems
@@ -580,6 +595,8 @@ class SequenceRunner:
                 v.outcome, v.message = Outcome.ERROR, run_message or "the unit was not measured"
             try:
                 built = build_session(unit, self.plan.gravity_mps2, self.metadata(unit))
+                if built is not None:
+                    built = in_sensor_frame(built, self.nests, unit.slot)
                 # fit exactly what is saved: re-fitting the CSV reproduces the parameter set
                 text = format_session(built) if built is not None else None
                 texts.append(text)
@@ -682,6 +699,14 @@ class SequenceRunner:
         finally:
             self.verify_s = self.clock.now() - t0
 
+    def _refused_now(self, r: UnitResult) -> UnitResult | None:
+        """The retest policy asked again right before writing (e.g. scrapped while it was measured): REFUSED,
+        and no image is written into it; None: go on."""
+        reason = self.admit(r.serial, self.run_id) if self.admit is not None else None
+        if not reason:
+            return None
+        return replace_outcome(r, Outcome.REFUSED, f"not provisioned, refused by the retest policy: {reason}")
+
     def _write(self, p: Provisioner, r: UnitResult) -> Any:
         sensor = self.sensors[r.slot]
         return p.write(p.intend(r, sensor, self.started_at), sensor)
@@ -692,6 +717,10 @@ class SequenceRunner:
         for r in results:
             if r.outcome != Outcome.PASS or stop:
                 out.append(r)
+                continue
+            refused = self._refused_now(r)
+            if refused is not None:
+                out.append(refused)
                 continue
             try:
                 written = self._write(p, r)
@@ -711,6 +740,10 @@ class SequenceRunner:
         written: dict[int, Any] = {}
         for k, r in enumerate(results):
             if r.outcome != Outcome.PASS:
+                continue
+            refused = self._refused_now(r)
+            if refused is not None:
+                out[k] = refused
                 continue
             try:
                 written[k] = self._write(p, r)
@@ -791,6 +824,15 @@ class SequenceRunner:
         except StationError as exc:
             return replace_outcome(r, Outcome.ERROR, f"{what}: the result could not be recorded: {exc}"), False
         return r, False
+
+
+def common_cause(report: StepReport) -> set[str]:
+    """Physics gates that every unit measured in a step failed (empty below two measured units)."""
+    measured = [gates for gates in report.gates.values() if gates]
+    if len(measured) < 2:
+        return set()
+    failed = [{g.name for g in gates if not g.passed and not g.link} for gates in measured]
+    return set.intersection(*failed)
 
 
 def recording_verdict(params: ParameterSet) -> tuple[Outcome, str] | None:

@@ -20,6 +20,7 @@ every unit. The rig is brought back to rest and the sensor back to RAW output af
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -29,6 +30,7 @@ from station.kernel.clock import Clock
 from station.kernel.geometry import AXIS_INDEX, up_vector
 from station.kernel.limits_file import VerificationLimits
 from station.kernel.measurement import Measurement
+from station.kernel.nest_frames import NestCalibration
 from station.rig.protocol import Rig
 from station.sensor.protocol import Sensor
 from station.sequence.options import SequenceOptions
@@ -70,6 +72,8 @@ class RigVerifier:
         gravity_mps2: local gravity (m/s^2).
         sample_rate_hz: sensor rate during the check (Hz).
         options: rig timeouts and tolerances (the sequence's).
+        nests, sensors: the rig's nest calibration and the fixture's sensors in slot order: a unit's expected
+            output is the rig's reference taken into its sensor frame (the calibration's datum), as its fit was.
     """
 
     def __init__(
@@ -81,8 +85,12 @@ class RigVerifier:
         gravity_mps2: float = 9.80665,
         sample_rate_hz: int = 100,
         options: SequenceOptions | None = None,
+        nests: NestCalibration | None = None,
+        sensors: Sequence[Sensor] = (),
     ) -> None:
         self.rig = rig
+        self.nests = nests
+        self._sensors = list(sensors)
         self.clock = clock
         self.limits = limits if limits is not None else VerificationLimits()
         self.gravity_mps2 = float(gravity_mps2)
@@ -101,6 +109,13 @@ class RigVerifier:
             return np.full(3, np.nan), np.full(3, np.nan), 0, 0
         return block.accel_mps2.mean(axis=0), block.gyro_radps.mean(axis=0), n, int(n - block.corrected.sum())
 
+    def _expected(self, sensor: Sensor, ref_nest: np.ndarray) -> np.ndarray:
+        """A reference in the nest's frame as the unit's sensor frame sees it (unchanged without nests)."""
+        slot = next((k for k, s in enumerate(self._sensors) if s is sensor), None)
+        if self.nests is None or slot is None:
+            return ref_nest
+        return self.nests.to_sensor_frame(slot, ref_nest[None, :])[0]
+
     def verify(self, sensor: Sensor, image: CalibrationImage) -> VerificationResult:
         """Switch to corrected output, run the pose and rate checks, restore RAW and rest."""
         lim, g = self.limits, self.gravity_mps2
@@ -118,15 +133,16 @@ class RigVerifier:
             drive_rig(self.rig, pose_step, self.options)
             a, w, n, u = self._capture(sensor, pose_step)
             samples, uncorrected = samples + n, uncorrected + u
-            da = a - g * up_vector(lim.pose)
+            da = a - self._expected(sensor, g * up_vector(lim.pose))
             checks.append(check("verify.pose.accel_error", float(np.max(np.abs(da))), lim.accel_mps2, "m/s^2"))
             checks.append(check("verify.pose.gyro_error", float(np.max(np.abs(w))), lim.gyro_static_radps, "rad/s"))
             drive_rig(self.rig, rate_step, self.options)
             a, w, n, u = self._capture(sensor, rate_step)
             samples, uncorrected = samples + n, uncorrected + u
             k = AXIS_INDEX[axis]
-            checks.append(check("verify.rate.rate_error", float(w[k] - lim.rate_dps * _DEG), lim.rate_radps, "rad/s"))
-            da = a - g * up_vector(lim.rate_pose)
+            rate = self._expected(sensor, sign * lim.rate_dps * _DEG * np.eye(3)[k])
+            checks.append(check("verify.rate.rate_error", float(w[k] - abs(rate[k])), lim.rate_radps, "rad/s"))
+            da = a - self._expected(sensor, g * up_vector(lim.rate_pose))
             checks.append(check("verify.rate.accel_error", float(np.max(np.abs(da))), lim.accel_mps2, "m/s^2"))
         finally:
             try:

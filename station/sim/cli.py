@@ -80,6 +80,9 @@ def demo(
     thermal: Annotated[bool, typer.Option("--thermal", help="thermal calibration in a simulated climate chamber: "
                                           "plateaus at 5/15/25/45 degC, verification at 35 degC; the last unit has "
                                           "no temperature effects (the reference)")] = False,
+    lot: Annotated[str | None, typer.Option("--lot", help="production lot of the units, recorded with the run "
+                                                          "(quality page filter, certificate)")] = None,
+    operator: Annotated[str | None, typer.Option(help="operator name for the records")] = None,
 ) -> None:
     """Simulated rig + N sensors, the whole sequence, fit, limits, summary: the station end to end.
 
@@ -95,9 +98,10 @@ def demo(
     try:
         if thermal:
             result, _ = run_thermal_demo(units, scale or THERMAL_SCALE, seed, out, db_url=db, record=True,
-                                         limits_path=limits)
+                                         limits_path=limits, lot=lot or "", operator=operator or "")
         else:
-            result = run_demo(units, scale or DEMO_SCALE, seed, out, db_url=db, record=True, limits_path=limits)
+            result = run_demo(units, scale or DEMO_SCALE, seed, out, db_url=db, record=True, limits_path=limits,
+                              lot=lot or "", operator=operator or "")
     except StationError as exc:
         raise fail(exc) from None
     raise typer.Exit(result.outcome.exit_code)
@@ -146,8 +150,72 @@ def sim(
         typer.echo("stopped")
 
 
+def msa_simulate(
+    parts: Annotated[int, typer.Option(min=2, max=100, help="parts (simulated units) in the study")] = 10,
+    nests: Annotated[int, typer.Option(min=2, max=16, help="nests of the rig (the appraisers)")] = 4,
+    repeats: Annotated[int, typer.Option(min=2, max=10, help="measurements of every part in every nest")] = 3,
+    seed: Annotated[int, typer.Option(min=0, max=2**63 - 1, help="seed of the parts and the nests' errors")] = 0,
+    scale: Annotated[float, typer.Option(min=1.0, max=600.0, help="simulated seconds per wall second")] = 120.0,
+    nest_error: Annotated[float, typer.Option(min=0.0, max=5.0, help="std (deg) of the nests' mounting errors "
+                                              "about each axis (0: perfect nests)")] = 0.3,
+    nest_cal: Annotated[bool, typer.Option("--nest-cal", help="first run a reference unit in every nest, "
+                                           "estimate the nests and store them: the study then runs with them")]
+    = False,
+    lot: Annotated[str, typer.Option(help="the study's lot in the records")] = "msa-study",
+    as_json: Annotated[bool, typer.Option("--json", help="print the study as JSON (station-msa/1)")] = False,
+    db: DbOption = None,
+) -> None:
+    """Run a crossed Gage R&R study (parts x nests x repeats) on the simulated station and report it.
+
+    Every run is the station's own sequence and fit, recorded under ``--lot``; the report is
+    ``station msa report --lot LOT`` of those records. The simulated rig's nests carry mounting errors
+    drawn from ``--seed`` (``--nest-error`` deg per axis); ``--nest-cal`` calibrates them out first.
+    """
+    import json as json_module
+
+    from station.commands.msa import print_report, study_report
+    from station.commands.nest_cal import describe, estimate_from_records
+    from station.sim.msa_study import StudyDesign, run_nest_calibration, run_study
+    from station.store.db import database_url
+
+    try:
+        db_url = database_url(db)
+        design = StudyDesign(parts, nests, repeats, seed)
+        rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(77,)))
+        errors = [tuple(float(v) for v in rng.normal(0.0, nest_error, 3)) for _ in range(nests)]
+        station_id = "msa-sim"
+        rig_key = f"fake-rig://{station_id}"
+
+        def progress(k: int, n: int, result: object) -> None:
+            outcomes = ", ".join(u.outcome.value for u in getattr(result, "units", ()))
+            typer.echo(f"  run {k + 1}/{n}: {outcomes}", err=True)
+
+        typer.echo(f"nests' mounting errors (deg, x/y/z): {errors}", err=True)
+        if nest_cal:
+            typer.echo(f"nest calibration: the reference unit in each of {nests} nests", err=True)
+            serial, _, lab = run_nest_calibration(nests, db_url, seed=seed, scale=scale,
+                                             nest_errors_deg=errors, station_id=station_id, on_run=progress)
+            cal = estimate_from_records(db_url, rig_key, serial, reference=lab)
+            for line in describe(cal):
+                typer.echo(line, err=True)
+        typer.echo(f"study: {parts} parts x {nests} nests x {repeats} repeats = "
+                   f"{len(design.schedule())} runs", err=True)
+        run_study(design, db_url, lot, scale=scale, nest_errors_deg=errors,
+                  station_id=station_id, on_run=progress, nest_calibration=nest_cal)
+        report = study_report(db_url, lot=lot)
+    except StationError as exc:
+        raise fail(exc) from None
+    if as_json:
+        sys.stdout.write(json_module.dumps(report.to_json(), indent=2) + "\n")
+    else:
+        print_report(report)
+
+
 def register(app: typer.Typer) -> None:
     """Add ``simulate``, ``demo`` and ``sim`` to the ``station`` command."""
     app.command()(simulate)
     app.command()(demo)
     app.command()(sim)
+    from station.commands.msa import msa_app
+
+    msa_app.command("simulate")(msa_simulate)

@@ -29,6 +29,7 @@ from rich.console import Console
 
 from station.compose import Station, StationConfig
 from station.fit.calibrate import FitOptions
+from station.kernel.display import limits_identity
 from station.kernel.plan import RigPlan, default_plan
 from station.kernel.thermal_plan import ThermalPlan
 from station.physics.effects import Effects
@@ -62,6 +63,8 @@ def run_demo(
     subscribers: Sequence[Callable[[Record], None]] = (),
     on_provision: Callable[[ProvisionRecord], None] | None = None,
     admit: Callable[[str, str], str | None] | None = None,
+    lot: str = "",
+    operator: str = "",
 ) -> RunResult:
     """Start the simulated station, run the sequence for ``units`` units at clock ``scale``, print, return.
 
@@ -84,6 +87,7 @@ def run_demo(
         subscribers: more record subscribers (called after the progress display).
         on_provision: called with each unit's EEPROM write and verification record.
         admit: the retest policy (see :class:`~station.sequence.runner.SequenceRunner`).
+        lot, operator: the production lot and the operator recorded with the run ('' none).
     """
     console = console if console is not None else Console()
     plan = plan if plan is not None else default_plan()
@@ -96,7 +100,7 @@ def run_demo(
         config = StationConfig(
             sim.rig_url, tuple(sim.sensor_urls), station_id="demo", db_url=db_url, record=record,
             limits_path=limits_path, out_dir=out_dir, clock_scale=scale, plan=plan, provision=provision,
-            rig_options=sim.rig_client_options(),
+            rig_options=sim.rig_client_options(), lot=lot, operator=operator,
         )
         display = ProgressDisplay(console, [u.truth.serial for u in sim.units], scale)
         station = Station(config, clock=sim.clock, options=options, subscribers=[display, *subscribers],
@@ -107,7 +111,7 @@ def run_demo(
     if station.provisioner is not None and station.provisioner.records:
         console.print(provisioning_table(station.provisioner))
     limits = station.limits
-    console.print(f"limits: {limits.name} {limits.version} ({limits.path})")
+    console.print(f"limits: {limits_identity(f'{limits.name} {limits.version}', limits.sha256)} ({limits.path})")
     if out_dir is not None:
         console.print(f"recordings in {out_dir}/")
     console.print(f"demo finished in {time.monotonic() - wall0:.1f} s wall time")
@@ -170,7 +174,7 @@ def check_errors(session: Any, params: Any, skip_s: float = 1.5) -> CheckErrors:
 
 
 def target_lines(errors: dict[tuple[int, str], CheckErrors]) -> list[str]:
-    """The issue's targets per unit with temperature effects: corrected errors with the thermal model within
+    """The thermal demo's targets per unit with temperature effects: corrected errors with the thermal model within
     2x of the reference unit's (no temperature effects) and at least 10x better than without the model."""
     refs = [e for (_, label), e in errors.items() if label == "reference"]
     if not refs:
@@ -221,6 +225,8 @@ def run_thermal_demo(
     limits_path: Path | None = None,
     db_url: str | None = None,
     record: bool = False,
+    lot: str = "",
+    operator: str = "",
 ) -> tuple[RunResult, Any]:
     """``station demo --thermal``: a simulated rig, chamber and ``units`` sensors; the thermal plan
     (:func:`thermal_demo_plan`), fit, EEPROM write, verification at the verification temperature; prints the
@@ -248,7 +254,8 @@ def run_thermal_demo(
         config = StationConfig(
             sim.rig_url, tuple(sim.sensor_urls), station_id="demo-thermal", db_url=db_url, record=record,
             limits_path=limits_path, out_dir=out_dir, clock_scale=scale, provision=True,
-            rig_options=sim.rig_client_options(), chamber_url=sim.chamber_url, thermal=thermal,
+            rig_options=sim.rig_client_options(), chamber_url=sim.chamber_url, thermal=thermal, lot=lot,
+            operator=operator,
         )
         display = ProgressDisplay(console, [u.truth.serial for u in sim.units], scale)
         station = Station(config, clock=sim.clock, subscribers=[display])

@@ -58,6 +58,8 @@ class PhysicsSource:
             ``self_heating_tau_s``, counted from its first power-on: a quick power cycle does not cool
             it) is added on top. The temperature effects then act about ``reference_degc``.
         reference_degc: the temperature at which the unit's temperature effects are zero (degC).
+        mount: the rotation from the sensor frame to its nest's frame (3x3; None: mounted exactly), e.g. a
+            nest's mounting error: what the rig moves is the nest, what the sensor measures is in its own frame.
     """
 
     def __init__(
@@ -75,8 +77,10 @@ class PhysicsSource:
         environment: Environment | None = None,
         temperature_degc: Callable[[np.ndarray], np.ndarray] | None = None,
         reference_degc: float = 25.0,
+        mount: np.ndarray | None = None,
     ) -> None:
         self.rig = rig
+        self.mount = None if mount is None else np.asarray(mount, dtype=float).reshape(3, 3)
         self.clock = clock
         self.truth = truth
         self.sensor_class = sensor_class
@@ -147,5 +151,8 @@ class PhysicsSource:
                 raise RuntimeError("PhysicsSource.render before power_on")
             t = np.asarray(t_s, dtype=float)
             kin = self.rig.kinematics(self.rig_time(t))
+            if self.mount is not None:  # the unit sits in its nest rotated by ``mount`` (sensor to nest frame)
+                kin = replace(kin, rotation=kin.rotation @ self.mount, omega_radps=kin.omega_radps @ self.mount,
+                              alpha_radps2=kin.alpha_radps2 @ self.mount)
             raw = self.model.render(replace(kin, t_s=t), self.gravity_mps2)
             return raw.accel_mps2, raw.gyro_radps, raw.temp_degc

@@ -18,7 +18,7 @@ power cycle.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, Self
 
@@ -74,6 +74,13 @@ class SimulatedStation:
         unit_effects: per slot, effects replacing ``effects`` (None entries keep ``effects``), e.g. a
             reference unit without temperature effects next to units with them.
         reference_degc: with a chamber, the temperature at which the units' temperature effects vanish.
+        unit_keys: per slot, which unit of ``seed`` sits there (default: unit k in slot k), so that the same
+            unit (the same truth and serial) can be measured again in another nest.
+        noise_index: which noise and fault streams the units use (0: the default streams; another index gives
+            the same units fresh noise, as a repeat measurement does).
+        nest_errors_deg: the rig's configuration: per nest, its mounting error as a small rotation vector
+            (deg, about the nest's x, y, z) from the sensor frame to the nest frame; None: perfect nests.
+        truth_change: ``(slot, truth) -> truth`` applied to every drawn unit, e.g. a unit that has aged.
     """
 
     def __init__(
@@ -90,6 +97,10 @@ class SimulatedStation:
         chamber: dict[str, Any] | None = None,
         unit_effects: Sequence[Effects | None] | None = None,
         reference_degc: float = 25.0,
+        unit_keys: Sequence[int] | None = None,
+        noise_index: int = 0,
+        nest_errors_deg: Sequence[Sequence[float]] | None = None,
+        truth_change: Callable[[int, UnitTruth], UnitTruth] | None = None,
     ) -> None:
         if units < 1:
             raise ValueError("a simulated station needs at least one unit")
@@ -106,6 +117,12 @@ class SimulatedStation:
         self.chamber: SimulatedChamber | None = None
         self.unit_effects = list(unit_effects or [])
         self.reference_degc = float(reference_degc)
+        self.unit_keys = [int(k) for k in unit_keys] if unit_keys is not None else list(range(self.n_units))
+        if len(self.unit_keys) != self.n_units:
+            raise ValueError(f"unit_keys names {len(self.unit_keys)} units for {self.n_units} slots")
+        self.noise_index = int(noise_index)
+        self.truth_change = truth_change
+        self.nest_errors_deg = [tuple(float(v) for v in e) for e in nest_errors_deg] if nest_errors_deg else []
 
     @property
     def scale(self) -> float:
@@ -137,8 +154,13 @@ class SimulatedStation:
                 self.chamber = SimulatedChamber(self.clock, **self._chamber_options).start()
             rate = int(self.plan.sample_rate_hz)
             for k in range(self.n_units):
-                unit_ss, imu_ss, fault_ss = np.random.SeedSequence(self.seed, spawn_key=(k,)).spawn(3)
+                key = self.unit_keys[k]
+                unit_ss, imu_ss, fault_ss = np.random.SeedSequence(self.seed, spawn_key=(key,)).spawn(3)
+                if self.noise_index:
+                    _, imu_ss, fault_ss = np.random.SeedSequence(self.seed, spawn_key=(key, self.noise_index)).spawn(3)
                 truth = draw_unit(self.sensor_class, np.random.default_rng(unit_ss))
+                if self.truth_change is not None:
+                    truth = self.truth_change(k, truth)
                 effects = self.effects
                 if k < len(self.unit_effects) and self.unit_effects[k] is not None:
                     effects = self.unit_effects[k]
@@ -154,6 +176,7 @@ class SimulatedStation:
                     heading_deg=self.plan.heading_deg,
                     temperature_degc=self.chamber.load_temperature if self.chamber is not None else None,
                     reference_degc=self.reference_degc,
+                    mount=self.nest_mount(k),
                 )
                 sensor = self._start_sensor(source, truth, rate, int(fault_ss.generate_state(1)[0]))
                 self.units.append(SimUnit(k, truth, source, sensor))
@@ -161,6 +184,14 @@ class SimulatedStation:
             self.stop()
             raise
         return self
+
+    def nest_mount(self, slot: int) -> np.ndarray | None:
+        """The rotation from a unit's sensor frame to nest ``slot``'s frame (None: a perfect nest)."""
+        if slot >= len(self.nest_errors_deg):
+            return None
+        from scipy.spatial.transform import Rotation
+
+        return np.asarray(Rotation.from_rotvec(np.radians(self.nest_errors_deg[slot])).as_matrix())
 
     def stop(self) -> None:
         """Stop the sensors and the rig (idempotent)."""

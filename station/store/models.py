@@ -292,6 +292,55 @@ class RigLock(Base):
     since: Mapped[datetime] = mapped_column(DateTime(timezone=True))
 
 
+class NestCalibrationRecord(Base):
+    """A rig's nest calibration (format ``station-nests/1``): ``version`` counts up per ``rig`` key; the
+    newest applies to every later run on that rig. ``body`` is the JSON as saved, ``sha256`` its hash."""
+
+    __tablename__ = "nest_calibrations"
+    __table_args__ = (UniqueConstraint("rig", "version"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    rig: Mapped[str] = mapped_column(String(300), index=True)
+    version: Mapped[int] = mapped_column(Integer)
+    reference_serial: Mapped[str] = mapped_column(String(100))
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
+    format: Mapped[str] = mapped_column(String(40))
+    body: Mapped[str] = mapped_column(Text)
+    sha256: Mapped[str] = mapped_column(String(64))
+
+
+class GoldenUnitRecord(Base):
+    """A golden unit's registration (format ``station-golden/1``): ``version`` counts up per ``serial``; the
+    newest is in force. ``body`` is the JSON as saved."""
+
+    __tablename__ = "golden_units"
+    __table_args__ = (UniqueConstraint("serial", "version"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    serial: Mapped[str] = mapped_column(String(100), index=True)
+    version: Mapped[int] = mapped_column(Integer)
+    registered_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
+    body: Mapped[str] = mapped_column(Text)
+    sha256: Mapped[str] = mapped_column(String(64))
+
+
+class GoldenCheckRecord(Base):
+    """One golden-unit run judged against the unit's references: on which station, when, passed or not, and
+    per parameter the measured value, deviation and allowed deviation (``body``, JSON)."""
+
+    __tablename__ = "golden_checks"
+    __table_args__ = (Index("ix_golden_checks_station_time", "station", "checked_at"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    run_unit_id: Mapped[int | None] = mapped_column(ForeignKey("run_units.id"), index=True)
+    serial: Mapped[str] = mapped_column(String(100), index=True)
+    station: Mapped[str] = mapped_column(String(100))
+    golden_version: Mapped[int] = mapped_column(Integer)
+    checked_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
+    passed: Mapped[bool] = mapped_column(Boolean)
+    body: Mapped[str] = mapped_column(Text)
+
+
 class Disposition(Base):
     """A person's decision about a unit (e.g. 'retest', 'scrap', 'rework'); it resets the attempt count."""
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from datetime import UTC, datetime
 from typing import Any
 
@@ -47,6 +47,7 @@ class UnitSummary:
     last_outcome: str
     last_started_at: str | None
     attempts: int
+    disposition: str = ""  # the latest disposition's decision ('' none): 'scrap' locks the serial
 
 
 @dataclass(frozen=True)
@@ -62,6 +63,7 @@ class UnitRun:
     started_at: str | None
     finished_at: str | None
     operator: str
+    lot: str
     software_version: str
     limits_version: str
     limits_hash: str
@@ -212,8 +214,28 @@ def unit_image(db: Database, serial: str) -> UnitImage | None:
     return UnitImage(serial, encode_image(image), run_uid, False)
 
 
+def latest_dispositions(db: Database, serials: list[str]) -> dict[str, str]:
+    """The latest disposition's decision of each of ``serials`` that has one (e.g. ``{"SIM-1": "scrap"}``).
+
+    A scrap is final (the station refuses the serial from then on), so a scrapped unit shows "scrap" even if a
+    later decision was recorded."""
+    out: dict[str, str] = {}
+    if not serials:
+        return out
+    with db.transaction() as s:
+        for i in range(0, len(serials), 500):
+            rows = s.execute(select(Unit.serial, Disposition.decision).join(Disposition, Disposition.unit_id == Unit.id)
+                             .where(Unit.serial.in_(serials[i:i + 500]))
+                             .order_by(Disposition.decided_at, Disposition.id)).all()
+            for serial, decision in rows:
+                if out.get(serial) != "scrap":
+                    out[serial] = decision
+    return out
+
+
 def list_units(db: Database) -> list[UnitSummary]:
-    """Every unit, by serial, with its run count, latest outcome and attempts since its last disposition."""
+    """Every unit, by serial, with its run count, latest outcome, attempts since its last disposition and
+    that disposition (scrap shown for good)."""
     out: list[UnitSummary] = []
     with db.transaction() as s:
         for unit in s.scalars(select(Unit).order_by(Unit.serial)):
@@ -224,7 +246,8 @@ def list_units(db: Database) -> list[UnitSummary]:
             last = rows[0] if rows else None
             out.append(UnitSummary(unit.serial, len(rows), last[0] if last else "", _iso(last[1]) if last else None,
                                    _attempts(s, unit.id, True)))
-    return out
+    shown = latest_dispositions(db, [u.serial for u in out])
+    return [replace(u, disposition=shown.get(u.serial, "")) for u in out]
 
 
 def show_unit(db: Database, serial: str) -> UnitDetail | None:
@@ -242,8 +265,8 @@ def show_unit(db: Database, serial: str) -> UnitDetail | None:
             rec = s.scalar(select(SessionRecording).where(SessionRecording.run_unit_id == ru.id))
             runs.append(UnitRun(
                 run.run_uid, station_name, ru.slot, ru.outcome, ru.message, run.outcome, _iso(run.started_at),
-                _iso(run.finished_at), run.operator, run.software_version, run.limits_version, run.limits_hash,
-                run.sequence_version, run.sequence_hash, len(checks),
+                _iso(run.finished_at), run.operator, run.lot or "", run.software_version, run.limits_version,
+                run.limits_hash, run.sequence_version, run.sequence_hash, len(checks),
                 tuple(f"{c.step}:{c.name}" for c in checks if not c.passed),
                 rec.path if rec else None, rec.sha256 if rec else None,
             ))

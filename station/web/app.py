@@ -11,6 +11,8 @@ Pages (server-rendered Jinja2 templates in ``templates/``, no front-end build st
   history and plots (``/units/{serial}/plots/{name}.svg``, see :mod:`station.web.plots`), and the
   diagnosis of each run's recording (loaded by the page from the API, figure at
   ``/units/{serial}/diagnosis.svg``; computed in the background, see :mod:`station.web.diagnosis`);
+* ``/units/{serial}/certificate.pdf`` and ``.html``: the unit's calibration certificate (see
+  :mod:`station.web.routes.certificate`);
 * ``/population``: a histogram per limit-checked parameter over all units, with limits;
 * ``/quality``: yield (first pass, final; by station, shift, day, lot) and its trend, parameters ranked by Cpk,
   control charts with run rules, histograms, CSV exports; filters by date, station, lot, limits version.
@@ -40,13 +42,14 @@ from station.store.quality import ShiftCalendar
 from station.web.context import WebContext
 from station.web.diagnosis import DiagnosisService
 from station.web.openapi import StationAPI, add_store_errors
-from station.web.routes import diagnosis, population, quality, runs, status, units
+from station.web.routes import certificate, diagnosis, population, quality, runs, status, units
 from station.web.security import SecurityHeaders
 from station.web.state import LiveStatus
 
 # a serial may hold any printable character, "/" too ({serial:path}): the routes with something after the serial
-# (diagnosis, plots, eeprom.bin) are matched before the unit's own page and record
-ROUTERS = (status.router, runs.router, diagnosis.router, units.router, population.router, quality.router)
+# (certificate, diagnosis, plots, eeprom.bin) are matched before the unit's own page and record
+ROUTERS = (status.router, runs.router, certificate.router, diagnosis.router, units.router, population.router,
+           quality.router)
 
 
 @asynccontextmanager

@@ -21,6 +21,7 @@ from sqlalchemy import and_, func, or_, select
 from station.store.db import Database
 from station.store.models import UNFINISHED, LimitCheck, Run, RunUnit, Unit
 from station.store.models import Station as StationRow
+from station.store.queries import latest_dispositions
 from station.web.models import LimitCheckResult, RunSummary, RunUnitOutcome, UnitOverview
 
 
@@ -165,8 +166,10 @@ def list_unit_results(
         names = {int(i): str(nm) for i, nm in s.execute(select(StationRow.id, StationRow.name))}
     more = limit is not None and len(found) > limit
     found = found[:limit] if limit is not None else found
+    dispositions = latest_dispositions(db, [str(f[0]) for f in found])
     result = [UnitOverview(serial=serial, runs=int(nruns), last_outcome=unit_outcome, last_run_id=run_uid,
-                           last_started_at=_iso(started), station=names.get(st, ""))
+                           last_started_at=_iso(started), station=names.get(st, ""),
+                           disposition=dispositions.get(serial))
               for serial, nruns, unit_outcome, run_uid, started, st in found]
     return result, (_encode(f"units|{result[-1].serial}") if more and result else None)
 

@@ -1,13 +1,13 @@
 """Server-rendered SVG plots of a unit for the engineer's page (matplotlib, no pyplot state).
 
 * ``raw_corrected``: raw versus corrected (Algorithm 1 applied with the fitted parameter
-  set) specific force (m/s^2) and angular rate (deg/s) per axis over the session;
+  set) specific force (mg) and angular rate (deg/s) per axis over the session;
 * ``drift``: the gyro output during the power-on rest (deg/s) with the fitted bias of
   eq. (1) and (3), b_stat + b_drift * exp(-t / T_c);
 * ``acf``: normalised autocorrelation of the low-passed rest record with the e^-1 point
   and the fitted T_c;
-* ``residuals``: RMS of the fit residual per segment and axis;
-* ``allan``: overlapping Allan deviation of the gyro (deg/s) and accelerometer (m/s^2)
+* ``residuals``: RMS of the fit residual per segment and axis (accel mg, gyro deg/s);
+* ``allan``: overlapping Allan deviation of the gyro (deg/s) and accelerometer (mg)
   during the rest against the cluster time tau (s);
 * ``histogram``: a population histogram of one parameter with its limits;
 * ``diagnosis``: block-mean residual before and after each finding of a diagnosis
@@ -29,12 +29,14 @@ from station.correct.session_correct import correct_session
 from station.fit.acf import finite_record_acf, lowpass_record
 from station.fit.allan import overlapping_allan_deviation
 from station.fit.params import ParameterSet
+from station.kernel.display import display_for
 from station.kernel.errors import FitError
 from station.session.model import Kind, Session
 from station.web.diagnosis import Curve
 
 AXES = "xyz"
 _DEG = 180.0 / math.pi
+_MG = display_for("acceleration")  # accelerometer quantities in mg (the display convention)
 _MAX_POINTS = 4000
 
 
@@ -57,7 +59,7 @@ def raw_corrected_svg(session: Session, params: ParameterSet) -> str:
     axs = fig.subplots(3, 2, sharex=True)
     for i, a in enumerate(AXES):
         for col, (raw, cor, scale, unit, what) in enumerate((
-            (session.accel_mps2, corrected.accel_mps2, 1.0, "m/s²", "accel"),
+            (session.accel_mps2, corrected.accel_mps2, _MG.scale, _MG.unit, "accel"),
             (session.gyro_radps, corrected.gyro_radps, _DEG, "deg/s", "gyro"),
         )):
             ax = axs[i, col]
@@ -112,7 +114,7 @@ def allan_svg(session: Session, params: ParameterSet) -> str:
     fig = Figure(figsize=(10, 3.6))
     axs = fig.subplots(1, 2)
     for ax, data, scale, unit, what in ((axs[0], session.gyro_radps, _DEG, "deg/s", "gyro"),
-                                        (axs[1], session.accel_mps2, 1.0, "m/s²", "accel")):
+                                        (axs[1], session.accel_mps2, _MG.scale, _MG.unit, "accel")):
         for i, a in enumerate(AXES):
             x = data[idx, i]
             x = x[np.isfinite(x)]
@@ -175,10 +177,10 @@ def acf_svg(session: Session, params: ParameterSet) -> str:
 
 
 def residuals_svg(params: ParameterSet) -> str:
-    """RMS of the fit residual per segment and axis (accel m/s^2, gyro deg/s), from the parameter set's quality."""
+    """RMS of the fit residual per segment and axis (accel mg, gyro deg/s), from the parameter set's quality."""
     fig = Figure(figsize=(10, 3.4))
     axs = fig.subplots(1, 2)
-    for ax, what, scale, unit in ((axs[0], "accel", 1.0, "m/s²"), (axs[1], "gyro", _DEG, "deg/s")):
+    for ax, what, scale, unit in ((axs[0], "accel", _MG.scale, _MG.unit), (axs[1], "gyro", _DEG, "deg/s")):
         segs = (params.quality.get(what) or {}).get("segments") or {}
         keys = sorted(segs, key=lambda k: int(k) if str(k).isdigit() else 0)
         if keys:

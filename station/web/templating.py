@@ -8,6 +8,7 @@ from urllib.parse import quote
 
 from fastapi.templating import Jinja2Templates
 
+from station.kernel.display import display_of_check, format_number, format_value, limits_identity, local_time
 from station.web.labels import parameter_label, unit_label
 
 TEMPLATES_DIR = Path(__file__).resolve().parent / "templates"
@@ -31,5 +32,10 @@ templates.env.filters["path_part"] = path_part
 templates.env.filters["fmt"] = fmt
 templates.env.filters["label"] = parameter_label
 templates.env.filters["unit"] = unit_label
+templates.env.filters["localtime"] = local_time
+templates.env.globals["display_of"] = display_of_check
+templates.env.globals["format_value"] = format_value
+templates.env.globals["format_number"] = format_number
+templates.env.globals["limits_identity"] = limits_identity
 
 __all__ = ["TEMPLATES_DIR", "fmt", "path_part", "templates"]

@@ -34,6 +34,8 @@ class UnitOverview(BaseModel):
     last_run_id: RunId
     last_started_at: Timestamp
     station: StationName
+    disposition: str | None = Field(None, description="the unit's latest disposition (retest, scrap, rework, "
+                                                      "accept-deviation; scrap is final); null: none")
 
 
 class LimitCheckResult(BaseModel):
@@ -66,9 +68,11 @@ class UnitRunResult(BaseModel):
     started_at: Timestamp
     finished_at: Timestamp
     operator: str = Field(description="who ran the station ('' when not configured)")
+    lot: str = Field("", description="the production lot of the run ('' when not given)")
     software_version: str = Field(description="the station software's version")
     limits_version: str = Field(description="the product limits' name and version")
-    limits_hash: str = Field(description="hex SHA-256 of the product limits")
+    limits_hash: str = Field(description="hex SHA-256 of the limits file's bytes (an edited file with the same name "
+                                         "and version has another hash)")
     sequence_version: str = Field(description="the sequence's (plan's) version")
     sequence_hash: str = Field(description="hex SHA-256 of the sequence (plan)")
     checks: int = Field(description="limit checks of the unit in the run (capture gates and product limits)")

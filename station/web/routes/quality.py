@@ -9,14 +9,16 @@ from __future__ import annotations
 
 import csv
 import io
+from dataclasses import replace
 from typing import Annotated
 
 from fastapi import APIRouter, HTTPException, Query, Request
 from fastapi.responses import HTMLResponse, Response
 from sqlalchemy import select
 
+from station.kernel.display import display_of_check, limits_identity
 from station.store import quality as q
-from station.store.models import QualityDaily, QualityYield
+from station.store.models import QualityDaily, QualityYield, Run
 from station.store.models import Station as StationRow
 from station.store.spc import RULES
 from station.web import charts
@@ -96,6 +98,59 @@ def _choices(web: Web) -> dict[str, list[str]]:
         }
 
 
+def _limits_labels(web: Web, versions: list[str]) -> dict[str, str]:
+    """Each limits version as people see it: name, version and the content hash of the file(s) recorded under it.
+
+    Two different files recorded under one name and version (an edited file) are named as such."""
+    hashes: dict[str, list[str]] = {}
+    with web.db.transaction() as s:
+        for version, digest in s.execute(select(Run.limits_version, Run.limits_hash).distinct()
+                                         .where(Run.limits_version.in_(versions))):
+            hashes.setdefault(version, []).append(digest or "")
+    out = {}
+    for v in versions:
+        found = sorted(set(hashes.get(v, [])))
+        if len(found) > 1:
+            out[v] = f"{v}: {len(found)} different files (sha256 " + ", ".join(h[:12] for h in found) + ")"
+        else:
+            out[v] = limits_identity(v, found[0] if found else "")
+    return out
+
+
+def _displayed_chart(pc: q.ParameterChart) -> q.ParameterChart:
+    """The chart in the display convention (values with the quantity's offset, sigmas without)."""
+    d = display_of_check(pc.name, pc.unit)
+
+    def v(x: float | None) -> float | None:
+        return d.value(x)
+
+    ch = pc.chart
+    points = tuple(replace(p, mean=d.convert(p.mean), s=d.spread(p.s), lcl=v(p.lcl), ucl=v(p.ucl),
+                           s_lcl=d.spread(p.s_lcl), s_ucl=d.spread(p.s_ucl)) for p in ch.points)
+    chart = replace(ch, center=d.convert(ch.center), sigma_within=d.spread(ch.sigma_within), points=points)
+    return replace(pc, unit=d.unit, low=v(pc.low), high=v(pc.high), chart=chart)
+
+
+def _displayed_histogram(h: q.Histogram) -> q.Histogram:
+    d = display_of_check(h.name, h.unit)
+    return replace(h, unit=d.unit, lo=d.convert(h.lo), hi=d.convert(h.hi), mean=d.convert(h.mean),
+                   sigma=d.spread(h.sigma), low=d.value(h.low),
+                   high=d.value(h.high))
+
+
+def _displayed(c: CapabilityEntry) -> CapabilityEntry:
+    """The entry in the display convention (station/kernel/display.py): values and spreads in the quantity's
+    engineering unit (a scale factor as its error in ppm); the capability indices are unit-free."""
+    d = display_of_check(c.name, c.unit)
+
+    def v(x: float | None) -> float | None:
+        return d.value(x)
+
+    return c.model_copy(update={"unit": d.unit, "mean": v(c.mean), "low": v(c.low), "high": v(c.high),
+                                "min": v(c.min), "max": v(c.max), "sigma_within": d.spread(c.sigma_within),
+                                "sigma_overall": d.spread(c.sigma_overall)})
+
+
 @router.get("/quality", response_class=HTMLResponse, include_in_schema=False)
 def quality_page(request: Request, web: Web, query: Filters) -> HTMLResponse:
     cal = query.calendar(web.shifts)
@@ -105,16 +160,17 @@ def quality_page(request: Request, web: Web, query: Filters) -> HTMLResponse:
     caps = _capability(web, query, rules)
     flagged = [c for c in caps if c.rules or (c.cpk is not None and c.cpk < CPK_TARGET)]
     shown = {c.name for c in flagged}
-    svgs = {c.name: charts.control_chart_svg(c) for c in chart_list if c.name in shown}
+    svgs = {c.name: charts.control_chart_svg(_displayed_chart(c)) for c in chart_list if c.name in shown}
     days = tables["day"].rows
     trend = charts.yield_trend_svg([r.group for r in days], [r.first_pass_yield for r in days],
                                    [r.final_yield for r in days])
+    choices = _choices(web)
     params = request.query_params
     qs = "&".join(f"{k}={v}" for k, v in params.multi_items() if v)
     return templates.TemplateResponse(request, "quality.html", {
-        "query": query, "qs": qs, "tables": tables, "caps": caps, "svgs": svgs, "trend": trend,
-        "rules": RULES, "cpk_target": CPK_TARGET, "shifts": cal.text(), "definitions": DEFINITIONS,
-        "choices": _choices(web), "unit_label": unit_label,
+        "query": query, "qs": qs, "tables": tables, "caps": [_displayed(c) for c in caps], "svgs": svgs,
+        "trend": trend, "rules": RULES, "cpk_target": CPK_TARGET, "shifts": cal.text(), "definitions": DEFINITIONS,
+        "choices": choices, "limits_labels": _limits_labels(web, choices["limits"]), "unit_label": unit_label,
         "flagged": flagged,
     })
 
@@ -124,7 +180,8 @@ def quality_histogram_svg(web: Web, name: str, query: Filters) -> Response:
     h = q.histogram(web.db, name, query.filter())
     if h is None:
         raise HTTPException(404, f"no values of {name} in the selection")
-    return Response(charts.histogram_svg(h), media_type="image/svg+xml", headers={"Cache-Control": "max-age=30"})
+    return Response(charts.histogram_svg(_displayed_histogram(h)), media_type="image/svg+xml",
+                    headers={"Cache-Control": "max-age=30"})
 
 
 @router.get("/quality/control/{name}.svg", include_in_schema=False)
@@ -132,7 +189,7 @@ def quality_control_svg(web: Web, name: str, query: Filters) -> Response:
     found = q.control_charts(web.db, query.filter(), [name])
     if not found:
         raise HTTPException(404, f"no values of {name} in the selection")
-    return Response(charts.control_chart_svg(found[0]), media_type="image/svg+xml",
+    return Response(charts.control_chart_svg(_displayed_chart(found[0])), media_type="image/svg+xml",
                     headers={"Cache-Control": "max-age=30"})
 
 
@@ -154,7 +211,7 @@ def quality_yield_csv(web: Web, query: Filters, by: ByQuery = "station") -> Resp
 
 @router.get("/quality/capability.csv", include_in_schema=False)
 def quality_capability_csv(web: Web, query: Filters) -> Response:
-    caps = _capability(web, query)
+    caps = [_displayed(c) for c in _capability(web, query)]  # the display convention (the API stays SI)
     fields = [f for f in CapabilityEntry.model_fields if f != "rules"]
     return _csv("capability", fields, [[getattr(c, f) for f in fields] for c in caps])
 

@@ -3,8 +3,8 @@ the target slot and update count) before the first page goes to the unit and com
 an intent left open by a crash is reconciled against the unit (state 'complete' or 'not-applied').
 Rows of older versions were recorded after the fact: they are 'complete'.
 
-Revision ID: 0004
-Revises: 0003
+Revision ID: 0006
+Revises: 0005
 Create Date: 2026-11-28
 """
 
@@ -13,8 +13,8 @@ from __future__ import annotations
 import sqlalchemy as sa
 from alembic import op
 
-revision = '0004'
-down_revision = '0003'
+revision = '0006'
+down_revision = '0005'
 branch_labels = None
 depends_on = None
 
