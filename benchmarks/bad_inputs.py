@@ -448,15 +448,19 @@ def option_probes(w: Path) -> list[Probe]:
 
 
 def database_probes(w: Path) -> list[Probe]:
+    def make_store(path: Path) -> None:  # a read-only command no longer creates one
+        subprocess.run([sys.executable, "-c", "import sys; from station.store.db import open_database; "
+                        "open_database(sys.argv[1]).close()", f"sqlite:///{path}"], check=True, capture_output=True)
+
     newer = w / "newer.sqlite"
-    subprocess.run([*STATION, "units", "list", "--db", f"sqlite:///{newer}"], check=True, capture_output=True)
+    make_store(newer)
     with sqlite3.connect(newer) as c:
         c.execute("UPDATE alembic_version SET version_num = '9999_future'")
     foreign = w / "foreign.sqlite"
     with sqlite3.connect(foreign) as c:
         c.execute("CREATE TABLE IF NOT EXISTS customers (id INTEGER PRIMARY KEY, name TEXT)")
     corrupt = w / "corrupt.sqlite"
-    subprocess.run([*STATION, "units", "list", "--db", f"sqlite:///{corrupt}"], check=True, capture_output=True)
+    make_store(corrupt)
     data = bytearray(corrupt.read_bytes())
     for i in range(200, len(data), 7):
         data[i] = 0xA5

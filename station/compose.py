@@ -36,6 +36,7 @@ from station.kernel.limits_file import LimitsFile, load_limits
 from station.kernel.nest_frames import NestCalibration
 from station.kernel.plan import RigPlan, default_plan
 from station.kernel.thermal_plan import ThermalPlan
+from station.kernel.urls import split_url
 from station.rig import RIGS, open_rig, rig_client_options
 from station.rig.protocol import Rig, RigIdentity
 from station.rig_lock import RigLock
@@ -140,14 +141,23 @@ class StationConfig:
             raise ConfigError(f"clock scale must be a positive number, got {self.clock_scale!r}")
         if self.golden not in ("off", "per-shift"):
             raise ConfigError(f"golden {self.golden!r}: 'off' or 'per-shift'")
-        # every URL and path before anything starts: a bad one is one line, not a traceback minutes later
+        # every URL and path before anything starts: a bad one is one line, not a traceback minutes later (the
+        # URL's scheme is checked against the registries when the station is built: a plugin may register later)
+        split_url(self.rig_url, "rig")
+        for url in self.sensor_urls:
+            split_url(url, "sensor")
+        if self.chamber_url:
+            split_url(self.chamber_url, "chamber")
+        if self.out_dir is not None:
+            check_out_dir(self.out_dir)
+
+    def check_urls(self) -> None:
+        """Each device URL against its registry: a registered scheme whose parser takes it (one line if not)."""
         RIGS.check(self.rig_url)
         for url in self.sensor_urls:
             SENSORS.check(url)
         if self.chamber_url:
             CHAMBERS.check(self.chamber_url)
-        if self.out_dir is not None:
-            check_out_dir(self.out_dir)
 
     @classmethod
     def from_file(cls, path: Path, **overrides: Any) -> StationConfig:
@@ -412,6 +422,7 @@ class Station:
         on_provision: Callable[[ProvisionRecord], None] | None = None,
     ) -> None:
         self.config = config
+        config.check_urls()
         if config.out_dir is not None:
             prepare_out_dir(config.out_dir)
         self.clock = clock if clock is not None else make_clock(config.clock_scale)
