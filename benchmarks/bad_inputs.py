@@ -280,7 +280,7 @@ def params_probes(w: Path, good: Path, params: dict) -> list[Probe]:
         variant("T_c negative", set_("accel", "correlation_time_s", value=[-5, 100, 100])),
         variant("another serial", set_("serial", value="SOMEONE-ELSE")),
         variant("serial as a number", set_("serial", value=12)),
-        variant("format v2", set_("format", value="station-params/2")),
+        variant("format from a newer version", set_("format", value="station-params/99")),
         variant("no format", lambda d: d.pop("format")),
         variant("no gyro", lambda d: d.pop("gyro")),
         variant("non-UTF-8", lambda d: None, raw=b'{"format": "\xff\xfe"}'),
