@@ -30,7 +30,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from sqlalchemy import select
 from sqlalchemy.exc import IntegrityError
@@ -68,6 +68,9 @@ from station.store.models import (
     Station as StationRow,
 )
 from station.store.quality_index import index_run
+
+if TYPE_CHECKING:
+    from station.sequence.provision import ProvisionRecord
 
 log = logging.getLogger(__name__)
 
@@ -197,19 +200,24 @@ class Recorder:
         """Close stale UNFINISHED runs (of ``station_name``, or all); returns their run ids."""
         return recover_unfinished(self.db, station_name, outcome=outcome, exclude=set(self._runs))
 
-    def provisioned(self, record: object) -> None:
-        """Store one unit's EEPROM write and verification (an ``EepromProvisioner`` ``on_record``).
+    def current_run(self) -> str | None:
+        """The run in progress on this recorder (the last started), or None."""
+        return next(reversed(self._runs), None)
+
+    def provisioned(self, record: ProvisionRecord) -> None:
+        """Store one unit's EEPROM write and verification after the fact (an ``EepromProvisioner`` ``on_record``
+        for a provisioner without a journal; the station records ahead instead: :mod:`station.store.write_ahead`).
 
         Linked to the run in progress on this recorder (the provisioner runs inside it).
         """
-        write = record.write  # type: ignore[attr-defined]
-        verification = record.verification  # type: ignore[attr-defined]
+        write = record.write
+        verification = record.verification
         on_rig = None if verification is None else bool(verification.passed)
         run_id = next(reversed(self._runs), None)
         message = "" if verification is None else verification.describe()
         record_eeprom_write(
             self.db, write.serial, write.sha256, attempts=write.attempts, read_back_ok=True, verified_on_rig=on_rig,
-            image=write.data or None, run_id=run_id, slot=record.slot,  # type: ignore[attr-defined]
+            image=write.data or None, run_id=run_id, slot=record.slot,
             layout_version=write.image.layout_version,
             message=message,
         )
