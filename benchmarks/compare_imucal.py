@@ -11,6 +11,7 @@ differences. Units: m/s^2, deg/s, deg.
 from __future__ import annotations
 
 import json
+import os
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -23,7 +24,7 @@ from station.kernel.parameters import ParameterSet
 from station.session.imucal_import import import_imucal_ferraris
 from station.session.model import Session
 
-REAL = Path(__file__).resolve().parents[2] / "shared" / "real" / "imucal"
+REAL = Path(os.environ.get("STATION_REAL") or Path(__file__).resolve().parents[2] / "shared" / "real") / "imucal"
 CSV = REAL / "example_ferraris_session.csv"
 SECTIONS = REAL / "example_ferraris_session_list.json"
 RATE_HZ = 102.4

@@ -457,12 +457,14 @@ def run_station(
     except KeyboardInterrupt:
         typer.echo("aborted before the run started; nothing was moved or written", err=True)
         raise typer.Exit(130) from None
+    for line in station.reconciled:
+        typer.echo(line, err=True)
     console.print(summary_table(result))
     if station.provisioner is not None and station.provisioner.records:
         from station.terminal import provisioning_table
 
         console.print(provisioning_table(station.provisioner))
-    timing = getattr(runners[-1], "timing", None) if runners else None
+    timing = getattr(runners[-1].sequence, "timing", None) if runners else None
     if timing is not None:
         console.print(f"cycle time per batch of {timing.units}: {timing.cycle_s / 60:.1f} min (sequence incl. soaks "
                       f"{timing.sequence_s / 60:.1f} min, fits {timing.fit_wall_s:.1f} s, verification "

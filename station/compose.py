@@ -14,7 +14,9 @@ is real hardware or a simulation.
 
 from __future__ import annotations
 
+import logging
 import math
+import os
 import signal
 import sys
 import threading
@@ -25,27 +27,28 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from station.chamber import chamber_client_options, open_chamber
+from station.chamber import CHAMBERS, chamber_client_options, open_chamber
 from station.fit.calibrate import FitOptions
 from station.kernel.clock import Clock, SimClock, WallClock
-from station.kernel.errors import StationError
+from station.kernel.errors import StationError, path_problem, shorten
 from station.kernel.golden import GoldenCheck
 from station.kernel.limits_file import LimitsFile, load_limits
 from station.kernel.nest_frames import NestCalibration
 from station.kernel.plan import RigPlan, default_plan
 from station.kernel.thermal_plan import ThermalPlan
-from station.rig import open_rig, rig_client_options
+from station.kernel.urls import split_url
+from station.rig import RIGS, open_rig, rig_client_options
 from station.rig.protocol import Rig, RigIdentity
 from station.rig_lock import RigLock
-from station.sensor import open_sensor
+from station.sensor import SENSORS, open_sensor
 from station.sensor.protocol import Sensor
 from station.sequence.options import SequenceOptions
 from station.sequence.prompts import Operator
-from station.sequence.provision import EepromProvisioner, ProvisionRecord
+from station.sequence.provision import EepromProvisioner, ProvisionJournal, ProvisionRecord, reconcile_unit
 from station.sequence.records import Record
 from station.sequence.runner import RunResult, SequenceRunner
 from station.sequence.steps import plan_steps
-from station.sequence.thermal import ThermalRunner
+from station.sequence.thermal_sequence import thermal_runner
 from station.sequence.verify import RigVerifier
 
 if TYPE_CHECKING:  # the database code loads only when a station records
@@ -53,6 +56,8 @@ if TYPE_CHECKING:  # the database code loads only when a station records
 
 Subscriber = Callable[[Record], None]
 CONFIG_FORMAT = "station-config/1"
+
+log = logging.getLogger(__name__)
 
 
 class ConfigError(StationError):
@@ -137,6 +142,23 @@ class StationConfig:
             raise ConfigError(f"clock scale must be a positive number, got {self.clock_scale!r}")
         if self.golden not in ("off", "per-shift"):
             raise ConfigError(f"golden {self.golden!r}: 'off' or 'per-shift'")
+        # every URL and path before anything starts: a bad one is one line, not a traceback minutes later (the
+        # URL's scheme is checked against the registries when the station is built: a plugin may register later)
+        split_url(self.rig_url, "rig")
+        for url in self.sensor_urls:
+            split_url(url, "sensor")
+        if self.chamber_url:
+            split_url(self.chamber_url, "chamber")
+        if self.out_dir is not None:
+            check_out_dir(self.out_dir)
+
+    def check_urls(self) -> None:
+        """Each device URL against its registry: a registered scheme whose parser takes it (one line if not)."""
+        RIGS.check(self.rig_url)
+        for url in self.sensor_urls:
+            SENSORS.check(url)
+        if self.chamber_url:
+            CHAMBERS.check(self.chamber_url)
 
     @classmethod
     def from_file(cls, path: Path, **overrides: Any) -> StationConfig:
@@ -341,6 +363,38 @@ def abort_on_signals(runner: Callable[[], SequenceRunner | None]) -> Iterator[No
             signal.signal(sig, old)
 
 
+def check_out_dir(path: Path, what: str = "output directory") -> None:
+    """Refuse an output directory that cannot be one: a file, under a file, or a name too long (no side effect)."""
+    text = str(path)
+    shown = shorten(text, 120)
+    try:
+        if path.exists() and not path.is_dir():
+            raise ConfigError(f"{what} {shown} is a file, not a directory")
+        for parent in path.parents:
+            if parent.exists():
+                if not parent.is_dir():
+                    raise ConfigError(f"{what} {shown}: {parent} is a file, not a directory")
+                break
+    except (OSError, ValueError) as exc:
+        raise ConfigError(f"{what} {shown}: {path_problem(exc, text)}") from None
+
+
+def prepare_out_dir(path: Path, what: str = "output directory") -> None:
+    """Create the output directory and write a probe file in it now, not after the cycle; refuses one the
+    station cannot write (e.g. under /proc, read-only, a full disk)."""
+    import tempfile
+
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=path) as probe:
+            probe.write(b"\0" * 4096)
+            probe.flush()
+            os.fsync(probe.fileno())
+    except (OSError, ValueError) as exc:
+        raise ConfigError(f"{what} {shorten(str(path), 120)}: cannot write there "
+                          f"({path_problem(exc, str(path))})") from None
+
+
 class Station:
     """A station built from its configuration; :meth:`run` runs the sequence once on its hardware.
 
@@ -373,6 +427,9 @@ class Station:
     ) -> None:
         self.config = config
         self.prompter = prompter
+        config.check_urls()
+        if config.out_dir is not None:
+            prepare_out_dir(config.out_dir)
         self.clock = clock if clock is not None else make_clock(config.clock_scale)
         self.limits = limits if limits is not None else load_limits(config.limits_path)
         self.options = (options if options is not None else SequenceOptions()).for_scale(self.clock.scale)
@@ -406,9 +463,13 @@ class Station:
             admit = golden_gate(self.recorder.db, config.station_id, calendar, inner=admit)
         self.admit = admit
         self.golden_checks: list[GoldenCheck] = []  # the last run's golden-unit checks
-        if on_provision is None and self.recorder is not None:
-            on_provision = self.recorder.provisioned
         self.on_provision = on_provision
+        self.journal: ProvisionJournal | None = None  # EEPROM writes recorded ahead (the recorder's database)
+        if self.recorder is not None:
+            from station.store.write_ahead import StoreJournal
+
+            self.journal = StoreJournal(self.recorder.db, self.recorder.current_run)
+        self.reconciled: list[str] = []  # unfinished EEPROM writes found and closed when the last run started
         self.provisioner: EepromProvisioner | None = None  # the last run's, with its records
 
     def subscribe(self, fn: Subscriber) -> None:
@@ -434,24 +495,40 @@ class Station:
         verifier = RigVerifier(hw.rig, self.clock, self.limits.verification, gravity_mps2=plan.gravity_mps2,
                                sample_rate_hz=int(plan.sample_rate_hz), options=self.options, nests=nests,
                                sensors=hw.sensors)
-        return EepromProvisioner(self.config.station_id, verifier=verifier, on_record=self.on_provision)
+        return EepromProvisioner(self.config.station_id, verifier=verifier, journal=self.journal,
+                                 on_record=self.on_provision)
 
     def _verifier(self, hw: Hardware) -> RigVerifier:
         plan = self.config.plan
         return RigVerifier(hw.rig, self.clock, self.limits.verification, gravity_mps2=plan.gravity_mps2,
                            sample_rate_hz=int(plan.sample_rate_hz), options=self.options)
 
-    def _thermal_runner(self, hw: Hardware, chamber: Any, serials: Mapping[int, str] | None = None) -> ThermalRunner:
+    def _thermal_runner(self, hw: Hardware, chamber: Any, serials: Mapping[int, str] | None = None) -> SequenceRunner:
         c = self.config
         assert c.thermal is not None
-        self.provisioner = (EepromProvisioner(c.station_id, on_record=self.on_provision) if c.provision else None)
-        return ThermalRunner(
-            hw.rig, hw.sensors, self.clock, chamber, c.thermal, verifier=self._verifier(hw) if c.provision else None,
+        self.provisioner = (EepromProvisioner(c.station_id, verifier=self._verifier(hw), journal=self.journal,
+                                              on_record=self.on_provision) if c.provision else None)
+        return thermal_runner(
+            hw.rig, hw.sensors, self.clock, chamber, c.thermal,
             options=self.options, limits=self.limits.product, out_dir=c.out_dir, station=c.station_id,
             rig_name=hw.rig_name, sensor_urls=list(c.sensor_urls), subscribers=self.subscribers,
             provisioner=self.provisioner, admit=self.admit, fit_options=self.fit_options,
             operator=self.prompter, expected_serials=serials,
         )
+
+    def reconcile(self, sensors: Sequence[Sensor]) -> list[str]:
+        """Close the unfinished EEPROM writes (a crash between a write and its record) of the units on the
+        fixture against what they hold; one line per write closed (also logged). A unit that cannot be read
+        keeps its intents open (the run itself will report it)."""
+        if self.journal is None or not self.journal.any_open():
+            return []
+        lines: list[str] = []
+        for sensor in sensors:
+            try:
+                lines += reconcile_unit(self.journal, sensor)
+            except StationError as exc:
+                log.warning("could not reconcile the EEPROM writes of %s: %s", getattr(sensor, "url", sensor), exc)
+        return lines
 
     def run(self, on_runner: Callable[[SequenceRunner], None] | None = None, operator: str | None = None, *,
             lot: str | None = None, serials: Mapping[int, str] | None = None) -> RunResult:
@@ -472,6 +549,7 @@ class Station:
         with RigLock(c.rig_url, c.station_id, db), open_hardware(
             c.rig_url, c.sensor_urls, self.clock, rig_options=self._rig_options(), sensor_options=c.sensor_options
         ) as hw:
+            self.reconciled = self.reconcile(hw.sensors)
             if c.thermal is not None:
                 assert c.chamber_url is not None
                 options = c.chamber_options if c.chamber_options is not None else chamber_client_options(

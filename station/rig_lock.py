@@ -22,9 +22,9 @@ from datetime import UTC, datetime
 from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING
-from urllib.parse import urlsplit
 
 from station.kernel.errors import StationBusy
+from station.kernel.urls import split_url
 
 if TYPE_CHECKING:
     from station.store.db import Database
@@ -36,7 +36,7 @@ class RigBusy(StationBusy):
 
 def rig_key(url: str) -> str:
     """The rig a URL names: scheme, host and port or device, without query parameters (lower-case host)."""
-    parts = urlsplit(url)
+    parts = split_url(url, "rig")
     netloc = (parts.hostname or "") + (f":{parts.port}" if parts.port else "")
     return f"{parts.scheme.lower()}://{netloc}{parts.path}"
 

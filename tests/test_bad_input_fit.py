@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from realdata import IMUCAL_FERRARIS, IMUCAL_SECTIONS, real_path
 from typer.testing import CliRunner
 
 from station.cli import app
@@ -20,8 +21,8 @@ from station.session.imucal_import import import_imucal_ferraris
 from station.session.model import Kind, Session
 from station.sim.session_sim import simulate_session
 
-REAL = Path(__file__).resolve().parents[2] / "shared" / "real" / "imucal"
-needs_real = pytest.mark.skipif(not (REAL / "example_ferraris_session.csv").is_file(), reason="shared/real missing")
+REAL = real_path("imucal")
+needs_real = pytest.mark.real(IMUCAL_FERRARIS, IMUCAL_SECTIONS)
 
 
 @pytest.fixture(scope="module")

@@ -11,11 +11,11 @@ from __future__ import annotations
 
 import json
 import math
-import os
 from pathlib import Path
 
 import numpy as np
 import pytest
+from realdata import OPENAXES_LOG, real_path
 from typer.testing import CliRunner
 
 from station.cli import app
@@ -32,8 +32,7 @@ from station.session.still import detect_still, label_segments
 from station.sim.handheld import HandheldResult, simulate_handheld
 
 RUN = CliRunner()
-REAL = Path(os.environ.get("STATION_REAL", Path(__file__).resolve().parents[2] / "shared" / "real"))
-LOG = REAL / "openaxes" / "log_imu9_2022-06-22_22-13-55.csv"
+LOG = real_path(OPENAXES_LOG)
 DPS_PER_G = 9.80665 * 180.0 / math.pi  # (rad/s per m/s^2) -> deg/s per g
 
 
@@ -143,11 +142,10 @@ def test_cli_says_method_and_what_it_cannot_test(tmp_path: Path) -> None:
 
 @pytest.fixture(scope="module")
 def openaxes() -> dict[str, dict]:
-    if not LOG.is_file():
-        pytest.skip(f"the OpenAXES recording is absent ({LOG}); set STATION_REAL to the shared/real folder")
     return {a: diagnose(import_openaxes(LOG, accel=a)).to_json() for a in ("adxl355", "bmi160")}
 
 
+@pytest.mark.real(OPENAXES_LOG)
 @pytest.mark.parametrize("accel", ["adxl355", "bmi160"])
 def test_openaxes(openaxes: dict[str, dict], accel: str) -> None:
     report = openaxes[accel]

@@ -7,13 +7,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from realdata import IMUCAL_FERRARIS, IMUCAL_SECTIONS
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 compare_imucal = pytest.importorskip("compare_imucal")
 pytest.importorskip("imucal")
 
-if not compare_imucal.CSV.exists():  # pragma: no cover - the shared data lives beside the repo
-    pytest.skip(f"real recording not found at {compare_imucal.CSV}", allow_module_level=True)
+pytestmark = pytest.mark.real(IMUCAL_FERRARIS, IMUCAL_SECTIONS)
 
 
 @pytest.fixture(scope="module")

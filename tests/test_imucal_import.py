@@ -8,21 +8,19 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from realdata import DATA_SETS, real_path
 
 from station.kernel.errors import FormatError
 from station.session import Kind, Session, format_session, parse_session
 from station.session.imucal_import import import_imucal_annotated, import_imucal_ferraris
 
-REAL = Path(__file__).resolve().parents[2] / "shared" / "real" / "imucal"
+REAL = real_path("imucal")
 FERRARIS_CSV = REAL / "example_ferraris_session.csv"
 FERRARIS_JSON = REAL / "example_ferraris_session_list.json"
 ANNOTATED_CSV = REAL / "annotated_session.csv"
 G = 9.81
 
-needs_real = pytest.mark.skipif(
-    not (FERRARIS_CSV.exists() and FERRARIS_JSON.exists() and ANNOTATED_CSV.exists()),
-    reason=f"real imucal recordings not found under {REAL}",
-)
+needs_real = pytest.mark.real(*DATA_SETS["imucal"])
 
 POSE_UP = {"x_p": (0, 1.0), "x_a": (0, -1.0), "y_p": (1, 1.0), "y_a": (1, -1.0), "z_p": (2, 1.0), "z_a": (2, -1.0)}
 ROT_AXIS = {"x_rot": 0, "y_rot": 1, "z_rot": 2}

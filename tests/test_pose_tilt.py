@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from realdata import IMUCAL_FERRARIS, IMUCAL_SECTIONS, real_path
 
 from station.diagnose import pose_tilt
 from station.diagnose.residuals import fit_baseline
@@ -183,10 +184,10 @@ def test_engineering_units_and_pose_groups(tilted: SimResult) -> None:
     assert np.all((index >= 0) == (b.session.kind == int(Kind.POSE)))
 
 
-REAL = Path(__file__).resolve().parents[2] / "shared" / "real" / "imucal"
+REAL = real_path("imucal")
 
 
-@pytest.mark.skipif(not (REAL / "example_ferraris_session.csv").exists(), reason=f"no real recording under {REAL}")
+@pytest.mark.real(IMUCAL_FERRARIS, IMUCAL_SECTIONS)
 def test_real_hand_placed_poses_are_named_and_the_rerun_matches() -> None:
     """The real imucal session (hand-placed poses): the accelerometer's pose means disagree with the base fit;
     the diagnosis names pose_tilt (tilts of a few tenths of a degree), and the simulator re-run with the fitted

@@ -7,11 +7,11 @@ Published reference (shared/real/README.md): OpenAXES's imu_tk-based script's 36
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
 import pytest
+from realdata import OPENAXES_LOG, real_path
 
 from station.fit.export import openaxes_coefficients
 from station.fit.multipos import direction_errors_deg
@@ -20,9 +20,8 @@ from station.kernel.parameters import ParameterSet
 from station.session.model import Kind, Session
 from station.session.multipos_import import import_openaxes
 
-REAL = Path(os.environ.get("STATION_REAL", Path(__file__).resolve().parents[2] / "shared" / "real"))
-LOG = REAL / "openaxes" / "log_imu9_2022-06-22_22-13-55.csv"
-pytestmark = pytest.mark.skipif(not LOG.is_file(), reason=f"the OpenAXES recording is absent ({LOG})")
+LOG = real_path(OPENAXES_LOG)
+pytestmark = pytest.mark.real(OPENAXES_LOG)
 
 G_TK = 9.81744
 PUBLISHED = np.array([

@@ -65,9 +65,21 @@ class EepromWriter:
     def __init__(self) -> None:
         self.calls: list[int] = []
 
-    def provision(self, unit: UnitResult, sensor: Sensor, run_started_at: object = None) -> None:
+    verifies = False
+
+    def intend(self, unit: UnitResult, sensor: Sensor, run_started_at: object = None) -> UnitResult:
+        return unit
+
+    def write(self, unit: UnitResult, sensor: Sensor) -> UnitResult:
         self.calls.append(unit.slot)
         sensor.eeprom_write_page(0, b"CAL:" + unit.serial.encode())
+        return unit
+
+    def verify(self, written: UnitResult, sensor: Sensor) -> None:
+        return None
+
+    def complete(self, written: UnitResult, result: object, fault: str = "") -> None:
+        return None
 
 
 def at_step(name: str, action: Callable[[], None]) -> Callable[[Record], None]:

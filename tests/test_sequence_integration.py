@@ -66,9 +66,21 @@ class MarkerProvisioner:
     def __init__(self) -> None:
         self.calls: list[str] = []
 
-    def provision(self, unit: UnitResult, sensor: SerialSensor, run_started_at: object = None) -> None:
+    verifies = False
+
+    def intend(self, unit: UnitResult, sensor: SerialSensor, run_started_at: object = None) -> UnitResult:
+        return unit
+
+    def write(self, unit: UnitResult, sensor: SerialSensor) -> UnitResult:
         self.calls.append(unit.serial)
         sensor.eeprom_write_page(0, MARKER + unit.serial.encode()[:20])
+        return unit
+
+    def verify(self, written: UnitResult, sensor: SerialSensor) -> None:
+        return None
+
+    def complete(self, written: UnitResult, result: object, fault: str = "") -> None:
+        return None
 
 
 @dataclass

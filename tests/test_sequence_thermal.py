@@ -25,12 +25,14 @@ from station.rig import open_rig
 from station.sensor import open_sensor
 from station.sequence import Measured, Outcome, Record, RunResult, SequenceOptions, StepStarted
 from station.sequence.provision import EepromProvisioner
-from station.sequence.thermal import (
+from station.sequence.runner import SequenceRunner
+from station.sequence.thermal_sequence import (
     ChamberStep,
     RampStep,
     SoakStep,
-    ThermalRunner,
+    ThermalSequence,
     temperature_slope_k_per_min,
+    thermal_runner,
     thermal_steps,
 )
 from station.sequence.verify import RigVerifier
@@ -103,6 +105,11 @@ def sim() -> Iterator[SimStation]:
         yield station
 
 
+def seq(runner: SequenceRunner) -> ThermalSequence:
+    assert isinstance(runner.sequence, ThermalSequence)
+    return runner.sequence
+
+
 def at_step(name: str, action: Callable[[], None]) -> Callable[[Record], None]:
     fired: list[bool] = []
 
@@ -115,7 +122,7 @@ def at_step(name: str, action: Callable[[], None]) -> Callable[[Record], None]:
 
 
 def run(sim: SimStation, *subscribers: Callable[[Record], None], plan: ThermalPlan = PLAN,
-        on_runner: Callable[[ThermalRunner], None] | None = None) -> tuple[RunResult, ThermalRunner]:
+        on_runner: Callable[[SequenceRunner], None] | None = None) -> tuple[RunResult, SequenceRunner]:
     clock = sim.clock
     rig = open_rig(sim.rig_url + "&timeout=0.2&retries=1", clock, **sim.rig_client_options())
     chamber = open_chamber(sim.chamber_url + "&timeout=0.2&retries=1", clock, **chamber_client_options(clock.scale))
@@ -123,9 +130,9 @@ def run(sim: SimStation, *subscribers: Callable[[Record], None], plan: ThermalPl
     try:
         options = OPTIONS.for_scale(clock.scale)
         verifier = RigVerifier(rig, clock, gravity_mps2=plan.base.gravity_mps2, sample_rate_hz=50, options=options)
-        runner = ThermalRunner(rig, sensors, clock, chamber, plan, verifier=verifier,
-                               provisioner=EepromProvisioner("test"), options=options, limits=table1_limits(),
-                               subscribers=list(subscribers))
+        runner = thermal_runner(rig, sensors, clock, chamber, plan,
+                                provisioner=EepromProvisioner("test", verifier=verifier), options=options,
+                                limits=table1_limits(), subscribers=list(subscribers))
         if on_runner is not None:
             on_runner(runner)
         return runner.run(), runner
@@ -169,19 +176,19 @@ def test_plateaus_soak_fit_write_and_verify_at_another_temperature(sim: SimStati
         # a thermal plan fits the temperature polynomials (the plan moves the temperature far enough)
         params = result.units[slot].params
         assert params is not None and params.thermal.status == "fitted", params and params.thermal.reason
-        check = runner.check_sessions[slot]
+        check = seq(runner).check_sessions[slot]
         windows = check.segments_of(Kind.POSE, Kind.RATE)
         assert len(windows) == len(BASE.poses) + len(BASE.rate_steps)
         assert all(abs(check.temp_degc[w.slice].mean() - 30.0) < unit.truth.self_heating_k + 1.0 for w in windows)
-    assert runner.chamber_at_ambient and chamber_sent_to_ambient(sim)
+    assert seq(runner).chamber_at_ambient and chamber_sent_to_ambient(sim)
     assert result.rig_at_rest
-    t = runner.timing
+    t = seq(runner).timing
     assert t is not None and t.cycle_s >= t.sequence_s > 0 and t.verify_s > 0 and t.ambient_s > 0
 
 
 def run_and_check(sim: SimStation, step: str, inject: Callable[[], None],
-                  on_runner: Callable[[ThermalRunner], None] | None = None,
-                  reachable: bool = True) -> tuple[RunResult, ThermalRunner]:
+                  on_runner: Callable[[SequenceRunner], None] | None = None,
+                  reachable: bool = True) -> tuple[RunResult, SequenceRunner]:
     """Run with ``inject`` when ``step`` starts; every unit ERROR, rig at rest, no write, chamber to ambient
     (when it can still be reached)."""
     result, runner = run(sim, at_step(step, inject), on_runner=on_runner)
@@ -198,7 +205,7 @@ def test_chamber_alarm_during_a_plateau_is_a_station_error(sim: SimStation) -> N
     result, runner = run_and_check(sim, "pose -z @10C", lambda: setattr(sim.chamber.faults, "alarm_code",
                                                                       int(AlarmCode.COMPRESSOR)))
     assert "station fault: chamber alarm 5 (COMPRESSOR)" in result.message
-    assert not runner.chamber_at_ambient  # an alarmed chamber is stopped, not driven
+    assert not seq(runner).chamber_at_ambient  # an alarmed chamber is stopped, not driven
 
 
 def test_chamber_not_answering_is_a_station_error(sim: SimStation) -> None:
@@ -226,18 +233,20 @@ def test_setpoint_not_reached_in_time_is_a_station_error(sim: SimStation) -> Non
 
 
 def test_chamber_watchdog_trips_when_the_station_stops_beating(sim: SimStation) -> None:
-    holder: list[ThermalRunner] = []
-    result, _ = run_and_check(sim, "pose +x @10C", lambda: holder[0].chamber.stop_heartbeat(),  # type: ignore[attr-defined]
+    holder: list[SequenceRunner] = []
+    # the Chamber protocol has no heartbeat switch: the Modbus chamber client (a HeartbeatClient) has
+    result, _ = run_and_check(sim, "pose +x @10C",
+                              lambda: seq(holder[0]).chamber.stop_heartbeat(),  # type: ignore[attr-defined]
                               on_runner=holder.append)
     assert "station fault: chamber alarm 1 (WATCHDOG)" in result.message
 
 
 def test_abort_brings_the_chamber_back_to_ambient(sim: SimStation) -> None:
-    holder: list[ThermalRunner] = []
+    holder: list[SequenceRunner] = []
     result, runner = run(sim, at_step("soak @10C", lambda: holder[0].abort("test abort")), on_runner=holder.append)
     assert result.outcome == Outcome.ABORTED and result.rig_at_rest
     assert_no_eeprom_write(sim)
-    assert runner.chamber_at_ambient and sim.chamber.model.setpoint_degc == CHAMBER["ambient_degc"]
+    assert seq(runner).chamber_at_ambient and sim.chamber.model.setpoint_degc == CHAMBER["ambient_degc"]
 
 
 def test_continuous_ramp_cycles_the_poses_while_the_temperature_rises(sim: SimStation) -> None:
@@ -259,4 +268,4 @@ def test_continuous_ramp_cycles_the_poses_while_the_temperature_rises(sim: SimSt
         assert means.min() < 15.0 + heating + 0.5 and means.max() > 35.0 - 0.5
         assert means.max() - means.min() > 10.0
         assert runner.verification[slot].passed
-    assert runner.chamber_at_ambient
+    assert seq(runner).chamber_at_ambient

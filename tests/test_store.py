@@ -120,7 +120,7 @@ def test_upgrade_from_empty_and_round_trip(tmp_path: Path) -> None:
     engine = make_engine(f"sqlite:///{tmp_path / 'm.sqlite'}")
     assert current_revision(engine) is None
     upgrade(engine)
-    assert current_revision(engine) == head_revision() == "0006"
+    assert current_revision(engine) == head_revision() == "0007"
     assert set(inspect(engine).get_table_names()) == TABLES | {"alembic_version"}
     with engine.connect() as conn:  # the migration builds exactly the ORM's schema
         assert compare_metadata(MigrationContext.configure(conn), Base.metadata) == []
@@ -128,7 +128,7 @@ def test_upgrade_from_empty_and_round_trip(tmp_path: Path) -> None:
     assert current_revision(engine) is None
     assert set(inspect(engine).get_table_names()) <= {"alembic_version"}
     upgrade(engine)
-    assert current_revision(engine) == "0006"
+    assert current_revision(engine) == "0007"
     assert set(inspect(engine).get_table_names()) == TABLES | {"alembic_version"}
     engine.dispose()
 
@@ -138,7 +138,7 @@ def test_default_url_is_sqlite_file_in_working_directory(tmp_path: Path, monkeyp
     monkeypatch.delenv("STATION_DB", raising=False)
     with open_database() as database:
         assert database.url == "sqlite:///station.sqlite"
-        assert current_revision(database.engine) == "0006"
+        assert current_revision(database.engine) == "0007"
     assert (tmp_path / "station.sqlite").is_file()
 
 

@@ -76,7 +76,7 @@ def test_upgrade_from_empty_and_round_trip(pg_url: str) -> None:
     assert engine.dialect.name == "postgresql"
     assert current_revision(engine) is None and inspect(engine).get_table_names() == []
     upgrade(engine)
-    assert current_revision(engine) == "0003"
+    assert current_revision(engine) == "0007"
     assert set(inspect(engine).get_table_names()) == TABLES | {"alembic_version"}
     with engine.connect() as conn:
         assert compare_metadata(MigrationContext.configure(conn), Base.metadata) == []
@@ -84,7 +84,7 @@ def test_upgrade_from_empty_and_round_trip(pg_url: str) -> None:
     assert current_revision(engine) is None
     assert set(inspect(engine).get_table_names()) <= {"alembic_version"}
     upgrade(engine)
-    assert current_revision(engine) == "0003"
+    assert current_revision(engine) == "0007"
     assert set(inspect(engine).get_table_names()) == TABLES | {"alembic_version"}
     engine.dispose()
 

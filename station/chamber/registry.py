@@ -10,14 +10,14 @@ from __future__ import annotations
 from typing import Any
 
 from station.chamber import client
-from station.chamber.chamber_url import SCHEMES, ChamberUrlError
+from station.chamber.chamber_url import SCHEMES, ChamberUrlError, parse_chamber_url
 from station.chamber.protocol import Chamber
 from station.kernel.clock import Clock
 from station.kernel.schemes import SchemeRegistry
 
 CHAMBERS: SchemeRegistry[Chamber] = SchemeRegistry("chamber", ChamberUrlError)
 for _scheme in SCHEMES:
-    CHAMBERS.register(_scheme, client.open_chamber)
+    CHAMBERS.register(_scheme, client.open_chamber, parse_chamber_url)
 
 
 def open_chamber(url: str, clock: Clock | None = None, **options: Any) -> Chamber:

@@ -227,59 +227,101 @@ def write_cmd(
 ) -> None:
     """Write a unit's image into its EEPROM (free A/B slot, page by page, read back and compared).
 
-    A scrapped unit is refused before the sensor is touched (exit 2)."""
-    from station.eeprom.provision import write_image
+    A scrapped unit is refused before the sensor is touched (exit 2). The write is recorded ahead in the unit
+    store: the intent before the first page, the write after the read-back (see docs/provisioning.md)."""
+    from station.eeprom.provision import plan_write, program_image
     from station.sensor import open_sensor
+    from station.sequence.provision import reconcile_unit
+    from station.store.db import open_database
+    from station.store.write_ahead import StoreJournal
 
     try:
         image = _unit_image(serial, params_path, db, station_id)
-        with open_sensor(sensor_url) as sensor:
-            report = write_image(sensor, image, max_attempts=attempts)
-            if power_cycle:
-                sensor.power_cycle(2.0)
-        _record_write(db, report)
+        database = open_database(db, for_writing=True)
+        try:
+            journal = StoreJournal(database, source="`station eeprom write`")
+            with open_sensor(sensor_url) as sensor:
+                for line in reconcile_unit(journal, sensor, serial):
+                    typer.echo(line, err=True)
+                plan = plan_write(sensor, image)
+                intent = journal.intend(plan, None)
+                try:
+                    report = program_image(sensor, plan, max_attempts=attempts)
+                except StationError:
+                    for line in _settle(journal, sensor, serial):
+                        typer.echo(line, err=True)
+                    raise
+                journal.written(intent, report)
+                journal.verified(intent, None, "not verified on the rig")
+                if power_cycle:
+                    sensor.power_cycle(2.0)
+        finally:
+            database.close()
     except StationError as exc:
         raise _fail(exc) from None
     typer.echo(f"wrote image #{report.update_count} to slot {report.slot} of {report.serial} "
                f"({report.length} bytes, {report.attempts} attempt(s), sha256 {report.sha256})")
 
 
-def _record_write(db_url: str | None, report: Any) -> None:
-    """Record a write made outside a calibration run in the unit store (read back and compared)."""
-    from station.store.db import open_database
-    from station.store.recorder import record_eeprom_write
+def _settle(journal: Any, sensor: Any, serial: str) -> list[str]:
+    """After a failed write: close its intent against the unit if it still answers (else it stays open)."""
+    from station.sequence.provision import reconcile_unit
 
-    db = open_database(db_url)
     try:
-        record_eeprom_write(db, report.serial, report.sha256, attempts=report.attempts, read_back_ok=True,
-                            verified_on_rig=None, image=report.data or None,
-                            layout_version=report.image.layout_version,
-                            message=f"written by `station eeprom write` to slot {report.slot}; read back, "
-                                    "not verified on the rig")
-    finally:
-        db.close()
+        return reconcile_unit(journal, sensor, serial)
+    except StationError as exc:
+        return [f"{serial}: the write's intent stays open until the unit can be read ({exc})"]
+
+
+def _existing_store(db_url: str | None) -> Any:
+    """The unit store when it exists (None: no store here: nothing to reconcile against)."""
+    from station.store.db import database_url, open_database, store_exists
+
+    url = database_url(db_url)
+    if not store_exists(url):
+        return None
+    return open_database(url, must_exist=True)
 
 
 @eeprom_app.command("read")
 def read_cmd(
     sensor_url: Annotated[str, typer.Option("--sensor", help="sensor URL")],
+    db: DbOption = None,
 ) -> None:
-    """Read both image slots of a connected unit and print which one is current."""
+    """Read both image slots of a connected unit and print which one is current.
+
+    When the unit store exists, unfinished writes of this unit (an intent without a completion, left by
+    a crash) are reconciled against what the unit holds and listed under "reconciled"."""
     from station.eeprom.image import select_image
     from station.eeprom.provision import read_unit_slots
     from station.sensor import open_sensor
 
+    reconciled: list[str] = []
     try:
-        with open_sensor(sensor_url) as sensor:
-            serial = sensor.identify().serial
-            slots = read_unit_slots(sensor)
+        database = _existing_store(db)
+        try:
+            with open_sensor(sensor_url) as sensor:
+                serial = sensor.identify().serial
+                slots = read_unit_slots(sensor)
+                if database is not None:
+                    from station.sequence.provision import reconcile_unit
+                    from station.store.write_ahead import StoreJournal
+
+                    reconciled = reconcile_unit(StoreJournal(database, source="`station eeprom read`"), sensor,
+                                                serial)
+        finally:
+            if database is not None:
+                database.close()
     except StationError as exc:
         raise _fail(exc) from None
+    for line in reconciled:
+        typer.echo(line, err=True)
     current = select_image(slots, serial)
     out = {
         "serial": serial,
         "current": current.name if current is not None else None,
         "slots": {s.name: image_summary(s.image) if s.image else {"error": s.error} for s in slots},
+        "reconciled": reconciled,
     }
     typer.echo(json.dumps(out, indent=2))
 

@@ -25,15 +25,16 @@ DbOption = Annotated[
 ]
 
 
-def _query(db_url: str | None, query: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
+def _query(db_url: str | None, query: Callable[..., Any], *args: Any, writes: bool = False, **kwargs: Any) -> Any:
     """Open the existing store, run ``query(database, *args, **kwargs)``, close it.
 
-    A missing SQLite file is refused, never created; a StationError is one line, exit 2.
+    A missing SQLite file is refused, never created; ``writes``: so is one that keeps nothing (in memory); a
+    StationError (a locked database after the stated wait, a full disk) is one line, exit 2.
     """
     from station.store.db import open_database
 
     try:
-        with open_database(db_url, must_exist=True) as database:
+        with open_database(db_url, must_exist=True, for_writing=writes) as database:
             return query(database, *args, **kwargs)
     except StationError as exc:
         typer.echo(f"error: {exc}", err=True)
@@ -102,7 +103,8 @@ def units_show(
             typer.echo(f"      recording {r.session_path} sha256 {r.session_sha256}")
     for w in detail.eeprom_writes:
         typer.echo(f"  EEPROM {local_time(w['written_at'])}: image {w['image_sha256'][:16]}..., "
-                   f"{w['attempts']} attempt(s), {'verified' if w['verified'] else 'NOT verified'}")
+                   f"{w['attempts']} attempt(s), {'verified' if w['verified'] else 'NOT verified'}"
+                   + ("" if w.get("state", "complete") == "complete" else f" ({w['state']})"))
     for d in detail.dispositions:
         typer.echo(f"  disposition {local_time(d['decided_at'])}: {d['decision']} by {d['operator'] or '-'} "
                    f"{d['note']}")
@@ -140,7 +142,7 @@ def units_disposition(
     """
     from station.store.recorder import record_disposition
 
-    _query(db, record_disposition, serial, decision, operator=operator, note=reason)
+    _query(db, record_disposition, serial, decision, operator=operator, note=reason, writes=True)
     typer.echo(f"recorded disposition {decision!r} for {serial}")
 
 

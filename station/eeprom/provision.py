@@ -120,23 +120,36 @@ def _pages(addr: int, data: bytes, page_size: int) -> list[tuple[int, bytes]]:
     return out
 
 
-def write_image(
-    sensor: Sensor,
-    image: CalibrationImage,
-    *,
-    layout: SlotLayout = DEFAULT_SLOTS,
-    max_attempts: int = 3,
-) -> WriteReport:
-    """Write ``image`` into the unit's free slot with the next update count; read back and compare.
+@dataclass(frozen=True)
+class WritePlan:
+    """What a write will put where, decided before anything is written (:func:`plan_write`).
+
+    Attributes:
+        serial: the unit; slot: 'A' or 'B' (the free slot); address: EEPROM address of the slot.
+        update_count: the new image's count; previous_count: the current image's (0: none).
+        image: the image as it will be written (with its update count); data: its bytes;
+        sha256: hex SHA-256 of ``data``; page_size: the EEPROM's page size (bytes).
+    """
+
+    serial: str
+    slot: str
+    address: int
+    update_count: int
+    previous_count: int
+    sha256: str
+    image: CalibrationImage = field(repr=False, compare=False)
+    data: bytes = field(default=b"", repr=False, compare=False)
+    page_size: int = 32
+
+
+def plan_write(sensor: Sensor, image: CalibrationImage, *, layout: SlotLayout = DEFAULT_SLOTS) -> WritePlan:
+    """Identify the unit, check the image and the EEPROM, read both slots and decide the write (nothing written).
 
     Raises:
         SerialMismatchError: the sensor reports another serial.
         EepromUnusableError: write protect asserted, or the EEPROM is too small.
-        ReadbackMismatchError: every attempt read back different bytes.
         HardwareError: link faults (SensorTimeout, SensorNak, ...) as they come.
     """
-    if max_attempts < 1:
-        raise ValueError("max_attempts must be >= 1")
     ident = sensor.identify()
     if ident.serial != image.serial:
         raise SerialMismatchError(
@@ -156,9 +169,22 @@ def write_image(
     previous = current.image.update_count if current is not None and current.image is not None else 0
     new = image.with_update_count(count)
     data = encode_image(new)
-    addr = region.address(target)
     name = SlotState(target, None, layout=region).name
-    pages = _pages(addr, data, info.page_size)
+    return WritePlan(ident.serial, name, region.address(target), count, previous, image_sha256(data), new, data,
+                     info.page_size)
+
+
+def program_image(sensor: Sensor, plan: WritePlan, *, max_attempts: int = 3) -> WriteReport:
+    """Write ``plan``'s bytes page by page (the header page last), read back and compare; retry on mismatch.
+
+    Raises:
+        ReadbackMismatchError: every attempt read back different bytes.
+        HardwareError: link faults (SensorTimeout, SensorNak, ...) as they come.
+    """
+    if max_attempts < 1:
+        raise ValueError("max_attempts must be >= 1")
+    data, addr, name = plan.data, plan.address, plan.slot
+    pages = _pages(addr, data, plan.page_size)
     pages = pages[1:] + pages[:1]  # the header page last: the slot has no valid magic + CRC until the end
     for attempt in range(1, max_attempts + 1):
         for a, chunk in pages:
@@ -168,17 +194,47 @@ def write_image(
             try:
                 decode_image(back)
             except ImageError as exc:  # cannot happen for bytes equal to what encode produced
-                raise ProvisionError(f"image read back from {ident.serial} does not decode: {exc}") from exc
-            log.info("%s: image #%d written to slot %s in %d attempt(s)", ident.serial, count, name, attempt)
-            return WriteReport(ident.serial, name, addr, count, previous, attempt, len(data),
-                               image_sha256(data), new, back)
+                raise ProvisionError(f"image read back from {plan.serial} does not decode: {exc}") from exc
+            log.info("%s: image #%d written to slot %s in %d attempt(s)", plan.serial, plan.update_count, name,
+                     attempt)
+            return WriteReport(plan.serial, name, addr, plan.update_count, plan.previous_count, attempt, len(data),
+                               plan.sha256, plan.image, back)
         bad = sum(1 for x, y in zip(back, data, strict=True) if x != y)
-        log.warning("%s: read-back of slot %s differs in %d of %d bytes (attempt %d of %d)", ident.serial,
+        log.warning("%s: read-back of slot %s differs in %d of %d bytes (attempt %d of %d)", plan.serial,
                     name, bad, len(data), attempt, max_attempts)
     raise ReadbackMismatchError(
-        f"EEPROM of {ident.serial}: slot {name} read back different bytes after {max_attempts} "
-        f"write attempts; the previous image (count {previous}) is still current"
+        f"EEPROM of {plan.serial}: slot {name} read back different bytes after {max_attempts} "
+        f"write attempts; the previous image (count {plan.previous_count}) is still current"
     )
+
+
+def write_image(
+    sensor: Sensor,
+    image: CalibrationImage,
+    *,
+    layout: SlotLayout = DEFAULT_SLOTS,
+    max_attempts: int = 3,
+) -> WriteReport:
+    """Write ``image`` into the unit's free slot with the next update count; read back and compare
+    (:func:`plan_write` then :func:`program_image`).
+
+    Raises:
+        SerialMismatchError: the sensor reports another serial.
+        EepromUnusableError: write protect asserted, or the EEPROM is too small.
+        ReadbackMismatchError: every attempt read back different bytes.
+        HardwareError: link faults (SensorTimeout, SensorNak, ...) as they come.
+    """
+    if max_attempts < 1:
+        raise ValueError("max_attempts must be >= 1")
+    return program_image(sensor, plan_write(sensor, image, layout=layout), max_attempts=max_attempts)
+
+
+def current_image_sha256(sensor: Sensor, layout: SlotLayout = DEFAULT_SLOTS) -> tuple[str, int] | None:
+    """Hex SHA-256 of the unit's current image bytes and its update count (None: no valid image)."""
+    current = read_current_image(sensor, layout)
+    if current is None:
+        return None
+    return image_sha256(encode_image(current)), current.update_count
 
 
 __all__ = [
@@ -186,7 +242,11 @@ __all__ = [
     "ProvisionError",
     "ReadbackMismatchError",
     "SerialMismatchError",
+    "WritePlan",
     "WriteReport",
+    "current_image_sha256",
+    "plan_write",
+    "program_image",
     "read_current_image",
     "read_unit_slots",
     "write_image",

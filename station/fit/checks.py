@@ -14,13 +14,16 @@ AXES = "xyz"
 
 
 def check_time(session: Session) -> None:
-    """Refuse empty sessions, non-finite or non-increasing time."""
+    """Refuse empty sessions, non-finite, negative or non-increasing time."""
     if len(session) < 2:
         raise FitError("session has fewer than 2 samples")
     t = session.t_s
     if not np.all(np.isfinite(t)):
         i = int(np.flatnonzero(~np.isfinite(t))[0])
         raise FitError(f"time is not finite at sample {i}")
+    if t[0] < 0:
+        raise FitError(f"time starts at {t[0]:.6g} s: t is seconds since power-on, from 0 (the model's warm-up "
+                       f"term b_drift exp(-t/T_c) starts there); shift the time stamps so the first is >= 0")
     bad = np.flatnonzero(np.diff(t) <= 0)
     if bad.size:
         i = int(bad[0]) + 1

@@ -12,9 +12,9 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from typing import Any, Generic, TypeVar
-from urllib.parse import urlsplit
 
 from station.kernel.errors import StationError
+from station.kernel.urls import split_url
 
 T = TypeVar("T")
 
@@ -31,13 +31,17 @@ class SchemeRegistry(Generic[T]):
         self.what = what
         self.error = error
         self._openers: dict[str, Callable[..., T]] = {}
+        self._parsers: dict[str, Callable[[str], object]] = {}
 
-    def register(self, scheme: str, opener: Callable[..., T]) -> None:
-        """Make ``opener(url, *args, **kwargs)`` open URLs of ``scheme`` (lower case, no '://')."""
+    def register(self, scheme: str, opener: Callable[..., T], parse: Callable[[str], object] | None = None) -> None:
+        """Make ``opener(url, *args, **kwargs)`` open URLs of ``scheme`` (lower case, no '://'); ``parse(url)``
+        (optional) checks a URL of the scheme without opening anything (raises on a bad one)."""
         key = scheme.lower()
         if not key or "://" in key:
             raise ValueError(f"bad scheme {scheme!r}")
         self._openers[key] = opener
+        if parse is not None:
+            self._parsers[key] = parse
 
     def unregister(self, scheme: str) -> None:
         self._openers.pop(scheme.lower(), None)
@@ -48,12 +52,20 @@ class SchemeRegistry(Generic[T]):
 
     def opener(self, url: str) -> Callable[..., T]:
         """The opener registered for ``url``'s scheme; raises ``error`` naming the known schemes."""
-        scheme = urlsplit(url).scheme.lower() if isinstance(url, str) else ""
+        scheme = split_url(url, self.what, self.error).scheme.lower()
         try:
             return self._openers[scheme]
         except KeyError:
             known = ", ".join(f"{s}://" for s in self.schemes)
             raise self.error(f"{self.what} URL {url!r}: scheme must be one of {known}") from None
+
+    def check(self, url: str) -> None:
+        """Check ``url`` before anything starts: it parses, its scheme is registered, and the scheme's own
+        parser (if registered) takes it; raises ``error`` in one line."""
+        self.opener(url)
+        parse = self._parsers.get(split_url(url, self.what, self.error).scheme.lower())
+        if parse is not None:
+            parse(url)
 
     def open(self, url: str, *args: Any, **kwargs: Any) -> T:
         """Open the device at ``url`` with the opener of its scheme."""

@@ -153,8 +153,8 @@ class LineRigRunner(SequenceRunner):
 
         super().__init__(rig, wrapped, clock, admit=admit, **kwargs)
 
-    def _metadata(self, unit: UnitChannel) -> dict[str, str]:
-        meta = super()._metadata(unit)
+    def metadata(self, unit: UnitChannel) -> dict[str, str]:
+        meta = super().metadata(unit)
         offset = getattr(unit, "offset_s", None)
         if offset is not None and math.isfinite(offset):
             meta[OFFSET_KEY] = repr(float(offset))

@@ -13,9 +13,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, fields
 from typing import TypeVar
-from urllib.parse import parse_qs, urlsplit
+from urllib.parse import parse_qs
 
-from station.kernel.errors import StationError
+from station.kernel.errors import StationError, quote_input
+from station.kernel.urls import split_url
 
 SCHEMES = ("modbus-tcp", "modbus-rtu")
 _PARITIES = {"N": "N", "E": "E", "O": "O", "NONE": "N", "EVEN": "E", "ODD": "O"}
@@ -96,7 +97,9 @@ def parse_modbus_url(url: str, kind: type[U], dialect: UrlDialect) -> U:
     error = dialect.error
     where = f"{dialect.role} URL {url!r}"
     value_where = where if dialect.quote_url_in_values else f"{dialect.role} URL"
-    parts = urlsplit(url)
+    parts = split_url(url, dialect.role, error)
+    where = f"{dialect.role} URL {quote_input(url)}"
+    value_where = where if dialect.quote_url_in_values else f"{dialect.role} URL"
     scheme = parts.scheme.lower()
     if scheme not in SCHEMES:
         raise error(f"{where}: scheme must be one of {', '.join(SCHEMES)}")

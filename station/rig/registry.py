@@ -13,11 +13,11 @@ from station.kernel.clock import Clock
 from station.kernel.schemes import SchemeRegistry
 from station.rig import modbus
 from station.rig.protocol import Rig
-from station.rig.rig_url import SCHEMES, RigUrl, RigUrlError
+from station.rig.rig_url import SCHEMES, RigUrl, RigUrlError, parse_rig_url
 
 RIGS: SchemeRegistry[Rig] = SchemeRegistry("rig", RigUrlError)
 for _scheme in SCHEMES:
-    RIGS.register(_scheme, modbus.open_rig)
+    RIGS.register(_scheme, modbus.open_rig, parse_rig_url)
 
 
 def open_rig(url: str | RigUrl, clock: Clock | None = None, **options: Any) -> Rig:

@@ -13,10 +13,10 @@ from station.kernel.clock import Clock
 from station.kernel.schemes import SchemeRegistry
 from station.sensor import client
 from station.sensor.protocol import Sensor
-from station.sensor.serial_url import SensorUrlError
+from station.sensor.serial_url import SensorUrlError, parse_sensor_url
 
 SENSORS: SchemeRegistry[Sensor] = SchemeRegistry("sensor", SensorUrlError)
-SENSORS.register("serial", client.open_sensor)
+SENSORS.register("serial", client.open_sensor, parse_sensor_url)
 
 
 def open_sensor(url: str, clock: Clock | None = None, **options: Any) -> Sensor:

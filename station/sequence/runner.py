@@ -33,7 +33,7 @@ from concurrent.futures import Future, ThreadPoolExecutor, wait
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Protocol
+from typing import Any, Protocol
 
 from station.fit.calibrate import FitOptions, fit_session
 from station.fit.determinability import assess
@@ -140,20 +140,131 @@ class RunResult:
 
 
 class Provisioner(Protocol):
-    """Writes a passed unit's calibration into the sensor (EEPROM) and verifies it.
+    """Writes a passed unit's calibration into the sensor (EEPROM) and verifies it, in four phases.
 
-    Returns the verification checks (recorded as measurements of step 'verify'); raises
-    :class:`~station.kernel.errors.UnitRejected` when the unit misses them (FAIL) and a
-    :class:`~station.kernel.errors.HardwareError` when the writing fails (ERROR).
+    1. ``intend``: decide the write and record the intent before anything is written;
+    2. ``write``: write, read back, record the write, power-cycle; a HardwareError when it fails (ERROR);
+    3. ``verify``: check the corrected output (None: nothing to check); a HardwareError on a fault (ERROR);
+    4. ``complete``: record the verification, or the ``fault`` that stopped it; returns the checks
+       (recorded as measurements of step 'verify'), raises :class:`~station.kernel.errors.UnitRejected`
+       when the unit misses them (FAIL).
+
+    ``verifies``: whether ``verify`` checks anything (a sequence soaks or positions only then).
+    See :class:`station.sequence.provision.EepromProvisioner`.
     """
 
-    def provision(
-        self, unit: UnitResult, sensor: Sensor, run_started_at: datetime | None = None
-    ) -> Sequence[Measurement] | None: ...
+    @property
+    def verifies(self) -> bool: ...
+
+    def intend(self, unit: UnitResult, sensor: Sensor, run_started_at: datetime | None = None) -> Any: ...
+
+    def write(self, intent: Any, sensor: Sensor) -> Any: ...
+
+    def verify(self, written: Any, sensor: Sensor) -> Any: ...
+
+    def complete(self, written: Any, result: Any, fault: str = "") -> Sequence[Measurement] | None: ...
+
+
+class NamedStep(Protocol):
+    """A step of a sequence as the runner's records need it: its name."""
+
+    @property
+    def name(self) -> str: ...
+
+
+class RunSequence(Protocol):
+    """What a run does on the rig and around its results: the steps, and hooks the runner calls.
+
+    :class:`RigSequence` is the plain rig sequence; :class:`station.sequence.thermal_sequence.ThermalSequence`
+    adds a climate chamber. The runner owns everything else (admission, teardown of the rig, records, fits,
+    limits, files, provisioning).
+
+    ``steps``: the named items, in order (their names go into ``RunStarted``).
+    ``batch_verification``: write every PASS unit first, then :meth:`before_verification`, then verify each
+    (False: write and verify one unit after the other, no preparation).
+    """
+
+    @property
+    def steps(self) -> Sequence[Any]: ...
+
+    @property
+    def batch_verification(self) -> bool: ...
+
+    def run_steps(self, run: SequenceRunner, fx: Fixture, verdicts: list[UnitVerdict], reconnects0: int) -> None:
+        """Run the steps (raise KeyboardInterrupt on abort, HardwareError on a station fault)."""
+        ...
+
+    def after_teardown(self, run: SequenceRunner, failed: bool) -> None:
+        """After the rig was brought to rest; ``failed``: the steps did not complete (fault, abort)."""
+        ...
+
+    def before_fits(self, run: SequenceRunner, channels: list[UnitChannel]) -> None:
+        """Before the sessions are assembled and fitted."""
+        ...
+
+    def before_verification(self, run: SequenceRunner, units: list[UnitResult]) -> dict[int, str]:
+        """Prepare the verification of the written ``units``; slot -> why for units that cannot be verified
+        (they FAIL). Raises HardwareError or KeyboardInterrupt (every written unit ERROR / ABORTED)."""
+        ...
+
+    def after_run(self, run: SequenceRunner, result: RunResult | None) -> RunResult | None:
+        """Called whenever :meth:`SequenceRunner.run` ends: the run's result, amended (e.g. by a teardown fault
+        of the sequence's own equipment); ``result`` None: the run raised (the exception goes on)."""
+        ...
+
+
+class RigSequence:
+    """The plain rig sequence: :func:`~station.sequence.steps.plan_steps` of the plan, nothing around it."""
+
+    batch_verification = False
+
+    def __init__(self, plan: RigPlan) -> None:
+        self.steps: list[Step] = plan_steps(plan)
+
+    def run_steps(self, run: SequenceRunner, fx: Fixture, verdicts: list[UnitVerdict], reconnects0: int) -> None:
+        for step in self.steps:
+            if not fx.active:
+                log.warning("run %s: no unit left to measure; stopping before '%s'", run.run_id, step.name)
+                return
+            if fx.abort.is_set():
+                raise KeyboardInterrupt
+            t0 = run.clock.now()
+            run.emit(StepStarted(run.run_id, step.index, step.name, step.kind.label, t0, step.hold_s))
+            try:
+                report = STEP_FUNCTIONS[step.kind](fx, step)
+                reconnects = fx.rig.reconnects
+                if run.options.rig_reconnect_is_error and reconnects > reconnects0:
+                    raise RigLinkError(
+                        f"the rig link dropped during the run and was re-established ({reconnects - reconnects0} "
+                        f"reconnect(s)); the rig went unsupervised, the run is not trusted"
+                    )
+            except BaseException as exc:
+                aborted = isinstance(exc, KeyboardInterrupt)
+                why = run.abort_reason if aborted else f"{type(exc).__name__}: {exc}"
+                run.emit(StepFinished(run.run_id, step.index, step.name, run.clock.now(),
+                                      run.clock.now() - t0, False, len(fx.active), why))
+                raise
+            problems = run.apply_report(fx, step, report, verdicts)
+            run.emit(StepFinished(run.run_id, step.index, step.name, run.clock.now(), run.clock.now() - t0,
+                                  not problems, len(fx.active), "; ".join(problems)))
+
+    def after_teardown(self, run: SequenceRunner, failed: bool) -> None:
+        return None
+
+    def before_fits(self, run: SequenceRunner, channels: list[UnitChannel]) -> None:
+        return None
+
+    def before_verification(self, run: SequenceRunner, units: list[UnitResult]) -> dict[int, str]:
+        return {}
+
+    def after_run(self, run: SequenceRunner, result: RunResult | None) -> RunResult | None:
+        return result
 
 
 @dataclass
 class UnitVerdict:
+    """A unit's verdict while the run goes: None until something decides it."""
+
     outcome: Outcome | None = None
     message: str = ""
     measurements: list[Measured] = field(default_factory=list)
@@ -188,6 +299,8 @@ class SequenceRunner:
             load the nests and close the lid before the rig moves, unload after the verdicts).
         expected_serials: fixture slot -> the serial the operator scanned for it; a unit that reports another
             serial is REFUSED before anything moves (the wrong unit, or the right one in the wrong nest).
+        sequence: what runs on the rig and around it (default :class:`RigSequence` of ``plan``; a thermal
+            plan: :class:`station.sequence.thermal_sequence.ThermalSequence`).
     """
 
     def __init__(
@@ -211,6 +324,7 @@ class SequenceRunner:
         operator: Operator | None = None,
         prompts: PromptPlan | None = None,
         expected_serials: Mapping[int, str] | None = None,
+        sequence: RunSequence | None = None,
     ) -> None:
         if not sensors:
             raise ValueError("a run needs at least one sensor")
@@ -228,7 +342,11 @@ class SequenceRunner:
         self.rig_name = rig_name
         self.sensor_urls = list(sensor_urls) if sensor_urls is not None else [f"slot{k}" for k in range(len(sensors))]
         self.nests = nests
-        self.steps: list[Step] = plan_steps(self.plan)
+        self.sequence: RunSequence = RigSequence(self.plan) if sequence is None else sequence
+        self.steps = self.sequence.steps
+        self.verification: dict[int, Any] = {}  # slot -> the provisioner's verification result
+        self.verify_s = 0.0  # station clock s spent in the verification (incl. its preparation)
+        self.finish_wall_s = 0.0  # wall s after the teardown: sessions, fits, limits, files, provisioning
         self._subscribers: list[Subscriber] = list(subscribers)
         self._records: list[Record] = []
         self._abort_requested = False
@@ -248,7 +366,7 @@ class SequenceRunner:
         """Call ``fn`` with every record emitted from now on."""
         self._subscribers.append(fn)
 
-    def _emit(self, record: Record) -> None:
+    def emit(self, record: Record) -> None:
         self._records.append(record)
         for fn in self._subscribers:
             try:
@@ -272,6 +390,15 @@ class SequenceRunner:
 
     def run(self) -> RunResult:
         """Run every step, tear down, fit, check limits, save; see the module docstring."""
+        result: RunResult | None = None
+        try:
+            result = self._run()
+        finally:
+            amended = self.sequence.after_run(self, result)
+        assert amended is not None
+        return amended
+
+    def _run(self) -> RunResult:
         self.started_at = datetime.now(UTC)
         clock = self.clock
         t_start, wall0 = clock.now(), time.monotonic()
@@ -280,7 +407,7 @@ class SequenceRunner:
             UnitChannel(k, url, s, clock) for k, (url, s) in enumerate(zip(self.sensor_urls, self.sensors, strict=True))
         ]
         verdicts = [UnitVerdict() for _ in channels]
-        self._emit(
+        self.emit(
             RunStarted(
                 self.run_id, self.started_at.isoformat(), t_start, self.station, self.rig_name,
                 tuple(self.sensor_urls), tuple(s.name for s in self.steps), tuple(s.hold_s for s in self.steps),
@@ -306,7 +433,7 @@ class SequenceRunner:
                     self._ask_before()
                     loaded = True
                     self._admit_units(fx, verdicts)
-                    self._run_steps(fx, verdicts, reconnects0)
+                    self.sequence.run_steps(self, fx, verdicts, reconnects0)
                     completed = bool(fx.active)
             except KeyboardInterrupt:
                 aborted = True
@@ -318,11 +445,14 @@ class SequenceRunner:
                 fx.abort.set()
                 rig_at_rest, teardown_message, interrupted = self._teardown(channels)
                 aborted = aborted or interrupted
+                self.sequence.after_teardown(self, aborted or bool(run_message) or not completed)
                 if teardown_message:
                     run_message = f"{run_message}; {teardown_message}" if run_message else teardown_message
             sequence_s = clock.now() - t_start
             post_wall0 = time.monotonic()
+            self.sequence.before_fits(self, channels)
             units = self._finish_units(channels, verdicts, aborted, run_message, completed)
+            self.finish_wall_s = time.monotonic() - post_wall0
         finally:
             self.rig.listeners.remove(self._rig_reading)
             pool.shutdown(wait=True, cancel_futures=True)
@@ -339,14 +469,14 @@ class SequenceRunner:
             for u in units
         )
         for rec in finished:
-            self._emit(rec)
+            self.emit(rec)
         note = self._ask_unload(units) if loaded and not aborted else ""
         if note:
             run_message = f"{run_message}; {note}" if run_message else note
         duration = clock.now() - t_start
         wall = time.monotonic() - wall0
         post_wall = time.monotonic() - post_wall0
-        self._emit(RunFinished(self.run_id, outcome, clock.now(), duration, wall, finished, run_message, rig_at_rest))
+        self.emit(RunFinished(self.run_id, outcome, clock.now(), duration, wall, finished, run_message, rig_at_rest))
         return RunResult(
             self.run_id, outcome, tuple(units), tuple(self._records), sequence_s, duration, wall, post_wall,
             run_message, rig_at_rest,
@@ -359,14 +489,14 @@ class SequenceRunner:
         assert self.operator is not None
         self._prompt_seq += 1
         pid = f"{self.run_id}/p{self._prompt_seq}"
-        self._emit(PromptShown(self.run_id, pid, prompt.kind.value, prompt.text, prompt.nests, prompt.timeout_s))
+        self.emit(PromptShown(self.run_id, pid, prompt.kind.value, prompt.text, prompt.nests, prompt.timeout_s))
         t0 = time.monotonic()
         answer: Answer = "cancelled"
         by = ""
         try:
             answer, by = self.operator.ask(pid, prompt, self._cancel)
         finally:  # also on Ctrl-C or an operator that cannot be reached: the displays close the prompt
-            self._emit(PromptAnswered(self.run_id, pid, answer, by, time.monotonic() - t0))
+            self.emit(PromptAnswered(self.run_id, pid, answer, by, time.monotonic() - t0))
         return answer
 
     def _ask_before(self) -> None:
@@ -405,37 +535,10 @@ class SequenceRunner:
             return
         self._last_reading = now
         flags = "|".join(f.name or "" for f in type(state.status) if state.status & f)
-        self._emit(RigReading(self.run_id, state.t_s, state.roll_deg, state.pitch_deg, state.yaw_deg, state.rate_dps,
+        self.emit(RigReading(self.run_id, state.t_s, state.roll_deg, state.pitch_deg, state.yaw_deg, state.rate_dps,
                               flags, state.fault_code))
 
-    def _run_steps(self, fx: Fixture, verdicts: list[UnitVerdict], reconnects0: int) -> None:
-        for step in self.steps:
-            if not fx.active:
-                log.warning("run %s: no unit left to measure; stopping before '%s'", self.run_id, step.name)
-                return
-            if fx.abort.is_set():
-                raise KeyboardInterrupt
-            t0 = self.clock.now()
-            self._emit(StepStarted(self.run_id, step.index, step.name, step.kind.label, t0, step.hold_s))
-            try:
-                report = STEP_FUNCTIONS[step.kind](fx, step)
-                reconnects = fx.rig.reconnects
-                if self.options.rig_reconnect_is_error and reconnects > reconnects0:
-                    raise RigLinkError(
-                        f"the rig link dropped during the run and was re-established ({reconnects - reconnects0} "
-                        f"reconnect(s)); the rig went unsupervised, the run is not trusted"
-                    )
-            except BaseException as exc:
-                aborted = isinstance(exc, KeyboardInterrupt)
-                why = self.abort_reason if aborted else f"{type(exc).__name__}: {exc}"
-                self._emit(StepFinished(self.run_id, step.index, step.name, self.clock.now(),
-                                        self.clock.now() - t0, False, len(fx.active), why))
-                raise
-            problems = self._apply_report(fx, step, report, verdicts)
-            self._emit(StepFinished(self.run_id, step.index, step.name, self.clock.now(), self.clock.now() - t0,
-                                    not problems, len(fx.active), "; ".join(problems)))
-
-    def _apply_report(self, fx: Fixture, step: Step, report: StepReport, verdicts: list[UnitVerdict]) -> list[str]:
+    def apply_report(self, fx: Fixture, step: NamedStep, report: StepReport, verdicts: list[UnitVerdict]) -> list[str]:
         """Emit the step's measurements; end units with a sensor fault (ERROR) or a failed gate.
 
         A physics gate that every measured unit of the step fails (two units or more) is a common cause, the
@@ -457,7 +560,7 @@ class SequenceRunner:
             for g in gates:
                 m = Measured(self.run_id, unit.slot, unit.serial, step.name, g)
                 v.measurements.append(m)
-                self._emit(m)
+                self.emit(m)
             failed = [g for g in gates if not g.passed]
             if failed:
                 link = [g for g in failed if g.link]
@@ -532,7 +635,7 @@ class SequenceRunner:
 
     # --- after the rig: sessions, fits, limits, files -------------------------------------------------
 
-    def _metadata(self, unit: UnitChannel) -> dict[str, str]:
+    def metadata(self, unit: UnitChannel) -> dict[str, str]:
         p = self.plan
         return {
             "latitude_deg": repr(float(p.latitude_deg)),
@@ -568,7 +671,7 @@ class SequenceRunner:
             elif v.outcome is None:
                 v.outcome, v.message = Outcome.ERROR, run_message or "the unit was not measured"
             try:
-                built = build_session(unit, self.plan.gravity_mps2, self._metadata(unit))
+                built = build_session(unit, self.plan.gravity_mps2, self.metadata(unit))
                 if built is not None:
                     built = in_sensor_frame(built, self.nests, unit.slot)
                 # fit exactly what is saved: re-fitting the CSV reproduces the parameter set
@@ -580,11 +683,12 @@ class SequenceRunner:
                 texts.append(None)
                 sessions.append(None)
         params: list[ParameterSet | None] = [None] * len(channels)
-        to_fit = [k for k, v in enumerate(verdicts) if v.outcome is None and sessions[k] is not None]
+        to_fit = {k: s for k, (v, s) in enumerate(zip(verdicts, sessions, strict=True))
+                  if v.outcome is None and s is not None}
         if to_fit:
             assert self._fixture is not None
             futures: dict[int, Future[ParameterSet]] = {
-                k: self._fixture.pool.submit(self._fit_one, s) for k in to_fit if (s := sessions[k]) is not None
+                k: self._fixture.pool.submit(self._fit_one, session) for k, session in to_fit.items()
             }
             try:
                 wait(futures.values())
@@ -595,13 +699,14 @@ class SequenceRunner:
                 if aborted and not fut.done():
                     v.outcome, v.message = Outcome.ABORTED, f"{self.abort_reason} during the fit"
                     continue
-                error = fut.exception()
-                if isinstance(error, FitError):
-                    v.outcome, v.message = Outcome.FAIL, f"fit refused the recording: {error}"
-                elif error is not None:
-                    raise error
+                err = fut.exception()
+                if isinstance(err, FitError):
+                    v.outcome, v.message = Outcome.FAIL, f"fit refused the recording: {err}"
+                elif err is not None:
+                    raise err
                 else:
-                    fitted = params[k] = fut.result()
+                    fitted = fut.result()
+                    params[k] = fitted
                     self._check_unit_limits(channels[k], v, fitted)
         results: list[UnitResult] = []
         for k, (unit, v) in enumerate(zip(channels, verdicts, strict=True)):
@@ -626,7 +731,7 @@ class SequenceRunner:
         for c in checks:
             m = Measured(self.run_id, unit.slot, unit.serial, "limits", c)
             v.measurements.append(m)
-            self._emit(m)
+            self.emit(m)
         v.outcome, v.message = recording_verdict(params) or unit_verdict(checks, self.limits)
 
     def _save(
@@ -657,34 +762,145 @@ class SequenceRunner:
 
     def _emit_verify(self, r: UnitResult, checks: Sequence[Measurement]) -> None:
         for c in checks:
-            self._emit(Measured(self.run_id, r.slot, r.serial, "verify", c))
+            self.emit(Measured(self.run_id, r.slot, r.serial, "verify", c))
 
     def _provision(self, results: list[UnitResult]) -> list[UnitResult]:
-        assert self.provisioner is not None
+        """The provisioner's phases for every PASS unit (see :class:`Provisioner`)."""
+        p = self.provisioner
+        assert p is not None
+        t0 = self.clock.now()
+        try:
+            if not self.sequence.batch_verification:
+                return self._provision_each(p, results)
+            return self._provision_batch(p, results)
+        finally:
+            self.verify_s = self.clock.now() - t0
+
+    def _refused_now(self, r: UnitResult) -> UnitResult | None:
+        """The retest policy asked again right before writing (e.g. scrapped while it was measured): REFUSED,
+        and no image is written into it; None: go on."""
+        reason = self.admit(r.serial, self.run_id) if self.admit is not None else None
+        if not reason:
+            return None
+        return replace_outcome(r, Outcome.REFUSED, f"not provisioned, refused by the retest policy: {reason}")
+
+    def _write(self, p: Provisioner, r: UnitResult) -> Any:
+        sensor = self.sensors[r.slot]
+        return p.write(p.intend(r, sensor, self.started_at), sensor)
+
+    def _provision_each(self, p: Provisioner, results: list[UnitResult]) -> list[UnitResult]:
         out: list[UnitResult] = []
         stop = False
         for r in results:
             if r.outcome != Outcome.PASS or stop:
                 out.append(r)
                 continue
-            reason = self.admit(r.serial, self.run_id) if self.admit is not None else None
-            if reason:  # e.g. scrapped while it was measured: no image is written into a refused unit
-                out.append(replace_outcome(r, Outcome.REFUSED, f"not provisioned, refused by the retest policy: "
-                                                                f"{reason}"))
+            refused = self._refused_now(r)
+            if refused is not None:
+                out.append(refused)
                 continue
             try:
-                checks = self.provisioner.provision(r, self.sensors[r.slot], self.started_at)
-                self._emit_verify(r, checks or ())
-                out.append(r)
-            except UnitRejected as exc:
-                self._emit_verify(r, exc.checks)
-                out.append(replace_outcome(r, Outcome.FAIL, f"verification failed: {exc}"))
+                written = self._write(p, r)
             except StationError as exc:  # a link fault, or an image the writer refused: the station's fault
                 out.append(replace_outcome(r, Outcome.ERROR, f"provisioning failed: {exc}"))
+                continue
             except KeyboardInterrupt:
                 stop = True
                 out.append(replace_outcome(r, Outcome.ABORTED, f"{self.abort_reason} during provisioning"))
+                continue
+            r, stop = self._verify_written(p, r, written, "verification")
+            out.append(r)
         return out
+
+    def _provision_batch(self, p: Provisioner, results: list[UnitResult]) -> list[UnitResult]:
+        out = list(results)
+        written: dict[int, Any] = {}
+        for k, r in enumerate(results):
+            if r.outcome != Outcome.PASS:
+                continue
+            refused = self._refused_now(r)
+            if refused is not None:
+                out[k] = refused
+                continue
+            try:
+                written[k] = self._write(p, r)
+            except StationError as exc:
+                out[k] = replace_outcome(r, Outcome.ERROR, f"provisioning failed: {exc}")
+            except KeyboardInterrupt:
+                for j in range(k, len(results)):
+                    if results[j].outcome == Outcome.PASS:
+                        out[j] = replace_outcome(results[j], Outcome.ABORTED,
+                                                 f"{self.abort_reason} during provisioning")
+                self._complete_unverified(p, out, written, Outcome.ABORTED, self.abort_reason)
+                return out
+        if not written:
+            return out
+        if not p.verifies:
+            for k, w in written.items():
+                out[k], _ = self._verify_written(p, out[k], w, "verification")
+            return out
+        what = self.sequence_verification_name()
+        try:
+            unfit = self.sequence.before_verification(self, [out[k] for k in written])
+        except (HardwareError, KeyboardInterrupt) as exc:
+            aborted = isinstance(exc, KeyboardInterrupt)
+            why = self.abort_reason if aborted else f"{type(exc).__name__}: {exc}"
+            self._complete_unverified(p, out, written, Outcome.ABORTED if aborted else Outcome.ERROR,
+                                      f"{what}: {why}")
+            return out
+        for k, w in written.items():
+            r = out[k]
+            if r.slot in unfit:
+                out[k] = self._complete(p, r, w, unfit[r.slot], Outcome.FAIL, unfit[r.slot])
+                continue
+            out[k], stop = self._verify_written(p, r, w, what)
+            if stop:
+                rest = {j: x for j, x in written.items() if j > k}
+                self._complete_unverified(p, out, rest, Outcome.ABORTED, f"{self.abort_reason} during verification")
+                break
+        return out
+
+    def sequence_verification_name(self) -> str:
+        """How the verification is named in unit messages ('verification', or with its temperature)."""
+        name = getattr(self.sequence, "verification_name", None)
+        return name if isinstance(name, str) else "verification"
+
+    def _complete(self, p: Provisioner, r: UnitResult, written: Any, fault: str, outcome: Outcome,
+                  message: str) -> UnitResult:
+        """Record a written unit that was not verified (``fault`` says why); the unit gets ``outcome``."""
+        try:
+            p.complete(written, None, fault)
+        except StationError as exc:
+            return replace_outcome(r, Outcome.ERROR, f"{message}; the write could not be recorded: {exc}")
+        return replace_outcome(r, outcome, message)
+
+    def _complete_unverified(self, p: Provisioner, out: list[UnitResult], written: dict[int, Any], outcome: Outcome,
+                             why: str) -> None:
+        for k, w in written.items():
+            out[k] = self._complete(p, out[k], w, why, outcome, why)
+
+    def _verify_written(self, p: Provisioner, r: UnitResult, written: Any, what: str) -> tuple[UnitResult, bool]:
+        """Verify and complete one written unit; (its result, whether the operator aborted)."""
+        sensor = self.sensors[r.slot]
+        try:
+            result = p.verify(written, sensor)
+        except StationError as exc:  # a rig or link fault during the verification: ERROR, the write recorded
+            why = f"{what} fault: {type(exc).__name__}: {exc}"
+            return self._complete(p, r, written, why, Outcome.ERROR, why), False
+        except KeyboardInterrupt:
+            why = f"{self.abort_reason} during {what}"
+            return self._complete(p, r, written, why, Outcome.ABORTED, why), True
+        if result is not None:
+            self.verification[r.slot] = result
+        try:
+            checks = p.complete(written, result)
+            self._emit_verify(r, checks or ())
+        except UnitRejected as exc:
+            self._emit_verify(r, exc.checks)
+            return replace_outcome(r, Outcome.FAIL, f"{what} failed: {exc}"), False
+        except StationError as exc:
+            return replace_outcome(r, Outcome.ERROR, f"{what}: the result could not be recorded: {exc}"), False
+        return r, False
 
 
 def common_cause(report: StepReport) -> set[str]:

@@ -34,7 +34,7 @@ def simulate(
     """Simulate one unit on the rig and write its session recording."""
     from dataclasses import replace
 
-    from station.commands.output import check_output
+    from station.commands.output import check_output, write_failed
     from station.kernel.plan import default_plan
     from station.kernel.plan import random_plan as draw_plan
     from station.physics.effects import Effects
@@ -58,7 +58,10 @@ def simulate(
                 raise StationError("--temperature-plateaus: one or more plateaus in -60..150 degC")
         result = simulate_session(seed, plan=plan, effects=effects, temperature_plateaus_degc=plateaus,
                                   soak_s=soak)
-        write_session(result.session, output)
+        try:
+            write_session(result.session, output)
+        except OSError as exc:
+            raise write_failed(exc, output) from None
     except StationError as exc:
         raise fail(exc) from None
     typer.echo(f"wrote {output} ({len(result.session)} samples, {result.session.duration_s:.1f} s, "

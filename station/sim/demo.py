@@ -387,24 +387,25 @@ def run_thermal_demo(
             result = station.run(on_runner=holder.append)
         shapes = [(u.source.effects, u.truth) for u in sim.units]
     runner = holder[0]
+    thermal_seq = runner.sequence
     console.print(summary_table(result))
-    t = runner.timing
+    t = thermal_seq.timing
     if t is not None:
         console.print(
             f"cycle time per batch of {t.units}: {t.cycle_s / 60:.1f} min (sequence incl. soaks "
-            f"{t.sequence_s / 60:.1f} min, fits {t.fit_wall_s:.1f} s, verification at {runner.verify_degc:g} degC "
+            f"{t.sequence_s / 60:.1f} min, fits {t.fit_wall_s:.1f} s, verification at {thermal_seq.verify_degc:g} degC "
             f"{t.verify_s / 60:.1f} min, chamber back to ambient {t.ambient_s / 60:.1f} min); "
             f"{t.per_unit_s / 60:.1f} min per unit", soft_wrap=True
         )
     header = (f"{'slot':>4}  {'serial':<11} {'tempco: accel mg/K, gyro deg/s/K, scale ppm/K':<46} {'model':<14}"
               f"{'pose accel mg':>14} {'pose gyro deg/s':>16} {'rate step % of rate':>20}  on-rig verify")
-    lines = [f"corrected errors at {runner.verify_degc:g} degC, a temperature the fit did not use (Algorithm 1 "
+    lines = [f"corrected errors at {thermal_seq.verify_degc:g} degC, a temperature the fit did not use (Algorithm 1 "
              f"over the raw check recording; on-rig verify: the unit's own corrected output after writing)", header,
              "-" * len(header)]
     errors: dict[tuple[int, str], CheckErrors] = {}
     off = _without_thermal(station.fit_options)
     for r in result.units:
-        session = runner.check_sessions.get(r.slot)
+        session = thermal_seq.check_sessions.get(r.slot)
         eff, truth = shapes[r.slot]
         realized = eff.realize(truth.shapes)
         coeff = (f"{np.max(np.abs(realized.accel_temp_bias)) / 9.80665e-3:.2f}, "

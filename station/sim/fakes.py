@@ -32,11 +32,12 @@ from __future__ import annotations
 import itertools
 import threading
 from typing import Any
-from urllib.parse import urlsplit
 
 import numpy as np
 
 from station.kernel.clock import Clock
+from station.kernel.errors import StationError
+from station.kernel.urls import split_url
 from station.physics.unit import UnitTruth
 from station.rig import RIGS
 from station.rig.mapped import RegisterRig, start_rig
@@ -65,8 +66,8 @@ _rigs: dict[str, FakeRigDevice] = {}
 _sensors: dict[str, FakeSensorDevice] = {}
 
 
-def _key(url: str, scheme: str, error: type[Exception]) -> str:
-    parts = urlsplit(url)
+def _key(url: str, scheme: str, error: type[StationError]) -> str:
+    parts = split_url(url, scheme, error)
     if parts.scheme.lower() != scheme or not parts.netloc:
         raise error(f"URL {url!r}: expected {scheme}://NAME")
     return f"{parts.netloc}{parts.path}".rstrip("/")
@@ -89,7 +90,7 @@ def withdraw(device: FakeRigDevice | FakeSensorDevice) -> None:
             del table[key]
 
 
-def _lookup(url: str, table: dict[str, Any], scheme: str, error: type[Exception]) -> Any:
+def _lookup(url: str, table: dict[str, Any], scheme: str, error: type[StationError]) -> Any:
     key = _key(url, scheme, error)
     with _lock:
         try:

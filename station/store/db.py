@@ -23,12 +23,21 @@ from alembic.runtime.migration import MigrationContext
 from alembic.script import ScriptDirectory
 from alembic.util.exc import CommandError
 from sqlalchemy import Engine, create_engine, event, make_url, text
-from sqlalchemy.exc import ArgumentError, SQLAlchemyError
+from sqlalchemy.exc import ArgumentError, OperationalError, SQLAlchemyError
 from sqlalchemy.orm import Session, sessionmaker
 
 from station.kernel.datafiles import data_path
+from station.kernel.errors import path_problem, shorten
 from station.store.default_url import DEFAULT_URL, ENV_VAR
-from station.store.opening import DatabaseRefused, StoreError, check_schema, check_url
+from station.store.opening import (
+    DatabaseRefused,
+    StoreError,
+    check_keeps_records,
+    check_schema,
+    check_url,
+    classify_failure,
+    lock_timeout_s,
+)
 
 """The default database: a SQLite file in the working directory."""
 
@@ -57,9 +66,10 @@ def alembic_config(url: str) -> Config:
 
 
 def make_engine(url: str) -> Engine:
-    """An engine for ``url``; SQLite gets foreign keys on and a 30 s busy timeout (several writers)."""
+    """An engine for ``url``; SQLite gets foreign keys on and the stated busy timeout (:func:`lock_timeout_s`,
+    several writers); PostgreSQL the same ``lock_timeout``."""
     if url.startswith("sqlite"):
-        engine = create_engine(url, connect_args={"timeout": 30.0})
+        engine = create_engine(url, connect_args={"timeout": lock_timeout_s()})
 
         @event.listens_for(engine, "connect")
         def _pragmas(dbapi_conn: Any, _record: Any) -> None:
@@ -69,6 +79,9 @@ def make_engine(url: str) -> Engine:
             cur.close()
 
         return engine
+    if make_url(url).get_backend_name() == "postgresql":
+        ms = int(lock_timeout_s() * 1000)
+        return create_engine(url, pool_pre_ping=True, connect_args={"options": f"-c lock_timeout={ms}"})
     return create_engine(url, pool_pre_ping=True)
 
 
@@ -112,9 +125,19 @@ class Database:
 
     @contextmanager
     def transaction(self) -> Iterator[Session]:
-        """A session in one transaction: committed on success, rolled back on any exception."""
-        with self.sessions.begin() as session:
-            yield session
+        """A session in one transaction: committed on success, rolled back on any exception.
+
+        A database another process holds locked past the stated wait raises
+        :class:`~station.store.opening.DatabaseLocked`, a full disk :class:`~station.store.opening.DatabaseFull`.
+        """
+        try:
+            with self.sessions.begin() as session:
+                yield session
+        except OperationalError as exc:
+            known = classify_failure(exc, self.url, _redact(self.url))
+            if known is not None:
+                raise known from None
+            raise
 
     def close(self) -> None:
         self.engine.dispose()
@@ -126,17 +149,23 @@ class Database:
         self.close()
 
 
-def open_database(url: str | None = None, *, migrate: bool = True, must_exist: bool = False) -> Database:
+def open_database(url: str | None = None, *, migrate: bool = True, must_exist: bool = False,
+                  for_writing: bool | None = None) -> Database:
     """Open the database at ``url`` (see :func:`database_url`) and run the migrations up to head.
 
     ``must_exist``: for commands that only read: a SQLite file that does not exist is refused instead of
     created (an empty database would only say "no units" about the wrong place).
-    Raises :class:`StoreError` if the database cannot be reached or migrated.
+    ``for_writing`` (default: not ``must_exist``): a database that keeps nothing after the command (SQLite
+    in memory, or its temporary file) is refused.
+    Raises :class:`StoreError` if the database cannot be reached or migrated (``DatabaseLocked`` when another
+    process holds it past the stated wait, ``DatabaseFull`` when its disk is full).
     """
     url = database_url(url)
     shown = _redact(url)
     if must_exist:
         _require_existing(url, shown)
+    if (not must_exist) if for_writing is None else for_writing:
+        check_keeps_records(url, shown)
     try:
         check_url(url, shown)
         script = ScriptDirectory.from_config(alembic_config(url))
@@ -151,6 +180,9 @@ def open_database(url: str | None = None, *, migrate: bool = True, must_exist: b
     except DatabaseRefused as exc:
         raise DatabaseRefused(f"cannot open the station database {exc}") from None  # "{url}: why"
     except (SQLAlchemyError, OSError, CommandError) as exc:
+        known = classify_failure(exc, url, shown)
+        if known is not None:
+            raise known from None
         raise StoreError(f"cannot open the station database {shown}: {_first_line(exc)}") from exc
     return Database(url, engine, sessionmaker(engine, expire_on_commit=False))
 
@@ -158,12 +190,33 @@ def open_database(url: str | None = None, *, migrate: bool = True, must_exist: b
 def _require_existing(url: str, shown: str) -> None:
     try:
         parsed = make_url(url)
-    except ArgumentError:
+    except (ArgumentError, ValueError):
         return  # check_url names what is wrong with it
     file = parsed.database if parsed.get_backend_name() == "sqlite" else None
-    if file not in (None, "", ":memory:") and not Path(str(file)).exists():
+    if file in (None, "", ":memory:"):
+        return
+    try:
+        exists = Path(str(file)).exists()
+    except (OSError, ValueError) as exc:
+        raise DatabaseRefused(f"{shown}: {path_problem(exc, str(file))}") from None
+    if not exists:
         raise StoreError(f"no station database at {shown} (nothing is created by a command that only reads; "
                          f"give --db or set ${ENV_VAR})")
+
+
+def store_exists(url: str) -> bool:
+    """Whether a station database may be there: a SQLite file that exists, or any server URL."""
+    try:
+        parsed = make_url(url)
+    except (ArgumentError, ValueError):
+        return False
+    if parsed.get_backend_name() != "sqlite":
+        return True
+    file = parsed.database or ""
+    try:
+        return file not in ("", ":memory:") and not file.startswith("file:") and Path(file).is_file()
+    except (OSError, ValueError):
+        return False
 
 
 def shown_url(url: str | None = None) -> str:
@@ -175,9 +228,9 @@ def _redact(url: str) -> str:
     from sqlalchemy.engine import make_url
 
     try:
-        return make_url(url).render_as_string(hide_password=True)
+        return shorten(make_url(url).render_as_string(hide_password=True), 200)
     except Exception:
-        return "<bad URL>"
+        return shorten(url.split("@")[-1] if "@" in url else url, 200)
 
 
 def _first_line(exc: BaseException) -> str:

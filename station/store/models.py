@@ -263,6 +263,12 @@ class EepromWrite(Base):
     verification limits (None: not checked, e.g. ``station eeprom write`` off the rig). ``verified``
     is kept for older readers: read back and (where checked) verified on the rig. ``image`` holds the
     bytes written (None for rows of older versions).
+
+    Write-ahead (see docs/provisioning.md): the row is committed as an intent (``state`` 'intended',
+    ``written`` False) before the first page goes to the unit, with the image's hash, the target slot
+    (``slot_name``) and update count; it is completed ('complete') after the read-back. An intent found
+    without a completion is reconciled against the unit's current image: 'complete' when the image is
+    there, 'not-applied' when it is not; ``reconciled`` says when and how.
     """
 
     __tablename__ = "eeprom_writes"
@@ -280,6 +286,12 @@ class EepromWrite(Base):
     read_back_ok: Mapped[bool] = mapped_column(Boolean, server_default=true())
     verified_on_rig: Mapped[bool | None] = mapped_column(Boolean)
     image: Mapped[bytes | None] = mapped_column(LargeBinary)
+    state: Mapped[str] = mapped_column(String(16), server_default="complete", index=True)
+    slot_name: Mapped[str] = mapped_column(String(4), server_default="")
+    update_count: Mapped[int | None] = mapped_column(Integer)
+    intended_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
+    completed_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
+    reconciled: Mapped[str] = mapped_column(Text, server_default="")
 
     run_unit: Mapped[RunUnit | None] = relationship(back_populates="eeprom_writes")
 

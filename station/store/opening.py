@@ -19,7 +19,7 @@ from sqlalchemy import Engine, inspect, text
 from sqlalchemy.engine import make_url
 from sqlalchemy.exc import ArgumentError
 
-from station.kernel.errors import StationError
+from station.kernel.errors import StationError, path_problem
 
 #: URL schemes (dialect names) the station's store works with
 SUPPORTED_SCHEMES = ("sqlite", "postgresql")
@@ -30,7 +30,82 @@ class StoreError(StationError):
 
 
 class DatabaseRefused(StoreError):
-    """A database the station does not open: unsupported, corrupt, foreign or newer."""
+    """A database the station does not open: unsupported, corrupt, foreign, newer, or one that keeps nothing."""
+
+
+class DatabaseLocked(StoreError):
+    """Another process held the database locked for longer than the station waits (:data:`LOCK_TIMEOUT_S`)."""
+
+
+class DatabaseFull(StoreError):
+    """The disk (or the PostgreSQL server's) holding the database is full: nothing more can be recorded."""
+
+
+#: How long a command waits for a database another process holds locked (s); ``$STATION_DB_LOCK_TIMEOUT_S``.
+LOCK_TIMEOUT_S = 10.0
+
+
+def lock_timeout_s() -> float:
+    """The stated wait for a locked database (s): ``$STATION_DB_LOCK_TIMEOUT_S`` or :data:`LOCK_TIMEOUT_S`."""
+    text = os.environ.get("STATION_DB_LOCK_TIMEOUT_S", "")
+    try:
+        value = float(text) if text else LOCK_TIMEOUT_S
+    except ValueError:
+        return LOCK_TIMEOUT_S
+    return value if 0 <= value <= 3600 else LOCK_TIMEOUT_S
+
+
+def check_keeps_records(url: str, shown: str) -> None:
+    """Refuse, for a command that writes, a database that loses its records when the command ends: SQLite's
+    in-memory database (``:memory:``, ``mode=memory``) and its private temporary file (an empty file name)."""
+    try:
+        parsed = make_url(url)
+    except (ArgumentError, ValueError):
+        return  # check_url names what is wrong with it
+    if parsed.get_backend_name() != "sqlite":
+        return
+    name = parsed.database or ""
+    memory = name == ":memory:" or (name.startswith("file:") and ("mode=memory" in name or ":memory:" in name))
+    memory = memory or parsed.query.get("mode") == "memory"
+    if memory or name == "":
+        what = "an in-memory database" if memory else "a temporary database SQLite deletes when the command ends"
+        raise DatabaseRefused(f"{shown}: {what} keeps no records; a command that writes needs a database that "
+                              "outlives it (sqlite:///station.sqlite or postgresql+psycopg://USER@HOST/DB)")
+
+
+def disk_free_bytes(url: str) -> int | None:
+    """Free bytes on the file system of a SQLite database file (None: not a SQLite file, or unknown)."""
+    try:
+        parsed = make_url(url)
+    except (ArgumentError, ValueError):
+        return None
+    name = parsed.database or ""
+    if parsed.get_backend_name() != "sqlite" or name in ("", ":memory:") or name.startswith("file:"):
+        return None
+    parent = Path(name).parent
+    try:
+        st = os.statvfs(parent if str(parent) else ".")
+    except (OSError, ValueError):
+        return None
+    return st.f_bavail * st.f_frsize
+
+
+def classify_failure(exc: BaseException, url: str, shown: str) -> StoreError | None:
+    """A locked database or a full disk as what it is (None: neither)."""
+    text = str(getattr(exc, "orig", None) or exc).lower()
+    if "database is locked" in text or "database table is locked" in text or "lock timeout" in text \
+            or "canceling statement due to lock timeout" in text:
+        return DatabaseLocked(f"the station database {shown} is locked by another process: waited "
+                              f"{lock_timeout_s():g} s (STATION_DB_LOCK_TIMEOUT_S); nothing was recorded, try again "
+                              "when it is released")
+    free = disk_free_bytes(url)
+    full_text = "database or disk is full" in text or "no space left" in text or "could not extend file" in text \
+        or "disk full" in text
+    if full_text or ("disk i/o error" in text and free is not None and free < 1 << 20):
+        room = f" ({free} bytes free)" if free is not None else ""
+        return DatabaseFull(f"the disk holding the station database {shown} is full{room}: nothing more can be "
+                            "recorded; free space and run again")
+    return None
 
 
 def check_url(url: str, shown: str) -> None:
@@ -52,6 +127,10 @@ def _check_sqlite_file(database: str, shown: str) -> None:
     if database in ("", ":memory:") or database.startswith("file:"):
         return
     path = Path(database)
+    try:
+        path.exists()
+    except (OSError, ValueError) as exc:
+        raise DatabaseRefused(f"{shown}: {path_problem(exc, database)}") from None
     if path.is_dir():
         raise DatabaseRefused(f"{shown}: {path} is a directory, not a database file")
     parent = path.parent if str(path.parent) else Path(".")
@@ -72,6 +151,11 @@ def _check_sqlite_file(database: str, shown: str) -> None:
         finally:
             conn.close()
     except sqlite3.DatabaseError as exc:
+        known = classify_failure(exc, f"sqlite:///{path}", shown)
+        if known is not None:
+            raise known from exc
+        if "disk i/o error" in str(exc).lower() or "unable to open" in str(exc).lower():
+            raise StoreError(f"{shown}: {path} could not be read ({exc})") from exc
         raise DatabaseRefused(f"{shown}: {path} is corrupt ({exc})") from exc
     if rows != [("ok",)]:
         raise DatabaseRefused(f"{shown}: {path} is corrupt (SQLite integrity check: {rows[0][0]})")

@@ -200,7 +200,8 @@ def unit_image(db: Database, serial: str) -> UnitImage | None:
             return None
         ru_id, run_uid, started_at, station_name = row
         written = s.scalar(select(EepromWrite.image).where(EepromWrite.run_unit_id == ru_id,
-                                                           EepromWrite.image.is_not(None))
+                                                           EepromWrite.image.is_not(None),
+                                                           EepromWrite.state == "complete")
                            .order_by(EepromWrite.id.desc()).limit(1))
         params_json = s.scalar(select(ParameterSetRecord.params_json).where(ParameterSetRecord.run_unit_id == ru_id)
                                .order_by(ParameterSetRecord.id.desc()).limit(1))
@@ -277,7 +278,7 @@ def show_unit(db: Database, serial: str) -> UnitDetail | None:
         ).first()
         writes = tuple(
             {"image_sha256": w.image_sha256, "layout_version": w.layout_version, "attempts": w.attempts,
-             "verified": w.verified, "message": w.message, "written_at": _iso(w.written_at)}
+             "verified": w.verified, "message": w.message, "written_at": _iso(w.written_at), "state": w.state}
             for w in s.scalars(select(EepromWrite).where(EepromWrite.unit_id == unit.id).order_by(EepromWrite.id))
         )
         dispositions = tuple(

@@ -69,7 +69,7 @@ from station.store.models import (
 )
 from station.store.quality_index import index_run
 
-if TYPE_CHECKING:  # the provisioner's record type (the store records what the sequence provisioned)
+if TYPE_CHECKING:
     from station.sequence.provision import ProvisionRecord
 
 log = logging.getLogger(__name__)
@@ -200,8 +200,13 @@ class Recorder:
         """Close stale UNFINISHED runs (of ``station_name``, or all); returns their run ids."""
         return recover_unfinished(self.db, station_name, outcome=outcome, exclude=set(self._runs))
 
+    def current_run(self) -> str | None:
+        """The run in progress on this recorder (the last started), or None."""
+        return next(reversed(self._runs), None)
+
     def provisioned(self, record: ProvisionRecord) -> None:
-        """Store one unit's EEPROM write and verification (an ``EepromProvisioner`` ``on_record``).
+        """Store one unit's EEPROM write and verification after the fact (an ``EepromProvisioner`` ``on_record``
+        for a provisioner without a journal; the station records ahead instead: :mod:`station.store.write_ahead`).
 
         Linked to the run in progress on this recorder (the provisioner runs inside it).
         """

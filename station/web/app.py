@@ -47,7 +47,7 @@ from station.store.quality import ShiftCalendar
 from station.web.console import ConsoleOperator, ConsoleSettings
 from station.web.context import WebContext
 from station.web.diagnosis_worker import DiagnosisService
-from station.web.openapi import StationAPI
+from station.web.openapi import StationAPI, add_store_errors
 from station.web.routes import (
     certificate,
     diagnosis,
@@ -59,9 +59,12 @@ from station.web.routes import (
     status,
     units,
 )
+from station.web.security import SecurityHeaders
 from station.web.state import LiveStatus
 
-ROUTERS = (status.router, runs.router, units.router, certificate.router, diagnosis.router, population.router,
+# a serial may hold any printable character, "/" too ({serial:path}): the routes with something after the serial
+# (certificate, diagnosis, plots, eeprom.bin) are matched before the unit's own page and record
+ROUTERS = (status.router, runs.router, certificate.router, diagnosis.router, units.router, population.router,
            quality.router, msa.router, operator_console.router)
 
 
@@ -118,6 +121,8 @@ def create_app(db_url: str | None = None, *, token: str | None = None, live: Liv
                      owns_db=database is None, shifts=calendar)
     app = StationAPI(title="station", version="1", lifespan=lifespan,
                      description="End-of-line MEMS IMU calibration station: live status, units, runs, EEPROM images.")
+    app.add_middleware(SecurityHeaders)
+    add_store_errors(app)
     app.state.web = web
     app.state.console = console if console is not None else ConsoleSettings(max_attempts=limits.retest.max_attempts)
     app.state.prompter = prompter

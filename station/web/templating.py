@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from urllib.parse import quote
 
 from fastapi.templating import Jinja2Templates
 
@@ -20,7 +21,14 @@ def fmt(value: float | None) -> str:
     return f"{value:.4g}"
 
 
+def path_part(value: object) -> str:
+    """A value as one URL path segment: every reserved character encoded, "/" too (a serial may hold any
+    printable character; the routes take it back with a path converter)."""
+    return quote(str(value), safe="")
+
+
 templates = Jinja2Templates(directory=str(TEMPLATES_DIR))
+templates.env.filters["path_part"] = path_part
 templates.env.filters["fmt"] = fmt
 templates.env.filters["label"] = parameter_label
 templates.env.filters["unit"] = unit_label
@@ -30,4 +38,4 @@ templates.env.globals["format_value"] = format_value
 templates.env.globals["format_number"] = format_number
 templates.env.globals["limits_identity"] = limits_identity
 
-__all__ = ["TEMPLATES_DIR", "fmt", "templates"]
+__all__ = ["TEMPLATES_DIR", "fmt", "path_part", "templates"]

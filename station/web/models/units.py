@@ -90,6 +90,9 @@ class EepromWriteEntry(BaseModel):
     verified: bool = Field(description="the read-back matched the image")
     message: str = Field(description="what the write reported ('' when there is nothing to say)")
     written_at: Timestamp
+    state: str = Field("complete", description="'complete': written and read back; 'intended': recorded ahead, "
+                                              "not completed yet (or the station died; reconciled at its next "
+                                              "start); 'not-applied': reconciled, the image never reached the unit")
 
 
 class DispositionEntry(BaseModel):

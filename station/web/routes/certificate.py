@@ -42,7 +42,7 @@ def _filename(serial: str, run_id: str, ext: str) -> str:
     return f"certificate_{safe}.{ext}"
 
 
-@router.get("/units/{serial}/certificate.pdf", tags=["units"], response_class=Response,
+@router.get("/units/{serial:path}/certificate.pdf", tags=["units"], response_class=Response,
             responses={200: {"content": {"application/pdf": {}}, "description": "the calibration certificate"},
                        **_RESPONSES})
 def certificate_pdf_route(web: Web, serial: str, run: RunQuery = None) -> Response:
@@ -53,7 +53,7 @@ def certificate_pdf_route(web: Web, serial: str, run: RunQuery = None) -> Respon
                     headers={"Content-Disposition": f'inline; filename="{_filename(serial, cert.run_id, "pdf")}"'})
 
 
-@router.get("/units/{serial}/certificate.html", response_class=HTMLResponse, include_in_schema=False)
+@router.get("/units/{serial:path}/certificate.html", response_class=HTMLResponse, include_in_schema=False)
 def certificate_html_route(web: Web, serial: str, run: RunQuery = None) -> HTMLResponse:
     return HTMLResponse(certificate_html(_certificate(web, serial, run)))
 

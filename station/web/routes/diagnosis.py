@@ -38,7 +38,7 @@ RunQuery = Annotated[str | None, Query(description="the run whose recording to d
 router = APIRouter()
 
 
-@router.get("/units/{serial}/diagnosis.svg", include_in_schema=False)
+@router.get("/units/{serial:path}/diagnosis.svg", include_in_schema=False)
 def unit_diagnosis_svg(web: Web, serial: str, run_id: str | None = None) -> Response:
     rec = recording_or_404(web.db, serial, run_id)
     try:
@@ -61,7 +61,7 @@ def _svg(svg: str, status: int, headers: dict[str, str]) -> Response:
     return Response(svg, status_code=status, media_type="image/svg+xml", headers=headers)
 
 
-@router.get("/api/units/{serial}/diagnosis", tags=["units"], response_model=DiagnosisReady, responses={
+@router.get("/api/units/{serial:path}/diagnosis", tags=["units"], response_model=DiagnosisReady, responses={
     202: {"model": DiagnosisPending, "description": "the diagnosis is being computed; ask again (Retry-After)"},
     404: problem("unknown serial, or no session recording of the unit (in that run)"),
     422: {"model": DiagnosisFailed, "description": "the recording cannot be diagnosed"},
@@ -86,7 +86,7 @@ def api_unit_diagnosis(web: Web, serial: str, run_id: RunQuery = None) -> Diagno
                           report=result.json_report() or {}, summary=DiagnosisSummary.of(result.report))
 
 
-@router.get("/units/{serial}/diagnosis", response_class=HTMLResponse, include_in_schema=False)
+@router.get("/units/{serial:path}/diagnosis", response_class=HTMLResponse, include_in_schema=False)
 def unit_diagnosis_page(request: Request, web: Web, serial: str, run_id: RunQuery = None) -> HTMLResponse:
     """The diagnosis page: findings, unexplained structure, inseparable and rejected effects as tables."""
     rec = recording_or_404(web.db, serial, run_id)

@@ -41,26 +41,7 @@ _SVG_CACHED = {"Cache-Control": "max-age=60"}
 router = APIRouter()
 
 
-@router.get("/units/{serial}", response_class=HTMLResponse, include_in_schema=False)
-def unit_page(request: Request, web: Web, serial: str) -> HTMLResponse:
-    detail = show_unit(web.db, serial)
-    if detail is None:
-        return templates.TemplateResponse(request, "missing.html", {"what": f"unit {serial}"}, status_code=404)
-    checks_run, latest = latest_checks_of_run(web.db, serial)
-    checks = [(c, shown_marginal(c, web.marginal_fraction)) for c in latest]
-    recorded = {rec.run_id for rec in recordings(detail)}
-    verdict = next((r for r in detail.runs if r.outcome in TESTED and r.run_outcome != "UNFINISHED"), None)
-    newest = detail.runs[0] if detail.runs else None
-    return templates.TemplateResponse(request, "unit.html", {
-        "d": detail, "checks": checks, "plots": PLOT_NAMES if plot_source(detail) is not None else (),
-        "params": detail.latest_params(), "marginal_fraction": web.marginal_fraction,
-        "diag_runs": [r for r in detail.runs if r.run_id in recorded],
-        "verdict": verdict, "newest": newest, "checks_run": checks_run,
-        "disposition": detail.dispositions[-1] if detail.dispositions else None,
-    })
-
-
-@router.get("/units/{serial}/plots/{name}.svg", include_in_schema=False)
+@router.get("/units/{serial:path}/plots/{name}.svg", include_in_schema=False)
 def unit_plot(web: Web, serial: str, name: str) -> Response:
     if name not in PLOT_NAMES:
         raise HTTPException(404, f"no plot {name}")
@@ -84,6 +65,25 @@ def unit_plot(web: Web, serial: str, name: str) -> Response:
 
         svg = web.svgs.get((serial, run_id, name), render)
     return Response(svg, media_type="image/svg+xml", headers=_SVG_CACHED)
+
+
+@router.get("/units/{serial:path}", response_class=HTMLResponse, include_in_schema=False)
+def unit_page(request: Request, web: Web, serial: str) -> HTMLResponse:
+    detail = show_unit(web.db, serial)
+    if detail is None:
+        return templates.TemplateResponse(request, "missing.html", {"what": f"unit {serial}"}, status_code=404)
+    checks_run, latest = latest_checks_of_run(web.db, serial)
+    checks = [(c, shown_marginal(c, web.marginal_fraction)) for c in latest]
+    recorded = {rec.run_id for rec in recordings(detail)}
+    verdict = next((r for r in detail.runs if r.outcome in TESTED and r.run_outcome != "UNFINISHED"), None)
+    newest = detail.runs[0] if detail.runs else None
+    return templates.TemplateResponse(request, "unit.html", {
+        "d": detail, "checks": checks, "plots": PLOT_NAMES if plot_source(detail) is not None else (),
+        "params": detail.latest_params(), "marginal_fraction": web.marginal_fraction,
+        "diag_runs": [r for r in detail.runs if r.run_id in recorded],
+        "verdict": verdict, "newest": newest, "checks_run": checks_run,
+        "disposition": detail.dispositions[-1] if detail.dispositions else None,
+    })
 
 
 @router.get("/api/units", tags=["units"], response_model=list[UnitOverview], responses=PAGED)
@@ -113,14 +113,7 @@ def units_page(request: Request, web: Web, query: Annotated[UnitFilter, Query()]
     return templates.TemplateResponse(request, "units.html", {"units": units, "query": query, "next": more})
 
 
-@router.get("/api/units/{serial}", tags=["units"], response_model=UnitRecord,
-            responses={404: problem("unknown serial")})
-def api_unit(web: Web, serial: str) -> UnitRecord:
-    """One unit: its runs (newest first), latest parameter set (SI units), limit checks, EEPROM writes."""
-    return UnitRecord.of(unit_or_404(web.db, serial), latest_checks(web.db, serial))
-
-
-@router.get("/api/units/{serial}/eeprom.bin", tags=["units"], response_class=Response,
+@router.get("/api/units/{serial:path}/eeprom.bin", tags=["units"], response_class=Response,
             responses={200: {"content": {"application/octet-stream": {}}, "description": "the EEPROM image"},
                        404: problem("unknown serial, or the unit never passed"),
                        409: problem("the parameter set does not fit the image format")})
@@ -140,6 +133,13 @@ def api_eeprom(web: Web, serial: str) -> Response:
     data = found.data
     return Response(data, media_type="application/octet-stream",
                     headers={"Content-Disposition": f'attachment; filename="{_safe(serial)}.eeprom.bin"'})
+
+
+@router.get("/api/units/{serial:path}", tags=["units"], response_model=UnitRecord,
+            responses={404: problem("unknown serial")})
+def api_unit(web: Web, serial: str) -> UnitRecord:
+    """One unit: its runs (newest first), latest parameter set (SI units), limit checks, EEPROM writes."""
+    return UnitRecord.of(unit_or_404(web.db, serial), latest_checks(web.db, serial))
 
 
 def _safe(serial: str) -> str:

@@ -8,16 +8,17 @@ K/min) and the rig steps (poses, rate steps or a subset) named ``'pose +x @5C'``
 soak and plateau, the ramp (the chamber ramps slowly while the rig cycles through the poses and, if
 asked, rate steps) and a final soak and plateau; optionally a raw check plateau at the verification
 temperature (``'check pose +z @35C'``), kept out of the fit's recording and assembled into a check
-recording of its own (:attr:`ThermalRunner.check_sessions`).
+recording of its own (:attr:`ThermalSequence.check_sessions`).
 
-:class:`ThermalRunner` is the :class:`~station.sequence.runner.SequenceRunner` for it. Everything the
-base runner guarantees holds (rig to rest in the teardown, outcomes, records, fits, limits, files). On
+:class:`ThermalSequence` is the :class:`~station.sequence.runner.RunSequence` for it: the
+:class:`~station.sequence.runner.SequenceRunner` takes it (:func:`thermal_runner`) and calls its
+hooks. Everything the runner guarantees holds (rig to rest in the teardown, outcomes, records, fits, limits, files). On
 top: every chamber fault (no answer, alarm, setpoint not reached in time, a dropped link) is a station
 ERROR, never a unit FAIL; after the fit each PASS unit's image is written and the unit power-cycled,
 then the chamber goes to the verification temperature (one the fit did not use), the units soak, and
 the corrected output is verified on the rig there (:class:`~station.sequence.verify.RigVerifier`): the
 verdict uses those errors. The chamber is brought back to ambient at the end, also after a fault or an
-abort. :attr:`ThermalRunner.timing` holds the batch's cycle time. Temperatures degC, times s.
+abort. :attr:`ThermalSequence.timing` holds the batch's cycle time. Temperatures degC, times s.
 """
 
 from __future__ import annotations
@@ -28,18 +29,19 @@ import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
 from station.chamber.protocol import Chamber, ChamberError, ChamberSetpointTimeout
 from station.chamber.registers import AlarmCode
 from station.fit.calibrate import FitOptions
-from station.kernel.errors import HardwareError, StationError, UnitRejected
+from station.kernel.clock import Clock
+from station.kernel.errors import HardwareError, StationError
 from station.kernel.measurement import Measurement
-from station.kernel.plan import RigPlan
 from station.kernel.thermal_plan import ThermalPlan
 from station.rig.protocol import Rig, RigFault
-from station.sensor.protocol import SensorTimeout
+from station.sensor.protocol import Sensor, SensorTimeout
 from station.sequence.capture import UnitChannel, build_session
 from station.sequence.records import Measured, Outcome, StepFinished, StepStarted
 from station.sequence.runner import (
@@ -47,9 +49,8 @@ from station.sequence.runner import (
     RunResult,
     SequenceRunner,
     UnitResult,
+    UnitVerdict,
 )
-from station.sequence.runner import UnitVerdict as _Verdict
-from station.sequence.runner import replace_outcome as _replace_outcome
 from station.sequence.steps import (
     STEP_FUNCTIONS,
     Fixture,
@@ -60,7 +61,6 @@ from station.sequence.steps import (
     plan_steps,
     position_rig,
 )
-from station.sequence.verify import RigVerifier, VerificationResult
 from station.session import format_session
 from station.session.model import Kind, Session
 
@@ -183,42 +183,29 @@ class ThermalTiming:
         return self.cycle_s / max(self.units, 1)
 
 
-class ThermalRunner(SequenceRunner):
-    """Runs a :class:`ThermalPlan` for the units of one fixture on one rig in one chamber.
+class ThermalSequence:
+    """The steps of a :class:`ThermalPlan` and the chamber around them: a :class:`~station.sequence.runner.RunSequence`.
+
+    The :class:`~station.sequence.runner.SequenceRunner` takes it (``sequence=``; :func:`thermal_runner`
+    builds both) and calls its hooks; the runner's provisioner writes every PASS unit first
+    (``batch_verification``), then :meth:`before_verification` brings the chamber to the verification
+    temperature and soaks the units, then the provisioner verifies each.
 
     Args:
-        rig, sensors, clock: as for :class:`SequenceRunner`.
         chamber: the open chamber (:func:`station.chamber.open_chamber`).
         thermal: the thermal plan (its ``base`` is the rig plan).
-        verifier: verifies the corrected output at ``thermal.verify_degc`` after writing (None: no
-            verification; the units are still written when a provisioner is given).
-        kwargs: the other arguments of :class:`SequenceRunner` (``plan`` is taken from ``thermal``);
-            ``provisioner`` must offer ``write`` and ``finish`` (an
-            :class:`~station.sequence.provision.EepromProvisioner`).
+
+    After a run: ``check_sessions`` (slot -> check recording), ``timing``, ``chamber_at_ambient``,
+    ``chamber_message`` (why the chamber's teardown failed, '' if it did not).
     """
 
-    def __init__(
-        self,
-        rig: Rig,
-        sensors: Sequence,
-        clock,
-        chamber: Chamber,
-        thermal: ThermalPlan,
-        *,
-        verifier: RigVerifier | None = None,
-        **kwargs,
-    ) -> None:
-        kwargs.pop("plan", None)
-        if kwargs.get("fit_options") is None:
-            # the plan moves the temperature on purpose: fit the temperature polynomials where they separate
-            kwargs["fit_options"] = FitOptions(thermal="auto")
-        super().__init__(rig, sensors, clock, plan=thermal.base, **kwargs)
+    batch_verification = True
+
+    def __init__(self, chamber: Chamber, thermal: ThermalPlan) -> None:
         self.chamber = chamber
         self.thermal = thermal
-        self.verifier = verifier
-        self.steps = thermal_steps(thermal)  # type: ignore[assignment]
+        self.steps = thermal_steps(thermal)
         self.check_sessions: dict[int, Session] = {}
-        self.verification: dict[int, VerificationResult] = {}
         self.timing: ThermalTiming | None = None
         self.chamber_at_ambient = False
         self.chamber_message = ""
@@ -227,32 +214,39 @@ class ThermalRunner(SequenceRunner):
         self._chamber_home_done = False
         self._next_index = len(self.steps)
         self._chamber_reconnects0 = 0
-        self._t_steps_end: float | None = None
-        self._verify_s = 0.0
         self._ambient_s = 0.0
-        self._fit_wall_s = 0.0
+        self._run: SequenceRunner | None = None
 
     @property
-    def rig_plan(self) -> RigPlan:
-        return self.thermal.base
+    def verification_name(self) -> str:
+        return f"verification at {self.verify_degc:g} degC"
+
+    def _r(self) -> SequenceRunner:
+        assert self._run is not None, "the sequence runs inside a SequenceRunner"
+        return self._run
 
     # --- the run --------------------------------------------------------------------------------------
 
-    def run(self) -> RunResult:
-        """As :meth:`SequenceRunner.run`, with the chamber: see the module docstring."""
-        try:
-            result = super().run()
-        finally:
-            self._chamber_home()
-        self.timing = ThermalTiming(result.sequence_s, self._fit_wall_s, self._verify_s, self._ambient_s,
-                                    len(result.units))
+    def after_run(self, run: SequenceRunner, result: RunResult | None) -> RunResult | None:
+        """The chamber back to ambient (also when the run raised), the batch's timing, a chamber teardown fault."""
+        self._run = run
+        self._chamber_home()
+        if result is None:
+            return None
+        fit_wall_s = run.finish_wall_s - run.verify_s / run.clock.scale
+        self.timing = ThermalTiming(result.sequence_s, fit_wall_s, run.verify_s, self._ambient_s, len(result.units))
         if self.chamber_message:
             message = f"{result.message}; {self.chamber_message}" if result.message else self.chamber_message
             outcome = Outcome.ERROR if result.outcome == Outcome.PASS else result.outcome
             result = replace(result, outcome=outcome, message=message)
         return result
 
-    def _run_steps(self, fx: Fixture, verdicts: list[_Verdict], reconnects0: int) -> None:
+    def run_steps(self, run: SequenceRunner, fx: Fixture, verdicts: list[UnitVerdict], reconnects0: int) -> None:
+        self._run = run
+        self.check_sessions, self.timing = {}, None
+        self.chamber_at_ambient, self.chamber_message = False, ""
+        self._steps_failed = self._fresh_start = self._chamber_home_done = False
+        self._next_index, self._ambient_s = len(self.steps), 0.0
         self._chamber_reconnects0 = self.chamber.reconnects
         try:
             st = self.chamber.state()
@@ -261,22 +255,22 @@ class ThermalRunner(SequenceRunner):
             self.chamber.check()
             for item in self.steps:
                 if not fx.active:
-                    log.warning("run %s: no unit left to measure; stopping before '%s'", self.run_id, item.name)
+                    log.warning("run %s: no unit left to measure; stopping before '%s'", self._r().run_id, item.name)
                     return
                 self._do_step(fx, item, verdicts, reconnects0)
         except BaseException:
             self._steps_failed = True
             raise
         finally:
-            self._t_steps_end = self.clock.now()
+            self._t_steps_end = self._r().clock.now()
 
-    def _do_step(self, fx: Fixture, item: ThermalItem, verdicts: list[_Verdict], reconnects0: int,
+    def _do_step(self, fx: Fixture, item: ThermalItem, verdicts: list[UnitVerdict], reconnects0: int,
                  index: int | None = None) -> None:
         if fx.abort.is_set():
             raise KeyboardInterrupt
         index = item.index if index is None else index
-        t0 = self.clock.now()
-        self._emit(StepStarted(self.run_id, index, item.name, item.kind.label, t0, item.hold_s))
+        t0 = self._r().clock.now()
+        self._r().emit(StepStarted(self._r().run_id, index, item.name, item.kind.label, t0, item.hold_s))
         try:
             if isinstance(item, Step) and item.kind != Kind.REST and self._fresh_start:
                 # the rig waited for the chamber: the capture starts after this step's confirmation, never
@@ -298,20 +292,21 @@ class ThermalRunner(SequenceRunner):
             self._supervise(fx, reconnects0)
         except BaseException as exc:
             aborted = isinstance(exc, KeyboardInterrupt)
-            why = self.abort_reason if aborted else f"{type(exc).__name__}: {exc}"
-            self._emit(StepFinished(self.run_id, index, item.name, self.clock.now(), self.clock.now() - t0, False,
-                                    len(fx.active), why))
+            why = self._r().abort_reason if aborted else f"{type(exc).__name__}: {exc}"
+            now = self._r().clock.now()
+            self._r().emit(StepFinished(self._r().run_id, index, item.name, now, now - t0, False, len(fx.active), why))
             raise
-        problems = self._apply_report(fx, item, report, verdicts)  # type: ignore[arg-type]
-        self._emit(StepFinished(self.run_id, index, item.name, self.clock.now(), self.clock.now() - t0,
-                                not problems, len(fx.active), "; ".join(problems)))
+        problems = self._r().apply_report(fx, item, report, verdicts)
+        now = self._r().clock.now()
+        self._r().emit(StepFinished(self._r().run_id, index, item.name, now, now - t0, not problems, len(fx.active),
+                                    "; ".join(problems)))
         if isinstance(item, RampStep):
             self._ramp(fx, item, verdicts, reconnects0)
 
     def _supervise(self, fx: Fixture, reconnects0: int) -> None:
         """After every step: the chamber has no alarm, neither link was re-established."""
         self.chamber.check()
-        if self.options.rig_reconnect_is_error:
+        if self._r().options.rig_reconnect_is_error:
             if fx.rig.reconnects > reconnects0:
                 raise RigLinkError(f"the rig link dropped during the run and was re-established "
                                    f"({fx.rig.reconnects - reconnects0} reconnect(s)); the run is not trusted")
@@ -321,7 +316,7 @@ class ThermalRunner(SequenceRunner):
                                        f"the chamber went unsupervised, the run is not trusted")
 
     def _rest_step(self) -> Step:
-        return Step(0, "rest pose", Kind.POSE, self.rig_plan.rest_pose, 0.0, 0.0)
+        return Step(0, "rest pose", Kind.POSE, self.thermal.base.rest_pose, 0.0, 0.0)
 
     def _pull(self, fx: Fixture, progress: dict[int, float], report: StepReport) -> None:
         """Move every active unit's buffered samples into its record; a silent unit is a sensor fault."""
@@ -341,11 +336,11 @@ class ThermalRunner(SequenceRunner):
 
     def _chamber_step(self, fx: Fixture, item: ChamberStep) -> StepReport:
         """Rig still in the rest pose, setpoint written, RUN, the air confirmed at the setpoint."""
-        report = StepReport(rig_moved=drive_rig(fx.rig, self._rest_step(), self.options))
+        report = StepReport(rig_moved=drive_rig(fx.rig, self._rest_step(), self._r().options))
         self.chamber.set_setpoint(item.degc, item.ramp_k_per_min)
         self.chamber.run()
         progress: dict[int, float] = {}
-        deadline = self.clock.now() + self.thermal.setpoint_timeout_s
+        deadline = self._r().clock.now() + self.thermal.setpoint_timeout_s
         poll = max(self.thermal.soak_poll_s, getattr(self.chamber, "poll_s", 1.0))
         while True:
             self._pull(fx, progress, report)
@@ -353,20 +348,20 @@ class ThermalRunner(SequenceRunner):
             if st.at_setpoint and st.running and abs(st.air_degc - item.degc) <= getattr(self.chamber,
                                                                                          "setpoint_tol_k", 0.5):
                 return report
-            if self.clock.now() > deadline:
+            if self._r().clock.now() > deadline:
                 raise ChamberSetpointTimeout(f"chamber did not reach {item.degc:g} degC within "
                                              f"{self.thermal.setpoint_timeout_s:g} s: {st.describe()}", st)
             if fx.abort.is_set():
                 raise KeyboardInterrupt
             _check_rig(fx.rig)
-            self.clock.sleep(poll)
+            self._r().clock.sleep(poll)
 
     def _soak(self, fx: Fixture, item: SoakStep) -> StepReport:
         """The soak gate: wait until every active unit's temperature slope over the last ``soak_window_s``
         is within ``soak_rate_k_per_min`` (or ``soak_timeout_s`` passed); one gate per unit."""
         tp = self.thermal
-        report = StepReport(rig_moved=drive_rig(fx.rig, self._rest_step(), self.options))
-        t_start = self.clock.now()
+        report = StepReport(rig_moved=drive_rig(fx.rig, self._rest_step(), self._r().options))
+        t_start = self._r().clock.now()
         deadline = t_start + tp.soak_timeout_s
         progress: dict[int, float] = {}
         slopes: dict[int, float] = {}
@@ -375,7 +370,7 @@ class ThermalRunner(SequenceRunner):
             self._pull(fx, progress, report)
             self.chamber.check()
             _check_rig(fx.rig)
-            covered = self.clock.now() - t_start >= tp.soak_window_s
+            covered = self._r().clock.now() - t_start >= tp.soak_window_s
             for unit in fx.active:
                 if unit.slot in report.errors:
                     continue
@@ -384,11 +379,11 @@ class ThermalRunner(SequenceRunner):
                 temps[unit.slot] = float(np.mean(temp)) if len(temp) else math.nan
             waiting = [u for u in fx.active if u.slot not in report.errors
                        and not abs(slopes.get(u.slot, math.nan)) <= tp.soak_rate_k_per_min]
-            if not waiting or self.clock.now() > deadline:
+            if not waiting or self._r().clock.now() > deadline:
                 break
             if fx.abort.is_set():
                 raise KeyboardInterrupt
-            self.clock.sleep(tp.soak_poll_s)
+            self._r().clock.sleep(tp.soak_poll_s)
         for unit in fx.active:
             if unit.slot in report.errors:
                 continue
@@ -397,28 +392,28 @@ class ThermalRunner(SequenceRunner):
                 Measurement.in_range("soak_rate", abs(slope) if math.isfinite(slope) else math.inf, 0.0,
                                      tp.soak_rate_k_per_min, "K/min"),
                 Measurement.in_range("soak_temperature", temps.get(unit.slot, math.nan), -math.inf, math.inf, "degC"),
-                Measurement.in_range("soak_time", self.clock.now() - t_start, 0.0, tp.soak_timeout_s, "s"),
+                Measurement.in_range("soak_time", self._r().clock.now() - t_start, 0.0, tp.soak_timeout_s, "s"),
             ]
         return report
 
-    def _ramp(self, fx: Fixture, item: RampStep, verdicts: list[_Verdict], reconnects0: int) -> None:
+    def _ramp(self, fx: Fixture, item: RampStep, verdicts: list[UnitVerdict], reconnects0: int) -> None:
         """Chamber ramp to ``to_degc``; the rig cycles through ``item.cycle`` until the air is there."""
-        drive_rig(fx.rig, self._rest_step(), self.options)
+        drive_rig(fx.rig, self._rest_step(), self._r().options)
         self.chamber.set_setpoint(item.to_degc, item.k_per_min)
         self.chamber.run()
         ramp_s = abs(item.to_degc - item.from_degc) / item.k_per_min * 60.0
-        t_ramp0 = self.clock.now()
+        t_ramp0 = self._r().clock.now()
         deadline = t_ramp0 + ramp_s + self.thermal.setpoint_timeout_s
         k = 0
         while fx.active:
             st = self.chamber.check()
             if st.at_setpoint and st.running:
                 return
-            if self.clock.now() > deadline:
+            if self._r().clock.now() > deadline:
                 raise ChamberSetpointTimeout(f"chamber ramp did not reach {item.to_degc:g} degC within "
                                              f"{deadline - t_ramp0:.0f} s: {st.describe()}", st)
             if not item.cycle:
-                self.clock.sleep(self.thermal.soak_poll_s)
+                self._r().clock.sleep(self.thermal.soak_poll_s)
                 continue
             step = item.cycle[k % len(item.cycle)]
             step = replace(step, name=f"{step.name} #{k // len(item.cycle) + 1}")
@@ -428,11 +423,10 @@ class ThermalRunner(SequenceRunner):
 
     # --- teardown and after the rig ----------------------------------------------------------------------
 
-    def _teardown(self, channels: list[UnitChannel]) -> tuple[bool, str, bool]:
-        at_rest, message, interrupted = super()._teardown(channels)
-        if self._steps_failed or self._abort_requested or interrupted:
+    def after_teardown(self, run: SequenceRunner, failed: bool) -> None:
+        self._run = run
+        if self._steps_failed or failed:
             self._chamber_home()  # nothing more to do at temperature
-        return at_rest, message, interrupted
 
     def _chamber_home(self) -> None:
         """Bring the chamber back to ambient (command, then wait up to ``ambient_timeout_s``); once."""
@@ -440,7 +434,7 @@ class ThermalRunner(SequenceRunner):
             return
         self._chamber_home_done = True
         tp = self.thermal
-        t0 = self.clock.now()
+        t0 = self._r().clock.now()
         for _ in range(2):
             try:
                 self.chamber.go_ambient(tp.ambient_degc)
@@ -457,13 +451,13 @@ class ThermalRunner(SequenceRunner):
                 continue
             except HardwareError as exc:
                 self.chamber_message = f"could not bring the chamber back to ambient ({type(exc).__name__}: {exc})"
-                log.error("run %s: %s", self.run_id, self.chamber_message)
+                log.error("run %s: %s", self._r().run_id, self.chamber_message)
                 break
-        self._ambient_s = self.clock.now() - t0
+        self._ambient_s = self._r().clock.now() - t0
 
-    def _finish_units(self, channels: list[UnitChannel], verdicts: list[_Verdict], aborted: bool, run_message: str,
-                      completed: bool) -> list[UnitResult]:
-        wall0 = time.monotonic()
+    def before_fits(self, run: SequenceRunner, channels: list[UnitChannel]) -> None:
+        """Assemble each unit's check plateau into a check recording of its own, out of the fit's recording."""
+        self._run = run
         for unit in channels:
             check = [w for w in unit.windows if w.step.startswith(CHECK_PREFIX)]
             if not check:
@@ -471,7 +465,7 @@ class ThermalRunner(SequenceRunner):
             calibration = [w for w in unit.windows if not w.step.startswith(CHECK_PREFIX)]
             unit.windows = check
             try:
-                session = build_session(unit, self.plan.gravity_mps2, {**self._metadata(unit), "purpose": "check"})
+                session = build_session(unit, run.plan.gravity_mps2, {**run.metadata(unit), "purpose": "check"})
             except StationError as exc:
                 log.error("slot %d: could not assemble the check recording: %s", unit.slot, exc)
                 session = None
@@ -480,18 +474,14 @@ class ThermalRunner(SequenceRunner):
             if session is not None:
                 self.check_sessions[unit.slot] = session
                 self._save_check(session)
-        verify0 = [self._verify_s]
-        results = super()._finish_units(channels, verdicts, aborted, run_message, completed)
-        self._fit_wall_s = time.monotonic() - wall0 - (self._verify_s - verify0[0]) / self.clock.scale
-        self._chamber_home()
-        return results
 
     def _save_check(self, session: Session) -> None:
-        if self.out_dir is None:
+        out_dir = self._r().out_dir
+        if out_dir is None:
             return
         try:
-            self.out_dir.mkdir(parents=True, exist_ok=True)
-            path = self.out_dir / f"{session.serial}_{self.run_id}.check.csv"
+            out_dir.mkdir(parents=True, exist_ok=True)
+            path = out_dir / f"{session.serial}_{self._r().run_id}.check.csv"
             path.write_bytes(format_session(session).encode("utf-8"))
         except (OSError, StationError) as exc:
             log.error("could not save the check recording of %s: %s", session.serial, exc)
@@ -503,86 +493,32 @@ class ThermalRunner(SequenceRunner):
         tp = self.thermal
         return tp.verify_degc if tp.verify_degc is not None else tp.calibration_degc[-1]
 
-    def _provision(self, results: list[UnitResult]) -> list[UnitResult]:
-        p = self.provisioner
-        assert p is not None
-        out = list(results)
-        written: dict[int, object] = {}
-        for k, r in enumerate(results):
-            if r.outcome != Outcome.PASS:
-                continue
-            try:
-                written[k] = p.write(r, self.sensors[r.slot], self.started_at)  # type: ignore[attr-defined]
-            except StationError as exc:
-                out[k] = _replace_outcome(r, Outcome.ERROR, f"provisioning failed: {exc}")
-            except KeyboardInterrupt:
-                for j in range(k, len(results)):
-                    if results[j].outcome == Outcome.PASS:
-                        out[j] = _replace_outcome(results[j], Outcome.ABORTED,
-                                                  f"{self.abort_reason} during provisioning")
-                written = {j: w for j, w in written.items() if j < k}
-                break
-        if not written:
-            return out
-        if self.verifier is None:
-            for k, report in written.items():
-                p.finish(out[k], report, None)  # type: ignore[attr-defined]
-            return out
-        t0 = self.clock.now()
-        try:
-            unstable = self._verification_soak([out[k] for k in written])
-        except (HardwareError, KeyboardInterrupt) as exc:
-            why = self.abort_reason if isinstance(exc, KeyboardInterrupt) else f"{type(exc).__name__}: {exc}"
-            outcome = Outcome.ABORTED if isinstance(exc, KeyboardInterrupt) else Outcome.ERROR
-            for k, report in written.items():
-                p.finish(out[k], report, None)  # type: ignore[attr-defined]
-                out[k] = _replace_outcome(out[k], outcome, f"verification at {self.verify_degc:g} degC: {why}")
-            self._verify_s = self.clock.now() - t0
-            return out
-        for k, report in written.items():
-            r = out[k]
-            if r.slot in unstable:
-                p.finish(r, report, None)  # type: ignore[attr-defined]
-                out[k] = _replace_outcome(r, Outcome.FAIL, unstable[r.slot])
-                continue
-            try:
-                result = self.verifier.verify(self.sensors[r.slot], report.image)  # type: ignore[attr-defined]
-                self.verification[r.slot] = result
-                checks = p.finish(r, report, result)  # type: ignore[attr-defined]
-                self._emit_verify(r, checks or ())
-            except UnitRejected as exc:
-                self._emit_verify(r, exc.checks)
-                out[k] = _replace_outcome(r, Outcome.FAIL,
-                                          f"verification at {self.verify_degc:g} degC failed: {exc}")
-            except StationError as exc:
-                out[k] = _replace_outcome(r, Outcome.ERROR, f"verification at {self.verify_degc:g} degC: {exc}")
-            except KeyboardInterrupt:
-                out[k] = _replace_outcome(r, Outcome.ABORTED, f"{self.abort_reason} during verification")
-                break
-        self._verify_s = self.clock.now() - t0
-        return out
+    def before_verification(self, run: SequenceRunner, units: list[UnitResult]) -> dict[int, str]:
+        """Chamber to the verification temperature and the units soaked there (see :meth:`_verification_soak`)."""
+        self._run = run
+        return self._verification_soak(units)
 
     def _verification_soak(self, units: list[UnitResult]) -> dict[int, str]:
         """Chamber to the verification temperature, units streaming raw until their temperatures are
         stable; returns slot -> why for units that did not settle (they FAIL). Chamber faults raise."""
         tp, T = self.thermal, self.verify_degc
-        drive_rig(self.rig, self._rest_step(), self.options)
+        drive_rig(self._r().rig, self._rest_step(), self._r().options)
         self.chamber.set_setpoint(T, tp.move_ramp_k_per_min)
         self.chamber.run()
         self.chamber.wait_at_setpoint(tp.setpoint_timeout_s)
-        rate = int(self.plan.sample_rate_hz)
+        rate = int(self._r().plan.sample_rate_hz)
         records: dict[int, list] = {r.slot: [] for r in units}
         for r in units:
-            self.sensors[r.slot].start_stream(rate)
-        t_start = self.clock.now()
+            self._r().sensors[r.slot].start_stream(rate)
+        t_start = self._r().clock.now()
         slopes: dict[int, float] = {}
         temps: dict[int, float] = {}
         try:
             while True:
-                self.clock.sleep(tp.soak_poll_s)
+                self._r().clock.sleep(tp.soak_poll_s)
                 self.chamber.check()
                 for r in units:
-                    block = self.sensors[r.slot].drain()
+                    block = self._r().sensors[r.slot].drain()
                     if len(block):
                         records[r.slot].append((block.t_s, block.temp_degc))
                     t = np.concatenate([b[0] for b in records[r.slot]]) if records[r.slot] else np.zeros(0)
@@ -591,17 +527,17 @@ class ThermalRunner(SequenceRunner):
                         keep = t >= t[-1] - tp.soak_window_s
                         t, temp = t[keep], temp[keep]
                         records[r.slot] = [(t, temp)]
-                    covered = self.clock.now() - t_start >= tp.soak_window_s
+                    covered = self._r().clock.now() - t_start >= tp.soak_window_s
                     slopes[r.slot] = temperature_slope_k_per_min(t, temp) if covered else math.nan
                     temps[r.slot] = float(np.mean(temp)) if len(temp) else math.nan
                 if all(abs(slopes[r.slot]) <= tp.soak_rate_k_per_min for r in units):
                     break
-                if self.clock.now() - t_start > tp.soak_timeout_s:
+                if self._r().clock.now() - t_start > tp.soak_timeout_s:
                     break
         finally:
             for r in units:
                 with contextlib.suppress(HardwareError):
-                    self.sensors[r.slot].stop_stream()
+                    self._r().sensors[r.slot].stop_stream()
         unstable: dict[int, str] = {}
         for r in units:
             gates = [
@@ -610,10 +546,31 @@ class ThermalRunner(SequenceRunner):
                 Measurement.in_range("soak_temperature", temps[r.slot], -math.inf, math.inf, "degC"),
             ]
             for g in gates:
-                self._emit(Measured(self.run_id, r.slot, r.serial, f"verify soak {_label(T)}", g))
+                self._r().emit(Measured(self._r().run_id, r.slot, r.serial, f"verify soak {_label(T)}", g))
             if not gates[0].passed:
                 unstable[r.slot] = f"verification soak at {T:g} degC: {gates[0].describe()}"
         return unstable
+
+
+def thermal_runner(
+    rig: Rig,
+    sensors: Sequence[Sensor],
+    clock: Clock,
+    chamber: Chamber,
+    thermal: ThermalPlan,
+    **kwargs: Any,
+) -> SequenceRunner:
+    """A :class:`~station.sequence.runner.SequenceRunner` for ``thermal`` in ``chamber`` (``runner.sequence`` is
+    the :class:`ThermalSequence`).
+
+    ``kwargs``: the runner's other arguments (``plan`` is the thermal plan's base); the provisioner's
+    verifier verifies at the verification temperature. Without ``fit_options`` the fit adds the temperature
+    polynomials where the recording separates them (``thermal="auto"``): the plan moves the temperature.
+    """
+    kwargs.pop("plan", None)
+    if kwargs.get("fit_options") is None:
+        kwargs["fit_options"] = FitOptions(thermal="auto")
+    return SequenceRunner(rig, sensors, clock, plan=thermal.base, sequence=ThermalSequence(chamber, thermal), **kwargs)
 
 
 def _check_rig(rig: Rig) -> None:
@@ -628,8 +585,9 @@ __all__ = [
     "ChamberStep",
     "RampStep",
     "SoakStep",
-    "ThermalRunner",
+    "ThermalSequence",
     "ThermalTiming",
     "temperature_slope_k_per_min",
+    "thermal_runner",
     "thermal_steps",
 ]
