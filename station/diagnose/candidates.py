@@ -89,11 +89,13 @@ def lever_arm(b: Baseline, s: SensorData) -> np.ndarray | None:
         return None
     m = np.nan_to_num(s.params.misalignment)
     z = np.zeros((len(w), 3, 3))
-    for j in range(3):
-        e = np.zeros(3)
-        e[j] = 1.0
-        extra = np.cross(w, np.cross(w, e)) + np.cross(alpha, e)  # w x (w x r) + alpha x r per unit r_j
-        z[:, :, j] = extra @ m.T
+    for lo in range(0, len(w), _PIECE):  # a piece at a time: no (n, 3) temporaries (the same numbers)
+        wp, ap = w[lo:lo + _PIECE], alpha[lo:lo + _PIECE]
+        for j in range(3):
+            e = np.zeros(3)
+            e[j] = 1.0
+            extra = np.cross(wp, np.cross(wp, e)) + np.cross(ap, e)  # w x (w x r) + alpha x r per unit r_j
+            z[lo:lo + _PIECE, :, j] = extra @ m.T
     return z
 
 
