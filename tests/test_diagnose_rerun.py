@@ -131,6 +131,30 @@ def test_true_effects_bring_the_rerun_to_the_noise(all_effects: tuple) -> None:
         np.testing.assert_array_equal(again.extended.output[sensor], rr.extended.output[sensor])
 
 
+def test_chunked_render_is_bit_identical(all_effects: tuple, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The re-run renders in chunks cut between blocks: small chunks give the very numbers of one render."""
+    import station.diagnose.rerun as rerun_module
+
+    baseline, effects = all_effects
+    tilt = FittedEffect("pose_tilt", "accel", 1e-3 * np.arange(12) / 12)
+    whole = rerun(baseline, [*effects, tilt])
+    assert Drive(baseline).cuts() == [0, len(baseline.session)]
+    monkeypatch.setattr(rerun_module, "CHUNK", 3000)
+    cuts = Drive(baseline).cuts()
+    assert len(cuts) > 5
+    for sd in (baseline.accel, baseline.gyro):  # no block of either sensor crosses a cut
+        lab = sd.label
+        for c in cuts[1:-1]:
+            before, after = lab[:c][lab[:c] >= 0], lab[c:][lab[c:] >= 0]
+            assert len(before) == 0 or len(after) == 0 or before[-1] != after[0]
+    chunked = rerun(baseline, [*effects, tilt])
+    for a, b in zip((whole.base, whole.extended, *whole.alone), (chunked.base, chunked.extended, *chunked.alone),
+                    strict=True):
+        for sensor in a.block_residual:
+            np.testing.assert_array_equal(a.block_residual[sensor], b.block_residual[sensor])
+    assert whole.summary().to_json() == chunked.summary().to_json()
+
+
 @pytest.mark.parametrize(("effect", "sensor"), [
     ("lever_arm", "accel"), ("time_offset", "accel"), ("scale_asymmetry", "accel"), ("g_sensitivity", "gyro"),
     ("time_offset", "gyro"), ("scale_asymmetry", "gyro"), ("scale_nonlinearity", "gyro"), ("earth_rotation", "gyro"),

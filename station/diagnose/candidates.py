@@ -89,11 +89,13 @@ def lever_arm(b: Baseline, s: SensorData) -> np.ndarray | None:
         return None
     m = np.nan_to_num(s.params.misalignment)
     z = np.zeros((len(w), 3, 3))
-    for j in range(3):
-        e = np.zeros(3)
-        e[j] = 1.0
-        extra = np.cross(w, np.cross(w, e)) + np.cross(alpha, e)  # w x (w x r) + alpha x r per unit r_j
-        z[:, :, j] = extra @ m.T
+    for lo in range(0, len(w), _PIECE):  # a piece at a time: no (n, 3) temporaries (the same numbers)
+        wp, ap = w[lo:lo + _PIECE], alpha[lo:lo + _PIECE]
+        for j in range(3):
+            e = np.zeros(3)
+            e[j] = 1.0
+            extra = np.cross(wp, np.cross(wp, e)) + np.cross(ap, e)  # w x (w x r) + alpha x r per unit r_j
+            z[lo:lo + _PIECE, :, j] = extra @ m.T
     return z
 
 
@@ -145,21 +147,36 @@ def attitude(b: Baseline) -> np.ndarray | None:
         return None
     roll, pitch = POSE_ANGLES_DEG[start[0]]
     r0 = rotation_matrices(np.array(roll * _DEG), np.array(pitch * _DEG), np.array(0.0)).reshape(3, 3)
-    w = np.nan_to_num(session.ref_gyro_radps)
-    dt = np.diff(session.t_s, prepend=session.t_s[0])
+    quat = _increments(session.t_s, session.ref_gyro_radps)
+    d = 1
+    n = len(quat)
+    while d < n:
+        quat = np.concatenate([quat[:d], _quat_mul(quat[:-d], quat[d:])])
+        d *= 2
+    # the (n, 3, 3) result filled a piece at a time: the matrices of the whole record and their temporaries
+    # held it several times over (elementwise per sample: the same numbers)
+    out = np.empty((n, 3, 3))
+    for lo in range(0, n, _PIECE):
+        out[lo:lo + _PIECE] = np.einsum("ij,njk->nik", r0, _quat_matrix(quat[lo:lo + _PIECE]))
+    return out
+
+
+#: Samples per piece of :func:`attitude`'s rotation matrices.
+_PIECE = 1 << 16
+
+
+def _increments(t_s: np.ndarray, rate: np.ndarray) -> np.ndarray:
+    """Per-sample body-frame rotation increments ``exp([w dt]x)`` (n, 4), scalar last, of the rate reference
+    (rad/s, NaN -> 0; trapezoid rate over each interval)."""
+    w = np.nan_to_num(rate)
+    dt = np.diff(t_s, prepend=t_s[0])
     wm = w.copy()
     wm[1:] = 0.5 * (w[1:] + w[:-1])  # trapezoid rate over each interval
     rotvec = wm * dt[:, None]
     angle = np.linalg.norm(rotvec, axis=1, keepdims=True)
     # sin(a/2)/a, with its limit 1/2 - a^2/48 for small a
     half = np.where(angle > 1e-6, np.sin(0.5 * angle) / np.where(angle > 1e-6, angle, 1.0), 0.5 - angle**2 / 48.0)
-    quat = np.concatenate([rotvec * half, np.cos(0.5 * angle)], axis=1)
-    d = 1
-    n = len(dt)
-    while d < n:
-        quat = np.concatenate([quat[:d], _quat_mul(quat[:-d], quat[d:])])
-        d *= 2
-    return np.einsum("ij,njk->nik", r0, _quat_matrix(quat))
+    return np.concatenate([rotvec * half, np.cos(0.5 * angle)], axis=1)
 
 
 def earth_rotation(b: Baseline, s: SensorData) -> np.ndarray | None:

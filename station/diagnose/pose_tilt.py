@@ -377,6 +377,12 @@ def build(baseline: Baseline, sd: SensorData) -> np.ndarray | None:
 _CACHE: weakref.WeakKeyDictionary[Baseline, tuple[SensorData, np.ndarray | None]] = weakref.WeakKeyDictionary()
 
 
+def release(baseline: Baseline) -> None:
+    """Drop the regressors :func:`build` keeps for ``baseline`` (the largest array of a long diagnosis, (n, 3, p)):
+    for a caller that needs no more of them; a later :func:`build` makes them again."""
+    _CACHE.pop(baseline, None)
+
+
 def specific_force_change(baseline: Baseline, sd: SensorData, theta: np.ndarray) -> np.ndarray:
     """What fitted tilts ``theta`` (rad, order of :func:`build`) change in the true specific force,
     sensor frame (m/s^2), (n, 3): ``f_ref x phi`` in each pose's samples, zero elsewhere. Adding it to
@@ -465,6 +471,6 @@ PARAMETERS: tuple[str, ...] = _parameter_names()
 
 __all__ = [
     "ALIGN_COS", "DESCRIPTION", "NAME", "PARAMETERS", "RIG_STEP", "SENSORS", "VARIANTS", "build", "build_variant",
-    "choose_variant", "engineering", "pose_groups", "rig_places",
+    "choose_variant", "engineering", "pose_groups", "release", "rig_places",
     "specific_force_change", "theta_of",
 ]

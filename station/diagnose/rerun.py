@@ -41,12 +41,14 @@ Pure numerics, no I/O.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from station.diagnose import pose_tilt
 from station.diagnose.candidates import attitude
 from station.diagnose.effect_registry import EFFECTS, REGISTRY, simulator_input
 from station.diagnose.residuals import SENSORS, Baseline, SensorData
@@ -58,6 +60,9 @@ from station.physics.effects import EffectShapes, EffectTruth
 from station.physics.imu import Environment, ImuModel
 from station.physics.unit import TriadTruth, UnitTruth
 from station.session.model import Kind
+
+#: Samples the simulator renders at a time (a chunk ends at the first sample after this many outside every block).
+CHUNK = 1 << 18
 
 #: Effects with a mean signal and a simulator mapping: simulated with their fitted parameters.
 SIMULATED = tuple(e.name for e in EFFECTS if e.simulate is not None)
@@ -114,8 +119,8 @@ class ModelRun:
         triads: the base-model parameters after the block re-fit, per sensor.
         effect_truth: the simulator's effect coefficients (SI).
         time_offset_s: per sensor, the time offset applied (s).
-        output: per sensor, the simulated output (n, 3) (m/s^2 or rad/s); None when the final re-fit was
-            applied to the block residual only (see :func:`run_model`).
+        output: per sensor, the block means of the simulated output (m, 3) (m/s^2 or rad/s); None when the
+            final re-fit was applied to the block residual only (see :func:`run_model`).
         block_residual: per sensor, recording minus simulation per block (m, 3).
 
     Runs of a single finding (``Rerun.alone``) hold only that finding's sensor.
@@ -232,16 +237,25 @@ def _effect_truth(
     """The simulator's coefficients (SI) for the base gyro G plus ``effects`` (each by its registry entry's
     simulator mapping), the time offset per sensor, and the change of the true specific force (m/s^2, (n, 3))
     by fitted pose tilts (None without)."""
+    effects = list(effects)
     acc = simulator_input(drive.baseline, lambda: drive.rotation() is not None,
-                          [(e.effect, e.sensor, e.theta) for e in effects])
+                          [(e.effect, e.sensor, e.theta) for e in effects if e.effect != pose_tilt.NAME])
+    for e in effects:  # the registry's pose-tilt mapping, its (n, 3) force made once per theta (Drive.tilt_force)
+        if e.effect == pose_tilt.NAME:
+            acc.tilt_force = drive.tilt_force(e.theta)
     return acc.truth(), acc.time_offset_s, acc.tilt_force
 
 
 class Drive:
     """What the recording imposes on the simulator: rig motion, temperature course, time stamps.
 
-    Built once per recording; the attitude (only the Earth rate needs it) and the motion per time
-    offset are computed on first use and kept.
+    Built once per recording; the attitude (only the Earth rate needs it) is computed on first use and
+    kept. The simulator renders the recording in time chunks of about :data:`CHUNK` samples, cut between
+    blocks, and each chunk is reduced to its blocks' sums before the next one is rendered: the motion and the
+    output exist for one chunk at a time, never for the whole recording. The chunked render is bit-identical to
+    one render of the whole (``ImuModel.render`` continues the last call; the noise-free model is elementwise
+    in time, eq. 3's warm-up taken from absolute time), and so are the block means (each block summed as one
+    piece, in sample order).
     """
 
     def __init__(self, baseline: Baseline) -> None:
@@ -255,7 +269,8 @@ class Drive:
         self.t0_degc = float(finite[0]) if len(finite) else 0.0
         self.environment = Environment(ambient_degc=self.t0_degc, ambient_rate_k_per_s=0.0)
         self._rotation: tuple[np.ndarray | None] | None = None
-        self._motion: dict[tuple[float, bool], tuple[Kinematics, np.ndarray]] = {}
+        self._tilt: dict[bytes, np.ndarray] = {}
+        self._cuts: list[int] | None = None
         self._block_index: dict[str, tuple[np.ndarray, np.ndarray | None]] = {}
         self._recorded: dict[str, np.ndarray] = {}
         self._ref_cols: dict[str, np.ndarray] = {}
@@ -272,28 +287,81 @@ class Drive:
             self._rotation = (attitude(self.baseline),)
         return self._rotation[0]
 
-    def motion(self, delta_s: float, need_rotation: bool) -> tuple[Kinematics, np.ndarray]:
-        """Kinematics and specific force (m/s^2) from the recording's references, read at ``t - delta_s``."""
-        key = (delta_s, need_rotation)
-        if key in self._motion:
-            return self._motion[key]
+    def tilt_force(self, theta: np.ndarray) -> np.ndarray:
+        """The change of the true specific force (m/s^2, (n, 3)) by the fitted pose tilts ``theta``
+        (:func:`station.diagnose.pose_tilt.specific_force_change`), made once per ``theta`` and kept."""
+        key = np.asarray(theta, dtype=float).tobytes()
+        if key not in self._tilt:
+            self._tilt[key] = pose_tilt.specific_force_change(self.baseline, self.baseline.accel, theta)
+        return self._tilt[key]
+
+    def _reference(self, values: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """``values`` (n, 3) with NaN -> 0, linearly interpolated at times ``x`` (increasing), as
+        ``np.interp(x, t, nan_to_num(values[:, k]))`` of the whole record, from the rows around ``x`` only."""
+        t = self.baseline.session.t_s
+        lo = max(int(np.searchsorted(t, x[0], side="right")) - 3, 0)
+        hi = min(int(np.searchsorted(t, x[-1], side="left")) + 3, len(t))
+        v = np.nan_to_num(values[lo:hi])
+        return np.column_stack([np.interp(x, t[lo:hi], v[:, k]) for k in range(3)])
+
+    def motion(self, delta_s: float, need_rotation: bool, a: int, b: int) -> tuple[Kinematics, np.ndarray]:
+        """Kinematics and specific force (m/s^2) of samples ``a:b`` from the recording's references, read at
+        ``t - delta_s`` (the angular acceleration is the time derivative of the whole record's rate, taken
+        with a neighbour sample on each side of the chunk)."""
         session = self.baseline.session
         t = session.t_s
-        f = np.nan_to_num(session.ref_accel_mps2)
-        w = np.nan_to_num(session.ref_gyro_radps)
+        n = len(t)
+        a0, b0 = max(a - 1, 0), min(b + 1, n)  # one neighbour each side: np.gradient's central differences
+        tc = t[a0:b0]
         if delta_s != 0.0:
-            f = np.column_stack([np.interp(t - delta_s, t, f[:, k]) for k in range(3)])
-            w = np.column_stack([np.interp(t - delta_s, t, w[:, k]) for k in range(3)])
-        alpha = np.gradient(w, t, axis=0) if len(t) > 1 else np.zeros_like(w)
+            f = self._reference(session.ref_accel_mps2, tc - delta_s)
+            w = self._reference(session.ref_gyro_radps, tc - delta_s)
+        else:
+            f = np.nan_to_num(session.ref_accel_mps2[a0:b0])
+            w = np.nan_to_num(session.ref_gyro_radps[a0:b0])
+        alpha = np.gradient(w, tc, axis=0) if n > 1 else np.zeros_like(w)
+        keep = slice(a - a0, a - a0 + (b - a))
+        f, w, alpha = f[keep], w[keep], alpha[keep]
         rot = self.rotation() if need_rotation else None
         if rot is None:
             # only row 2 ('up' in the sensor frame) is ever read: by the vertical Earth rate
             norm = np.linalg.norm(f, axis=1)
             up = np.divide(f, norm[:, None], out=np.zeros_like(f), where=norm[:, None] > 0)
-            rot = np.zeros((len(t), 3, 3))
+            rot = np.zeros((b - a, 3, 3))
             rot[:, 2, :] = up
-        self._motion[key] = (Kinematics(t, rot, w, alpha), f)
-        return self._motion[key]
+        else:
+            rot = rot[a:b]
+        return Kinematics(t[a:b], rot, w, alpha), f
+
+    def cuts(self) -> list[int]:
+        """Sample positions ``0 = c_0 < c_1 < ... = n`` of the render chunks: about :data:`CHUNK` samples apart,
+        none inside a block of either sensor; ``[0, n]`` when a sensor's blocks do not run in sample order."""
+        if self._cuts is None:
+            n = len(self.baseline.session)
+            spans = []  # per sensor: first and last kept sample of each block
+            for s in SENSORS:
+                idx, starts = self._blocks(s)
+                if starts is None:
+                    self._cuts = [0, n]
+                    return self._cuts
+                ends = np.append(starts[1:], len(idx)) - 1
+                spans.append((idx[starts], idx[ends]))
+            cuts = [0]
+            while n - cuts[-1] > CHUNK:
+                p = cuts[-1] + CHUNK
+                moved = True
+                while moved:  # to the first position no block straddles (a block holds samples on both sides)
+                    moved = False
+                    for first, last in spans:
+                        j = int(np.searchsorted(first, p, side="left")) - 1  # the last block starting before p
+                        if j >= 0 and last[j] >= p:
+                            p, moved = int(last[j]) + 1, True
+                if p >= n:
+                    break
+                cuts.append(p)
+            cuts.append(n)
+            self._cuts = cuts
+        return self._cuts
 
     def _blocks(self, sensor: str) -> tuple[np.ndarray, np.ndarray | None]:
         """Kept sample indices of ``sensor``'s blocks and, when the labels run in sample order (as
@@ -313,17 +381,32 @@ class Drive:
     def block_mean(self, sensor: str, values: np.ndarray) -> np.ndarray:
         """Mean of per-sample ``values`` (n, 3) over each block of ``sensor`` (m, 3)."""
         sd = self.baseline.sensor(sensor)
-        idx, starts = self._blocks(sensor)
-        if starts is None:
+        if self._blocks(sensor)[1] is None:
             return sd.block_mean(values)
-        return np.add.reduceat(values[idx], starts, axis=0) / sd.count[:, None]
+        cuts = self.cuts()
+        sums = [self._block_sums(sensor, values[a:b], a, b) for a, b in itertools.pairwise(cuts)]
+        return np.concatenate(sums) / sd.count[:, None]
+
+    def _block_sums(self, sensor: str, values: np.ndarray, a: int, b: int) -> np.ndarray:
+        """Sums over each block of ``sensor`` that starts in samples ``a:b`` of ``values`` (those samples, (b - a, 3));
+        ``a`` and ``b`` are :meth:`cuts` (no block crosses them)."""
+        idx, starts = self._blocks(sensor)
+        assert starts is not None
+        first = idx[starts]
+        j0, j1 = np.searchsorted(first, [a, b], side="left")
+        if j0 == j1:
+            return np.zeros((0, values.shape[1]))
+        k0 = starts[j0]
+        k1 = starts[j1] if j1 < len(starts) else len(idx)
+        return np.add.reduceat(values[idx[k0:k1] - a], starts[j0:j1] - k0, axis=0)
 
     def residual(self, sensor: str, simulated: np.ndarray) -> np.ndarray:
-        """Recording minus ``simulated`` (n, 3) per block of ``sensor`` (m, 3)."""
+        """Recording minus the simulation per block of ``sensor`` (m, 3), the simulation given by its block means
+        (m, 3) (:meth:`simulate`)."""
         if sensor not in self._recorded:
             s = self.baseline.session
             self._recorded[sensor] = self.block_mean(sensor, s.accel_mps2 if sensor == "accel" else s.gyro_radps)
-        return self._recorded[sensor] - self.block_mean(sensor, simulated)
+        return self._recorded[sensor] - simulated
 
     def ref_columns(self, sensor: str) -> np.ndarray:
         """Block means of the rig reference columns that vary between blocks (M row terms), (m, j)."""
@@ -352,9 +435,9 @@ class Drive:
         self, triads: dict[str, Triad], effect_truth: EffectTruth, time_offset_s: dict[str, float],
         sensors: Sequence[str] = SENSORS, tilt_force: np.ndarray | None = None,
     ) -> dict[str, np.ndarray]:
-        """Noise-free simulator output (n, 3) of ``sensors`` on the recording's motion, temperature and time
-        stamps; one render per distinct time offset among them. ``tilt_force``: added to the specific
-        force (m/s^2, (n, 3)), the fitted pose tilts."""
+        """Block means (m, 3) of the noise-free simulator output of ``sensors`` on the recording's motion,
+        temperature and time stamps; one render per distinct time offset among them, in chunks (see the class).
+        ``tilt_force``: added to the specific force (m/s^2, (n, 3)), the fitted pose tilts."""
         session = self.baseline.session
         z3 = np.zeros(3)
         shapes = EffectShapes(z3, z3, z3, z3, np.zeros((3, 3)), z3, z3, z3, z3, z3)
@@ -363,15 +446,28 @@ class Drive:
                          shapes=shapes)
         need_rotation = bool(np.any(effect_truth.earth_rate_radps))
         out: dict[str, np.ndarray] = {}
+        cuts = self.cuts()
+        whole = len(cuts) == 2
         for delta in sorted({time_offset_s[s] for s in sensors}):
             model = ImuModel(unit, effect_truth=effect_truth, environment=self.environment,
                              temperature_degc=self.temperature)
-            kin, f = self.motion(delta, need_rotation)
-            raw = model.render(kin, session.gravity_mps2,
-                               specific_force_mps2=f if tilt_force is None else f + tilt_force)
-            for s in sensors:
-                if time_offset_s[s] == delta:
-                    out[s] = raw.accel_mps2 if s == "accel" else raw.gyro_radps
+            mine = [s for s in sensors if time_offset_s[s] == delta]
+            sums: dict[str, list[np.ndarray]] = {s: [] for s in mine}
+            for a, b in itertools.pairwise(cuts):
+                kin, f = self.motion(delta, need_rotation, a, b)
+                raw = model.render(kin, session.gravity_mps2,
+                                   specific_force_mps2=f if tilt_force is None else f + tilt_force[a:b])
+                del kin, f
+                for s in mine:
+                    y = raw.accel_mps2 if s == "accel" else raw.gyro_radps
+                    if whole:  # one chunk: the blocks may not run in sample order
+                        out[s] = self.block_mean(s, y)
+                    else:
+                        sums[s].append(self._block_sums(s, y, a, b))
+                del raw
+            if not whole:
+                for s in mine:
+                    out[s] = np.concatenate(sums[s]) / self.baseline.sensor(s).count[:, None]
         return out
 
 
@@ -472,6 +568,10 @@ def rerun(baseline: Baseline, findings: Iterable[FittedEffect], *, refit: bool =
             reason = effect.not_simulated if effect is not None else "no simulator counterpart"
             skipped.append({"effect": e.effect, "sensor": e.sensor, "reason": reason})
     drive = Drive(baseline)
+    for e in simulated:  # the pose tilts' force, then the (n, 3, p) regressors it came from can go
+        if e.effect == pose_tilt.NAME:
+            drive.tilt_force(e.theta)
+    pose_tilt.release(baseline)
     base = run_model(drive, "base", [], refit=refit)
     if not simulated:
         return Rerun(baseline, base, base, (), tuple(skipped))
