@@ -43,6 +43,7 @@ TABLES = {
     "stations", "fixture_slots", "units", "runs", "run_units", "step_timings", "limit_checks",
     "parameter_sets", "session_recordings", "eeprom_writes", "dispositions", "rig_locks",
     "quality_parameters", "quality_results", "quality_values", "quality_daily", "quality_yield",
+    "nest_calibrations", "golden_units", "golden_checks", "rack_recordings",
 }
 RUNS_PER_STATION = 100
 

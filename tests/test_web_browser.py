@@ -33,6 +33,7 @@ from station.store import Recorder, open_database  # noqa: E402
 from station.web.app import create_app  # noqa: E402
 from station.web.serve import ServerThread  # noqa: E402
 from station.web.state import LiveStatus  # noqa: E402
+from tests.browser_wait import wait_for  # noqa: E402
 
 CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
                  "--disable-component-update", "--disable-sync", "--no-first-run"]
@@ -58,7 +59,7 @@ def test_status_page_follows_a_run_and_unit_page_shows_plots(tmp_path: Path, bro
     try:
         page = browser.new_page(viewport={"width": 1280, "height": 900})  # type: ignore[attr-defined]
         page.goto(server.url + "/")
-        page.wait_for_function("document.getElementById('conn').textContent === 'live'")
+        wait_for(page, "document.getElementById('conn').textContent === 'live'")
         assert page.text_content("#state") == "idle"
         # record every step name and state the page shows, and mark the document to prove it never reloads
         page.evaluate("""() => {
@@ -77,15 +78,15 @@ def test_status_page_follows_a_run_and_unit_page_shows_plots(tmp_path: Path, bro
 
         worker = threading.Thread(target=run)
         worker.start()
-        page.wait_for_function("document.getElementById('state').textContent === 'running'", timeout=60_000)
-        page.wait_for_function("window.__seen.some(s => s.startsWith('running|pose'))", timeout=60_000)
+        wait_for(page, "document.getElementById('state').textContent === 'running'", timeout=60_000)
+        wait_for(page, "window.__seen.some(s => s.startsWith('running|pose'))", timeout=60_000)
         mid = tmp_path / "status-running.png"
         page.screenshot(path=str(mid), full_page=True)
         worker.join(180.0)
         assert not worker.is_alive()
         res = result["run"]
-        page.wait_for_function("document.getElementById('state').textContent === 'idle'", timeout=30_000)
-        page.wait_for_function("document.querySelectorAll('#recent tbody tr').length === 1", timeout=30_000)
+        wait_for(page, "document.getElementById('state').textContent === 'idle'", timeout=30_000)
+        wait_for(page, "document.querySelectorAll('#recent tbody tr').length === 1", timeout=30_000)
         final = tmp_path / "status-final.png"
         page.screenshot(path=str(final), full_page=True)
         print(f"\nscreenshots: {mid} {final}")
@@ -110,21 +111,21 @@ def test_status_page_follows_a_run_and_unit_page_shows_plots(tmp_path: Path, bro
         serial = fitted[0].serial
         page.goto(f"{server.url}/units/{serial}")
         for name in ("raw_corrected", "drift", "acf", "allan", "residuals"):
-            page.wait_for_function(
+            wait_for(page,
                 f"(() => {{ const i = document.getElementById('plot-{name}'); "
                 f"return i && i.complete && i.naturalWidth > 300; }})()", timeout=60_000)
         assert page.locator("#checks tr").count() > 10
         # the diagnosis section: computed in the background, the page polls until it renders
-        page.wait_for_function("document.getElementById('diagnosis-status').dataset.state === 'ready'",
+        wait_for(page, "document.getElementById('diagnosis-status').dataset.state === 'ready'",
                                timeout=120_000)
-        page.wait_for_function("(() => { const i = document.getElementById('diagnosis-figure'); "
+        wait_for(page, "(() => { const i = document.getElementById('diagnosis-figure'); "
                                "return !i.hidden && i.complete && i.naturalWidth > 300; })()", timeout=60_000)
         assert page.locator("#diagnosis-findings tr").count() > 1 or page.locator("#diagnosis .diag-none").count() == 1
         unit_png = tmp_path / "unit.png"
         page.screenshot(path=str(unit_png), full_page=True)
         assert unit_png.stat().st_size > 10_000
         page.goto(f"{server.url}/population")
-        page.wait_for_function("[...document.querySelectorAll('.grid img')].every(i => i.complete && "
+        wait_for(page, "[...document.querySelectorAll('.grid img')].every(i => i.complete && "
                                "i.naturalWidth > 100) && document.querySelectorAll('.grid img').length > 20",
                                timeout=60_000)
         population_png = tmp_path / "population.png"
@@ -134,12 +135,12 @@ def test_status_page_follows_a_run_and_unit_page_shows_plots(tmp_path: Path, bro
 
         # the connection drops (server restart) and returns: the page reconnects and shows the new state
         page.goto(server.url + "/")
-        page.wait_for_function("document.getElementById('conn').textContent === 'live'")
+        wait_for(page, "document.getElementById('conn').textContent === 'live'")
         server.stop()
-        page.wait_for_function("document.getElementById('conn').className === 'lost'", timeout=30_000)
+        wait_for(page, "document.getElementById('conn').className === 'lost'", timeout=30_000)
         server = ServerThread(create_app(database=db, live=live), port=server.port)
         live.set_fault("rig lost power")
-        page.wait_for_function("document.getElementById('state').textContent === 'fault'", timeout=30_000)
+        wait_for(page, "document.getElementById('state').textContent === 'fault'", timeout=30_000)
         assert "rig lost power" in page.text_content("#message")
         assert page.text_content("#conn") == "live"
         page.goto("about:blank")  # close the event stream before the server stops

@@ -39,6 +39,7 @@ from station.sequence.records import Outcome, RunFinished, RunStarted, UnitFinis
 from station.store import Recorder, open_database  # noqa: E402
 from station.store.models import Run, RunUnit, Unit  # noqa: E402
 from station.store.recorder import record_disposition  # noqa: E402
+from tests.browser_wait import wait_for  # noqa: E402
 
 pytestmark = pytest.mark.integration
 
@@ -150,13 +151,13 @@ def _focused(page: object) -> str:
 
 def _answer_prompt(page: object, kind: str, timeout_ms: int = 60_000) -> str:
     """Wait for the prompt ``kind``, check the confirm button has the focus, press Enter; the prompt's text."""
-    page.wait_for_function(  # type: ignore[attr-defined]
+    wait_for(page,
         f"document.getElementById('prompt').classList.contains('open') && "
         f"document.getElementById('prompt-kind').textContent === '{kind}' && "
         f"document.activeElement.id === 'prompt-confirm'", timeout=timeout_ms)
     text = str(page.text_content("#prompt-text"))  # type: ignore[attr-defined]
     page.keyboard.press("Enter")  # type: ignore[attr-defined]
-    page.wait_for_function(  # type: ignore[attr-defined]
+    wait_for(page,
         f"!document.getElementById('prompt').classList.contains('open') || "
         f"document.getElementById('prompt-kind').textContent !== '{kind}'", timeout=30_000)
     return text
@@ -178,26 +179,26 @@ def test_the_operator_flow_with_the_keyboard_only(line: Line, browser: object) -
     _scan(page, "alice")  # a badge: the name, Enter (the role stays 'operator')
     page.wait_for_selector("#who-name")
     assert page.text_content("#who-name") == "alice" and TOKEN not in page.content()
-    page.wait_for_function("document.getElementById('conn').textContent === 'live'")
+    wait_for(page, "document.getElementById('conn').textContent === 'live'")
     assert _focused(page) == "lot"
     assert page.locator(".nest").count() == 2
 
     _scan(page, "LOT-2026-11")
     assert _focused(page) == "serial-1"
     _scan(page, "hello world!")  # not a serial of this line: refused, the field keeps the focus
-    page.wait_for_function("document.getElementById('scan-msg').textContent.startsWith('Refused')")
+    wait_for(page, "document.getElementById('scan-msg').textContent.startsWith('Refused')")
     assert "not a serial number of this line" in page.text_content("#scan-msg")
     assert _focused(page) == "serial-1"
     _scan(page, "SIM-SCRAPPED")  # the field's text is selected: the next scan replaces it
-    page.wait_for_function("document.getElementById('scan-msg').textContent.includes('scrapped')")
+    wait_for(page, "document.getElementById('scan-msg').textContent.includes('scrapped')")
     assert page.get_attribute("#serial-1", "class") == "serial refused"
     _scan(page, line.serials[0])
-    page.wait_for_function("document.getElementById('serial-1').className === 'serial ok'")
+    wait_for(page, "document.getElementById('serial-1').className === 'serial ok'")
     assert page.input_value("#serial-1") == line.serials[0] and _focused(page) == "serial-2"
     _scan(page, line.serials[0])  # the same unit again, into nest 2
-    page.wait_for_function("document.getElementById('scan-msg').textContent.includes('already scanned into nest 1')")
+    wait_for(page, "document.getElementById('scan-msg').textContent.includes('already scanned into nest 1')")
     _scan(page, line.serials[1])
-    page.wait_for_function("document.activeElement.id === 'start' && !document.getElementById('start').disabled")
+    wait_for(page, "document.activeElement.id === 'start' && !document.getElementById('start').disabled")
 
     # run 1: start, confirm the prompts, watch it go, abort it
     page.keyboard.press("Enter")
@@ -205,7 +206,7 @@ def test_the_operator_flow_with_the_keyboard_only(line: Line, browser: object) -
     assert load == "Load the units into nests 1-2 and plug in their cables."
     lid = _answer_prompt(page, "close lid")
     assert lid.startswith("Close the lid")
-    page.wait_for_function("document.getElementById('step').textContent === 'rest' && "
+    wait_for(page, "document.getElementById('step').textContent === 'rest' && "
                            "document.getElementById('bar-1').style.width !== ''", timeout=60_000)
     remaining = page.text_content("#remaining")
     basis = page.text_content("#basis")
@@ -216,22 +217,22 @@ def test_the_operator_flow_with_the_keyboard_only(line: Line, browser: object) -
     page.screenshot(path=str(shot), full_page=True)
     _tab_to(page, "abort")
     page.keyboard.press("Enter")
-    page.wait_for_function("document.body.dataset.state === 'idle' && "
+    wait_for(page, "document.body.dataset.state === 'idle' && "
                            "document.getElementById('nest-1').dataset.verdict === 'ABORTED'", timeout=60_000)
     for n in (1, 2):
         assert page.text_content(f"#reason-{n}").startswith("Not tested: the run was stopped (aborted by the operator)")
     assert page.locator("#prompt.open").count() == 0  # no unload prompt after an abort
 
     # run 2: the same units (still scanned), to the end
-    page.wait_for_function("!document.getElementById('start').disabled")
+    wait_for(page, "!document.getElementById('start').disabled")
     _tab_to(page, "start")
     page.keyboard.press("Enter")
     _answer_prompt(page, "load")
     _answer_prompt(page, "close lid")
-    page.wait_for_function("document.getElementById('step').textContent.startsWith('pose')", timeout=60_000)
+    wait_for(page, "document.getElementById('step').textContent.startsWith('pose')", timeout=60_000)
     unload = _answer_prompt_later(page, line)
     assert unload.startswith("Open the lid and unload nest 1: ") and "nest 2: " in unload
-    page.wait_for_function("document.body.dataset.state === 'idle' && "
+    wait_for(page, "document.body.dataset.state === 'idle' && "
                            "document.getElementById('serial-1').value === '' && "
                            "document.activeElement.id === 'serial-1'", timeout=30_000)
     verdicts = [page.get_attribute(f"#nest-{n}", "data-verdict") for n in (1, 2)]
@@ -263,7 +264,7 @@ def test_the_operator_flow_with_the_keyboard_only(line: Line, browser: object) -
 def _answer_prompt_later(page: object, line: Line) -> str:
     """The unload prompt comes after the fits, the EEPROM writes and the verification: wait long, take a
     screenshot of it at 1920 px, confirm."""
-    page.wait_for_function(  # type: ignore[attr-defined]
+    wait_for(page,
         "document.getElementById('prompt-kind').textContent === 'unload' && "
         "document.getElementById('prompt').classList.contains('open')", timeout=300_000)
     page.screenshot(path=str(SHOTS / "operator-console-1920-unload.png"), full_page=True)  # type: ignore[attr-defined]

@@ -495,7 +495,8 @@ class FitQuality:
             v = d.get(name)
             if v is not None and not isinstance(v, dict):
                 raise TypeError(f"'quality.{name}' must be an object")
-            return None if v is None else json.loads(json.dumps(v))
+            # a section kept as JSON must be writable again: NaN and infinity are refused here, not at the next save
+            return None if v is None else json.loads(json.dumps(v, allow_nan=False))
 
         def per_triad(name: str) -> dict[str, list[Any]] | None:
             v = section(name)
@@ -532,7 +533,7 @@ class FitQuality:
             determinability_rule="" if det is None else str(det.get("rule", "")),
             undetermined=() if det is None else tuple(Undetermined.from_dict(u) for u in det.get("undetermined", [])),
             record_end_s=math.nan if end is None else float(end),
-            extra=json.loads(json.dumps({k: v for k, v in d.items() if k not in cls._KNOWN})),
+            extra=json.loads(json.dumps({k: v for k, v in d.items() if k not in cls._KNOWN}, allow_nan=False)),
         )
 
 
