@@ -33,13 +33,14 @@ from typing import Any
 import numpy as np
 from scipy import linalg
 
-from station.diagnose import bootstrap, consistency, robust
+from station.diagnose import bootstrap, consistency, locator, retest, robust
 from station.diagnose.candidates import MAX_DELAY_S, delay_regressor
 from station.diagnose.likelihood import RCOND, WANDER_LIKE, SensorProblem, Test
 from station.diagnose.registry import LIBRARY, REGISTRY, RIG_STEPS
 from station.diagnose.reporting import AX, detectable_from, finding, outlier_test
 from station.diagnose.residuals import SENSORS, Baseline, SensorData
 from station.diagnose.results import Finding, Inseparable, Rejection
+from station.session.model import Kind
 
 #: Two candidates are inseparable when each one's fitted signal is explained this well (R^2) by the other.
 COLLINEAR_R2 = 0.9
@@ -68,7 +69,7 @@ class Decision:
     findings: tuple[Finding, ...]
     rejected: tuple[Rejection, ...]
     inseparable: tuple[Inseparable, ...]
-    unexplained: tuple[robust.Unexplained, ...] = ()
+    unexplained: tuple[robust.Unexplained | locator.Located, ...] = ()
 
 
 def _r2(signal: np.ndarray, span: np.ndarray) -> float:
@@ -111,7 +112,7 @@ def select(baseline: Baseline, *, max_effects: int = 4,
     findings: list[dict[str, Any]] = []
     rejected: list[dict[str, Any]] = []
     inseparable: list[dict[str, Any]] = []
-    unexplained: list[robust.Unexplained] = []
+    unexplained: list[robust.Unexplained | locator.Located] = []
     for sensor in SENSORS:
         sd = baseline.sensor(sensor)
         prob = SensorProblem(baseline, sd)
@@ -253,6 +254,29 @@ def select(baseline: Baseline, *, max_effects: int = 4,
             if _round == AUDIT_ROUNDS - 1:
                 unexplained.extend(robust.audit(prob, baseline, names, regs, walk,
                                                 _fitted_samples(prob, baseline, sd, names, tau)).unexplained)
+        # the locator (locator.py): the final model with the stochastic terms at the sensor class's values; an
+        # effect standing in for what it locates is rejected, then the location is taken again without it
+        for _round in range(2):
+            mine_cells = {(int(k), "xyz".index(a)) for u in unexplained if u.sensor == sensor
+                          for a in u.axes for k in _kind_codes(u.segment_kinds)}
+            located = locator.locate(prob, baseline, names, extra_cells=mine_cells,
+                                     fitted=_fitted_samples(prob, baseline, sd, names, tau))
+            if located is None:
+                break
+            unexplained = [u for u in unexplained if u.sensor != sensor] + [located]
+            gone = set(located.stand_ins)
+            if not gone:
+                break
+            for name in sorted(gone):
+                rejected.append({"effect": name, "sensor": sensor, "reason": "a stand-in: most of its fitted signal "
+                                 "lies where the class-frozen model locates structure (see unexplained)"})
+            keep = [i for i, n in enumerate(names) if n not in gone]
+            prob.accepted = [prob.accepted[i] for i in keep]
+            names = [names[i] for i in keep]
+            mine = [f for f in mine if f["effect"] not in gone]
+            prob.refit_drift()
+        fitted_final = _fitted_samples(prob, baseline, sd, names, tau)
+        size_checks = retest.sizes(prob, names, {f["effect"]: f["_theta"] for f in mine if "_theta" in f})
         boot = (bootstrap.bootstrap(prob, names, {n: c["threshold"] for n, c in confidence.items()},
                                     robust.dispersion(prob)[0], resamples=resamples, seed=seed)
                 if names and resamples else {})
@@ -264,6 +288,12 @@ def select(baseline: Baseline, *, max_effects: int = 4,
                 conf["bootstrap_accepted_fraction"] = boot[f["effect"]].accepted_fraction
                 f["bootstrap"] = boot[f["effect"]]
             f["consistency"] = checks.get(f["effect"]) or consistency.not_checked(f["effect"], sensor)
+            size = size_checks.get(f["effect"])
+            if size is not None:  # its size under the final model (retest.py): a spread beyond its std caps it
+                f["evidence"]["retest"] = size.to_dict()
+                if size.change_over_std > retest.SPREAD_STD and conf.get("level") == "high":
+                    conf["level"] = "medium"
+                    conf["capped_by"] = "retest: its size changes by more than its uncertainty between fits"
         findings.extend(mine)
         for t in last.values():
             entry: dict[str, Any] = {"effect": t.effect, "sensor": sensor, "gain": round(t.gain, 3),
@@ -293,7 +323,8 @@ def select(baseline: Baseline, *, max_effects: int = 4,
                                  "note": "the temperature course has the shape of a warm-up exp(-t/T_c) here"},
                     "rig_step": RIG_STEPS["temperature_bias"],
                 })
-        out = outlier_test(sd)
+        # counted again on the residual of the final model (retest.py), not the base fit's
+        out = outlier_test(retest.recount_outliers(baseline.session, sd, fitted_final))
         if any(u.sensor == sensor for u in unexplained):
             # structure no candidate explains: effects named for it are stand-ins (robust.py)
             for item in [i for i in inseparable
@@ -318,6 +349,11 @@ def select(baseline: Baseline, *, max_effects: int = 4,
     # the selection works on report entries; its result is typed
     return Decision(tuple(Finding.from_entry(f) for f in findings), tuple(Rejection.from_entry(r) for r in rejected),
                     tuple(Inseparable.from_entry(i) for i in inseparable), tuple(unexplained))
+
+
+def _kind_codes(labels: Collection[str]) -> list[int]:
+    """Segment-kind codes of the labels (rest, pose, rate, move)."""
+    return [int(k) for k in Kind if k.label in labels]
 
 
 def _wander_or_temperature(last: Mapping[str, Test], walk: Test | None) -> dict[str, Any] | None:
