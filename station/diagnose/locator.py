@@ -25,7 +25,9 @@ else treats as a symptom. Here, per sensor, after the selection:
    its increments are Gaussian; a bias that jumps between levels (telegraph) has a few increments of the
    0.5 s window means in the still and rate-hold segments beyond 6 robust sigmas (:func:`_jumps`);
    otherwise "none".
-4. **Stand-ins.** An accepted effect whose fitted signal lies mostly (:data:`STAND_IN_SHARE`) in the
+4. **Empirical model** per flagged axis (:mod:`station.diagnose.empirical`): a sparse model over the covariate
+   dictionary chosen on held-out segments, reported as "empirical, not in the library".
+5. **Stand-ins.** An accepted effect whose fitted signal lies mostly (:data:`STAND_IN_SHARE`) in the
    located cells of its sensor stands in for that structure: the selection rejects it.
 
 The results are typed (:class:`Located`, frozen, with ``to_dict``/``to_json``); the report lists them under
@@ -42,7 +44,10 @@ from typing import Any
 import numpy as np
 from scipy import linalg, stats
 from scipy.ndimage import uniform_filter1d
+from scipy.signal import lfilter
 
+from station.diagnose import empirical
+from station.diagnose.empirical import EmpiricalModel
 from station.kernel.sensor_class import TABLE1, SensorClass
 from station.session.model import Kind
 
@@ -113,6 +118,7 @@ class Located:
     q_over_class: tuple[float, ...]  # fitted q / class bound per axis (> 1: the free fit stretched it)
     tests: tuple[CovariateTest, ...]
     stand_ins: tuple[str, ...] = ()
+    empirical: tuple[EmpiricalModel, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
         return {"sensor": self.sensor, "axes": list(self.axes), "segment_kinds": list(self.segment_kinds),
@@ -123,7 +129,8 @@ class Located:
                             "covariate_per_axis": dict(self.covariates),
                             "q_over_class": [round(v, 3) for v in self.q_over_class],
                             "tests": [t.to_dict() for t in self.tests],
-                            "stand_ins_rejected": list(self.stand_ins)}}
+                            "stand_ins_rejected": list(self.stand_ins)},
+                "empirical": [e.to_dict() for e in self.empirical]}
 
     def to_json(self) -> str:
         return json.dumps(self.to_dict(), sort_keys=True)
@@ -135,20 +142,9 @@ def _smooth_derivative(x: np.ndarray, fs: float) -> np.ndarray:
     return np.gradient(uniform_filter1d(x, size=w, axis=0, mode="nearest"), 1.0 / fs, axis=0)
 
 
-def _since_last_step(session: Any, rate: np.ndarray) -> np.ndarray:
-    """Time (s) since the end of the last change of the rate reference's magnitude (inf before the first)."""
-    fs = session.sample_rate_hz
-    mag = np.linalg.norm(rate, axis=1)
-    changing = np.abs(_smooth_derivative(mag, fs)) > 5.0 * math.pi / 180.0  # > 5 deg/s^2: a ramp
-    idx = np.arange(len(mag))
-    last = np.where(changing, idx, -1)
-    last = np.maximum.accumulate(last)
-    out = np.where(last >= 0, (idx - last) / fs, np.inf)
-    return out
-
-
-def covariates(baseline: Any, sd: Any, k: int) -> dict[str, np.ndarray]:
-    """Block-mean physical covariates for axis ``k`` of ``sd`` (m,), by name."""
+def covariates(baseline: Any, sd: Any, k: int, *, extended: bool = False) -> dict[str, np.ndarray]:
+    """Block-mean physical covariates for axis ``k`` of ``sd`` (m,), by name; ``extended``: also the rate
+    components' products, the time since power-on and the table's spin phase (the empirical models')."""
     session = baseline.session
     fs = session.sample_rate_hz
     rate = np.nan_to_num(session.ref_gyro_radps)
@@ -171,13 +167,21 @@ def covariates(baseline: Any, sd: Any, k: int) -> dict[str, np.ndarray]:
         dtemp = _smooth_derivative(temp, fs)
         scale = max(float(np.percentile(np.abs(dtemp), 90)), 1e-12)
         out["temperature direction (heating vs cooling: hysteresis)"] = np.tanh(dtemp / (0.2 * scale))
-    since = _since_last_step(session, rate)
-    if np.isfinite(since).any():
+    # a kick after each rate step, by the step's size, decaying: |d|w|/dt| through a first-order lag
+    step = np.abs(_smooth_derivative(mag, fs))
+    if np.any(step > 0):
         for tau in KICK_TAU_S:
-            out[f"time since the last rate step (decay {tau:g} s)"] = np.where(np.isfinite(since),
-                                                                               np.exp(-since / tau), 0.0)
+            out[f"time since the last rate step (decay {tau:g} s, by the step's size)"] = lfilter(
+                [1.0 / fs], [1.0, -math.exp(-1.0 / (fs * tau))], step)
     du = _smooth_derivative(sd.u[:, k], fs)
     out["delay growing with time (sample clock rate)"] = -du * t
+    if extended:
+        for i, j in ((0, 1), (0, 2), (1, 2)):
+            out[f"rate {AX[i]} * rate {AX[j]}"] = rate[:, i] * rate[:, j]
+        out["time since power-on"] = t
+        angle = np.concatenate([[0.0], np.cumsum(0.5 * (mag[1:] + mag[:-1]) * np.diff(t))])
+        out["spin phase cos"] = np.cos(angle)
+        out["spin phase sin"] = np.sin(angle)
     return {name: sd.block_mean(v) for name, v in out.items() if np.ptp(v) > 0}
 
 
@@ -244,6 +248,7 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
         # --- covariate per axis ---
         tests: list[CovariateTest] = []
         chosen: list[tuple[str, str]] = []
+        models: list[EmpiricalModel] = []
         for k in axes:
             rows = slice(k * m, (k + 1) * m)
             xk = x[rows]
@@ -273,6 +278,9 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
                 if count >= JUMP_MIN and count >= JUMP_MIN_SHARE * total:
                     best = ("two-level", float(count), 0.0)
             chosen.append((AX[k], best[0]))
+            models.append(empirical.fit(sd.sensor, AX[k], prob.y[:, k] - _mean_fit(prob, beta, nbase, k),
+                                        1.0 / prob.white[:, k], sd.segment,
+                                        covariates(baseline, sd, k, extended=True)))
         tests.sort(key=lambda t: (not t.name.startswith("jumps"), -t.gain_chi2))
         # --- stand-ins among the accepted effects ---
         stand: list[str] = []
@@ -299,11 +307,24 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
             segment_kinds=tuple(sorted({Kind(c).label for c, _ in cells})), covariate=cov,
             covariates=tuple(chosen), dispersion=table, excess_chi2=excess_all,
             q_over_class=tuple(float(v / c) for v, c in zip(q_fit, q_cls, strict=True)), tests=tuple(tests[:8]),
-            stand_ins=tuple(stand))
+            stand_ins=tuple(stand), empirical=tuple(models))
     finally:
         prob.q = saved_q
         prob._eig_cache.clear()
         prob._eig_cache.update(saved_cache)
+
+
+def _mean_fit(prob: Any, beta: np.ndarray, nbase: int, k: int) -> np.ndarray:
+    """The GLS mean fit of axis k (its base terms and the accepted effects) per block, unwhitened (m,)."""
+    col = sum(b.shape[1] for b in prob.base[:k])
+    nb = prob.base[k].shape[1]
+    out = prob.base[k] @ beta[col:col + nb]
+    c = nbase
+    for zb in prob.accepted:
+        p = zb.shape[2]
+        out = out + zb[:, k, :] @ beta[c:c + p]
+        c += p
+    return np.asarray(out)
 
 
 def _text(name: str) -> str:
