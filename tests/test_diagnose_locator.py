@@ -1,4 +1,4 @@
-"""The mismatch locator, the empirical models and the re-tests of findings (station.diagnose.locator/empirical/retest)."""
+"""The mismatch locator, the empirical models and the re-tests of findings (locator, empirical, retest)."""
 
 from __future__ import annotations
 
@@ -76,10 +76,10 @@ def test_empirical_model_finds_the_planted_covariate_on_held_out_segments() -> N
 
 
 def test_recount_outliers_under_the_final_model() -> None:
+    import gen_outside
+
     from station.diagnose.residuals import fit_baseline
     from station.diagnose.retest import recount_outliers
-
-    import gen_outside
 
     rec = gen_outside.generate(0, "none")
     b = fit_baseline(rec.session)
