@@ -109,6 +109,7 @@ def finding(sd: SensorData, t: Test, before: dict[str, Any], after: dict[str, An
         },
         "_block_residual": (before["block_residual"], after["block_residual"]),
         "_theta": np.array(t.theta, dtype=float),  # fitted SI parameters, for the simulator re-run (rerun.py)
+        "_theta_std": np.sqrt(np.clip(np.diag(t.cov), 0.0, None)),  # their stated uncertainty (retest.py)
     }
 
 

@@ -49,7 +49,7 @@ def recount_outliers(session: Any, sd: SensorData, fitted: np.ndarray) -> Sensor
 
 @dataclass(frozen=True)
 class SizeCheck:
-    """One finding's size in three fits (SI parameters) and its standard deviation in the final free fit."""
+    """One finding's size in three fits (SI parameters) and the uncertainty it is compared with (SI)."""
 
     effect: str
     sensor: str
@@ -82,8 +82,11 @@ def _joint(prob: Any) -> tuple[np.ndarray, np.ndarray, int]:
     return beta, cov, nbase
 
 
-def sizes(prob: Any, names: list[str], reported: dict[str, np.ndarray]) -> dict[str, SizeCheck]:
-    """Per accepted mean effect of ``names`` (with its ``reported`` SI parameters) its :class:`SizeCheck`."""
+def sizes(prob: Any, names: list[str], reported: dict[str, tuple[np.ndarray, np.ndarray | None]]
+          ) -> dict[str, SizeCheck]:
+    """Per accepted mean effect of ``names`` (with its ``reported`` SI parameters and their stated standard
+    deviations, None: unknown) its :class:`SizeCheck`; the uncertainty it is compared with is the larger of the
+    stated one and the final model's."""
     if not names:
         return {}
     beta, cov, nbase = _joint(prob)
@@ -101,10 +104,14 @@ def sizes(prob: Any, names: list[str], reported: dict[str, np.ndarray]) -> dict[
         p = zb.shape[2]
         sl = slice(col, col + p)
         col += p
-        if name.startswith(NUISANCE) or name not in reported or len(reported[name]) != p:
+        if name.startswith(NUISANCE) or name not in reported or len(reported[name][0]) != p:
             continue
-        out[name] = SizeCheck(name, prob.sd.sensor, np.asarray(reported[name], dtype=float), beta[sl].copy(),
-                              beta_c[sl].copy(), np.sqrt(np.clip(np.diag(cov)[sl], 0.0, None)))
+        theta, stated = reported[name]
+        std = np.sqrt(np.clip(np.diag(cov)[sl], 0.0, None))
+        if stated is not None and len(stated) == p:
+            std = np.maximum(std, np.asarray(stated, dtype=float))
+        out[name] = SizeCheck(name, prob.sd.sensor, np.asarray(theta, dtype=float), beta[sl].copy(),
+                              beta_c[sl].copy(), std)
     return out
 
 

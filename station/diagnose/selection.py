@@ -276,7 +276,8 @@ def select(baseline: Baseline, *, max_effects: int = 4,
             mine = [f for f in mine if f["effect"] not in gone]
             prob.refit_drift()
         fitted_final = _fitted_samples(prob, baseline, sd, names, tau)
-        size_checks = retest.sizes(prob, names, {f["effect"]: f["_theta"] for f in mine if "_theta" in f})
+        size_checks = retest.sizes(prob, names, {f["effect"]: (f["_theta"], f.get("_theta_std")) for f in mine
+                                                  if "_theta" in f})
         boot = (bootstrap.bootstrap(prob, names, {n: c["threshold"] for n, c in confidence.items()},
                                     robust.dispersion(prob)[0], resamples=resamples, seed=seed)
                 if names and resamples else {})
