@@ -21,7 +21,9 @@ else treats as a symptom. Here, per sensor, after the selection:
    covariate at a time (:data:`COVARIATES`: the rate and its magnitude, powers, angular acceleration,
    specific force, temperature and its direction, time since the last rate step, a delay growing with
    time); one that takes at least :data:`COVARIATE_SHARE` of the axis's excess chi^2 in its flagged cells,
-   significant at :data:`ALPHA_LOCATED`, is named; otherwise a test of the drift model's own consequence:
+   significant at :data:`ALPHA_LOCATED`, is named; otherwise a term periodic at the rate table's spin
+   frequency when a cos/sin of the table's angle takes that share of the structure inside the rate holds
+   (sample level, :func:`_spin_periodic`); otherwise a test of the drift model's own consequence:
    its increments are Gaussian; a bias that jumps between levels (telegraph) has a few increments of the
    0.5 s window means in the still and rate-hold segments beyond 6 robust sigmas (:func:`_jumps`);
    otherwise "none".
@@ -185,6 +187,37 @@ def covariates(baseline: Any, sd: Any, k: int, *, extended: bool = False) -> dic
     return {name: sd.block_mean(v) for name, v in out.items() if np.ptp(v) > 0}
 
 
+def _spin_periodic(session: Any, sd: Any, residual: np.ndarray, k: int) -> tuple[float, int, float]:
+    """Axis ``k``'s ``residual`` (n, 3) in the rate-table holds against the table's angle (integrated from the
+    rate reference): per hold of at least one turn, the least-squares cos/sin part beside a mean and a trend.
+    Returns (its chi^2 in white-noise units, dof, its share of the holds' structure above the white noise):
+    a term periodic at the spin frequency takes most of it; slow or jumping structure leaves most outside it."""
+    rate = np.nan_to_num(session.ref_gyro_radps)
+    chi = excess = 0.0
+    dof = 0
+    for seg in session.segments():
+        if seg.kind != Kind.RATE or len(seg) < 50:
+            continue
+        sl = seg.slice
+        w = np.linalg.norm(rate[sl], axis=1)
+        t = session.t_s[sl]
+        ang = np.concatenate([[0.0], np.cumsum(0.5 * (w[1:] + w[:-1]) * np.diff(t))])
+        if ang[-1] < 2.0 * math.pi:
+            continue
+        keep = sd.keep[sl]
+        r = residual[sl, k][keep]
+        tt = t[keep] - t[keep].mean()
+        x = np.column_stack([np.ones(len(r)), tt, np.cos(ang[keep]), np.sin(ang[keep])])
+        beta, *_ = np.linalg.lstsq(x, r, rcond=None)
+        left = r - x[:, :2] @ np.linalg.lstsq(x[:, :2], r, rcond=None)[0]
+        per = x[:, 2:] @ beta[2:]
+        var = float(sd.sigma[k]) ** 2
+        chi += float(per @ per) / var
+        excess += max(float(left @ left) - len(r) * var, 0.0) / var
+        dof += 2
+    return chi, dof, (chi / excess if excess > 0 else 0.0)
+
+
 def _jumps(session: Any, residual: np.ndarray, k: int) -> tuple[int, int]:
     """Jumps of axis ``k``'s ``residual`` (n, 3) inside the still and rate-hold segments: (number of increments
     between adjacent :data:`JUMP_WINDOW_S` window means further than :data:`JUMP_SIGMAS` robust sigmas, number
@@ -273,6 +306,11 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
                 if share >= COVARIATE_SHARE and stats.chi2.sf(gain, 1) < ALPHA_LOCATED and gain > best[1]:
                     best = (name, gain, share)
             if best[0] == "none" and fitted is not None:
+                chi, dof, share = _spin_periodic(baseline.session, sd, sd.residual - fitted, k)
+                tests.append(CovariateTest(AX[k], "periodic at the spin frequency", chi, share))
+                if dof and share >= COVARIATE_SHARE and stats.chi2.sf(chi, dof) < ALPHA_LOCATED:
+                    best = ("periodic", chi, share)
+            if best[0] == "none" and fitted is not None:
                 count, total = _jumps(baseline.session, sd.residual - fitted, k)
                 tests.append(CovariateTest(AX[k], "jumps (two-level)", float(count), count / max(total, 1)))
                 if count >= JUMP_MIN and count >= JUMP_MIN_SHARE * total:
@@ -332,6 +370,9 @@ def _text(name: str) -> str:
         return ("none: no covariate of the dictionary (rate, |rate|, rate^2, rate^3, angular acceleration, specific "
                 "force, temperature and its direction, time since the last rate step, a delay growing with time) "
                 f"takes {COVARIATE_SHARE:.0%} of it, and it is not two-level")
+    if name == "periodic":
+        return ("periodic at the rate table's spin frequency: a cos/sin of the table's angle takes most of the "
+                "structure inside the rate holds")
     if name == "two-level":
         return ("two-level: the bias jumps between levels inside still segments (increments far from Gaussian), not "
                 "eq. 3's Gaussian drift, and follows no covariate")
