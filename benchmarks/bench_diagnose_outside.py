@@ -3,8 +3,11 @@
 Per recording: the planted kind, the findings named, and every ``unexplained`` entry (sensor, axes, segment
 kinds, covariate). Per kind: ``right`` = an ``unexplained`` entry at one of the kind's sensors and segment
 kinds (``gen_outside.LOCATION``) and no finding; ``cov`` = right, and every such entry's covariate text names
-what the kind follows (``gen_outside.COVARIATE``; on a null: an unexplained entry that says no covariate); ``unexpl`` = any ``unexplained``; ``named`` = recordings with
-a finding (each a false finding: none of these kinds is in the library). Nulls (``none``, ``ar1_noise``):
+what the kind follows (``gen_outside.COVARIATE``; on a null: an unexplained entry that says no covariate);
+``unexpl`` = any ``unexplained``; ``named`` = recordings with
+a finding (each a false finding: none of these kinds is in the library); ``held-out`` = median over the
+recordings of the empirical model's held-out improvement (best located axis at the kind's sensors).
+Nulls (``none``, ``ar1_noise``):
 ``named`` counts false findings; an ``unexplained`` on a null is listed with its covariate.
 
 Seeds: development used 0-999 (``--base 0``); report seeds start at 50000 and were drawn after the
@@ -61,6 +64,7 @@ def main() -> None:
     kinds = [k for k in args.kinds.split(",") if k]
     stats: dict[str, Counter] = {}
     times: list[float] = []
+    improvements: dict[str, list[float]] = {}
     seed = args.base
     for i in range(args.per):
         for kind in kinds:
@@ -79,6 +83,11 @@ def main() -> None:
             ok = right_place(kind, un) and not named
             st["right"] += ok
             st["cov"] += covariate_right(kind, un) and (ok or kind in gen_outside.NULLS)
+            loc = gen_outside.LOCATION.get(kind)
+            emp = [e["heldout_improvement"] for u in un for e in u.get("empirical", [])
+                   if loc is None or u["sensor"] in loc[0]]
+            if emp:
+                improvements.setdefault(kind, []).append(max(emp))
             where = "; ".join(f"{u['sensor']} {''.join(u['axes'])} {'/'.join(u['segment_kinds'])}: "
                               f"{u['covariate'][:60]}" for u in un) or "-"
             flag = "RIGHT" if ok else ("" if kind in gen_outside.NULLS else "miss")
@@ -87,13 +96,16 @@ def main() -> None:
                   flush=True)
     print()
     print(f"outside-library generator (benchmarks/gen_outside.py), seeds from {args.base}, {args.per} per kind")
-    print(f"{'kind':16s} {'n':>3s} {'right':>6s} {'cov':>4s} {'unexpl':>7s} {'named':>6s}   where it acts")
+    print(f"{'kind':16s} {'n':>3s} {'right':>6s} {'cov':>4s} {'unexpl':>7s} {'named':>6s} {'held-out':>9s}"
+          "   where it acts")
     tot_n = tot_r = null_n = null_named = 0
     for kind, st in stats.items():
         loc = gen_outside.LOCATION.get(kind)
         where = (f"{'/'.join(sorted(loc[0]))} in {'/'.join(sorted(loc[1]))}" if loc else "null (no physics)")
+        imp = improvements.get(kind)
+        held = f"{sorted(imp)[len(imp) // 2]:.2f}" if imp else "-"
         print(f"{kind:16s} {st['n']:3d} {st['right'] if loc else '-':>6} {st['cov']:4d} {st['unexpl']:7d} "
-              f"{st['named']:6d}   {where}")
+              f"{st['named']:6d} {held:>9s}   {where}")
         if loc:
             tot_n += st["n"]
             tot_r += st["right"]
