@@ -51,6 +51,9 @@ def covariate_right(kind: str, unexplained: list[dict]) -> bool:
     words = gen_outside.COVARIATE[kind]
     loc = gen_outside.LOCATION.get(kind)
     mine = [u for u in unexplained if loc is None or (u["sensor"] in loc[0] and set(u["segment_kinds"]) & loc[1])]
+    if loc is not None:  # a "none" text lists the dictionary: it names no covariate
+        return bool(mine) and all(not u["covariate"].startswith("none") and any(w in u["covariate"] for w in words)
+                                  for u in mine)
     return bool(mine) and all(any(w in u["covariate"] for w in words) for u in mine)
 
 
