@@ -121,8 +121,16 @@ class Located:
     tests: tuple[CovariateTest, ...]
     stand_ins: tuple[str, ...] = ()
     empirical: tuple[EmpiricalModel, ...] = ()
+    #: the spin-periodic term where one is named: axes, chi^2 and dof per axis, rms amplitude per axis, unit
+    periodic: dict[str, Any] | None = None
 
     def to_dict(self) -> dict[str, Any]:
+        out = self._entry()
+        if self.periodic:
+            out["periodic"] = self.periodic
+        return out
+
+    def _entry(self) -> dict[str, Any]:
         return {"sensor": self.sensor, "axes": list(self.axes), "segment_kinds": list(self.segment_kinds),
                 "covariate": self.covariate, "dispersion": self.dispersion, "excess_chi2": round(self.excess_chi2, 1),
                 "explained_by": None,
@@ -187,14 +195,15 @@ def covariates(baseline: Any, sd: Any, k: int, *, extended: bool = False) -> dic
     return {name: sd.block_mean(v) for name, v in out.items() if np.ptp(v) > 0}
 
 
-def _spin_periodic(session: Any, sd: Any, residual: np.ndarray, k: int) -> tuple[float, int, float]:
+def _spin_periodic(session: Any, sd: Any, residual: np.ndarray, k: int) -> tuple[float, int, float, float]:
     """Axis ``k``'s ``residual`` (n, 3) in the rate-table holds against the table's angle (integrated from the
     rate reference): per hold of at least one turn, the least-squares cos/sin part beside a mean and a trend.
-    Returns (its chi^2 in white-noise units, dof, its share of the holds' structure above the white noise):
-    a term periodic at the spin frequency takes most of it; slow or jumping structure leaves most outside it."""
+    Returns (its chi^2 in white-noise units, dof, its share of the holds' structure above the white noise, its
+    rms amplitude over the holds in the sensor's SI unit): a term periodic at the spin frequency takes most of
+    the structure; slow or jumping structure leaves most outside it."""
     rate = np.nan_to_num(session.ref_gyro_radps)
-    chi = excess = 0.0
-    dof = 0
+    chi = excess = amp2 = 0.0
+    dof = n_all = 0
     for seg in session.segments():
         if seg.kind != Kind.RATE or len(seg) < 50:
             continue
@@ -215,7 +224,9 @@ def _spin_periodic(session: Any, sd: Any, residual: np.ndarray, k: int) -> tuple
         chi += float(per @ per) / var
         excess += max(float(left @ left) - len(r) * var, 0.0) / var
         dof += 2
-    return chi, dof, (chi / excess if excess > 0 else 0.0)
+        amp2 += float(np.sum(beta[2:] ** 2)) * len(seg)
+        n_all += len(seg)
+    return chi, dof, (chi / excess if excess > 0 else 0.0), math.sqrt(amp2 / max(n_all, 1))
 
 
 def _jumps(session: Any, residual: np.ndarray, k: int) -> tuple[int, int]:
@@ -306,7 +317,7 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
                 if share >= COVARIATE_SHARE and stats.chi2.sf(gain, 1) < ALPHA_LOCATED and gain > best[1]:
                     best = (name, gain, share)
             if best[0] == "none" and fitted is not None:
-                chi, dof, share = _spin_periodic(baseline.session, sd, sd.residual - fitted, k)
+                chi, dof, share, _amp = _spin_periodic(baseline.session, sd, sd.residual - fitted, k)
                 tests.append(CovariateTest(AX[k], "periodic at the spin frequency", chi, share))
                 if dof and share >= COVARIATE_SHARE and stats.chi2.sf(chi, dof) < ALPHA_LOCATED:
                     best = ("periodic", chi, share)
@@ -338,6 +349,12 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
         for c, k in cells:
             sel = sd.kind == c
             excess_all += float(np.sum(z[sel, k] ** 2)) - float(sel.sum())
+        periodic = None
+        if fitted is not None and any(c == "periodic" for _, c in chosen):
+            per = [_spin_periodic(baseline.session, sd, sd.residual - fitted, k) for k in range(3)]
+            factor, unit = (180.0 / math.pi, "deg/s") if sd.sensor == "gyro" else (1.0, "m/s^2")
+            periodic = {"axes": [a for a, c in chosen if c == "periodic"], "chi2": [round(p[0], 1) for p in per],
+                        "dof": per[0][1], "amplitude": [round(p[3] * factor, 6) for p in per], "unit": unit}
         names_used = {c for _, c in chosen}
         cov = _text(chosen[0][1]) if len(names_used) == 1 else "; ".join(f"{a}: {_text(c)}" for a, c in chosen)
         return Located(
@@ -345,7 +362,7 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
             segment_kinds=tuple(sorted({Kind(c).label for c, _ in cells})), covariate=cov,
             covariates=tuple(chosen), dispersion=table, excess_chi2=excess_all,
             q_over_class=tuple(float(v / c) for v, c in zip(q_fit, q_cls, strict=True)), tests=tuple(tests[:8]),
-            stand_ins=tuple(stand), empirical=tuple(models))
+            stand_ins=tuple(stand), empirical=tuple(models), periodic=periodic)
     finally:
         prob.q = saved_q
         prob._eig_cache.clear()
