@@ -21,7 +21,7 @@ import numpy as np
 
 from station.correct import StreamingCorrector, correct_batch
 from station.correct.batch import DEFAULT_CHUNK_ROWS
-from station.fit.params import AllanCoefficients, ParameterSet, TriadParams
+from station.kernel.parameters import AllanCoefficients, ParameterSet, TriadParams
 
 TS = 0.01
 HOUR = 360_000

@@ -53,18 +53,20 @@ def main() -> None:
         for seed in seeds:
             s = _recording(seed, args.random_plan)
             for kind, size in POWER_CASES:
-                hits[(kind, size)] += not fit_session(_contradicted(s, kind, size)).quality["goodness_of_fit"]["passed"]
+                hits[(kind, size)] += not fit_session(_contradicted(s, kind, size)).quality.passed
         for (kind, size), n in hits.items():
             unit = "relative" if kind == "rate" else "m/s^2"
             print(f"{kind} {size:g} {unit}: found in {n}/{len(seeds)}")
         return
     failed, ratio = [], []
     for seed in seeds:
-        verdict = fit_session(_recording(seed, args.random_plan)).quality["goodness_of_fit"]
+        gof = fit_session(_recording(seed, args.random_plan)).quality.goodness_of_fit
+        assert gof is not None
+        verdict = gof.report
         ratio.append(max(max(abs(t["worst_z"]) / verdict["z_limit"],
                              t["chi2"] / t["chi2_limit"] if t["chi2_limit"] else 0.0) for t in verdict["tests"]))
-        if not verdict["passed"]:
-            failed.append((seed, verdict["failed"]))
+        if not gof.passed:
+            failed.append((seed, list(gof.failed)))
     print(f"false alarms: {len(failed)}/{len(seeds)} {failed}; largest statistic / limit {max(ratio):.3f}, "
           f"median {float(np.median(ratio)):.3f}")
 

@@ -46,9 +46,9 @@ import numpy as np
 
 from station.fit.calibrate import FitOptions, fit_session
 from station.fit.joint import fit_joint
-from station.fit.params import ParameterSet
 from station.kernel.limits_file import load_limits
 from station.kernel.line_plan import LinePlan, line_rig_plan
+from station.kernel.parameters import ParameterSet
 from station.kernel.plan import RigPlan, default_plan
 from station.physics.unit import UnitTruth
 from station.session.model import Kind, Session

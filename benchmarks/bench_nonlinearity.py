@@ -63,14 +63,14 @@ def main() -> None:
         k, k_std = p.gyro.scale_nonlinearity, p.gyro.scale_nonlinearity_std
         z = np.divide(k - sim.effect_truth.gyro_nonlinearity, k_std, out=np.full(3, np.nan), where=k_std > 0)
         zs.extend(z[np.isfinite(z)])
-        print(f"| {seed} | {p.quality['scale_nonlinearity']['status']} | {np.nanmax(np.abs(z)):.2f} | "
+        print(f"| {seed} | {p.quality.scale_nonlinearity.status} | {np.nanmax(np.abs(z)):.2f} | "
               f"{100 * worst_rate_error(sim.session, p):.4f} | {100 * worst_rate_error(sim.session, o):.4f} |")
     zs_a = np.abs(np.array(zs))
     if zs_a.size:
         print(f"\nwithin 1/2/3 sigma: {np.mean(zs_a < 1):.0%} / {np.mean(zs_a < 2):.0%} / {np.mean(zs_a < 3):.0%} "
               f"of {zs_a.size}")
     start = args.seed + 100
-    status = [fit_session(simulate_session(s).session, auto).quality["scale_nonlinearity"]["status"]
+    status = [fit_session(simulate_session(s).session, auto).quality.scale_nonlinearity["status"]
               for s in range(start, start + args.nulls)]
     if status:
         print(f"without the effect (seeds {start}-{start + args.nulls - 1}): "
@@ -92,7 +92,7 @@ def independent(n: int, auto: FitOptions, off: FitOptions) -> None:
         for seed in range(20000 + 1000 * i, 20000 + 1000 * i + n):
             session = indepgen.generate(seed, effects).session
             p, o = fit_session(session, auto), fit_session(session, off)
-            note = p.quality["scale_nonlinearity"]
+            note = p.quality.scale_nonlinearity
             kept += note["status"] == "fitted"
             axes += len(note.get("axes", []))
             e_with.append(100 * worst_rate_error(session, p))

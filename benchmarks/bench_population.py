@@ -17,9 +17,9 @@ import time
 from pathlib import Path
 
 from fastapi.testclient import TestClient
+from synthetic_history import fill
 
 from station.store import open_database
-from station.store.synthetic import fill
 from station.web.app import create_app
 
 

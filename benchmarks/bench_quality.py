@@ -1,6 +1,6 @@
 """Quality analytics at factory scale: page and endpoint latency on a synthetic production history.
 
-Fills a fresh database with ``--units`` synthetic units and their runs (:func:`station.store.synthetic.fill`:
+Fills a fresh database with ``--units`` synthetic units and their runs (:func:`synthetic_history.fill`:
 several stations and lots, retests, station faults, a drifting parameter and a shifted lot), serves the web
 app with uvicorn on 127.0.0.1 (a thread) and times sequential HTTP requests (one client, ``--requests`` per
 endpoint after two warm-ups, serials and searches drawn from a seeded RNG): the quality page, the population
@@ -26,13 +26,13 @@ import httpx
 import numpy as np
 
 from station.store import open_database
-from station.store.synthetic import DRIFTING, SHIFTED_LOT, fill
 from station.web.app import create_app
 from station.web.serve import ServerThread
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
 from pgcluster import ClusterStartError, PostgresUnavailable, fresh_database, throwaway_cluster
+from synthetic_history import DRIFTING, SHIFTED_LOT, fill
 
 
 def endpoints(units: int, rng: np.random.Generator) -> dict[str, list[str]]:

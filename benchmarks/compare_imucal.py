@@ -20,7 +20,7 @@ import numpy as np
 import pandas as pd
 
 from station.fit.calibrate import FitOptions, fit_session
-from station.fit.params import ParameterSet
+from station.kernel.parameters import ParameterSet
 from station.session.imucal_import import import_imucal_ferraris
 from station.session.model import Session
 

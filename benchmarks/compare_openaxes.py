@@ -45,9 +45,9 @@ import numpy as np
 
 from station.fit.export import openaxes_coefficients
 from station.fit.multipos import direction_errors_deg, fit_accel_norm, fit_gyro_rotations, norm_residuals
-from station.fit.params import ParameterSet
 from station.fit.readtiming import ReadTiming
-from station.fit.rigfree import RigFreeOptions, fit_rig_free
+from station.fit.rigfree_fit import RigFreeOptions, fit_rig_free
+from station.kernel.parameters import ParameterSet
 from station.session.model import Kind, Session
 from station.session.multipos_import import import_openaxes
 
@@ -154,7 +154,7 @@ def imu_tk_cross_validation(session: Session, folds: int = 5, samples: bool = Fa
 
 def read_timing(session: Session) -> ReadTiming:
     """The station's read-timing model of the session's gyro (as the rig-free fit finds it)."""
-    from station.fit.rigfree import prepare
+    from station.fit.rigfree_fit import prepare
 
     return prepare(session)[1]["read_timing"]
 
@@ -184,7 +184,7 @@ def _integrate(c: np.ndarray, moves: list[np.ndarray], dt: float, scheme: str) -
 
 def gyro_study() -> int:
     """Section 5: which of the gyro fit's choices moves the direction RMS (BMI160 moves, published accel)."""
-    from station.fit.rigfree import prepare
+    from station.fit.rigfree_fit import prepare
 
     s = import_openaxes(LOG, accel="bmi160", gravity_mps2=G_TK)
     prep, extra = prepare(s)
@@ -306,7 +306,7 @@ def main() -> int:
     print(f"OpenAXES {LOG.name}: {len(s)} samples at {s.sample_rate_hz:.4f} Hz, "
           f"{len(s.segments_of(Kind.REST, Kind.POSE))} still segments ({s.metadata['still_detector']}); "
           f"8 rig-free fits in {elapsed:.1f} s")
-    print(f"gyro read timing: {fits['bmi160', G_TK].quality['rig_free']['read_timing']['reason']}")
+    print(f"gyro read timing: {fits['bmi160', G_TK].quality.rig_free['read_timing']['reason']}")
 
     # --- 1. coefficients ------------------------------------------------------------------
     names = []
@@ -354,17 +354,17 @@ def main() -> int:
         print(f"{accel:<9}{'raw':<34}{1e3 * rms(norm_raw - G_TK):10.2f}{1e3 * rms(norm_raw - G_LOCAL):10.2f}")
         print(f"{'':<9}{'published (fitted at 9.81744)':<34}{1e3 * rms(norm_pub - G_TK):10.2f}"
               f"{1e3 * rms(norm_pub - G_LOCAL):10.2f}{'(in-sample)':>17}")
-        q = tk_model[accel].quality["rig_free"]
+        q = tk_model[accel].quality.rig_free
         norm = np.array(q["accel_norm_error_mps2"]) + G_TK
         print(f"{'':<9}{'station, imu_tk model (at 9.81744)':<34}{1e3 * rms(norm - G_TK):10.2f}"
               f"{1e3 * rms(norm - G_LOCAL):10.2f}{1e3 * q['cross_validation']['accel_norm_rms_mps2']:17.2f}")
         for g in (G_TK, G_LOCAL):
-            q = fits[accel, g].quality["rig_free"]
+            q = fits[accel, g].quality.rig_free
             norm = np.array(q["accel_norm_error_mps2"]) + g
             cv = q["cross_validation"]["accel_norm_rms_mps2"]
             print(f"{'':<9}{f'station, eq. 3 model (at {g:g})':<34}{1e3 * rms(norm - G_TK):10.2f}"
                   f"{1e3 * rms(norm - G_LOCAL):10.2f}{1e3 * cv:17.2f}")
-        q = fits[accel, G_TK].quality["rig_free"]
+        q = fits[accel, G_TK].quality.rig_free
         ok = 1e3 * q["accel_norm_rms_mps2"] <= targets[accel]
         print(f"{'':<9}target <= {targets[accel]:.1f} at the fit's own gravity: station "
               f"{1e3 * q['accel_norm_rms_mps2']:.2f} -> {'met' if ok else 'MISSED'}")
@@ -383,23 +383,23 @@ def main() -> int:
               f"{direction_rms(m_pub, bw_pub, moves, PUBLISHED_STEP_S, u_pub):8.3f}{'(in-sample)':>12}")
         print(f"{'':<16}{'published (M, b; recording period)':<44}"
               f"{direction_rms(m_pub, bw_pub, moves, ts, u_pub):8.3f}")
-        q = fits[accel, G_TK].quality["rig_free"]
+        q = fits[accel, G_TK].quality.rig_free
         print(f"{'':<16}{'station (rig-free fit, bias model of eq. 3)':<44}{q['gyro_direction_rms_deg']:8.3f}"
               f"{q['cross_validation']['gyro_direction_rms_deg']:10.3f}")
-        q = reads[accel].quality["rig_free"]
+        q = reads[accel].quality.rig_free
         print(f"{'':<16}{'station, the reads as they come (no read timing)':<44}{q['gyro_direction_rms_deg']:8.3f}"
               f"{q['cross_validation']['gyro_direction_rms_deg']:10.3f}")
-        q = tk_model[accel].quality["rig_free"]
+        q = tk_model[accel].quality.rig_free
         print(f"{'':<16}{'station, imu_tk model accelerometer':<44}{q['gyro_direction_rms_deg']:8.3f}"
               f"{q['cross_validation']['gyro_direction_rms_deg']:10.3f}")
         e_pub = direction_errors_deg(m_pub, [m - bw_pub for m in moves], PUBLISHED_STEP_S, u_pub[:-1], u_pub[1:])
         for label, fit in (("eq. 3", fits[accel, G_TK]), ("reads", reads[accel]),
                            ("imu_tk model", tk_model[accel])) * (accel == "bmi160"):
             # (the published gyro M is in the BMI160's frame: with the ADXL355's directions it does not apply)
-            d, se = paired_rms_difference(np.array(fit.quality["rig_free"]["gyro_direction_error_deg"]), e_pub)
+            d, se = paired_rms_difference(np.array(fit.quality.rig_free["gyro_direction_error_deg"]), e_pub)
             print(f"{'':<16}{f'station ({label}) - published, same moves':<44}{d:+8.3f} +- {se:.3f} "
                   "(paired bootstrap SE)")
-    q = fits["bmi160", G_TK].quality["rig_free"]
+    q = fits["bmi160", G_TK].quality.rig_free
     print(f"target <= 0.96 deg on the fitted poses: station {q['gyro_direction_rms_deg']:.3f} -> "
           f"{'met' if q['gyro_direction_rms_deg'] <= 0.96 else 'MISSED'}")
 
@@ -411,7 +411,7 @@ def main() -> int:
           f"{'station held out':>18}{'difference':>20}")
     for accel in ("adxl355", "bmi160"):
         tk = imu_tk_cross_validation(sessions[accel])
-        q = fits[accel, G_TK].quality["rig_free"]
+        q = fits[accel, G_TK].quality.rig_free
         cv = q["cross_validation"]
         rows = (("gravity norm, mm/s^2", 1e3, "norm_fitted", "norm_held_out", "accel_norm_error_mps2"),
                 ("gravity direction, deg", 1.0, "direction_fitted", "direction_held_out", "gyro_direction_error_deg"))
@@ -422,7 +422,7 @@ def main() -> int:
                   f"{rms(ours_out):18.3f}{f'{d:+.3f} +- {se:.3f}':>20}")
         # the gyro alone: the station without the read-timing model, and imu_tk's model on the sensor's samples
         tk_s = imu_tk_cross_validation(sessions[accel], samples=True)
-        q_r = reads[accel].quality["rig_free"]
+        q_r = reads[accel].quality.rig_free
         for label, tk_in, tk_out, ours_in, ours_out in (
                 ("  station on the reads", tk["direction_fitted"], tk["direction_held_out"],
                  q_r["gyro_direction_error_deg"], q_r["cross_validation"]["gyro_direction_error_deg"]),

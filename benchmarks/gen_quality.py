@@ -1,4 +1,4 @@
-"""Fill a station database with a synthetic production history (:func:`station.store.synthetic.fill`).
+"""Fill a station database with a synthetic production history (:func:`synthetic_history.fill`).
 
     .venv/bin/python benchmarks/gen_quality.py --db sqlite:///quality.sqlite --units 100000 [--days 30] [--seed 1]
 
@@ -9,9 +9,14 @@ The database must have no runs yet (a new SQLite file, or an empty PostgreSQL da
 from __future__ import annotations
 
 import argparse
+import sys
+from pathlib import Path
 
 from station.store import open_database
-from station.store.synthetic import fill
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # the generator is test data, not the station
+
+from synthetic_history import fill
 
 
 def main() -> None:

@@ -2,7 +2,7 @@
 
 On the OpenAXES BMI160 recording, each candidate is a nested extension of the station's gyro model
 (``w = C (y - b(t))``, C the 9 elements, b(t) eq. 3's bias curve), fitted on all moves and in the station's
-5 leave-poses-out folds (``station.fit.rigfree.folds``: the same held-out poses, the accelerometer refitted
+5 leave-poses-out folds (``station.fit.rigfree_fit.folds``: the same held-out poses, the accelerometer refitted
 per fold, the same gravity directions as the station's cross-validation), on two inputs: the reads as they
 come (the model before the read-timing correction) and the sensor's samples (``station.fit.readtiming``:
 stale reads dropped, the sensor's period). Printed per candidate: fitted and held-out direction RMS (deg),
@@ -31,7 +31,7 @@ import numpy as np
 from scipy import stats
 
 from station.fit.multipos import integrate_moves
-from station.fit.rigfree import RigFreeOptions, calibrated_accel, folds, prepare, still_directions
+from station.fit.rigfree_fit import RigFreeOptions, calibrated_accel, folds, prepare, still_directions
 from station.session.model import Session
 
 G = 9.81744

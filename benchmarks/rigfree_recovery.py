@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from station.fit.rigfree import RigFreeOptions, fit_rig_free
+from station.fit.rigfree_fit import RigFreeOptions, fit_rig_free
 from station.kernel.errors import StationError
 from station.kernel.sensor_class import TABLE1
 from station.session.multipos_import import import_imu_tk
@@ -61,7 +61,7 @@ def run_unit(seed: int, folder: Path, cv: bool, prior: bool = True) -> dict[str,
         "gyro b_stat": (params.gyro.bias_static - (res.truth.gyro.bias_static + g_off / g_sens))
         / params.gyro.bias_static_std,
     }
-    q = params.quality["rig_free"]
+    q = params.quality.rig_free
     z["_rms"] = np.array([q["accel_norm_rms_mps2"], q["gyro_direction_rms_deg"], q["still_segments"]])
     z["_read_timing"] = np.array([float(q["read_timing"]["selected"])])
     if cv:

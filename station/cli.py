@@ -7,8 +7,9 @@ station fault) as one line on stderr and a non-zero exit code, never a traceback
 from __future__ import annotations
 
 import sys
+from collections.abc import Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated
+from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 import numpy as np
 import typer
@@ -18,8 +19,31 @@ from station.kernel.errors import StationError
 if TYPE_CHECKING:
     from station.compose import StationConfig
 
-app = typer.Typer(add_completion=False, no_args_is_help=True, help="IMU end-of-line calibration station.")
-import_app = typer.Typer(no_args_is_help=True, help="Convert recordings made elsewhere into session CSV v1.")
+#: Help text is Markdown: docstrings reflow by paragraph and ``code`` shows as code, not as literal backticks.
+MARKUP: Literal["markdown"] = "markdown"
+
+
+def _hide_flag_types() -> None:
+    """typer (0.29) prints every option's value type in the help, ``<bool>`` also for a flag, which takes no
+    value; keep the type for options that take one. (Once per process: the station's apps share typer's class.)"""
+    import typer.core
+
+    shown = typer.core.TyperOption.display_type_rich
+    if shown.__name__ == "display_type_without_flags":
+        return
+
+    def display_type_without_flags(self: typer.core.TyperOption, ctx: Any) -> str | None:
+        return None if self.is_flag else shown(self, ctx)
+
+    # typer has no setting for it: the help's type column comes from this method only
+    typer.core.TyperOption.display_type_rich = display_type_without_flags  # type: ignore[method-assign]
+
+
+_hide_flag_types()
+app = typer.Typer(add_completion=False, no_args_is_help=True, rich_markup_mode=MARKUP,
+                  help="IMU end-of-line calibration station.")
+import_app = typer.Typer(no_args_is_help=True, rich_markup_mode=MARKUP,
+                         help="Convert recordings made elsewhere into session CSV v1.")
 app.add_typer(import_app, name="import")
 
 
@@ -27,9 +51,9 @@ def _add_subapps() -> None:
     from station.commands.diagnose import diagnose as diagnose_command
     from station.commands.eeprom import eeprom_app
     from station.commands.golden import golden_app
+    from station.commands.interchange import export_command, import_imu_tk_command, import_openaxes_command
     from station.commands.msa import msa_app
     from station.commands.nest_cal import nest_app
-    from station.commands.rigfree import export_command, import_imu_tk_command, import_openaxes_command
     from station.commands.roles import line_app
     from station.commands.units import units_app
 
@@ -76,8 +100,8 @@ def _print_params(params: object) -> None:
     from rich.console import Console
     from rich.table import Table
 
-    from station.fit.params import ParameterSet
     from station.kernel.display import display_for, display_of_check
+    from station.kernel.parameters import ParameterSet
 
     assert isinstance(params, ParameterSet)
     console = Console()
@@ -91,12 +115,14 @@ def _print_params(params: object) -> None:
             table.add_column(ax, justify="right")
 
         def row(label: str, v: np.ndarray, s: np.ndarray | None, names: list[str], si: str,
-                table: Table = table) -> None:
+                table: Table = table, parameter: str = "", triad: str = key) -> None:
             cells = []
             for i, a in enumerate(v):
                 d = display_of_check(names[i], si)
                 if not np.isfinite(a):
                     cells.append("unresolved")
+                elif parameter and not params.quality.is_determined(triad, parameter, i):
+                    cells.append("not determined (see below)")
                 else:
                     cells.append(d.format(float(a), float(s[i]) if s is not None else None, unit=False))
             table.add_row(label, *cells)
@@ -105,9 +131,9 @@ def _print_params(params: object) -> None:
             row(f"M row {ax} (ppm)", tri.misalignment[i], tri.misalignment_std[i],
                 [f"{key}.M.{ax}{b}" for b in "xyz"], "1")
         each = [f"{key}.x"] * 3
-        row(f"bias static ({shown.unit})", tri.bias_static, tri.bias_static_std, each, unit)
-        row(f"bias drift ({shown.unit})", tri.bias_drift, tri.bias_drift_std, each, unit)
-        row("T_c (s)", tri.correlation_time_s, tri.correlation_time_s_std, each, "s")
+        row(f"bias static ({shown.unit})", tri.bias_static, tri.bias_static_std, each, unit, parameter="bias_static")
+        row(f"bias drift ({shown.unit})", tri.bias_drift, tri.bias_drift_std, each, unit, parameter="bias_drift")
+        row("T_c (s)", tri.correlation_time_s, tri.correlation_time_s_std, each, "s", parameter="correlation_time_s")
         row(f"noise std ({shown.unit})", tri.noise_std, tri.noise_std_std, each, unit)
         row(f"residual rms ({shown.unit})", tri.residual_rms, None, each, unit)
         tempco = display_of_check("x", f"{unit}/K")
@@ -124,26 +150,37 @@ def _print_params(params: object) -> None:
                     display_for("scale_tempco").format(float(a), float(b), unit=False)
                     for a, b in zip(tri.temp_scale_coeff[:, j], tri.temp_scale_coeff_std[:, j], strict=True)])
         console.print(table)
+    for u in params.quality.undetermined:
+        console.print(f"{u.triad} {'xyz'[u.axis]} {_PARAMETER_LABELS[u.parameter]}: not determined ({u.reason})")
+    if params.quality.undetermined:
+        from station.eeprom.image import image_notes
+        from station.fit.export import export_notes
+
+        for line in (*image_notes(params), *(f"an export writes {n}" for n in export_notes(params))):
+            console.print(line)
     note = params.thermal
     if note.fitted:
         console.print(f"temperature terms fitted about T_ref = {params.reference_temperature_degc:.2f} degC "
                       f"(temperature span {note.span_k:.1f} K); orders {note.orders}")
     elif note.status != "absent":
         console.print(f"temperature terms: {note.status}: {note.reason}")
-    nl = params.quality.get("scale_nonlinearity")
-    if isinstance(nl, dict):
-        if nl.get("status") == "fitted":
+    nl = params.quality.scale_nonlinearity
+    if nl is not None:
+        if nl.fitted:
             from station.kernel.display import format_value
 
             k = params.gyro.scale_nonlinearity
             k_std = params.gyro.scale_nonlinearity_std
             parts = [f"{a} " + format_value(1e6 * k[i] * REF_RATE_RADPS, 1e6 * k_std[i] * REF_RATE_RADPS, "ppm")
-                     for i, a in enumerate("xyz") if a in nl.get("axes", [])]
+                     for i, a in enumerate("xyz") if a in nl.axes]
             console.print("gyro scale nonlinearity u + k u|u| fitted (relative error k|u| at 200 deg/s): "
                           + ", ".join(parts))
         else:
-            console.print(f"gyro scale nonlinearity: {nl.get('status')}: {nl.get('reason')}")
+            console.print(f"gyro scale nonlinearity: {nl.status}: {nl.reason}")
 
+
+#: How ``station fit`` names the parameters whose determinability the fit states.
+_PARAMETER_LABELS = {"bias_static": "bias static", "bias_drift": "bias drift", "correlation_time_s": "T_c"}
 
 #: The rate at which ``station fit`` states the gyro nonlinearity as a relative scale error (200 deg/s, rad/s).
 REF_RATE_RADPS = float(np.radians(200.0))
@@ -174,8 +211,9 @@ def fit(
     the leave-poses-out cross-validation): the parameters are printed, and stderr names what failed.
     """
     from station.fit.calibrate import FitOptions, fit_session
+    from station.fit.determinability import assess
     from station.fit.goodness import EXIT_GOODNESS, summary
-    from station.fit.rigfree import RigFreeOptions, fit_rig_free, is_rig_free
+    from station.fit.rigfree_fit import RigFreeOptions, fit_rig_free, is_rig_free
     from station.kernel.limits_file import load_limits
     from station.session import read_session
 
@@ -184,7 +222,8 @@ def fit(
             raise StationError(f"--thermal {thermal!r}: expected auto, off or require")
         if scale_nonlinearity not in ("auto", "off"):
             raise StationError(f"--scale-nonlinearity {scale_nonlinearity!r}: expected auto or off")
-        tc_range = dict(load_limits(limits).correlation_time_s) if limits is not None else {}
+        limits_file = load_limits(limits) if limits is not None else None
+        tc_range = dict(limits_file.correlation_time_s) if limits_file is not None else {}
         session = read_session(session_path)
         free = rig_free or is_rig_free(session)
         if free and g_sensitivity:
@@ -194,6 +233,8 @@ def fit(
         params = (fit_rig_free(session, RigFreeOptions(tc_range_s=tc_range)) if free
                   else fit_session(session, FitOptions(g_sensitivity=g_sensitivity, tc_range_s=tc_range,
                                                        thermal=thermal, scale_nonlinearity=scale_nonlinearity)))
+        if limits_file is not None:  # the b_stat rule needs the limit ranges' widths
+            params = assess(params, params.quality.record_end_s, limits_file.product)
     except StationError as exc:
         raise fail(exc) from None
     if as_json:
@@ -201,23 +242,23 @@ def fit(
     else:
         _print_params(params)
         if free:
-            _print_rig_free(params.quality["rig_free"])
-    verdict = params.quality["goodness_of_fit"]
-    if not verdict["passed"]:
-        reason = verdict.get("note", "") if free else summary(verdict)
+            _print_rig_free(params.quality.rig_free or {})
+    verdict = params.quality.goodness_of_fit
+    if verdict is not None and not verdict.passed:
+        reason = verdict.note if free else summary(verdict)
         typer.echo(f"error: not a calibration: the fit fails its goodness-of-fit test: {reason}", err=True)
         raise typer.Exit(EXIT_GOODNESS)
 
 
-def _print_rig_free(q: dict[str, object]) -> None:
+def _print_rig_free(q: Mapping[str, Any]) -> None:
     cv = q.get("cross_validation") or {}
     typer.echo(f"rig-free fit ({q['convention']})")
     typer.echo(f"  {q['still_segments']} still segments ({q['distinct_poses']} distinct orientations), "
                f"{q['moves']} moves; gravity {q['gravity_mps2']} m/s^2")
-    typer.echo(f"  gravity-norm RMS {1e3 * float(q['accel_norm_rms_mps2']):.2f} mm/s^2 fitted"  # type: ignore[arg-type]
-               + (f", {1e3 * cv['accel_norm_rms_mps2']:.2f} held out" if cv else ""))  # type: ignore[index]
-    typer.echo(f"  move gravity-direction RMS {float(q['gyro_direction_rms_deg']):.3f} deg fitted"  # type: ignore[arg-type]
-               + (f", {cv['gyro_direction_rms_deg']:.3f} held out ({cv['folds']}-fold leave-poses-out)"  # type: ignore[index]
+    typer.echo(f"  gravity-norm RMS {1e3 * float(q['accel_norm_rms_mps2']):.2f} mm/s^2 fitted"
+               + (f", {1e3 * cv['accel_norm_rms_mps2']:.2f} held out" if cv else ""))
+    typer.echo(f"  move gravity-direction RMS {float(q['gyro_direction_rms_deg']):.3f} deg fitted"
+               + (f", {cv['gyro_direction_rms_deg']:.3f} held out ({cv['folds']}-fold leave-poses-out)"
                   if cv else ""))
     timing = q.get("read_timing")
     if isinstance(timing, dict) and timing.get("selected"):
@@ -243,7 +284,7 @@ def correct(
     from station.commands.output import check_output
     from station.correct.session_correct import correct_session
     from station.eeprom.image import CalibrationImage, check_writable
-    from station.fit.params import ParameterSet
+    from station.kernel.parameters import ParameterSet
     from station.session import read_session, write_session
 
     try:
@@ -251,7 +292,7 @@ def correct(
         params = ParameterSet.read(params_path)
         session = read_session(session_path)
         image = CalibrationImage.from_params(params, "correct", datetime.now(UTC))
-        check_writable(image, (session.sample_rate_hz,))  # type: ignore[arg-type]
+        check_writable(image, (session.sample_rate_hz,))
         if params.serial != session.serial and not force:
             raise StationError(f"{params_path} holds the parameters of serial {params.serial!r}, the recording is of "
                                f"{session.serial!r} (--force to apply them anyway)")
@@ -321,7 +362,7 @@ def station_config(
     """The station's configuration from ``--config`` and the command's options (the options win)."""
     from station.compose import StationConfig
 
-    given = {k: v for k, v in overrides.items() if v is not None}
+    given: dict[str, Any] = {k: v for k, v in overrides.items() if v is not None}
     if rig is not None:
         given["rig_url"] = rig
     if sensor:
@@ -330,7 +371,7 @@ def station_config(
         return StationConfig.from_file(config, **given)
     if "rig_url" not in given or "sensor_urls" not in given:
         raise StationError("give the rig and sensors (--rig and --sensor) or a station configuration (--config)")
-    return StationConfig(**given)  # type: ignore[arg-type]
+    return StationConfig(**given)
 
 
 @app.command("run")

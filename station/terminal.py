@@ -9,7 +9,7 @@ import threading
 import time
 from typing import IO, Any
 
-from rich.console import Console, Group, RenderableType
+from rich.console import Console, Group, JustifyMethod, RenderableType
 from rich.live import Live
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
@@ -221,10 +221,11 @@ def summary_table(result: RunResult) -> Table:
 def provisioning_table(provisioner: EepromProvisioner) -> Table:
     """One row per provisioned unit: EEPROM slot and update count, write attempts, verification residuals."""
     table = Table(title="EEPROM write and verification of the corrected output")
-    for name, justify in (("serial", "left"), ("slot #", "left"), ("tries", "right"),
-                          (f"accel err\n({_MG.unit})", "right"), (f"gyro err\n({_DPS.unit})", "right"),
-                          (f"rate err\n({_DPS.unit})", "right"), ("verified", "left")):
-        table.add_column(name, justify=justify)  # type: ignore[arg-type]
+    columns: tuple[tuple[str, JustifyMethod], ...] = (
+        ("serial", "left"), ("slot #", "left"), ("tries", "right"), (f"accel err\n({_MG.unit})", "right"),
+        (f"gyro err\n({_DPS.unit})", "right"), (f"rate err\n({_DPS.unit})", "right"), ("verified", "left"))
+    for name, justify in columns:
+        table.add_column(name, justify=justify)
     for serial, rec in provisioner.records.items():
         v = rec.verification
         cells = ["", "", "", "not run"]

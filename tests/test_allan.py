@@ -21,8 +21,8 @@ from station.fit.allan import (
     white_noise_std,
     white_std_from_random_walk,
 )
-from station.fit.params import AllanCoefficients
 from station.kernel.errors import FitError
+from station.kernel.parameters import AllanCoefficients
 
 FS = 100.0
 

@@ -18,9 +18,9 @@ from typer.testing import CliRunner
 from station.cli import app
 from station.eeprom.image import ImageError, decode_image
 from station.fit.calibrate import fit_session
-from station.fit.params import ParameterSet
 from station.kernel.errors import FormatError, StationError
 from station.kernel.limits_file import DEFAULT_LIMITS_PATH, parse_limits
+from station.kernel.parameters import ParameterSet
 from station.session import parse_session, write_session
 from station.session.csv_v1 import format_session
 from station.sim.session_sim import simulate_session

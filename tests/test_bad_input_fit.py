@@ -112,7 +112,7 @@ def test_numerical_failure_names_what_was_fitted(good: Session, monkeypatch: pyt
 
 
 def test_good_recording_passes_goodness_of_fit(good: Session) -> None:
-    verdict = fit_session(good).quality["goodness_of_fit"]
+    verdict = fit_session(good).quality.goodness_of_fit.to_dict()
     assert verdict["format"] == "station-goodness/1"
     assert verdict["passed"] and verdict["failed"] == []
     kinds = {(t["triad"], t["kind"]) for t in verdict["tests"]}
@@ -126,7 +126,7 @@ def test_pose_mean_off_its_reference_fails_goodness_of_fit(good: Session, tmp_pa
     acc = good.accel_mps2.copy()
     acc[_segment(good, _pose(good, 0, 1.0)), axis] += offset
     bad = good.replace(accel_mps2=acc)
-    verdict = fit_session(bad).quality["goodness_of_fit"]
+    verdict = fit_session(bad).quality.goodness_of_fit.to_dict()
     assert not verdict["passed"] and "accel pose" in verdict["failed"]
     path = tmp_path / f"off{axis}.csv"
     write_session(bad, path)
@@ -140,7 +140,7 @@ def test_rate_step_off_its_command_fails_goodness_of_fit(good: Session) -> None:
     gyr = good.gyro_radps.copy()
     seg = good.segments_of(Kind.RATE)[3]
     gyr[seg.slice] *= 1.01
-    verdict = fit_session(good.replace(gyro_radps=gyr)).quality["goodness_of_fit"]
+    verdict = fit_session(good.replace(gyro_radps=gyr)).quality.goodness_of_fit.to_dict()
     assert not verdict["passed"] and "gyro rate" in verdict["failed"]
     worst = [t for t in verdict["tests"] if not t["passed"]]
     assert any(t["worst_segment"] == seg.index for t in worst)
@@ -149,7 +149,7 @@ def test_rate_step_off_its_command_fails_goodness_of_fit(good: Session) -> None:
 @needs_real
 def test_real_ferraris_passes_and_turns_not_about_one_axis_are_refused() -> None:
     s = import_imucal_ferraris(REAL / "example_ferraris_session.csv", REAL / "example_ferraris_session_list.json")
-    assert fit_session(s).quality["goodness_of_fit"]["passed"]
+    assert fit_session(s).quality.passed
     index = min(s.angles_deg)
     sel = np.flatnonzero(s.segment == index)
     gyr = s.gyro_radps.copy()

@@ -13,10 +13,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 from fastapi.testclient import TestClient
+from synthetic_history import fill
 
 from station.store import open_database
 from station.store.spc import MIN_CAPABILITY_N, cpk_interval
-from station.store.synthetic import fill
 from station.web.app import create_app
 
 

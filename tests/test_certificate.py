@@ -18,9 +18,9 @@ from typer.testing import CliRunner
 
 from station.cli import app
 from station.fit.calibrate import fit_session
-from station.fit.params import ParameterSet
 from station.kernel.limits_file import load_limits
 from station.kernel.measurement import Measurement
+from station.kernel.parameters import ParameterSet
 from station.sequence.limits import check_limits
 from station.sequence.records import Measured, Outcome
 from station.session.csv_v1 import write_session

@@ -9,7 +9,7 @@ import numpy as np
 from typer.testing import CliRunner
 
 from station.cli import app
-from station.fit.params import ParameterSet
+from station.kernel.parameters import ParameterSet
 from station.session import read_session
 from station.session.model import Kind
 

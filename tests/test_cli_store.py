@@ -10,7 +10,7 @@ from typer.testing import CliRunner
 from station.cli import app
 from station.eeprom.image import decode_image
 from station.fit.calibrate import fit_session
-from station.fit.params import ParameterSet
+from station.kernel.parameters import ParameterSet
 from station.sequence.records import Outcome
 from station.sim.session_sim import simulate_session
 from station.store.db import open_database

@@ -19,8 +19,8 @@ from station.correct import (
     start_index_of,
     two_sided_reference,
 )
-from station.fit.params import AllanCoefficients, ParameterSet, TriadParams
 from station.kernel.errors import FormatError
+from station.kernel.parameters import AllanCoefficients, ParameterSet, TriadParams
 from station.session.model import Kind, Session
 
 TS = 0.01  # s, 100 Hz

@@ -23,7 +23,7 @@ from station.diagnose.effect_registry import REGISTRY, rig_free_testable
 from station.diagnose.report import diagnose
 from station.diagnose.results import load_report
 from station.diagnose.rigfree_diagnosis import rig_free_baseline, rig_free_candidates
-from station.fit.rigfree import is_rig_free
+from station.fit.rigfree_fit import is_rig_free
 from station.physics.effects import GYRO_PER_ACCEL, Effects
 from station.session import write_session
 from station.session.model import Kind, Session

@@ -38,8 +38,8 @@ from station.eeprom.image import (
     read_slots,
     select_image,
 )
-from station.fit.params import ParameterSet
 from station.kernel.errors import FormatError, UnsupportedVersionError
+from station.kernel.parameters import ParameterSet
 from station.kernel.sensor_class import TABLE1
 from station.physics.unit import draw_unit
 

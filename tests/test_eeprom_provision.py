@@ -33,9 +33,9 @@ from station.eeprom.provision import (
     read_current_image,
     write_image,
 )
-from station.fit.params import ParameterSet
 from station.kernel.clock import ManualClock
 from station.kernel.errors import HardwareError, UnitRejected
+from station.kernel.parameters import ParameterSet
 from station.kernel.sensor_class import TABLE1
 from station.physics.unit import draw_unit
 from station.rig import open_rig

@@ -29,7 +29,7 @@ def study() -> dict[str, np.ndarray]:
                 e, s, t = np.asarray(getattr(est, key)), np.asarray(getattr(est, f"{key}_std")), getattr(tru, key)
                 z.setdefault(f"{name}.{key}", []).append(((e - t) / s).ravel())
         z.setdefault("rack_gravity", []).append(
-            np.array(params.quality["line"]["rack_gravity_mps2"]) - line.rig.gravity_mps2)
+            np.array(params.quality.extra["line"]["rack_gravity_mps2"]) - line.rig.gravity_mps2)
     return {k: np.concatenate(v) for k, v in z.items()}
 
 

@@ -37,8 +37,9 @@ def worst_rate_error(session, params) -> float:
 def test_nonlinearity_is_recovered_within_its_uncertainty_and_corrected(seed: int) -> None:
     sim = simulate_session(seed, effects=Effects(scale_nonlinearity=0.001))  # 0.1 % at 200 deg/s
     params = fit_session(sim.session, AUTO)
-    note = params.quality["scale_nonlinearity"]
-    assert note["status"] == "fitted" and note["axes"] == ["x", "y", "z"], note
+    note = params.quality.scale_nonlinearity
+    assert note is not None
+    assert note.status == "fitted" and note.axes == ("x", "y", "z"), note
     truth = sim.effect_truth.gyro_nonlinearity
     k, k_std = params.gyro.scale_nonlinearity, params.gyro.scale_nonlinearity_std
     assert np.all(k_std > 0)
@@ -53,8 +54,9 @@ def test_nonlinearity_is_recovered_within_its_uncertainty_and_corrected(seed: in
 def test_no_nonlinearity_is_not_fitted() -> None:
     sim = simulate_session(303)
     params = fit_session(sim.session, AUTO)
-    note = params.quality["scale_nonlinearity"]
-    assert note["status"] == "not_significant", note
+    note = params.quality.scale_nonlinearity
+    assert note is not None
+    assert note.status == "not_significant", note
     assert not np.any(params.gyro.scale_nonlinearity) and not params.has_nonlinearity
 
 
@@ -65,15 +67,16 @@ def test_one_rate_magnitude_cannot_identify_it() -> None:
     one = replace(plan, rate_steps=tuple((a, s * 100.0) for a in "xyz" for s in (1.0, -1.0)))
     sim = simulate_session(304, plan=one, effects=Effects(scale_nonlinearity=0.001))
     params = fit_session(sim.session, AUTO)
-    note = params.quality["scale_nonlinearity"]
-    assert note["status"] == "not_identifiable" and "second magnitude" in note["reason"], note
-    assert note["levels"] == [1, 1, 1]
+    note = params.quality.scale_nonlinearity
+    assert note is not None
+    assert note.status == "not_identifiable" and "second magnitude" in note.reason, note
+    assert note.detail["levels"] == [1, 1, 1]
     assert not np.any(params.gyro.scale_nonlinearity)
 
 
 def test_the_default_fit_leaves_it_out_and_bad_modes_are_refused() -> None:
     sim = simulate_session(305, effects=Effects(scale_nonlinearity=0.001))
     params = fit_session(sim.session, OFF)
-    assert "scale_nonlinearity" not in params.quality
+    assert params.quality.scale_nonlinearity is None
     with pytest.raises(ValueError, match="scale_nonlinearity"):
         FitOptions(scale_nonlinearity="yes")

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from station.fit.calibrate import fit_session
-from station.fit.params import ParameterSet
+from station.kernel.parameters import ParameterSet
 from station.kernel.sensor_class import TABLE1
 from station.physics.unit import UnitTruth, draw_unit
 from station.sim.session_sim import simulate_session

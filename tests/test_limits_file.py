@@ -10,11 +10,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from station.fit.params import ParameterSet
 from station.kernel.errors import UnsupportedVersionError
 from station.kernel.limits import table1_limits
 from station.kernel.limits_file import DEFAULT_LIMITS_PATH, FitQualityLimits, LimitsFileError, load_limits, parse_limits
 from station.kernel.measurement import Measurement, Verdict
+from station.kernel.parameters import ParameterSet
 from station.kernel.sensor_class import TABLE1
 from station.physics.unit import draw_unit
 from station.sequence.limits import check_fit_quality, check_limits, conformance, is_marginal

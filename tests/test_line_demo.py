@@ -18,7 +18,7 @@ def test_line_demo_runs_the_rack_and_the_rig_and_refuses_an_interrupted_unit() -
     first, second = result.units
     assert first.outcome == Outcome.PASS, first.message
     assert first.params is not None and first.params.source["fit"] == "joint (rack + rig)"
-    assert first.params.quality["line"]["rack_span_s"] > 290.0
+    assert first.params.quality.extra["line"]["rack_span_s"] > 290.0
     assert second.outcome == Outcome.REFUSED
     assert "full: power-on counter changed" in second.message
     assert "rig time per unit: " in text

@@ -24,10 +24,10 @@ from typer.testing import CliRunner
 
 from station.commands.eeprom import eeprom_app
 from station.eeprom.provision import current_image_sha256
-from station.fit.params import ParameterSet
 from station.kernel.clock import ManualClock
 from station.kernel.errors import HardwareError
 from station.kernel.limits import table1_limits
+from station.kernel.parameters import ParameterSet
 from station.kernel.plan import RigPlan
 from station.kernel.sensor_class import TABLE1
 from station.physics.unit import draw_unit

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 from sqlalchemy import select, text
+from synthetic_history import DRIFTING, SHIFTED, SHIFTED_LOT, fill
 
 from station.kernel.measurement import Measurement
 from station.sequence.records import (
@@ -40,7 +41,6 @@ from station.store.quality import (
 )
 from station.store.quality_index import rebuild
 from station.store.spc import c4, capability, control_chart, run_rules
-from station.store.synthetic import DRIFTING, SHIFTED, SHIFTED_LOT, fill
 from station.web.app import create_app
 
 UNITS = 2400  # 600 runs over 12 days: ~200 units a day

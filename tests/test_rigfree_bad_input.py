@@ -11,7 +11,7 @@ from scipy.spatial.transform import Rotation
 from typer.testing import CliRunner
 
 from station.cli import app
-from station.fit.rigfree import fit_rig_free
+from station.fit.rigfree_fit import fit_rig_free
 from station.physics.effects import Effects
 from station.session import write_session
 from station.session.model import Kind, Session
@@ -71,7 +71,7 @@ def test_a_constant_rate_offset_in_a_long_still_is_not_a_move() -> None:
     res = simulate_handheld(611, effects=Effects(g_sensitivity=0.02))
     params = fit_rig_free(_session(res))  # raised "segment 0 ... moves in it (gyro turns 2.8 deg" before
     # and the unit is calibrated: the moves still meet the gravity directions (simulated noise floor ~0.015 deg)
-    assert params.quality["rig_free"]["gyro_direction_rms_deg"] < 0.1
+    assert params.quality.rig_free["gyro_direction_rms_deg"] < 0.1
 
 
 def test_deg_per_s_given_as_rad_per_s_in_the_fit(tmp_path: Path) -> None:

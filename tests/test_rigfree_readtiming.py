@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from station.fit.readtiming import detect_stale_reads
-from station.fit.rigfree import RigFreeOptions, fit_rig_free
+from station.fit.rigfree_fit import RigFreeOptions, fit_rig_free
 from station.kernel.sensor_class import TABLE1
 from station.session.multipos_import import import_imu_tk
 from station.sim.handheld import HandheldResult, counts_with_offsets, simulate_handheld
@@ -88,8 +88,8 @@ def test_fit_on_the_sensor_samples_recovers_gyro_m(planted) -> None:  # type: ig
     m_w = _truth_gyro(res)
     on = fit_rig_free(session, RigFreeOptions(cv_folds=0, tc_range_s=TC_PRIOR))
     off = fit_rig_free(session, RigFreeOptions(cv_folds=0, tc_range_s=TC_PRIOR, read_timing=False))
-    assert on.quality["rig_free"]["read_timing"]["selected"]
-    assert not off.quality["rig_free"]["read_timing"]["selected"]
+    assert on.quality.rig_free["read_timing"]["selected"]
+    assert not off.quality.rig_free["read_timing"]["selected"]
     z_on = ((on.gyro.misalignment - m_w) / on.gyro.misalignment_std).ravel()
     z_off = ((off.gyro.misalignment - m_w) / off.gyro.misalignment_std).ravel()
     assert np.max(np.abs(z_on)) <= 3.5, np.round(z_on, 2)
@@ -99,8 +99,8 @@ def test_fit_on_the_sensor_samples_recovers_gyro_m(planted) -> None:  # type: ig
     assert np.max(np.abs(z_off)) <= 3.5, np.round(z_off, 2)
     ratio = np.median(off.gyro.misalignment_std / on.gyro.misalignment_std)
     assert ratio > 2.0, ratio
-    rms_on = on.quality["rig_free"]["gyro_direction_rms_deg"]
-    rms_off = off.quality["rig_free"]["gyro_direction_rms_deg"]
+    rms_on = on.quality.rig_free["gyro_direction_rms_deg"]
+    rms_off = off.quality.rig_free["gyro_direction_rms_deg"]
     assert rms_on < 0.5 * rms_off, (rms_on, rms_off)
 
 
@@ -110,7 +110,7 @@ def test_not_selected_without_stale_reads(tmp_path: Path) -> None:
     t = detect_stale_reads(session.gyro_radps, sigma)
     assert not t.selected and not t.stale.any(), t.reason
     p = fit_rig_free(session, RigFreeOptions(cv_folds=0, tc_range_s=TC_PRIOR))
-    q = p.quality["rig_free"]["read_timing"]
+    q = p.quality.rig_free["read_timing"]
     assert not q["selected"] and q["stale_reads"] == [0, 0, 0]
 
 

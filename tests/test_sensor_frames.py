@@ -46,7 +46,7 @@ from station.sensor.frames import (
     encode_sample_frames,
     encode_sample_payload,
 )
-from station.sensor.url import SensorUrlError, SerialUrl, parse_sensor_url
+from station.sensor.serial_url import SensorUrlError, SerialUrl, parse_sensor_url
 
 PROPS = settings(max_examples=150, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
 

@@ -22,8 +22,8 @@ from typer.testing import CliRunner
 
 from station.commands.units import units_app
 from station.compose import attach_recorder
-from station.fit.params import ParameterSet
 from station.kernel.measurement import Measurement
+from station.kernel.parameters import ParameterSet
 from station.sequence.records import (
     Measured,
     Outcome,

@@ -171,8 +171,9 @@ def test_recovery_on_postgres(pg_url: str) -> None:
 def test_quality_statistics_agree_with_sqlite(pg_url: str, tmp_path: Path) -> None:
     """The same synthetic history on PostgreSQL and on SQLite: every yield table, capability, control chart and
     histogram computed by the two databases' SQL agrees (the day and minute of a run come from different SQL)."""
+    from synthetic_history import DRIFTING, SHIFTED_LOT, fill
+
     from station.store.quality import QualityFilter, capabilities, control_charts, histogram, yield_tables
-    from station.store.synthetic import DRIFTING, SHIFTED_LOT, fill
 
     pg = open_database(pg_url)
     lite = open_database(f"sqlite:///{tmp_path / 'q.sqlite'}")

@@ -25,9 +25,9 @@ from station.eeprom.image import (
 from station.eeprom.provision import read_current_image, write_image
 from station.fit.calibrate import FitOptions, fit_session
 from station.fit.compensation import COMPENSATION, compensated_by
-from station.fit.params import ParameterSet
 from station.kernel.clock import ManualClock
 from station.kernel.errors import FitError, HardwareError, UnsupportedVersionError
+from station.kernel.parameters import ParameterSet
 from station.kernel.plan import RigPlan
 from station.kernel.sensor_class import TABLE1
 from station.physics.effects import Effects
@@ -311,7 +311,7 @@ def test_fit_recovers_temperature_coefficients(plateau_fit: tuple) -> None:
             assert np.all(std[:, 0] > 0)
             assert np.all(np.abs(est[:, 0] - true) < 4.0 * std[:, 0] + 1e-12), (est[:, 0], true, std[:, 0])
             assert np.all(std[:, 0] < 0.05 * np.abs(true))  # resolved to better than 5 % of the coefficient
-    assert p.quality["goodness_of_fit"]["passed"]
+    assert p.quality.passed
     # the orders are stated; a linear truth rarely needs more
     assert sum(sum(o) for t in p.thermal.orders.values() for o in t.values()) <= 14
 
@@ -446,7 +446,7 @@ def test_order_chosen_by_the_data(plateau_fit: tuple) -> None:
 
 def test_temperature_levels_and_order_caps() -> None:
     """The polynomial order is capped by the temperature levels the data hold (two plateaus: order 1)."""
-    from station.fit.thermal import temperature_levels
+    from station.fit.temperature_terms import temperature_levels
 
     two_plateaus = np.concatenate([10.0 + np.linspace(0, 2.5, 50), 40.0 + np.linspace(0, 4.0, 50)])
     assert temperature_levels(two_plateaus) == 2

@@ -21,10 +21,10 @@ from fastapi.testclient import TestClient
 
 from station.eeprom.image import decode_image
 from station.fit.calibrate import fit_session
-from station.fit.params import ParameterSet
 from station.kernel.limits import table1_limits
 from station.kernel.limits_file import load_limits
 from station.kernel.measurement import Measurement, Verdict
+from station.kernel.parameters import ParameterSet
 from station.sequence.limits import check_limits, conformance
 from station.sequence.records import (
     Measured,

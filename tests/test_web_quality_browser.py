@@ -1,5 +1,5 @@
 """The quality, unit list, unit and status pages in real headless Chromium (Debian's ``chromium``, Playwright),
-on a synthetic production history (:func:`station.store.synthetic.fill`) with a drifting parameter and a
+on a synthetic production history (:func:`synthetic_history.fill`) with a drifting parameter and a
 shifted lot planted: the quality page must flag the drift by a run rule and show the shifted lot's Cpk below
 1.33; the pages must fit an 800 px wide window without sideways scrolling. Screenshots at 1920 and 800 px are
 saved under pytest's tmp dir (their paths are printed).
@@ -19,8 +19,9 @@ if not CHROMIUM.is_file():
     pytest.skip(f"{CHROMIUM} not installed (apt-get install chromium)", allow_module_level=True)
 sync_api = pytest.importorskip("playwright.sync_api", reason="Playwright's Python package is not installed")
 
+from synthetic_history import DRIFTING, SHIFTED, SHIFTED_LOT, fill  # noqa: E402
+
 from station.store import Database, open_database  # noqa: E402
-from station.store.synthetic import DRIFTING, SHIFTED, SHIFTED_LOT, fill  # noqa: E402
 from station.web.app import create_app  # noqa: E402
 from station.web.serve import ServerThread  # noqa: E402
 

@@ -1,5 +1,6 @@
 """The climate chamber: register map, the station's :class:`Chamber` protocol and its Modbus client."""
 
+from station.chamber.chamber_url import ChamberUrl, ChamberUrlError, parse_chamber_url
 from station.chamber.client import ModbusChamber, chamber_client_options
 from station.chamber.protocol import (
     Chamber,
@@ -12,7 +13,6 @@ from station.chamber.protocol import (
     ChamberTimeout,
 )
 from station.chamber.registry import CHAMBERS, open_chamber
-from station.chamber.url import ChamberUrl, ChamberUrlError, parse_chamber_url
 
 __all__ = [
     "CHAMBERS",

@@ -16,6 +16,7 @@ from collections.abc import Callable
 from typing import Any
 
 from station.chamber import registers as reg
+from station.chamber.chamber_url import ChamberUrl, parse_chamber_url
 from station.chamber.protocol import (
     ChamberAlarm,
     ChamberIdentity,
@@ -25,7 +26,6 @@ from station.chamber.protocol import (
     ChamberTimeout,
 )
 from station.chamber.registers import HR, IR, Mode, Status
-from station.chamber.url import ChamberUrl, parse_chamber_url
 from station.kernel.clock import Clock, WallClock
 from station.modbus.client import ModbusTransport
 from station.modbus.heartbeat import Heartbeat
@@ -40,7 +40,7 @@ class ModbusChamber(ModbusTransport, Heartbeat):
     heartbeat thread :class:`station.modbus.heartbeat.Heartbeat`'s.
 
     Args:
-        url: chamber URL (:mod:`station.chamber.url`) or a parsed :class:`ChamberUrl`.
+        url: chamber URL (:mod:`station.chamber.chamber_url`) or a parsed :class:`ChamberUrl`.
         clock: time base for waits, polling and the heartbeat (chamber s).
         poll_s: status polling period while waiting (chamber s).
         heartbeat_period_s: heartbeat write period (chamber s), well inside the watchdog.

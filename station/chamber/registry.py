@@ -10,8 +10,8 @@ from __future__ import annotations
 from typing import Any
 
 from station.chamber import client
+from station.chamber.chamber_url import SCHEMES, ChamberUrlError, parse_chamber_url
 from station.chamber.protocol import Chamber
-from station.chamber.url import SCHEMES, ChamberUrlError, parse_chamber_url
 from station.kernel.clock import Clock
 from station.kernel.schemes import SchemeRegistry
 

@@ -20,15 +20,16 @@ import numpy as np
 import typer
 
 from station.fit.export import kalibr_imu_yaml
-from station.fit.params import ParameterSet
 from station.kernel.errors import StationError
+from station.kernel.parameters import ParameterSet
 
 if TYPE_CHECKING:
     from station.eeprom.image import CalibrationImage
 
 T = TypeVar("T")
 
-eeprom_app = typer.Typer(no_args_is_help=True, help="Calibration images in the unit's EEPROM.")
+eeprom_app = typer.Typer(no_args_is_help=True, rich_markup_mode="markdown",
+                         help="Calibration images in the unit's EEPROM.")
 
 
 def _fail(exc: StationError | str, code: int = 2) -> typer.Exit:

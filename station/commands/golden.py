@@ -17,7 +17,7 @@ from typing import Annotated
 import typer
 
 from station.kernel.errors import StationError
-from station.store.url import ENV_VAR
+from station.store.default_url import ENV_VAR
 
 golden_app = typer.Typer(no_args_is_help=True, help="The golden unit: register it, list, chart its checks.")
 

@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 
 from station.kernel.errors import StationError
-from station.store.url import ENV_VAR
+from station.store.default_url import ENV_VAR
 
 if TYPE_CHECKING:
     from station.msa.study import StudyReport

@@ -17,7 +17,7 @@ import numpy as np
 import typer
 
 from station.kernel.errors import StationError
-from station.store.url import ENV_VAR
+from station.store.default_url import ENV_VAR
 
 if TYPE_CHECKING:
     from station.kernel.nest_frames import NestCalibration
@@ -47,7 +47,7 @@ def estimate_from_records(db_url: str | None, rig: str, serial: str, runs: tuple
                               TriadFit(p.gyro.misalignment, p.gyro.misalignment_std)) for slot, p in fits.items()}
         ref = None
         if reference is not None:
-            from station.fit.params import ParameterSet
+            from station.kernel.parameters import ParameterSet
 
             p_ref = ParameterSet.read(reference)
             ref = NestFits(TriadFit(p_ref.accel.misalignment, p_ref.accel.misalignment_std),

@@ -30,7 +30,7 @@ from station.rig import open_rig, rig_client_options
 from station.sensor import open_sensor
 from station.sequence.options import SequenceOptions
 from station.store.db import open_database
-from station.store.url import ENV_VAR
+from station.store.default_url import ENV_VAR
 
 line_app = typer.Typer(no_args_is_help=True, help="The calibration line: soak rack and rig roles.")
 

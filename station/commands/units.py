@@ -11,12 +11,13 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 
 from station.kernel.errors import StationError
-from station.store.url import ENV_VAR
+from station.store.default_url import ENV_VAR
 
 if TYPE_CHECKING:  # the database code loads only when a command runs
     pass
 
-units_app = typer.Typer(no_args_is_help=True, help="Per-unit records in the station database.")
+units_app = typer.Typer(no_args_is_help=True, rich_markup_mode="markdown",
+                        help="Per-unit records in the station database.")
 
 DbOption = Annotated[
     str | None,

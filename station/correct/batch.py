@@ -54,7 +54,7 @@ import numpy as np
 from scipy.linalg.blas import dgemm
 
 from station.correct.streaming import CorrectionConstants, compensate_extended
-from station.fit.params import ParameterSet
+from station.kernel.parameters import ParameterSet
 
 DEFAULT_CHUNK_ROWS = 16384
 _ROW_BLOCK = 64  # chunk rows are a multiple of this
@@ -264,10 +264,13 @@ class _Pipeline:
                 np.add(a, b, out=dst)
             sums, gemm_b = v.sums, v.gemm_sums
             if v.gemm_single is not None:  # n a power of two: S is the top level itself
-                sums, gemm_b = v.parts[0][1], v.gemm_single
+                top = v.parts[0][1]
+                assert top is not None  # a single part is a buffer view (gemm_single is built from it)
+                sums, gemm_b = top, v.gemm_single
             elif v.from_buffers:
-                np.add(v.parts[0][1], v.parts[1][1], out=sums)
-                for _, p in v.parts[2:]:
+                buffers = [p for _, p in v.parts if p is not None]  # all of them (from_buffers)
+                np.add(buffers[0], buffers[1], out=sums)
+                for p in buffers[2:]:
                     sums += p
             else:  # a raw-input part (odd n): per triad
                 for t in (0, 1):

@@ -12,8 +12,8 @@ import numpy as np
 
 from station.correct.batch import correct_batch
 from station.correct.streaming import CorrectionConstants, compensate_extended
-from station.fit.params import ParameterSet
 from station.kernel.errors import FormatError
+from station.kernel.parameters import ParameterSet
 from station.session.model import Session
 
 # relative mismatch between the session's sample rate and 1 / T_sampl that we accept

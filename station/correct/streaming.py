@@ -10,7 +10,7 @@ Per time step i and per channel j of six (ax, ay, az in m/s^2, gx, gy, gz in rad
 
 With a ``station-params/2`` set that carries them, line 6 also removes the compensable effects beyond
 eq. (1), per channel, with dT = T_i - T_ref the unit's temperature at the sample minus the set's
-reference (see :mod:`station.fit.params`):
+reference (see :mod:`station.kernel.parameters`):
 
     line 6':  v = x~_ij - x_drift,ij - b_stat,j - (c_1 dT + c_2 dT^2 + c_3 dT^3)     temperature bias
               u = 2 v / (1 + sqrt(1 + 4 k |v|))                                       inverse of u + k u|u|
@@ -39,8 +39,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from station.fit.params import ParameterSet, TriadParams
 from station.kernel.errors import FormatError
+from station.kernel.parameters import ParameterSet, TriadParams
 
 CHANNELS: tuple[str, ...] = ("ax", "ay", "az", "gx", "gy", "gz")
 

@@ -130,7 +130,7 @@ class Identifiability:
         base_twin: the part of the base model it can be inseparable from (listed as the pair's second
             member by :mod:`station.diagnose.selection`), or None.
         rig_free: per sensor, why a rig-free recording (hand-held still poses, no rig reference:
-            :mod:`station.fit.rigfree`) cannot test it; a sensor not listed: testable there, as far as the
+            :mod:`station.fit.rigfree_fit`) cannot test it; a sensor not listed: testable there, as far as the
             recording holds what ``needs`` says.
         wander_like: a function of time alone, the same in every pose (a temperature bias follows the
             temperature's slow course): a bias random walk can imitate it, so

@@ -17,8 +17,8 @@ from station.diagnose.effect_registry import REGISTRY
 from station.diagnose.results import Compensation
 from station.fit.calibrate import FitOptions, fit_session
 from station.fit.compensation import APPLIED, COMPENSATION, compensated_by, field_value
-from station.fit.params import ParameterSet
 from station.kernel.errors import StationError
+from station.kernel.parameters import ParameterSet
 from station.session.model import Session
 
 #: Why an effect without applied parameters stays in the output when the registry does not say.
@@ -47,8 +47,9 @@ def _why_not_fitted(params: ParameterSet, effect: str) -> str:
     if effect.startswith("temperature_"):
         return f"the fit has the terms but did not fit them here: {params.thermal.status}: {params.thermal.reason}"
     if effect == "scale_nonlinearity":
-        note = params.quality.get("scale_nonlinearity") or {}
-        return f"the fit has the term but did not fit it here: {note.get('status')}: {note.get('reason')}"
+        note = params.quality.scale_nonlinearity
+        return (f"the fit has the term but did not fit it here: {note.status if note else None}: "
+                f"{note.reason if note else None}")
     return "the fit has the term but it is not significant in this recording"
 
 

@@ -55,7 +55,7 @@ from station.diagnose.residuals import BaseFitNoise, fit_baseline, locate, warmu
 from station.diagnose.results import FORMAT, DiagnosisReport, FindingRerun, RerunError, RerunSummary
 from station.diagnose.rigfree_diagnosis import diagnose_rig_free
 from station.diagnose.selection import select
-from station.fit.rigfree import is_rig_free
+from station.fit.rigfree_fit import is_rig_free
 from station.kernel.errors import FitError
 from station.session.model import Session
 
@@ -68,7 +68,7 @@ def diagnose(session: Session, *, warmup_tc_s: Mapping[str, tuple[float, float]]
     ``LimitsFile.correlation_time_s``; see :func:`station.diagnose.residuals.fit_baseline`. None: the
     recording alone decides T_c (a temperature bias then often cannot be told from the warm-up).
 
-    A rig-free recording (hand-held poses without references, :func:`station.fit.rigfree.is_rig_free`) is
+    A rig-free recording (hand-held poses without references, :func:`station.fit.rigfree_fit.is_rig_free`) is
     diagnosed by :func:`station.diagnose.rigfree_diagnosis.diagnose_rig_free` (its report adds ``untestable``).
 
     ``resamples``: the bootstrap over segments that states each finding's confidence

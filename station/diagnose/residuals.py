@@ -26,7 +26,7 @@ from scipy import sparse
 from scipy.ndimage import uniform_filter1d
 
 from station.fit.calibrate import fit_session, mean_model
-from station.fit.params import ParameterSet, TriadParams
+from station.kernel.parameters import ParameterSet, TriadParams
 from station.session.model import Kind, Session
 
 SENSORS = ("accel", "gyro")
@@ -242,7 +242,7 @@ def baseline_from_params(
     session's). ``warmup_tc_s`` as in :func:`fit_baseline` (not checked here)."""
     ranges = dict(warmup_tc_s or {})
     g_ref = session.ref_gyro_radps
-    if params.quality.get("gyro_scale_method") != "rate":
+    if params.quality.gyro_scale_method != "rate":
         g_ref = np.where(np.isnan(g_ref), 0.0, g_ref)
         static = np.isin(session.kind, [int(Kind.REST), int(Kind.POSE)])
         g_ref = np.where(static[:, None], g_ref, np.nan)

@@ -654,7 +654,7 @@ class RerunError:
 # --- the rig-free section ----------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class RigFreeSection:
-    """A rig-free recording's base fit (:mod:`station.fit.rigfree`): still segments, moves, gravity-norm and
+    """A rig-free recording's base fit (:mod:`station.fit.rigfree_fit`): still segments, moves, gravity-norm and
     move-direction RMS, the Earth rate taken out, the read timing, and which blocks the diagnosis uses."""
 
     still_segments: int | None

@@ -1,9 +1,9 @@
 """Diagnosis of a rig-free (hand-held, multi-position) recording: what it can test and what it cannot.
 
 A rig-free recording has no rig references: still poses at unknown orientations, hand moves
-between them (Tedaldi et al. 2014; :mod:`station.fit.rigfree`). The diagnosis here:
+between them (Tedaldi et al. 2014; :mod:`station.fit.rigfree_fit`). The diagnosis here:
 
-1. **Base model** from :func:`station.fit.rigfree.fit_rig_free` (eq. 1 + eq. 3, in its stated frame
+1. **Base model** from :func:`station.fit.rigfree_fit.fit_rig_free` (eq. 1 + eq. 3, in its stated frame
    convention). References derived from it, per still segment: the accelerometer's fitted gravity
    direction ``u_i = unit(M_a^-1 (mean_i - b_stat - b_drift g(t)))`` times the local gravity as the
    specific force, and a zero rate for the gyroscope. The moves have no sample-level reference (the
@@ -50,7 +50,7 @@ from station.diagnose.results import (
     Untestable,
 )
 from station.diagnose.selection import select
-from station.fit.rigfree import RigFreeOptions, fit_rig_free
+from station.fit.rigfree_fit import RigFreeOptions, fit_rig_free
 from station.kernel.constants import EARTH_RATE_RADPS
 from station.session.model import Kind, Session
 
@@ -243,7 +243,7 @@ def diagnose_rig_free(session: Session, *,
         if f.block_residual is not None:
             curves.append(ResidualCurve(f"{f.sensor} {f.effect}", baseline.sensor(f.sensor).t_s, *f.block_residual))
         findings.append(replace(f, calibration=Compensation(f.effect, False, "not assessed on a rig-free recording")))
-    rf = baseline.params.quality.get("rig_free", {})
+    rf = baseline.params.quality.rig_free or {}
     report = DiagnosisReport(
         serial=session.serial, method="rig-free", findings=tuple(findings), rejected=tuple(rejected),
         untestable=tuple(untestable), inseparable=decision.inseparable, unexplained=decision.unexplained,

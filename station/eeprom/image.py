@@ -29,12 +29,12 @@ import struct
 import zlib
 from dataclasses import dataclass, replace
 from datetime import UTC, datetime
-from typing import ClassVar
+from typing import ClassVar, cast
 
 import numpy as np
 
-from station.fit.params import AllanCoefficients, ParameterSet, ThermalFit, TriadParams
 from station.kernel.errors import FormatError, UnsupportedVersionError
+from station.kernel.parameters import AllanCoefficients, ParameterSet, ThermalFit, TriadParams
 
 MAGIC = b"SCAL"
 LAYOUT_VERSION = 1  # the layout of an image without the effects of layout 2 (byte for byte as before)
@@ -125,7 +125,8 @@ class TriadImage:
 
     @classmethod
     def from_values(cls, v: tuple[float, ...]) -> TriadImage:
-        return cls(np.reshape(v[0:9], (3, 3)), v[9:12], v[12:15], v[15:18], v[18:21])
+        a = np.asarray(v, dtype=float)
+        return cls(np.reshape(a[0:9], (3, 3)), a[9:12], a[12:15], a[15:18], a[18:21])
 
     def same_as(self, other: TriadImage) -> bool:
         """Bitwise equal (NaN equals NaN)."""
@@ -137,7 +138,7 @@ class TriadImage:
 
 @dataclass(frozen=True, eq=False)
 class EffectsImage:
-    """What layout 2 adds: the compensable effects beyond eq. (1) (see :mod:`station.fit.params`).
+    """What layout 2 adds: the compensable effects beyond eq. (1) (see :mod:`station.kernel.parameters`).
 
     Attributes:
         reference_temperature_degc: T_ref of the temperature terms (degC); NaN when they are all zero.
@@ -290,7 +291,12 @@ class CalibrationImage:
         update_count: int = 1,
         params_id_bytes: bytes | None = None,
     ) -> CalibrationImage:
-        """The image of ``params``; ``calibration_time`` defaults to now (UTC)."""
+        """The image of ``params``; ``calibration_time`` defaults to now (UTC).
+
+        The image holds the fitted warm-up curve ``b_stat + b_drift exp(-t/T_c)`` also where the recording
+        cannot determine the three on their own (:func:`image_notes` says where): Algorithm 1 applies it from
+        every power-on, and over the recording's length the curve is what the data determine.
+        """
         when = calibration_time if calibration_time is not None else datetime.now(UTC)
         if when.tzinfo is None:
             raise ImageContentError("calibration time must be timezone-aware")
@@ -358,11 +364,11 @@ class CalibrationImage:
             gyro=triad(self.gyro, self.g_sensitivity),
             source={"kind": "eeprom image", "params_id": self.params_id.hex(), "station": self.station_id,
                     "update_count": self.update_count, "layout_version": self.layout_version},
-            **({} if fx is None else {
-                "reference_temperature_degc": fx.reference_temperature_degc, "time_offset_s": fx.time_offset_s,
-                "thermal": ThermalFit("fitted" if np.any(fx.temp_bias != 0) or np.any(fx.temp_scale != 0)
-                                      else "absent", "from the EEPROM image"),
-            }),
+            reference_temperature_degc=math.nan if fx is None else fx.reference_temperature_degc,
+            time_offset_s=0.0 if fx is None else fx.time_offset_s,
+            thermal=ThermalFit() if fx is None else ThermalFit(
+                "fitted" if np.any(fx.temp_bias != 0) or np.any(fx.temp_scale != 0) else "absent",
+                "from the EEPROM image"),
         )
 
     def same_as(self, other: CalibrationImage) -> bool:
@@ -380,6 +386,19 @@ class CalibrationImage:
             and np.array_equal(self.g_sensitivity, other.g_sensitivity, equal_nan=True)
             and (self.effects.same_as(other.effects) if self.effects is not None else other.effects is None)
         )
+
+
+def image_notes(params: ParameterSet) -> tuple[str, ...]:
+    """One line per axis with parameters the recording cannot determine: the image holds their fitted warm-up
+    curve (see :meth:`CalibrationImage.from_params`), determined over the recording's length, not beyond it."""
+    q = params.quality
+    out = []
+    for name in ("accel", "gyro"):
+        for k in sorted({u.axis for u in q.undetermined if u.triad == name}):
+            which = ", ".join(u.parameter for u in q.undetermined if (u.triad, u.axis) == (name, k))
+            out.append(f"{name} {'xyz'[k]}: the image holds the fitted warm-up curve, determined over the recording's "
+                       f"{q.record_end_s:.1f} s after power-on, not beyond ({which} not determined on their own)")
+    return tuple(out)
 
 
 def run_image(params: ParameterSet, station_id: str, run_started_at: datetime) -> CalibrationImage:
@@ -437,7 +456,7 @@ class ImageRefused(ImageContentError):
     """An image the station will not write: its content would make the firmware refuse it or miscorrect."""
 
 
-def image_problems(img: CalibrationImage, rates_hz: tuple[int, ...] | None = None) -> list[str]:
+def image_problems(img: CalibrationImage, rates_hz: tuple[float, ...] | None = None) -> list[str]:
     """Why the unit's firmware could not use ``img`` to correct sensibly; empty when it can.
 
     Checked: every value finite (an unresolved T_c is NaN by design); each M invertible, with
@@ -493,7 +512,7 @@ def image_problems(img: CalibrationImage, rates_hz: tuple[int, ...] | None = Non
     return out
 
 
-def check_writable(img: CalibrationImage, rates_hz: tuple[int, ...] | None = None) -> None:
+def check_writable(img: CalibrationImage, rates_hz: tuple[float, ...] | None = None) -> None:
     """Raise :class:`ImageRefused` (one line, the first problems) unless ``img`` is usable (:func:`image_problems`)."""
     problems = image_problems(img, rates_hz)
     if problems:
@@ -530,7 +549,7 @@ def image_length(data: bytes) -> int:
     """The total length an image starting at ``data`` claims (checks magic and version first)."""
     if len(data) < MIN_HEADER:
         raise ImageLengthError(f"{len(data)} bytes are too few for an image header ({MIN_HEADER})")
-    magic, version, length = struct.unpack_from("<4sHH", data)
+    magic, version, length = cast(tuple[bytes, int, int], struct.unpack_from("<4sHH", data))
     if magic != MAGIC:
         raise ImageMagicError(f"no calibration image: magic {magic!r}, expected {MAGIC!r}")
     if version not in LAYOUT_VERSIONS:
@@ -670,7 +689,11 @@ def select_image(slots: list[SlotState], serial: str | None = None) -> SlotState
     valid = [s for s in slots if s.image is not None and (serial is None or s.image.serial == serial)]
     if not valid:
         return None
-    return max(valid, key=lambda s: (s.image.update_count, -s.layout.base, -s.slot))  # type: ignore[union-attr]
+    def newest(s: SlotState) -> tuple[int, int, int]:
+        assert s.image is not None  # valid slots only
+        return s.image.update_count, -s.layout.base, -s.slot
+
+    return max(valid, key=newest)
 
 
 def next_write(slots: list[SlotState]) -> tuple[int, int]:

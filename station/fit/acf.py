@@ -58,6 +58,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy import signal
@@ -329,7 +330,7 @@ def correlation_time_acf(
         below = np.flatnonzero(r <= _E_INV)
     kernel = _zero_phase_kernel(rec.numtaps, rec.lowpass_s, rec.rate_hz)
     noise_energy = rec.block_noise_std**2 * n * float(kernel @ kernel)
-    common = {
+    common: dict[str, Any] = {  # the fields both results share
         "noise_energy_fraction": noise_energy / s0 if s0 > 0.0 else math.inf,
         "acf_lags_s": _frozen(lags),
         "acf": _frozen(r),

@@ -36,8 +36,8 @@ from typing import Literal
 import numpy as np
 from scipy.optimize import nnls
 
-from station.fit.params import AllanCoefficients
 from station.kernel.errors import FitError
+from station.kernel.parameters import AllanCoefficients
 
 NoiseType = Literal["white", "flicker", "random_walk"]
 
@@ -55,7 +55,7 @@ _TERMS = ("random_walk", "bias_instability", "rate_random_walk", "rate_ramp")
 
 
 def _frozen(a: np.ndarray | list[float], dtype: type = np.float64) -> np.ndarray:
-    arr = np.array(a, dtype=dtype, copy=True)
+    arr: np.ndarray = np.array(a, dtype=dtype, copy=True)
     arr.flags.writeable = False
     return arr
 

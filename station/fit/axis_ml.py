@@ -70,7 +70,7 @@ class AxisFit:
     residual: np.ndarray
 
 
-class _Problem:
+class AxisProblem:
     """Concentrated likelihood of one axis for given (T_c, q)."""
 
     def __init__(self, blocks: Blocks, y: np.ndarray, design: np.ndarray, sigma_w: float, with_drift: bool) -> None:
@@ -175,7 +175,7 @@ class _ProfileGrid:
 
     def __init__(
         self,
-        problem: _Problem,
+        problem: AxisProblem,
         log_tc_nodes: np.ndarray,
         tc_ref_s: float,
         tc_column: np.ndarray | None = None,
@@ -216,7 +216,7 @@ class _ProfileGrid:
                 # derivative enters as one more column (linearized, eq. 3's exp(-t/T_c))
                 ext = np.column_stack([xr, u.T @ (tc_column / sw)])
                 info = (wt @ _outer_rows(ext)).reshape(-1, p + 1, p + 1)
-                self.ref_cov = np.array([_inverse(m)[:p, :p] for m in info])
+                self.ref_cov = np.array([information_inverse(m)[:p, :p] for m in info])
             usable[i] = np.all(np.isfinite(b), axis=1) & np.all(np.diagonal(cov, axis1=1, axis2=2) > 0, axis=1)
         # nodes where the normal equations are singular (drift and static bias collinear) drop out
         bad = ~(np.isfinite(nll) & usable)
@@ -304,7 +304,7 @@ def _edges(x: np.ndarray, f: np.ndarray, i0: int, rise: float) -> tuple[float, f
     return out[0], out[1]
 
 
-def _optimize(problem: _Problem, grid: tuple[float, float], bounds: tuple[float, float]) -> np.ndarray:
+def _optimize(problem: AxisProblem, grid: tuple[float, float], bounds: tuple[float, float]) -> np.ndarray:
     """Coarse grid over (log T_c, log q), log T_c from ``grid``, then Nelder-Mead within ``bounds`` of log T_c."""
     grid_tc = np.linspace(grid[0], grid[1], 10)
     grid_q = np.array([-10.0, -2.0, 2.0])
@@ -368,7 +368,7 @@ def fit_axis(
         grid_lt = (float(np.log(5.0)), float(log_tc_max))
         wald_lt = np.linspace(np.log(5.0), np.log(max(span, 10.0)), 8)
 
-    full = _Problem(blocks, y, design, sigma_w, with_drift=True)
+    full = AxisProblem(blocks, y, design, sigma_w, with_drift=True)
     theta = _optimize(full, grid_lt, (lt_lo, lt_hi))
     tc, q = float(np.exp(theta[0])), full.q0 * float(np.exp(theta[1]))
     nll, beta, xw, chol = full.solve(tc, q)
@@ -378,9 +378,9 @@ def fit_axis(
     lr = 0.0
     for tc_g in (tc, *np.exp(wald_lt)):
         _, beta_g, xw_g, _ = full.solve(float(tc_g), q)
-        lr = max(lr, float(beta_g[-1] ** 2 / _inverse(xw_g.T @ xw_g)[-1, -1]))
+        lr = max(lr, float(beta_g[-1] ** 2 / information_inverse(xw_g.T @ xw_g)[-1, -1]))
     resolved = bool(lr > lr_threshold)
-    problem = full if resolved else _Problem(blocks, y, design, sigma_w, with_drift=False)
+    problem = full if resolved else AxisProblem(blocks, y, design, sigma_w, with_drift=False)
     theta_q = theta if resolved else np.array([theta[0], _optimize_q(problem, theta)])
     q = problem.q0 * float(np.exp(theta_q[1]))
     # The stochastic drift q is often poorly determined (a Gauss-Markov process slower than
@@ -406,7 +406,7 @@ def fit_axis(
         _, _, xw, chol = full.solve(tc, q_unc)
         # Fisher information of the mean parameters (beta, d, T_c), at the upper end of q's interval.
         jw = np.column_stack([xw, linalg.solve_triangular(chol, beta[-1] * de_dtc, lower=True, check_finite=False)])
-        beta_cov = _inverse(jw.T @ jw)[:p, :p]
+        beta_cov = information_inverse(jw.T @ jw)[:p, :p]
         # T_c is non-linear: its uncertainty from the profile likelihood (beta re-fitted)
         lo, hi = _profile_interval(lambda u: full.solve(float(np.exp(u)), q_unc)[0], float(np.log(tc)),
                                    lt_lo, lt_hi)
@@ -453,12 +453,12 @@ def fit_axis(
         # and cannot be bounded by any recording of this length).
         nll, beta, _, _ = problem.solve(tc, q)
         _, _, xw, _ = problem.solve(tc, q_unc)
-        cov0 = _inverse(xw.T @ xw)
+        cov0 = information_inverse(xw.T @ xw)
         inflation = np.zeros(p - 1)
         hidden_d = 0.0
         for tc_g in np.exp(wald_lt):
             _, beta_g, xw_g, _ = full.solve(tc_g, q_unc)
-            var_g = _inverse(xw_g.T @ xw_g)
+            var_g = information_inverse(xw_g.T @ xw_g)
             hidden = float(beta_g[-1] ** 2 + var_g[-1, -1])
             # GLS regression of the drift column on the design: how much of it each beta absorbs
             absorbed = cov0 @ (xw.T @ xw_g[:, -1])
@@ -484,7 +484,7 @@ def fit_axis(
     )
 
 
-def _optimize_q(problem: _Problem, theta: np.ndarray) -> float:
+def _optimize_q(problem: AxisProblem, theta: np.ndarray) -> float:
     """log q (relative to q0) maximizing the likelihood at fixed T_c."""
     res = optimize.minimize_scalar(
         lambda u: problem.nll(np.array([theta[0], u])), bounds=(_LOG_Q_MIN, _LOG_Q_MAX), method="bounded",
@@ -522,7 +522,7 @@ def _profile_interval(
     return edges[0], edges[1]
 
 
-def _inverse(info: np.ndarray) -> np.ndarray:
+def information_inverse(info: np.ndarray) -> np.ndarray:
     """Inverse of an information matrix, with Jacobi scaling (columns differ by many decades)."""
     d = np.sqrt(np.clip(np.diag(info), 1e-300, None))
     scaled = info / np.outer(d, d)

@@ -30,9 +30,9 @@ from station.fit.blocks import Blocks, block_exp_mean, make_blocks
 from station.fit.boundary import numerics
 from station.fit.checks import check_session
 from station.fit.consistency import check_rotations
+from station.fit.determinability import assess
 from station.fit.goodness import Rows, TriadResidual, goodness_of_fit
-from station.fit.params import MAX_TEMP_ORDER, AllanCoefficients, ParameterSet, ThermalFit, TriadParams
-from station.fit.thermal import (
+from station.fit.temperature_terms import (
     assess_temperature,
     axis_regressors,
     order_caps,
@@ -40,6 +40,17 @@ from station.fit.thermal import (
     temperature_columns,
 )
 from station.kernel.errors import FitError
+from station.kernel.parameters import (
+    MAX_TEMP_ORDER,
+    AllanCoefficients,
+    FitQuality,
+    GoodnessOfFit,
+    NonlinearityNote,
+    ParameterSet,
+    ResidualFigures,
+    ThermalFit,
+    TriadParams,
+)
 from station.session.model import Kind, Session
 
 AXES = "xyz"
@@ -67,8 +78,8 @@ class FitOptions:
             prior on T_c (the limits file's ``correlation_time_s``); a triad without one is fitted
             from the record alone.
         thermal: the temperature terms (bias and scale polynomials in ``T - T_ref`` per output axis,
-            :mod:`station.fit.thermal`): ``'auto'`` fits them when the recording's temperature course
-            separates them from the warm-up (else :class:`~station.fit.params.ThermalFit` says why not,
+            :mod:`station.fit.temperature_terms`): ``'auto'`` fits them when the recording's temperature course
+            separates them from the warm-up (else :class:`~station.kernel.parameters.ThermalFit` says why not,
             status ``'not_separable'``), ``'require'`` refuses (FitError) a recording that cannot separate
             them, ``'off'`` (the default: eq. 1 alone, as callers from before the thermal model expect, e.g. the
             diagnosis's base model) never. ``station fit`` uses ``'auto'``.
@@ -115,14 +126,16 @@ class FitOptions:
 
 
 @dataclass(frozen=True)
-class _Noise:
+class NoiseEstimate:
+    """A triad's white noise (:func:`white_noise`), shared with the rig-free fit."""
+
     sigma: np.ndarray  # (3,) white-noise std per sample
     sigma_std: np.ndarray  # (3,)
     keep: np.ndarray  # (n,) bool: not an outlier on any axis
     outliers: np.ndarray  # (3,) count per axis
 
 
-def _settled_runs(session: Session, kinds: tuple[Kind, ...], ref: np.ndarray) -> list[tuple[int, int, int]]:
+def settled_runs(session: Session, kinds: tuple[Kind, ...], ref: np.ndarray) -> list[tuple[int, int, int]]:
     runs = []
     for seg in session.segments_of(*kinds):
         if np.all(np.isfinite(ref[seg.start:seg.stop])):
@@ -130,7 +143,9 @@ def _settled_runs(session: Session, kinds: tuple[Kind, ...], ref: np.ndarray) ->
     return runs
 
 
-def _noise(session: Session, data: np.ndarray, runs: list[tuple[int, int, int]], outlier_sigma: float) -> _Noise:
+def white_noise(
+    session: Session, data: np.ndarray, runs: list[tuple[int, int, int]], outlier_sigma: float
+) -> NoiseEstimate:
     """White-noise std from first differences within settled runs (robust to outliers), and outlier flags."""
     keep = np.ones(len(session), dtype=bool)
     # robust std of a difference of two samples is sqrt(2) sigma (one axis at a time: a third of the memory)
@@ -161,7 +176,7 @@ def _noise(session: Session, data: np.ndarray, runs: list[tuple[int, int, int]],
     sigma = sigma / np.sqrt(2.0)
     # differences of white noise: lag-1 correlation -1/2 inflates the variance of the estimate by 1.5
     sigma_std = sigma * np.sqrt(1.5 / (2.0 * max(count - 1, 1)))
-    return _Noise(sigma=sigma, sigma_std=sigma_std, keep=keep, outliers=outliers)
+    return NoiseEstimate(sigma=sigma, sigma_std=sigma_std, keep=keep, outliers=outliers)
 
 
 def _sum_of_rows(parts: Iterator[np.ndarray]) -> tuple[np.ndarray, int]:
@@ -193,7 +208,7 @@ _ROWS = 1 << 18
 
 
 @dataclass(frozen=True)
-class _TriadLinear:
+class TriadLinear:
     """Per-axis fits of one triad, and how to evaluate the mean model."""
 
     fits: list[AxisFit]
@@ -215,14 +230,14 @@ def _fit_triad(
     data: np.ndarray,
     ref: np.ndarray,
     runs: list[tuple[int, int, int]],
-    noise: _Noise,
+    noise: NoiseEstimate,
     options: FitOptions,
     *,
     with_ref: bool,
     g_sens: bool,
     triad: str,
     nonlin_m: np.ndarray | None = None,
-) -> tuple[_TriadLinear, Blocks]:
+) -> tuple[TriadLinear, Blocks]:
     blocks = make_blocks(  # NaN references count as 0 there
         session.t_s, data, ref, session.ref_accel_mps2, noise.keep, runs, 1.0 / session.sample_rate_hz,
         options.max_blocks,
@@ -235,7 +250,7 @@ def _fit_triad(
         fits.append(fit_axis(blocks, k, d_k, float(noise.sigma[k]), lr_threshold=options.drift_lr_threshold,
                              tc_range_s=tc_range))
         cols.append(col)
-    tri = _TriadLinear(fits=fits, n_ref=3 if with_ref else 0, extra=3 if g_sens else 0,
+    tri = TriadLinear(fits=fits, n_ref=3 if with_ref else 0, extra=3 if g_sens else 0,
                        nonlin_col=tuple(cols) if nonlin_m is not None else ())
     return tri, blocks
 
@@ -270,7 +285,7 @@ def _fit_triad_thermal(
     data: np.ndarray,
     ref: np.ndarray,
     runs: list[tuple[int, int, int]],
-    noise: _Noise,
+    noise: NoiseEstimate,
     options: FitOptions,
     *,
     with_ref: bool,
@@ -280,8 +295,8 @@ def _fit_triad_thermal(
     m_hat: np.ndarray | None,
     orders: tuple[list[int], list[int]] | None = None,
     nonlin_m: np.ndarray | None = None,
-) -> tuple[_TriadLinear, Blocks, dict[str, np.ndarray], tuple[list[int], list[int]]]:
-    """The triad fit with the temperature terms (:mod:`station.fit.thermal`), orders chosen or given.
+) -> tuple[TriadLinear, Blocks, dict[str, np.ndarray], tuple[list[int], list[int]]]:
+    """The triad fit with the temperature terms (:mod:`station.fit.temperature_terms`), orders chosen or given.
 
     Returns the fits, the blocks, the temperature coefficients with their stds (``temp_bias_coeff``,
     ``temp_scale_coeff``, ``*_std``, each (3, 3)) and the (bias, scale) orders per axis.
@@ -332,21 +347,21 @@ def _fit_triad_thermal(
         fits.append(fit)
         n_bias.append(nb)
         n_scale.append(ns)
-    tri = _TriadLinear(fits=fits, n_ref=3 if with_ref else 0, extra=3 if g_sens else 0, nonlin_col=tuple(cols))
+    tri = TriadLinear(fits=fits, n_ref=3 if with_ref else 0, extra=3 if g_sens else 0, nonlin_col=tuple(cols))
     return tri, blocks, coeff, (n_bias, n_scale)
 
 
 def _thermal_triad(
-    session: Session, data: np.ndarray, ref: np.ndarray, runs: list[tuple[int, int, int]], noise: _Noise,
-    options: FitOptions, first: _TriadLinear, *, with_ref: bool, g_sens: bool, triad: str, dt: np.ndarray,
-) -> tuple[_TriadLinear, Blocks, dict[str, np.ndarray], tuple[list[int], list[int]]]:
+    session: Session, data: np.ndarray, ref: np.ndarray, runs: list[tuple[int, int, int]], noise: NoiseEstimate,
+    options: FitOptions, first: TriadLinear, *, with_ref: bool, g_sens: bool, triad: str, dt: np.ndarray,
+) -> tuple[TriadLinear, Blocks, dict[str, np.ndarray], tuple[list[int], list[int]]]:
     """Two passes: orders chosen with M^ from the fit without temperature terms, then refitted with M^ from
     the first pass (the scale regressor ``(M^_k . ref) dT^j``)."""
-    m_hat = _unpack(first)["misalignment"] if with_ref else None
+    m_hat = unpack_triad(first)["misalignment"] if with_ref else None
     tri, blocks, coeff, orders = _fit_triad_thermal(session, data, ref, runs, noise, options, with_ref=with_ref,
                                                     g_sens=g_sens, triad=triad, dt=dt, m_hat=m_hat)
     if with_ref:
-        m_hat = _unpack(tri)["misalignment"]
+        m_hat = unpack_triad(tri)["misalignment"]
         tri, blocks, coeff, orders = _fit_triad_thermal(session, data, ref, runs, noise, options, with_ref=with_ref,
                                                         g_sens=g_sens, triad=triad, dt=dt, m_hat=m_hat, orders=orders)
     return tri, blocks, coeff, orders
@@ -364,7 +379,7 @@ def _temperature_terms(p: dict[str, np.ndarray], dt: np.ndarray, ref: np.ndarray
     return out
 
 
-def _unpack(tri: _TriadLinear) -> dict[str, np.ndarray]:
+def unpack_triad(tri: TriadLinear) -> dict[str, np.ndarray]:
     """Arrange per-axis results into M, b_stat, b_drift, T_c, ... with uncertainties."""
     m = np.full((3, 3), np.nan)
     m_std = np.full((3, 3), np.nan)
@@ -399,7 +414,7 @@ def mean_model(
     p: dict[str, np.ndarray], t_s: np.ndarray, ref: np.ndarray, force: np.ndarray, dt: np.ndarray | None = None
 ) -> np.ndarray:
     """The fitted eq. (1) without noise: M ref + b_stat + b_drift exp(-t/T_c) (+ G force), and with ``dt``
-    (T - T_ref per sample, K) the temperature terms of :mod:`station.fit.thermal`."""
+    (T - T_ref per sample, K) the temperature terms of :mod:`station.fit.temperature_terms`."""
     lin = np.nan_to_num(ref) @ p["misalignment"].T
     out = lin + p["bias_static"]
     k_nl = p.get("scale_nonlinearity")
@@ -416,7 +431,7 @@ def mean_model(
     return out
 
 
-def _allan(session: Session, residual: Rows, keep: np.ndarray) -> AllanCoefficients:
+def residual_allan(session: Session, residual: Rows | np.ndarray, keep: np.ndarray) -> AllanCoefficients:
     """IEEE 952 coefficients from the longest still segment's residual."""
     still = session.segments_of(Kind.REST) or session.segments_of(Kind.POSE)
     seg = max(still, key=len)
@@ -436,15 +451,15 @@ def _allan(session: Session, residual: Rows, keep: np.ndarray) -> AllanCoefficie
     return AllanCoefficients(**{n: np.array(v) for n, v in vals.items()})
 
 
-def _quality(
-    session: Session, name: str, residual: Rows, runs: list[tuple[int, int, int]], keep: np.ndarray
-) -> dict[str, Any]:
+def residual_figures(
+    residual: Rows | np.ndarray, runs: list[tuple[int, int, int]], keep: np.ndarray
+) -> ResidualFigures:
     rms_seg = {}
     for seg, a, b in runs:
         r = residual[a:b][keep[a:b]]
-        rms_seg[str(seg)] = np.sqrt(np.mean(r**2, axis=0)).round(9).tolist()
+        rms_seg[str(seg)] = tuple(np.sqrt(np.mean(r**2, axis=0)).round(9).tolist())
     total, count = _sum_of_rows(r**2 for r in _kept_rows(residual, runs, keep))
-    return {"rms": np.sqrt(total / count).round(9).tolist(), "segments": rms_seg, "samples": count}
+    return ResidualFigures(rms=tuple(np.sqrt(total / count).round(9).tolist()), segments=rms_seg, samples=count)
 
 
 def _sample_design(
@@ -493,8 +508,8 @@ def _kept_rows(residual: np.ndarray | Rows, runs: list[tuple[int, int, int]], ke
 
 
 def _triad_residual(
-    name: str, res: Rows, design: Rows, runs: list[tuple[int, int, int]], noise: _Noise,
-    tri: _TriadLinear, blocks: Blocks, scale: float, unit: str, reference_var: float = 0.0,
+    name: str, res: Rows, design: Rows, runs: list[tuple[int, int, int]], noise: NoiseEstimate,
+    tri: TriadLinear, blocks: Blocks, scale: float, unit: str, reference_var: float = 0.0,
 ) -> TriadResidual:
     return TriadResidual(
         name=name, residual=res, design=design, runs=runs, keep=noise.keep, sigma=noise.sigma,
@@ -522,10 +537,10 @@ def _top(note: ThermalFit, triad: str) -> int:
 
 
 def _gyro_nonlinearity(
-    session: Session, g_ref: np.ndarray, g_runs: list[tuple[int, int, int]], g_noise: _Noise, options: FitOptions,
-    g: dict[str, np.ndarray], g_tri: _TriadLinear, g_blocks: Blocks, *, rate: bool, dt: np.ndarray | None,
-    orders: tuple[list[int], list[int]] | None,
-) -> tuple[dict[str, np.ndarray], _TriadLinear, Blocks, dict[str, Any]]:
+    session: Session, g_ref: np.ndarray, g_runs: list[tuple[int, int, int]], g_noise: NoiseEstimate,
+    options: FitOptions, g: dict[str, np.ndarray], g_tri: TriadLinear, g_blocks: Blocks, *, rate: bool,
+    dt: np.ndarray | None, orders: tuple[list[int], list[int]] | None,
+) -> tuple[dict[str, np.ndarray], TriadLinear, Blocks, dict[str, Any]]:
     """The gyro refitted with ``k u|u|`` on the axes that identify it and keep it (see
     :attr:`FitOptions.scale_nonlinearity`): two passes, the regressor's M^ from the previous one. Returns the
     triad's parameters, fits, blocks and a note (``status`` fitted / not_identifiable / not_significant)."""
@@ -548,12 +563,12 @@ def _gyro_nonlinearity(
         if dt is None:
             tri, blocks = _fit_triad(session, session.gyro_radps, g_ref, g_runs, g_noise, options, with_ref=True,
                                      g_sens=options.g_sensitivity, triad="gyro", nonlin_m=nm)
-            p = _unpack(tri)
+            p = unpack_triad(tri)
         else:
             tri, blocks, coeff, _ = _fit_triad_thermal(
                 session, session.gyro_radps, g_ref, g_runs, g_noise, options, with_ref=True,
                 g_sens=options.g_sensitivity, triad="gyro", dt=dt, m_hat=m_hat, orders=orders, nonlin_m=nm)
-            p = {**_unpack(tri), **coeff}
+            p = {**unpack_triad(tri), **coeff}
         k_std = p["scale_nonlinearity_std"]
         z = np.divide(p["scale_nonlinearity"], k_std, out=np.zeros(3), where=k_std > 0)
         keep = use & (z**2 >= options.nonlinearity_wald)
@@ -573,26 +588,26 @@ def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
     ts = 1.0 / session.sample_rate_hz
 
     # --- accelerometer: rest + poses -----------------------------------------
-    a_runs = _settled_runs(session, (Kind.REST, Kind.POSE), session.ref_accel_mps2)
+    a_runs = settled_runs(session, (Kind.REST, Kind.POSE), session.ref_accel_mps2)
     with numerics("accelerometer fit (rest and poses)"):
-        a_noise = _noise(session, session.accel_mps2, a_runs, options.outlier_sigma)
+        a_noise = white_noise(session, session.accel_mps2, a_runs, options.outlier_sigma)
         a_tri, a_blocks = _fit_triad(session, session.accel_mps2, session.ref_accel_mps2, a_runs, a_noise, options,
                               with_ref=True, g_sens=False, triad="accel")
-    a = _unpack(a_tri)
+    a = unpack_triad(a_tri)
 
     # --- gyroscope: rest + poses + rate steps, or static + known angles --------
     if gyro_method == "rate":
-        g_runs = _settled_runs(session, (Kind.REST, Kind.POSE, Kind.RATE), session.ref_gyro_radps)
+        g_runs = settled_runs(session, (Kind.REST, Kind.POSE, Kind.RATE), session.ref_gyro_radps)
         g_ref = session.ref_gyro_radps
     else:
         static_ref = np.where(np.isnan(session.ref_gyro_radps), 0.0, session.ref_gyro_radps)
-        g_runs = _settled_runs(session, (Kind.REST, Kind.POSE), static_ref)
+        g_runs = settled_runs(session, (Kind.REST, Kind.POSE), static_ref)
         g_ref = static_ref
     with numerics(f"gyroscope fit ({'rest, poses and rate steps' if gyro_method == 'rate' else 'rest and poses'})"):
-        g_noise = _noise(session, session.gyro_radps, g_runs, options.outlier_sigma)
+        g_noise = white_noise(session, session.gyro_radps, g_runs, options.outlier_sigma)
         g_tri, g_blocks = _fit_triad(session, session.gyro_radps, g_ref, g_runs, g_noise, options,
                               with_ref=gyro_method == "rate", g_sens=options.g_sensitivity, triad="gyro")
-    g = _unpack(g_tri)
+    g = unpack_triad(g_tri)
 
     # --- temperature terms, when the recording's temperature course separates them from the warm-up ---
     course = assess_temperature(
@@ -613,8 +628,8 @@ def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
             g_tri, g_blocks, g_coeff, g_orders = _thermal_triad(
                 session, session.gyro_radps, g_ref, g_runs, g_noise, options, g_tri,
                 with_ref=gyro_method == "rate", g_sens=options.g_sensitivity, triad="gyro", dt=dt)
-        a = {**_unpack(a_tri), **a_coeff}
-        g = {**_unpack(g_tri), **g_coeff}
+        a = {**unpack_triad(a_tri), **a_coeff}
+        g = {**unpack_triad(g_tri), **g_coeff}
         thermal_note = replace(thermal_note, orders={
             "accel": {"bias": a_orders[0], "scale": a_orders[1]},
             "gyro": {"bias": g_orders[0], "scale": g_orders[1]},
@@ -644,45 +659,44 @@ def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
     # --- residuals, noise figures and quality ----------------------------------
     a_res = _residual(session, session.accel_mps2, a, session.ref_accel_mps2, dt)
     g_res = _residual(session, session.gyro_radps, g, g_ref, dt)
-    quality = {
-        "accel": _quality(session, "accel", a_res, a_runs, a_noise.keep),
-        "gyro": _quality(session, "gyro", g_res, g_runs, g_noise.keep),
-        "gyro_scale_method": gyro_method,
-        "outliers": {"accel": a_noise.outliers.tolist(), "gyro": g_noise.outliers.tolist()},
-        "drift_likelihood_ratio": {
-            "accel": [round(f.lr, 3) for f in a_tri.fits],
-            "gyro": [round(f.lr, 3) for f in g_tri.fits],
+    quality = FitQuality(
+        accel=residual_figures(a_res, a_runs, a_noise.keep),
+        gyro=residual_figures(g_res, g_runs, g_noise.keep),
+        gyro_scale_method=gyro_method,
+        outliers={"accel": tuple(a_noise.outliers.tolist()), "gyro": tuple(g_noise.outliers.tolist())},
+        drift_likelihood_ratio={
+            "accel": tuple(round(f.lr, 3) for f in a_tri.fits),
+            "gyro": tuple(round(f.lr, 3) for f in g_tri.fits),
         },
-    }
-    if angle_report:
-        quality["known_angle"] = angle_report
-    if nonlin_note is not None:
-        quality["scale_nonlinearity"] = nonlin_note
+        known_angle=angle_report or None,
+        scale_nonlinearity=None if nonlin_note is None else NonlinearityNote.from_dict(nonlin_note),
+    )
     deg = float(np.degrees(1.0))
     a_design = _sample_design(len(session), session.ref_accel_mps2, None, dt=dt, order=_top(thermal_note, "accel"))
     g_design = _sample_design(len(session), g_ref if gyro_method == "rate" else None,
                               session.ref_accel_mps2 if options.g_sensitivity else None,
                               nonlinearity=g_ref if np.any(g.get("scale_nonlinearity", 0.0)) else None,
                               dt=dt, order=_top(thermal_note, "gyro"))
-    quality["goodness_of_fit"] = goodness_of_fit(session, [
+    verdict = goodness_of_fit(session, [
         _triad_residual("accel", a_res, a_design, a_runs, a_noise, a_tri, a_blocks, 1.0, "m/s^2",
                         (0.5 * (session.meta_float("reference_tolerance_mps2") or 0.0)) ** 2),
         _triad_residual("gyro", g_res, g_design, g_runs, g_noise, g_tri, g_blocks, deg, "deg/s"),
     ], angle_report or None)
+    quality = replace(quality, goodness_of_fit=GoodnessOfFit.from_dict(verdict))
 
     def triad(
-        p: dict[str, np.ndarray], noise: _Noise, res: Rows, runs: list[tuple[int, int, int]]
+        p: dict[str, np.ndarray], noise: NoiseEstimate, res: Rows, runs: list[tuple[int, int, int]]
     ) -> TriadParams:
         squares, count = _sum_of_rows(r**2 for r in _kept_rows(res, runs, noise.keep))  # np.mean(res[mask]**2, 0)
         return TriadParams(
             noise_std=noise.sigma,
             noise_std_std=noise.sigma_std,
-            allan=_allan(session, res, noise.keep),
+            allan=residual_allan(session, res, noise.keep),
             residual_rms=np.sqrt(squares / count),
             **p,
         )
 
-    return ParameterSet(
+    params = ParameterSet(
         serial=session.serial,
         sample_period_s=ts,
         moving_average_length=options.moving_average_length,
@@ -700,6 +714,7 @@ def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
                if options.tc_range_s else {}),
         },
     )
+    return assess(params, float(session.t_s[-1]))
 
 
 __all__ = ["FitOptions", "block_exp_mean", "fit_session", "mean_model"]

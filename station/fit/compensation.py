@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 
-from station.fit.params import ParameterSet
+from station.kernel.parameters import ParameterSet
 
 #: Effect name -> dotted ParameterSet field paths that compensate it (empty: not compensable by the set).
 COMPENSATION: dict[str, tuple[str, ...]] = {

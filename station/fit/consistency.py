@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from station.kernel.errors import FitError
-from station.session.model import Kind, Session
+from station.session.model import Kind, Segment, Session
 
 AXES = "xyz"
 
@@ -94,7 +94,7 @@ def check_sample_rate(session: Session) -> None:
         )
 
 
-def _still_segments(session: Session) -> list[tuple[object, np.ndarray, np.ndarray]]:
+def _still_segments(session: Session) -> list[tuple[Segment, np.ndarray, np.ndarray]]:
     out = []
     for seg in session.segments_of(Kind.REST, Kind.POSE):
         ref = session.ref_accel_mps2[seg.slice]
@@ -120,7 +120,7 @@ def check_pose_references(session: Session) -> None:
     tolerance = session.meta_float("reference_tolerance_mps2")
     tol = REFERENCE_TOLERANCE * g if tolerance is None else tolerance
     for seg, ref, measured in _still_segments(session):
-        where = f"{seg.kind.label} segment {seg.index}"  # type: ignore[attr-defined]
+        where = f"{seg.kind.label} segment {seg.index}"
         norm = float(np.linalg.norm(ref))
         if abs(norm - g) > tol:
             raise FitError(

@@ -24,6 +24,11 @@ Our model (eq. 1) is ``y = M x + b`` (y the measurement); the corrections these 
 
 Each number carries a standard uncertainty where the parameter set has one (linear propagation
 through the inverse; from the full covariance of a rig-free fit when it is in ``quality``).
+
+An axis whose b_stat the recording cannot determine (``quality.determinability``) is exported with the
+rule of :meth:`~station.kernel.parameters.ParameterSet.constant_bias_values`: the bias at the end of the recording,
+its uncertainty not stated (NaN, ``null``); :func:`export_notes` says which axes, and the imu_tk document
+carries the same notes under ``convention.undetermined``.
 """
 
 from __future__ import annotations
@@ -35,11 +40,11 @@ from typing import Any
 
 import numpy as np
 
-from station.fit.params import ParameterSet, TriadParams
 from station.kernel.errors import FormatError
+from station.kernel.parameters import ParameterSet, TriadParams
 
-__all__ = ["IMU_TK_FORMAT", "imu_tk_calib_files", "imu_tk_document", "imu_tk_terms", "kalibr_imu_yaml",
-           "openaxes_coefficients", "openaxes_text"]
+__all__ = ["IMU_TK_FORMAT", "export_notes", "imu_tk_calib_files", "imu_tk_document", "imu_tk_terms",
+           "kalibr_imu_yaml", "openaxes_coefficients", "openaxes_text"]
 
 IMU_TK_FORMAT = "station-imutk/1"
 
@@ -60,12 +65,13 @@ def imu_tk_terms(params: ParameterSet) -> dict[str, dict[str, np.ndarray]]:
     if not (np.isfinite(params.accel.misalignment).all() and np.isfinite(params.gyro.misalignment).all()):
         raise FormatError("the parameter set has unresolved misalignment elements; nothing to export")
     out: dict[str, dict[str, np.ndarray]] = {}
-    rig_free = params.quality.get("rig_free", {}) if isinstance(params.quality, dict) else {}
+    rig_free = params.quality.rig_free or {}
+    params = params.constant_bias_values()[0]
     a_tk, a_tk_std = _inv_with_std(params.accel.misalignment, np.nan_to_num(params.accel.misalignment_std))
     b = params.accel.bias_static
     bias_after = a_tk @ b
     cov = rig_free.get("accel_param_cov")
-    if cov is not None and np.array(cov).shape == (9, 9):
+    if cov is not None and np.all(np.isfinite(params.accel.bias_static_std)) and np.array(cov).shape == (9, 9):
         # exact propagation from the rig-free fit's parameters (A00, A01, A02, A11, A12, A22, b0, b1, b2)
         cov = np.array(cov)
         upper = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
@@ -97,12 +103,17 @@ def imu_tk_terms(params: ParameterSet) -> dict[str, dict[str, np.ndarray]]:
 
 
 def _list(a: np.ndarray) -> Any:
-    return np.round(np.asarray(a, dtype=float), 12).tolist()
+    """Rounded nested lists; a number not stated (NaN) is ``null``."""
+    def clean(v: Any) -> Any:
+        return [clean(x) for x in v] if isinstance(v, list) else (None if v != v else v)
+
+    return clean(np.round(np.asarray(a, dtype=float), 12).tolist())
 
 
 def imu_tk_document(params: ParameterSet) -> str:
     """The parameter set in the imu_tk convention as JSON (format ``station-imutk/1``)."""
     terms = imu_tk_terms(params)
+    notes = export_notes(params)
     doc = {
         "format": IMU_TK_FORMAT,
         "serial": params.serial,
@@ -111,8 +122,8 @@ def imu_tk_document(params: ParameterSet) -> str:
             "gyro": "calibrated_radps = TK @ (raw_radps - bias_before_matrix); TK = T @ diag(K)",
             "order": "matrices row-major [[row x], [row y], [row z]]; vectors [x, y, z]; SI units",
             "drift": "not representable: the bias is the settled b_stat; b_drift exp(-t/T_c) of eq. (3) is left out",
-            "frame": params.quality.get("rig_free", {}).get("convention", "the rig's frame")
-            if isinstance(params.quality, dict) else "the rig's frame",
+            "frame": (params.quality.rig_free or {}).get("convention", "the rig's frame"),
+            **({"undetermined": list(notes)} if notes else {}),
         },
         "accel": {k: _list(v) for k, v in terms["accel"].items()},
         "gyro": {k: _list(v) for k, v in terms["gyro"].items()},
@@ -120,6 +131,12 @@ def imu_tk_document(params: ParameterSet) -> str:
                                                                if k in ("software", "method", "gravity_mps2")}},
     }
     return json.dumps(doc, indent=2) + "\n"
+
+
+def export_notes(params: ParameterSet) -> tuple[str, ...]:
+    """What an export writes differently from the set's own numbers: one line per axis whose b_stat the recording
+    cannot determine (the bias at the end of the recording is exported instead); empty when none."""
+    return params.constant_bias_values()[1]
 
 
 def openaxes_coefficients(param_sets: Sequence[ParameterSet]) -> tuple[np.ndarray, np.ndarray]:
@@ -158,8 +175,10 @@ def imu_tk_calib_files(params: ParameterSet) -> dict[str, str]:
     """imu_tk's parameter files of the set: ``{"acc": text, "gyro": text}`` (see the module docstring).
 
     ``T K = M^-1`` is split into K = its diagonal and T = ``M^-1 K^-1`` (unit diagonal, imu_tk's general
-    misalignment); B = b_stat. Refused (:class:`FormatError`) when M is not resolved or singular."""
+    misalignment); B = b_stat (the bias at the end of the recording where b_stat is not determined,
+    :func:`export_notes`). Refused (:class:`FormatError`) when M is not resolved or singular."""
     out: dict[str, str] = {}
+    params = params.constant_bias_values()[0]
     for name, tri in (("acc", params.accel), ("gyro", params.gyro)):
         m = np.asarray(tri.misalignment, dtype=np.float64)
         b = np.asarray(tri.bias_static, dtype=np.float64)

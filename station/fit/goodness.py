@@ -29,7 +29,7 @@ when there are more than three rotations.
 
 Every test runs at the same false-alarm rate, :data:`FALSE_ALARM` for the whole recording split
 evenly over the tests (Bonferroni), so a good recording fails with probability below it. A fit
-that fails is not a calibration: ``ParameterSet.quality["goodness_of_fit"]`` holds the verdict
+that fails is not a calibration: ``ParameterSet.quality.goodness_of_fit`` holds the verdict
 (``passed``, ``failed``: which triad and segment kind, and every statistic), the ``station fit``
 command exits with :data:`EXIT_GOODNESS` and the sequence counts it as a FAIL of the recording.
 """
@@ -45,6 +45,7 @@ import numpy as np
 from scipy import stats
 
 from station.fit.blocks import Blocks
+from station.kernel.parameters import GoodnessOfFit
 from station.session.model import Kind, Session
 
 #: probability that a recording that follows the model fails the verdict (all tests together)
@@ -277,12 +278,13 @@ def goodness_of_fit(
     }
 
 
-def summary(verdict: dict[str, Any]) -> str:
+def summary(verdict: GoodnessOfFit) -> str:
     """One line naming what failed (the worst test of each failed triad and kind)."""
     parts = []
-    for name in verdict["failed"]:
+    for name in verdict.failed:
         tri, kind = name.split(" ")
-        bad = [t for t in verdict["tests"] if t["triad"] == tri and t["kind"] == kind and not t["passed"]]
+        bad = [t for t in verdict.report.get("tests", [])
+               if t["triad"] == tri and t["kind"] == kind and not t["passed"]]
         t = max(bad, key=lambda t: abs(t["worst_z"]) + t["chi2"] / max(t["chi2_limit"] or 1.0, 1e-9))
         offset = "" if t["worst_offset"] is None else f", offset {t['worst_offset']:.3g} {t['unit']}"
         limit = "" if t["chi2_limit"] is None else f" (limit {t['chi2_limit']:g})"

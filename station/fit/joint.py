@@ -13,7 +13,7 @@ counter), so one model of eq. 1 with the drift of eq. 3 explains both:
 regressor that is 1 on the rack's samples, 0 on the rig's): the rack then says nothing about M and
 b_stat (they come from the rig) but everything about the shape of the warm-up, ``b_drift``, ``T_c``
 and the stochastic drift ``s``. This is the rig-free fit's treatment of unknown gravity directions
-(:mod:`station.fit.rigfree`: one direction per still segment) without its norm constraint ``|c| = g``,
+(:mod:`station.fit.rigfree_fit`: one direction per still segment) without its norm constraint ``|c| = g``,
 which would add one equation against three offsets and couple the axes into a non-linear problem;
 the constraint is instead checked afterwards (``quality["line"]["rack_gravity_mps2"]``: ``|M^-1 (o -
 b_stat)|`` must be local gravity). The per-axis maximum-likelihood fit (:func:`station.fit.axis_ml.fit_axis`,
@@ -41,18 +41,19 @@ from station.fit.blocks import Blocks, make_blocks
 from station.fit.boundary import numerics
 from station.fit.calibrate import (
     FitOptions,
-    _allan,
-    _Noise,
-    _noise,
-    _quality,
-    _settled_runs,
-    _TriadLinear,
-    _unpack,
+    NoiseEstimate,
+    TriadLinear,
     mean_model,
+    residual_allan,
+    residual_figures,
+    settled_runs,
+    unpack_triad,
+    white_noise,
 )
 from station.fit.checks import check_finite, check_session, check_time
-from station.fit.params import ParameterSet, TriadParams
+from station.fit.determinability import assess
 from station.kernel.errors import FitError
+from station.kernel.parameters import FitQuality, ParameterSet, TriadParams
 from station.session.model import Kind, Session
 
 #: Metadata keys the line's recordings carry (see :func:`check_power`).
@@ -197,11 +198,11 @@ def _merge(rack: Session, rig: Session) -> Session:
 @dataclass(frozen=True, eq=False)
 class _JointTriad:
     p: dict[str, np.ndarray]
-    tri: _TriadLinear
+    tri: TriadLinear
     blocks: Blocks
     offsets: np.ndarray  # (3, n_rack_segments) nuisance offsets M c (+ nothing else)
     offsets_std: np.ndarray
-    noise: _Noise
+    noise: NoiseEstimate
     runs: list[tuple[int, int, int]]
 
 
@@ -210,7 +211,7 @@ def _fit_triad(
     rack_runs: list[tuple[int, int, int]], indicator: np.ndarray, options: FitOptions, triad: str,
 ) -> _JointTriad:
     runs = sorted(rig_runs + rack_runs, key=lambda r: r[1])
-    noise = _noise(merged, data, runs, options.outlier_sigma)
+    noise = white_noise(merged, data, runs, options.outlier_sigma)
     blocks = make_blocks(merged.t_s, data, np.nan_to_num(ref), np.nan_to_num(merged.ref_accel_mps2), noise.keep,
                          runs, 1.0 / merged.sample_rate_hz, options.max_blocks, extra=indicator)
     assert blocks.extra is not None
@@ -218,11 +219,11 @@ def _fit_triad(
     tc_range = options.tc_range_s.get(triad)
     fits = [fit_axis(blocks, k, design, float(noise.sigma[k]), lr_threshold=options.drift_lr_threshold,
                      tc_range_s=tc_range) for k in range(3)]
-    tri = _TriadLinear(fits=fits, n_ref=3, extra=0)
+    tri = TriadLinear(fits=fits, n_ref=3, extra=0)
     n_off = indicator.shape[1]
     offsets = np.array([f.beta[4:4 + n_off] for f in fits])
     offsets_std = np.array([np.sqrt(np.clip(np.diag(f.beta_cov)[4:4 + n_off], 0.0, None)) for f in fits])
-    return _JointTriad(_unpack(tri), tri, blocks, offsets, offsets_std, noise, runs)
+    return _JointTriad(unpack_triad(tri), tri, blocks, offsets, offsets_std, noise, runs)
 
 
 def fit_joint(
@@ -265,11 +266,11 @@ def _fit_joint(rack: Session, rig: Session, options: FitOptions, max_transfer_s:
     for j, seg in enumerate(rack_segments):
         indicator[:n_rack, j] = rack.segment == seg
     shift = [(s + _RIG_SEGMENT_OFFSET, a + n_rack, b + n_rack) for s, a, b in
-             _settled_runs(rig, (Kind.REST, Kind.POSE), rig.ref_accel_mps2)]
+             settled_runs(rig, (Kind.REST, Kind.POSE), rig.ref_accel_mps2)]
     with numerics("accelerometer joint fit (rack rest, rig rest and poses)"):
         a = _fit_triad(merged, merged.accel_mps2, merged.ref_accel_mps2, shift, rack_runs, indicator, options, "accel")
     g_shift = [(s + _RIG_SEGMENT_OFFSET, a0 + n_rack, b0 + n_rack) for s, a0, b0 in
-               _settled_runs(rig, (Kind.REST, Kind.POSE, Kind.RATE), rig.ref_gyro_radps)]
+               settled_runs(rig, (Kind.REST, Kind.POSE, Kind.RATE), rig.ref_gyro_radps)]
     with numerics("gyroscope joint fit (rack rest, rig rest, poses and rate steps)"):
         g = _fit_triad(merged, merged.gyro_radps, merged.ref_gyro_radps, g_shift, rack_runs, indicator, options,
                        "gyro")
@@ -283,7 +284,7 @@ def _fit_joint(rack: Session, rig: Session, options: FitOptions, max_transfer_s:
     def implied(j: _JointTriad) -> list[list[float]]:
         """The rack's constant input per rack segment, ``M^-1 o`` (the offsets hold ``M c``)."""
         try:
-            return np.linalg.solve(j.p["misalignment"], j.offsets).T.round(9).tolist()  # type: ignore[no-any-return]
+            return np.linalg.solve(j.p["misalignment"], j.offsets).T.round(9).tolist()
         except np.linalg.LinAlgError:
             return []
 
@@ -299,15 +300,15 @@ def _fit_joint(rack: Session, rig: Session, options: FitOptions, max_transfer_s:
         "rack_angular_rate_radps": implied(g),
         "rule": "rack rest: M c + b_stat + b_drift exp(-t/T_c) with M c one free offset per axis and rack segment",
     }
-    quality = {
-        "accel": _quality(merged, "accel", a_res, a.runs, a.noise.keep),
-        "gyro": _quality(merged, "gyro", g_res, g.runs, g.noise.keep),
-        "gyro_scale_method": gyro_method,
-        "outliers": {"accel": a.noise.outliers.tolist(), "gyro": g.noise.outliers.tolist()},
-        "drift_likelihood_ratio": {"accel": [round(f.lr, 3) for f in a.tri.fits],
-                                   "gyro": [round(f.lr, 3) for f in g.tri.fits]},
-        "line": line,
-    }
+    quality = FitQuality(
+        accel=residual_figures(a_res, a.runs, a.noise.keep),
+        gyro=residual_figures(g_res, g.runs, g.noise.keep),
+        gyro_scale_method=gyro_method,
+        outliers={"accel": tuple(a.noise.outliers.tolist()), "gyro": tuple(g.noise.outliers.tolist())},
+        drift_likelihood_ratio={"accel": tuple(round(f.lr, 3) for f in a.tri.fits),
+                                "gyro": tuple(round(f.lr, 3) for f in g.tri.fits)},
+        extra={"line": line},  # the line's section (read as quality.extra["line"])
+    )
 
     def triad(j: _JointTriad, res: np.ndarray) -> TriadParams:
         mask = np.zeros(len(merged), dtype=bool)
@@ -315,10 +316,10 @@ def _fit_joint(rack: Session, rig: Session, options: FitOptions, max_transfer_s:
             mask[s0:s1] = True
         mask &= j.noise.keep
         return TriadParams(noise_std=j.noise.sigma, noise_std_std=j.noise.sigma_std,
-                           allan=_allan(merged, res, j.noise.keep),
+                           allan=residual_allan(merged, res, j.noise.keep),
                            residual_rms=np.sqrt(np.mean(res[mask] ** 2, axis=0)), **j.p)
 
-    return ParameterSet(
+    params = ParameterSet(
         serial=rig.serial,
         sample_period_s=1.0 / rig.sample_rate_hz,
         moving_average_length=options.moving_average_length,
@@ -336,6 +337,7 @@ def _fit_joint(rack: Session, rig: Session, options: FitOptions, max_transfer_s:
                if options.tc_range_s else {}),
         },
     )
+    return assess(params, float(merged.t_s[-1]))
 
 
 __all__ = ["BOOT_KEY", "OFFSET_KEY", "WALL_KEY", "PowerContinuity", "check_power", "fit_joint", "power_continuity"]

@@ -50,13 +50,13 @@ __all__ = [
     "rough_directions",
 ]
 
-_UPPER = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
+UPPER_TRIANGLE = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
 
 
 def accel_from_params(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(A upper-triangular (3, 3), b (3,)) from the 9 accelerometer parameters."""
     a = np.zeros((3, 3))
-    for k, (i, j) in enumerate(_UPPER):
+    for k, (i, j) in enumerate(UPPER_TRIANGLE):
         a[i, j] = p[k]
     return a, np.asarray(p[6:9], dtype=float)
 
@@ -129,7 +129,7 @@ def _accel_jac(p: np.ndarray, means: np.ndarray) -> np.ndarray:
     c = v @ a.T
     n = np.linalg.norm(c, axis=1, keepdims=True)
     jac = np.empty((len(means), 9))
-    for k, (i, j) in enumerate(_UPPER):
+    for k, (i, j) in enumerate(UPPER_TRIANGLE):
         jac[:, k] = c[:, i] * v[:, j] / n[:, 0]
     jac[:, 6:9] = -(c @ a) / n
     return jac
@@ -151,7 +151,7 @@ def fit_accel_norm(means: np.ndarray, gravity_mps2: float) -> AccelNormFit:
     if np.any(np.diag(a) < 0):  # the mirror solution: flip the signs of the rows with a negative diagonal
         sign = np.sign(np.diag(a))
         a = a * sign[:, None]
-        p = np.array([a[i, j] for i, j in _UPPER] + list(b))
+        p = np.array([a[i, j] for i, j in UPPER_TRIANGLE] + list(b))
     r = norm_residuals(a, b, y, g)
     jac = _accel_jac(p, y)
     s2 = float(np.sum(r**2) / (m - 9))
@@ -357,7 +357,7 @@ class AccelJointFit:
     def std(self) -> dict[str, np.ndarray]:
         sd = np.sqrt(np.clip(np.diag(self.cov), 0.0, None))
         m = np.zeros((3, 3))
-        for k, (i, j) in enumerate(_UPPER):
+        for k, (i, j) in enumerate(UPPER_TRIANGLE):
             m[i, j] = sd[k]
         tc = np.full(3, np.nan)
         tc[self.tc_free] = sd[12:12 + int(self.tc_free.sum())] * self.tc_s[self.tc_free]
@@ -409,12 +409,12 @@ def fit_accel_joint(
     free = np.flatnonzero(tc_free)
     n_tc = len(free)
     m0 = np.linalg.inv(initial.a_matrix)
-    x0 = np.concatenate([[m0[i, j] for i, j in _UPPER], initial.bias, drift0, np.log(np.asarray(tc_s)[free]),
+    x0 = np.concatenate([[m0[i, j] for i, j in UPPER_TRIANGLE], initial.bias, drift0, np.log(np.asarray(tc_s)[free]),
                          np.zeros(2 * len(poses))])
 
     def unpack(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         m = np.zeros((3, 3))
-        for k, (i, j) in enumerate(_UPPER):
+        for k, (i, j) in enumerate(UPPER_TRIANGLE):
             m[i, j] = x[k]
         tc = np.array(tc_s, dtype=float)
         tc[free] = np.exp(x[12:12 + n_tc])

@@ -241,10 +241,10 @@ def detect_stale_reads(
     trials = max(1.0, (f_hi - f_lo) * span)
     p_value = float(min(1.0, np.exp(-len(k) * r_beat**2) * trials))
     on_grid = int(np.sum(np.abs(res) <= 1.0))
-    stats = {"candidates": len(k), "on_grid": on_grid, "rayleigh": r_beat, "p_value": p_value}
     if on_grid < 0.5 * len(k) or p_value > p_max:
         return _not_selected(n, f"{len(k)} exact repeats while the gyro turns, {on_grid} on a beat of "
-                                f"{x[0]:.1f} reads (p = {p_value:.2g}): no periodic stale reads", **stats)
+                                f"{x[0]:.1f} reads (p = {p_value:.2g}): no periodic stale reads",
+                             candidates=len(k), on_grid=on_grid, rayleigh=r_beat, p_value=p_value)
     # every axis's stale read in every cycle: eq. (1) rounded, moved to an exact repeat within 1 read
     stale = np.zeros((n, 3), dtype=bool)
     lead = np.zeros(3, dtype=int)

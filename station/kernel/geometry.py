@@ -56,9 +56,12 @@ def rotation_vector_matrix(phi: np.ndarray) -> np.ndarray:
     phi = np.asarray(phi, dtype=float)
     angle = float(np.linalg.norm(phi))
     k = np.array([[0.0, -phi[2], phi[1]], [phi[2], 0.0, -phi[0]], [-phi[1], phi[0], 0.0]])
+    out: np.ndarray
     if angle < 1e-12:
-        return np.eye(3) + k
-    return np.eye(3) + (np.sin(angle) / angle) * k + ((1.0 - np.cos(angle)) / angle**2) * (k @ k)
+        out = np.eye(3) + k
+    else:
+        out = np.eye(3) + (np.sin(angle) / angle) * k + ((1.0 - np.cos(angle)) / angle**2) * (k @ k)
+    return out
 
 
 @dataclass(frozen=True)

@@ -172,6 +172,13 @@ class _Table:
             raise self.fail(key, f"must be > 0, got {v!r}")
         return float(v)
 
+    def value(self, key: str, *, positive: bool = False) -> float:
+        """A required number (a missing key is an error, so never None)."""
+        v = self.number(key, positive=positive)
+        if v is None:  # pragma: no cover - number() raises for a missing required key
+            raise self.fail(key, "missing")
+        return v
+
     def text(self, key: str) -> str:
         v = self.raw(key)
         if not isinstance(v, str) or not v.strip():
@@ -315,14 +322,14 @@ def parse_limits(text: str | bytes, source: str = "<limits>", path: Path | None 
     ver = top.table("verification")
     try:
         verification = VerificationLimits(
-            accel_mps2=ver.number("accel_error_mps2", positive=True),  # type: ignore[arg-type]
-            gyro_static_radps=ver.number("gyro_static_error_dps", positive=True) * _DEG,  # type: ignore[operator]
-            rate_radps=ver.number("rate_error_dps", positive=True) * _DEG,  # type: ignore[operator]
+            accel_mps2=ver.value("accel_error_mps2", positive=True),
+            gyro_static_radps=ver.value("gyro_static_error_dps", positive=True) * _DEG,
+            rate_radps=ver.value("rate_error_dps", positive=True) * _DEG,
             pose=ver.text("pose"),
             rate_pose=ver.text("rate_pose"),
-            rate_dps=ver.number("rate_dps"),  # type: ignore[arg-type]
-            settle_s=ver.number("settle_s", positive=True),  # type: ignore[arg-type]
-            hold_s=ver.number("hold_s", positive=True),  # type: ignore[arg-type]
+            rate_dps=ver.value("rate_dps"),
+            settle_s=ver.value("settle_s", positive=True),
+            hold_s=ver.value("hold_s", positive=True),
         )
     except ValueError as exc:
         raise LimitsFileError(f"{source}: verification: {exc}") from exc

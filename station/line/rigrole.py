@@ -25,9 +25,9 @@ from typing import Any
 
 from station.fit.calibrate import FitOptions
 from station.fit.joint import BOOT_KEY, OFFSET_KEY, check_power, fit_joint, power_continuity
-from station.fit.params import ParameterSet
 from station.kernel.clock import Clock
 from station.kernel.errors import FitError, HardwareError
+from station.kernel.parameters import ParameterSet
 from station.line.recordings import RackArchive, StoredRackRecording
 from station.sensor.protocol import Sensor
 from station.sequence.capture import UnitChannel
@@ -140,7 +140,7 @@ class LineRigRunner(SequenceRunner):
                                                  uptime_s=status.uptime_s, clock_now_s=0.5 * (t_a + t_b),
                                                  max_transfer_s=max_transfer_s, on_interruption=on_interruption,
                                                  clock_slack_s=clock_slack_s)
-            wrapped.append(KeepPowered(s))  # type: ignore[arg-type]
+            wrapped.append(KeepPowered(s))
         outer = kwargs.pop("admit", None)
 
         def admit(serial: str, run_id: str) -> str | None:
@@ -153,8 +153,8 @@ class LineRigRunner(SequenceRunner):
 
         super().__init__(rig, wrapped, clock, admit=admit, **kwargs)
 
-    def _metadata(self, unit: UnitChannel) -> dict[str, str]:
-        meta = super()._metadata(unit)
+    def metadata(self, unit: UnitChannel) -> dict[str, str]:
+        meta = super().metadata(unit)
         offset = getattr(unit, "offset_s", None)
         if offset is not None and math.isfinite(offset):
             meta[OFFSET_KEY] = repr(float(offset))

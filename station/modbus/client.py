@@ -1,6 +1,6 @@
 """The station's pymodbus client transport, shared by the rig and the chamber clients.
 
-:class:`ModbusTransport` opens a pymodbus sync client for a :class:`~station.modbus.url.ModbusUrl`
+:class:`ModbusTransport` opens a pymodbus sync client for a :class:`~station.modbus.modbus_url.ModbusUrl`
 (Modbus/TCP or RTU) and runs every transaction under the device's lock in a bounded retry loop: a
 request that gets no answer (or whose connection dropped) is retried ``url.retries`` times after
 closing and reopening the link, then the device's timeout error is raised; a Modbus exception reply
@@ -20,7 +20,7 @@ from pymodbus.constants import ExcCodes
 from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
 
 from station.kernel.errors import StationError
-from station.modbus.url import ModbusUrl
+from station.modbus.modbus_url import ModbusUrl
 
 
 class ProtocolErrorType(Protocol):

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass, field, fields
 
 import numpy as np
 
@@ -214,12 +214,12 @@ class EffectShapes:
     accel_asymmetry: np.ndarray
     gyro_asymmetry: np.ndarray
     lever_arm: np.ndarray
-    pose_tilt: np.ndarray | None = None
+    pose_tilt: np.ndarray = field(default_factory=lambda: np.zeros((len(POSES), 3)))
 
     def __post_init__(self) -> None:
         for f in fields(self):
             value = getattr(self, f.name)
-            if f.name == "pose_tilt" and value is None:
+            if f.name == "pose_tilt" and value is None:  # as before the default factory: zeros
                 value = np.zeros((len(POSES), 3))
             object.__setattr__(self, f.name, _ro(value, _SHAPE_SHAPES.get(f.name, (3,))))
 

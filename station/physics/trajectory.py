@@ -72,7 +72,8 @@ class RigTrajectory:
         """(angle rad, rate rad/s, accel rad/s^2), each (n, 3) with columns roll, pitch, yaw."""
         t = np.asarray(t_rig_s, dtype=float)
         states = [ax.state(t) for ax in (self.roll, self.pitch, self.yaw)]
-        return tuple(np.stack([s[i] for s in states], axis=1) for i in range(3))  # type: ignore[return-value]
+        angle, rate, accel = (np.stack([s[i] for s in states], axis=1) for i in range(3))
+        return angle, rate, accel
 
     def kinematics(
         self, t_s: np.ndarray, time_offset_s: float = 0.0, pose_tilt_rad: Mapping[str, np.ndarray] | None = None
@@ -139,10 +140,12 @@ class RigTrajectory:
             sel = idx == i
             if not np.any(sel):
                 continue
-            ref_f[sel] = g * up_vector(seg.up)  # type: ignore[arg-type]
+            assert seg.up is not None  # every segment but a move has a pose
+            ref_f[sel] = g * up_vector(seg.up)
             if seg.kind == Kind.RATE:
+                assert seg.rate_axis is not None  # a rate segment has its axis
                 w = np.zeros(3)
-                w[AXIS_INDEX[seg.rate_axis]] = seg.rate_dps * _DEG  # type: ignore[index]
+                w[AXIS_INDEX[seg.rate_axis]] = seg.rate_dps * _DEG
                 ref_w[sel] = w
         return ref_f, ref_w
 
@@ -178,16 +181,19 @@ class _Builder:
             self._add(Kind.MOVE, self._move_start, self.t)
         self._move_start = None
 
-    def _add(self, kind: Kind, t0: float, t1: float, **kw: object) -> None:
-        self.segments.append(PlanSegment(len(self.segments), kind, t0, t1, **kw))  # type: ignore[arg-type]
+    def _add(self, kind: Kind, t0: float, t1: float, *, up: str | None = None, rate_axis: str | None = None,
+             rate_dps: float = 0.0) -> None:
+        self.segments.append(PlanSegment(len(self.segments), kind, t0, t1, up=up, rate_axis=rate_axis,
+                                         rate_dps=rate_dps))
 
-    def hold(self, kind: Kind, duration: float, **kw: object) -> None:
+    def hold(self, kind: Kind, duration: float, *, up: str | None = None, rate_axis: str | None = None,
+             rate_dps: float = 0.0) -> None:
         self._end_move()
         if duration <= 0:
             return
         t0 = self.t
         self._sync(t0 + duration)
-        self._add(kind, t0, self.t, **kw)
+        self._add(kind, t0, self.t, up=up, rate_axis=rate_axis, rate_dps=rate_dps)
 
     def tumble(self, pose: str) -> None:
         """Move the gimbal (roll, pitch) to ``pose``, then settle; the table must be still."""

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from station.fit.params import AllanCoefficients, ParameterSet, TriadParams
+from station.kernel.parameters import AllanCoefficients, ParameterSet, TriadParams
 from station.kernel.sensor_class import Range, SensorClass
 from station.physics.effects import EffectShapes
 
@@ -32,7 +32,7 @@ def _ro(a: Any, shape: tuple[int, ...]) -> np.ndarray:
 
 @dataclass(frozen=True, eq=False)
 class TriadTruth:
-    """True parameters of one triad; names as in :class:`station.fit.params.TriadParams`.
+    """True parameters of one triad; names as in :class:`station.kernel.parameters.TriadParams`.
 
     Unit U is m/s^2 for the accelerometer and rad/s for the gyroscope.
 

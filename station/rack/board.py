@@ -2,7 +2,7 @@
 
 :class:`RelayBoard` follows ``station/rack/register-map.md`` over :class:`station.modbus.client.ModbusTransport`
 (retries, reconnects, Modbus exceptions as :class:`RelayBoardError`). URLs as the rig's and the
-chamber's (:mod:`station.modbus.url`): ``modbus-tcp://HOST:PORT?unit=1``, ``modbus-rtu:///dev/ttyUSB0?...``.
+chamber's (:mod:`station.modbus.modbus_url`): ``modbus-tcp://HOST:PORT?unit=1``, ``modbus-rtu:///dev/ttyUSB0?...``.
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 from station.kernel.errors import HardwareError, StationError
 from station.modbus.client import ModbusTransport
-from station.modbus.url import ModbusUrl, UrlDialect, parse_modbus_url
+from station.modbus.modbus_url import ModbusUrl, UrlDialect, parse_modbus_url
 from station.rack import registers as reg
 
 
@@ -34,7 +34,7 @@ class RelayBoardUrlError(StationError, ValueError):
 
 @dataclass(frozen=True)
 class RelayBoardUrl(ModbusUrl):
-    """A parsed relay-board URL (fields: :class:`~station.modbus.url.ModbusUrl`; 9600 baud by default)."""
+    """A parsed relay-board URL (fields: :class:`~station.modbus.modbus_url.ModbusUrl`; 9600 baud by default)."""
 
     baud: int = 9600
 

@@ -14,7 +14,7 @@ from station.rig.protocol import (
     RigTimeout,
 )
 from station.rig.registry import RIGS, open_rig
-from station.rig.url import RigUrl, RigUrlError, parse_rig_url
+from station.rig.rig_url import RigUrl, RigUrlError, parse_rig_url
 
 __all__ = [
     "RIGS",

@@ -23,7 +23,7 @@ from station.kernel.clock import Clock
 from station.modbus.client import ModbusTransport
 from station.rig.mapped import RegisterRig, start_rig
 from station.rig.protocol import RigProtocolError, RigTimeout
-from station.rig.url import RigUrl, parse_rig_url
+from station.rig.rig_url import RigUrl, parse_rig_url
 
 
 class ModbusRig(ModbusTransport, RegisterRig):
@@ -32,7 +32,7 @@ class ModbusRig(ModbusTransport, RegisterRig):
     The transport (retries, reconnects) is :class:`station.modbus.client.ModbusTransport`'s.
 
     Args:
-        url: rig URL (see :mod:`station.rig.url`) or a parsed :class:`RigUrl`.
+        url: rig URL (see :mod:`station.rig.rig_url`) or a parsed :class:`RigUrl`.
         clock: time base for waits, polling and the heartbeat (rig seconds).
         retry_backoff_s: pause before a retry (wall s).
         options: the motion and supervision settings of :class:`RegisterRig`.

@@ -13,7 +13,7 @@ from station.kernel.clock import Clock
 from station.kernel.schemes import SchemeRegistry
 from station.rig import modbus
 from station.rig.protocol import Rig
-from station.rig.url import SCHEMES, RigUrl, RigUrlError, parse_rig_url
+from station.rig.rig_url import SCHEMES, RigUrl, RigUrlError, parse_rig_url
 
 RIGS: SchemeRegistry[Rig] = SchemeRegistry("rig", RigUrlError)
 for _scheme in SCHEMES:
@@ -24,7 +24,7 @@ def open_rig(url: str | RigUrl, clock: Clock | None = None, **options: Any) -> R
     """Open, identify and supervise the rig at ``url`` with the implementation its scheme names.
 
     ``options`` go to that implementation (for Modbus: :func:`station.rig.modbus.open_rig`).
-    Raises :class:`~station.rig.url.RigUrlError` for a scheme nobody registered.
+    Raises :class:`~station.rig.rig_url.RigUrlError` for a scheme nobody registered.
     """
     if isinstance(url, RigUrl):
         return modbus.open_rig(url, clock, **options)

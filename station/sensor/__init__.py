@@ -6,7 +6,7 @@
 - :mod:`station.sensor.base`: :class:`~station.sensor.base.ProtocolSensor`, the protocol's semantics over any transport.
 - :mod:`station.sensor.client`: :class:`SerialSensor`, the protocol over a serial port.
 - :mod:`station.sensor.registry`: :func:`open_sensor` by URL scheme.
-- :mod:`station.sensor.url`: ``serial:///dev/...?baud=N`` parsing.
+- :mod:`station.sensor.serial_url`: ``serial:///dev/...?baud=N`` parsing.
 """
 
 from station.sensor.client import SerialSensor
@@ -22,7 +22,7 @@ from station.sensor.protocol import (
     SensorTimeout,
 )
 from station.sensor.registry import SENSORS, open_sensor
-from station.sensor.url import SensorUrlError, SerialUrl, parse_sensor_url
+from station.sensor.serial_url import SensorUrlError, SerialUrl, parse_sensor_url
 
 __all__ = [
     "SENSORS",

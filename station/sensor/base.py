@@ -336,7 +336,7 @@ class ProtocolSensor:
         if (n is None) == (duration_s is None):
             raise ValueError("give exactly one of n and duration_s")
         rate = self._rate_hz or 10
-        span = duration_s if duration_s is not None else n / rate  # type: ignore[operator]
+        span = duration_s if duration_s is not None else (n or 0) / rate  # n is given when duration_s is not
         if timeout_s is None:
             timeout_s = 1.5 * span + 1.0
         return self._read(n, duration_s, timeout_s)

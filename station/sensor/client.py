@@ -33,7 +33,7 @@ from station.kernel.clock import Clock
 from station.kernel.errors import FormatError
 from station.sensor.base import ProtocolSensor
 from station.sensor.commands import BootEvent, Command, Reply, decode_reply, encode_command
-from station.sensor.frames import FrameParser, FrameType, ParserStats, decode_sample_payloads
+from station.sensor.frames import Frame, FrameParser, FrameType, ParserStats, decode_sample_payloads
 from station.sensor.protocol import (
     CrcStormError,
     SampleBlock,
@@ -41,7 +41,7 @@ from station.sensor.protocol import (
     SensorNak,
     SensorTimeout,
 )
-from station.sensor.url import parse_sensor_url
+from station.sensor.serial_url import parse_sensor_url
 
 _T_SAMPLE = int(FrameType.SAMPLE)
 _T_REPLY = (int(FrameType.ACK), int(FrameType.NAK))
@@ -156,9 +156,9 @@ class SerialSensor(ProtocolSensor):
             self._update_crc_window(n_frames - last_frames, n_crc - last_crc)
             last_frames, last_crc = n_frames, n_crc
 
-    def _dispatch(self, frame: object) -> None:
+    def _dispatch(self, frame: Frame) -> None:
         try:
-            reply = decode_reply(frame)  # type: ignore[arg-type]
+            reply = decode_reply(frame)
         except FormatError:
             self._counts["stray"] += 1
             return
@@ -279,7 +279,7 @@ def open_sensor(
 ) -> SerialSensor:
     """Open the sensor at ``url`` (``serial:///dev/ttyUSB0?baud=921600``, ``serial:///dev/pts/N``).
 
-    Input already waiting on the port is discarded. Raises :class:`~station.sensor.url.SensorUrlError`
+    Input already waiting on the port is discarded. Raises :class:`~station.sensor.serial_url.SensorUrlError`
     for a bad URL and :class:`SensorLinkError` when the port cannot be opened.
     """
     where = parse_sensor_url(url)

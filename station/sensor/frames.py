@@ -232,8 +232,8 @@ def decode_sample_payload(payload: bytes) -> Sample:
         seq=int(rec["seq"]),
         flags=SampleFlag(int(rec["flags"]) & 0x07),
         t_us=int(rec["t_us"]),
-        accel=tuple(float(v) for v in rec["accel"]),  # type: ignore[arg-type]
-        gyro=tuple(float(v) for v in rec["gyro"]),  # type: ignore[arg-type]
+        accel=(float(rec["accel"][0]), float(rec["accel"][1]), float(rec["accel"][2])),
+        gyro=(float(rec["gyro"][0]), float(rec["gyro"][1]), float(rec["gyro"][2])),
         temp=float(rec["temp"]),
     )
 

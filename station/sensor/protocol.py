@@ -13,7 +13,7 @@ failures: :class:`SensorTimeout` (no answer), :class:`SensorNak` (refused),
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Protocol, runtime_checkable
+from typing import Protocol, Self, runtime_checkable
 
 import numpy as np
 
@@ -109,14 +109,14 @@ class SampleBlock:
         if len(blocks) == 1:
             return blocks[0]
         return cls(
-            *(np.concatenate([getattr(b, name) for b in blocks]) for name in cls.__dataclass_fields__)  # type: ignore[arg-type]
+            *(np.concatenate([getattr(b, name) for b in blocks]) for name in cls.__dataclass_fields__)
         )
 
     def split(self, k: int) -> tuple[SampleBlock, SampleBlock]:
         """The first ``k`` samples and the rest."""
         names = self.__dataclass_fields__
-        head = SampleBlock(*(getattr(self, n)[:k] for n in names))  # type: ignore[arg-type]
-        tail = SampleBlock(*(getattr(self, n)[k:] for n in names))  # type: ignore[arg-type]
+        head = SampleBlock(*(getattr(self, n)[:k] for n in names))
+        tail = SampleBlock(*(getattr(self, n)[k:] for n in names))
         return head, tail
 
 
@@ -198,6 +198,12 @@ class Sensor(Protocol):
     def stats(self) -> LinkStats: ...
 
     def close(self) -> None: ...
+
+    def __enter__(self) -> Self:
+        """``with open_sensor(url) as sensor:`` closes the link on leaving."""
+        ...
+
+    def __exit__(self, *exc: object) -> None: ...
 
 
 __all__ = [

@@ -13,7 +13,7 @@ from station.kernel.clock import Clock
 from station.kernel.schemes import SchemeRegistry
 from station.sensor import client
 from station.sensor.protocol import Sensor
-from station.sensor.url import SensorUrlError, parse_sensor_url
+from station.sensor.serial_url import SensorUrlError, parse_sensor_url
 
 SENSORS: SchemeRegistry[Sensor] = SchemeRegistry("sensor", SensorUrlError)
 SENSORS.register("serial", client.open_sensor, parse_sensor_url)
@@ -22,7 +22,7 @@ SENSORS.register("serial", client.open_sensor, parse_sensor_url)
 def open_sensor(url: str, clock: Clock | None = None, **options: Any) -> Sensor:
     """Open the sensor at ``url`` with the implementation its scheme names (``options`` go to it).
 
-    Raises :class:`~station.sensor.url.SensorUrlError` for a scheme nobody registered.
+    Raises :class:`~station.sensor.serial_url.SensorUrlError` for a scheme nobody registered.
     """
     return SENSORS.open(url, clock, **options)
 

@@ -47,7 +47,7 @@ def dropped_frames(seq: np.ndarray) -> int:
     """Frames missing between consecutive sequence numbers (u16, wrapping)."""
     if len(seq) < 2:
         return 0
-    d = np.diff(seq.astype(np.int64)) % SEQ_MODULUS
+    d = np.mod(np.diff(seq.astype(np.int64)), SEQ_MODULUS)
     return int(np.sum(np.where(d > 0, d - 1, 0)))
 
 

@@ -31,9 +31,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from station.fit.params import ParameterSet, TriadParams
 from station.kernel.limits import GUARD_BAND, WIDEN, FitQualityLimits, ProductLimits, ThermalLimits, TriadLimits
 from station.kernel.measurement import Measurement
+from station.kernel.parameters import ParameterSet, TriadParams
 from station.kernel.sensor_class import Range
 
 AXES = "xyz"

@@ -36,13 +36,14 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from station.fit.calibrate import FitOptions, fit_session
+from station.fit.determinability import assess
 from station.fit.goodness import summary as goodness_summary
-from station.fit.params import ParameterSet
 from station.kernel.clock import Clock
 from station.kernel.errors import FitError, HardwareError, StationError, UnitRejected
 from station.kernel.limits import ProductLimits, table1_limits
 from station.kernel.measurement import Measurement, Verdict
 from station.kernel.nest_frames import NestCalibration
+from station.kernel.parameters import ParameterSet
 from station.kernel.plan import RigPlan, default_plan
 from station.rig.protocol import Rig, RigState
 from station.sensor.protocol import Sensor
@@ -646,7 +647,8 @@ class SequenceRunner:
         }
 
     def _fit_one(self, session: Session) -> ParameterSet:
-        return fit_session(session, self.fit_options)
+        params = fit_session(session, self.fit_options)  # the b_stat rule of determinability needs the limits
+        return assess(params, params.quality.record_end_s, self.limits)
 
     def _finish_units(
         self,
@@ -722,9 +724,9 @@ class SequenceRunner:
 
     def _check_unit_limits(self, unit: UnitChannel, v: UnitVerdict, params: ParameterSet) -> None:
         checks = check_limits(params, self.limits)
-        goodness = params.quality.get("goodness_of_fit") if isinstance(params.quality, dict) else None
-        if isinstance(goodness, dict) and "passed" in goodness:
-            checks.append(Measurement.in_range("fit.goodness_of_fit.failed_tests", len(goodness.get("failed", ())),
+        goodness = params.quality.goodness_of_fit
+        if goodness is not None:
+            checks.append(Measurement.in_range("fit.goodness_of_fit.failed_tests", len(goodness.failed),
                                                0.0, 0.0, "1"))
         for c in checks:
             m = Measured(self.run_id, unit.slot, unit.serial, "limits", c)
@@ -917,8 +919,8 @@ def recording_verdict(params: ParameterSet) -> tuple[Outcome, str] | None:
     limit verdicts are meaningless, and it is not the unit's failure either (a disturbed recording, a
     rig that did not hold): the recording is repeated, and no failed attempt is counted.
     """
-    goodness = params.quality.get("goodness_of_fit") if isinstance(params.quality, dict) else None
-    if isinstance(goodness, dict) and goodness.get("passed") is False:
+    goodness = params.quality.goodness_of_fit
+    if goodness is not None and not goodness.passed:
         return Outcome.RETEST, f"the recording contradicts its own fit, retest: {goodness_summary(goodness)}"
     return None
 

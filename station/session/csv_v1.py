@@ -29,7 +29,7 @@ import stat
 import tempfile
 from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import IO
+from typing import IO, cast
 
 import numpy as np
 
@@ -684,12 +684,12 @@ def write_session(session: Session, path_or_stream: str | os.PathLike[str] | IO[
         elif isinstance(stream, io.BufferedIOBase | io.RawIOBase):
             stream.write(text.encode("utf-8"))
         else:
-            try:
-                stream.write(text)  # type: ignore[arg-type]
+            try:  # a stream of unknown kind: text first, then bytes
+                cast(IO[str], stream).write(text)
             except TypeError:
-                stream.write(text.encode("utf-8"))  # type: ignore[arg-type]
+                cast(IO[bytes], stream).write(text.encode("utf-8"))
         return
-    target = Path(os.fspath(path_or_stream))  # type: ignore[arg-type]
+    target = Path(os.fspath(path_or_stream))
     fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
     try:
         with os.fdopen(fd, "wb") as handle:

@@ -182,4 +182,4 @@ class Session:
             )
         }
         fields.update(changes)
-        return Session(**fields)  # type: ignore[arg-type]
+        return Session(**fields)

@@ -13,7 +13,7 @@
 
 Both label rest, pose and move segments with the still detector (:mod:`station.session.still`)
 and write the local gravity (m/s^2) into ``gravity_mps2``. Poses carry no reference (empty
-``ref_*``): the fit is the rig-free one (:mod:`station.fit.rigfree`).
+``ref_*``): the fit is the rig-free one (:mod:`station.fit.rigfree_fit`).
 """
 
 from __future__ import annotations

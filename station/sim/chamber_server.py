@@ -21,6 +21,8 @@ from __future__ import annotations
 import math
 import threading
 from dataclasses import dataclass
+from types import ModuleType
+from typing import ClassVar
 
 import numpy as np
 from pymodbus.constants import ExcCodes
@@ -278,7 +280,7 @@ class ChamberModel:
         """Every defined input register (address -> value) as of now."""
         with self._lock:
             now = self.update()
-            out = {
+            out: dict[int, int] = {
                 IR.STATUS: int(self._status()),
                 IR.ALARM_CODE: self.alarm_code,
                 IR.ALIVE: self._alive(now),
@@ -303,7 +305,7 @@ class ChamberModel:
             return out
 
 
-class SimulatedChamber(ThreadedModbusServer):
+class SimulatedChamber(ThreadedModbusServer[ChamberModel]):
     """The chamber model served over Modbus/TCP in a background thread (port 0: a free port).
 
     Use as a context manager or call :meth:`start` / :meth:`stop`; ``model_options`` are those of
@@ -312,7 +314,7 @@ class SimulatedChamber(ThreadedModbusServer):
     """
 
     _role = "chamber"
-    _map = reg
+    _map: ClassVar[ModuleType] = reg
     model: ChamberModel
 
     def __init__(self, clock: Clock, host: str = "127.0.0.1", port: int = 0, *, unit: int = 1,
@@ -321,6 +323,7 @@ class SimulatedChamber(ThreadedModbusServer):
         self.host = host
         self.port = port
         self.unit = unit
+        # mypy cannot tell that **model_options (floats by name) never holds 'faults'
         self.model = ChamberModel(clock, faults=faults, **model_options)  # type: ignore[arg-type]
         self._init_server()
 
@@ -343,7 +346,8 @@ class SimulatedChamber(ThreadedModbusServer):
     async def _open_server(self) -> ModbusTcpServer:
         server = ModbusTcpServer(self._device(), address=(self.host, self.port), trace_packet=self._trace_packet)
         await server.serve_forever(background=True)
-        self.port = int(server.transport.sockets[0].getsockname()[1])  # type: ignore[attr-defined]
+        self.port = int(server.transport.sockets[0].getsockname()[1])  # type: ignore[attr-defined]  # pymodbus
+            # types the listener's transport as asyncio.BaseTransport; for a server it is the asyncio.Server (.sockets)
         return server
 
 

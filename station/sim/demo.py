@@ -234,7 +234,7 @@ def run_line_demo(
     console.print(summary_table(result))
     for unit in result.units:
         if unit.params is not None:
-            line = unit.params.quality.get("line", {})
+            line = unit.params.quality.extra.get("line", {})
             tc = unit.params.gyro.correlation_time_s
             console.print(f"  {unit.serial}: rack {line.get('rack_span_s', 0):.0f} s + rig; gyro T_c "
                           f"{', '.join('-' if not np.isfinite(v) else f'{v:.0f}' for v in tc)} s")
@@ -322,7 +322,7 @@ def target_lines(errors: dict[tuple[int, str], CheckErrors]) -> list[str]:
 def _without_thermal(options: FitOptions) -> FitOptions | None:
     """The fit's options with its thermal model switched off (None: the fit has no thermal model)."""
     names = {f.name for f in fields(FitOptions)}
-    return replace(options, thermal="off") if "thermal" in names else None  # type: ignore[call-arg]
+    return replace(options, thermal="off") if "thermal" in names else None
 
 
 def _thermal_note(params: Any) -> tuple[bool, str]:

@@ -42,13 +42,13 @@ from station.physics.unit import UnitTruth
 from station.rig import RIGS
 from station.rig.mapped import RegisterRig, start_rig
 from station.rig.protocol import RigProtocolError
-from station.rig.url import RigUrlError
+from station.rig.rig_url import RigUrlError
 from station.sensor import SENSORS
 from station.sensor.base import ProtocolSensor
 from station.sensor.commands import BootEvent, BootReason, Command, Reply
 from station.sensor.frames import ParserStats, SequenceTracker
 from station.sensor.protocol import SampleBlock
-from station.sensor.url import SensorUrlError
+from station.sensor.serial_url import SensorUrlError
 from station.sim.eeprom import Eeprom
 from station.sim.physics_source import PhysicsSource
 from station.sim.rig_server import RigModel, RigModelView

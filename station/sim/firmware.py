@@ -43,8 +43,8 @@ from station.eeprom.image import (
     read_slots,
     select_image,
 )
-from station.fit.params import ParameterSet
 from station.kernel.clock import Clock, WallClock
+from station.kernel.parameters import ParameterSet
 from station.sim.eeprom import Eeprom, EepromError
 from station.sim.sensor_core import SensorUnit
 

@@ -113,7 +113,9 @@ def simulate_handheld(
         t += duration
 
     hold(attitudes[0], plan.rest_s)
-    segments = [(0.0, plan.rest_s, "hold", attitudes[0], None)]
+    #: (start, end, kind, attitude at the start, a move's rotation and wobble vectors or None for a hold)
+    segments: list[tuple[float, float, str, np.ndarray, tuple[np.ndarray, np.ndarray] | None]] = [
+        (0.0, plan.rest_s, "hold", attitudes[0], None)]
     for i in range(1, n_poses + 1):
         duration = float(rng.uniform(*plan.move_s))
         phi = Rotation.from_matrix(attitudes[i - 1].T @ attitudes[i]).as_rotvec()  # body-frame rotation vector
@@ -128,9 +130,9 @@ def simulate_handheld(
     rotation = np.empty((n, 3, 3))
     omega = np.zeros((n, 3))
     alpha = np.zeros((n, 3))
-    for t0, t1, kind, r0, move in segments:
+    for t0, t1, _kind, r0, move in segments:
         sel = np.flatnonzero((ts >= t0) & (ts < t1))
-        if kind == "hold":
+        if move is None:  # a hold
             rotation[sel] = r0
             continue
         phi, psi = move

@@ -13,7 +13,7 @@ from __future__ import annotations
 import asyncio
 import threading
 from types import ModuleType
-from typing import Any, ClassVar, Protocol, Self
+from typing import Any, ClassVar, Generic, Protocol, Self, TypeVar, cast
 
 from pymodbus.constants import ExcCodes
 from pymodbus.server import ModbusSerialServer, ModbusTcpServer
@@ -33,7 +33,11 @@ class ServedModel(Protocol):
     def write_holding(self, address: int, values: list[int]) -> ExcCodes | None: ...
 
 
-class ThreadedModbusServer:
+#: The device model a server serves.
+M = TypeVar("M", bound=ServedModel)
+
+
+class ThreadedModbusServer(Generic[M]):
     """Base of the simulated Modbus devices; subclasses set :attr:`_role` and :attr:`_map` (the
     register map module: HOLDING/STATE/IDENT start and count), :attr:`model` and :attr:`unit`, call
     :meth:`_init_server` and implement :meth:`_open_server`."""
@@ -43,7 +47,7 @@ class ThreadedModbusServer:
     #: the register map module
     _map: ClassVar[ModuleType]
 
-    model: ServedModel
+    model: M
     unit: int
 
     def _init_server(self) -> None:
@@ -83,7 +87,8 @@ class ThreadedModbusServer:
             return ExcCodes(faults.exception_replies)
         if faults.no_answer:
             if set_values is not None:  # a device that does not answer does not act either
-                set_values[:] = registers[address - start_address : address - start_address + count]
+                # a register write (the hook runs for registers only: the model has no coils to write)
+                cast(list[int], set_values)[:] = registers[address - start_address : address - start_address + count]
             return None
         if function_code == 4:
             for addr, value in self.model.input_registers().items():

@@ -30,10 +30,10 @@ import numpy as np
 
 from station.fit.calibrate import FitOptions, fit_session
 from station.fit.joint import fit_joint
-from station.fit.params import ParameterSet
 from station.kernel.errors import StationError
 from station.kernel.limits_file import LimitsFile
 from station.kernel.line_plan import LinePlan, line_rig_plan
+from station.kernel.parameters import ParameterSet
 from station.kernel.plan import default_plan
 from station.physics.trajectory import build_trajectory
 from station.sim.line_sim import simulate_line

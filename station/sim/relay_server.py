@@ -138,6 +138,7 @@ class SimulatedRelayBoard(ThreadedModbusServer):
     async def _open_server(self) -> ModbusTcpServer:
         server = ModbusTcpServer(self._device(), address=(self.host, self.port), trace_packet=self._trace_packet)
         await server.serve_forever(background=True)
+        # pymodbus types the listener's transport as asyncio.BaseTransport; for a server it is the asyncio.Server
         self.port = int(server.transport.sockets[0].getsockname()[1])  # type: ignore[attr-defined]
         return server
 

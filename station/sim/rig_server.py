@@ -23,6 +23,8 @@ import os
 import threading
 import tty
 from dataclasses import dataclass
+from types import ModuleType
+from typing import ClassVar
 
 import numpy as np
 from pymodbus.constants import ExcCodes
@@ -360,7 +362,7 @@ class RigModel:
             roll, pitch, yaw, rate, status = self.readback()
             if self.faults.nan_angle:
                 roll = math.nan
-            out = {
+            out: dict[int, int] = {
                 IR.STATUS: int(status),
                 IR.FAULT_CODE: self.fault_code,
                 IR.ACK_SEQ: self.ack_seq,
@@ -481,7 +483,7 @@ class _PtyBridge:
                 os.close(fd)
 
 
-class SimulatedRig(RigModelView, ThreadedModbusServer):
+class SimulatedRig(RigModelView, ThreadedModbusServer[RigModel]):
     """The rig model served over Modbus in a background thread.
 
     ``transport="tcp"`` listens on ``host:port`` (port 0 picks a free port);
@@ -492,7 +494,7 @@ class SimulatedRig(RigModelView, ThreadedModbusServer):
     """
 
     _role = "rig"
-    _map = reg
+    _map: ClassVar[ModuleType] = reg
 
     def __init__(
         self,
@@ -581,7 +583,8 @@ class SimulatedRig(RigModelView, ThreadedModbusServer):
         if self.transport == "tcp":
             server = ModbusTcpServer(self._device(), address=(self.host, self.port), trace_packet=self._trace_packet)
             await server.serve_forever(background=True)
-            self.port = int(server.transport.sockets[0].getsockname()[1])  # type: ignore[attr-defined]
+            self.port = int(server.transport.sockets[0].getsockname()[1])  # type: ignore[attr-defined]  # pymodbus
+            # types the listener's transport as asyncio.BaseTransport; for a server it is the asyncio.Server (.sockets)
         else:
             self._bridge = _PtyBridge()
             self._bridge.attach(asyncio.get_running_loop())

@@ -22,7 +22,7 @@ import math
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Protocol, cast
 
 import numpy as np
 
@@ -73,6 +73,8 @@ class SampleSource(Protocol):
 
 
 Corrector = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
+#: A corrector that also takes the temperature (it says so with ``takes_temperature = True``).
+TemperatureCorrector = Callable[[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
 """On-sensor correction for CORRECTED output: ``(accel (n,3) m/s^2, gyro (n,3) rad/s) -> same``.
 
 Called in time order with consecutive chunks. If the object also has a ``reset()``
@@ -234,7 +236,8 @@ class SensorCore:
         if self.output == OutputMode.CORRECTED:
             a64, w64 = np.asarray(accel, dtype=np.float64), np.asarray(gyro, dtype=np.float64)
             if getattr(self.corrector, "takes_temperature", False):  # e.g. a layout-2 image's temperature terms
-                accel, gyro = self.corrector(a64, w64, np.asarray(temp, dtype=np.float64))  # type: ignore[call-arg]
+                thermal = cast(TemperatureCorrector, self.corrector)
+                accel, gyro = thermal(a64, w64, np.asarray(temp, dtype=np.float64))
             else:
                 accel, gyro = self.corrector(a64, w64)
             base = int(SampleFlag.CORRECTED)

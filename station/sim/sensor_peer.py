@@ -39,7 +39,7 @@ import numpy as np
 
 from station.kernel.clock import Clock
 from station.kernel.errors import FormatError
-from station.sensor.commands import BootReason, Command, NakCode, decode_command, encode_ack, encode_nak
+from station.sensor.commands import BootEvent, BootReason, Command, NakCode, decode_command, encode_ack, encode_nak
 from station.sensor.frames import SAMPLE_FRAME_SIZE, FrameParser, FrameType, encode_frame, frame_sample_records
 from station.sim.sensor_core import (
     DEFAULT_RATES_HZ,
@@ -165,13 +165,14 @@ class SimulatedSensor(SensorUnit):
         self._delayed.clear()
         self._last_cmd = None
 
-    def _boot(self, reason: BootReason) -> None:  # type: ignore[override]
+    def _boot(self, reason: BootReason) -> BootEvent:
         self._stats["boots"] += 1
         self._last_cmd = None
         self._delayed.clear()
         self._parser = FrameParser(track_sequence=False)
         event = super()._boot(reason)
         self._send(encode_frame(FrameType.EVENT, event.encode()))
+        return event
 
     @property
     def error(self) -> BaseException | None:
@@ -261,7 +262,7 @@ class SimulatedSensor(SensorUnit):
         self._emit_samples(frame_sample_records(records))
 
     def _emit_samples(self, frames: np.ndarray) -> None:
-        n = frames.shape[0]
+        n = int(frames.shape[0])
         # Draw fault decisions for every frame, whatever the switches, so they depend on frame order only.
         keep = self._rng_drop.random(n) >= self.drop_frame_rate
         ber = self.bit_error_rate

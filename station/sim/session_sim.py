@@ -17,7 +17,7 @@ from station.kernel.plan import RigPlan, default_plan
 from station.kernel.sensor_class import TABLE1, SensorClass
 from station.physics.effects import Effects, EffectTruth
 from station.physics.imu import Environment, ImuModel
-from station.physics.thermal import PlateauCourse
+from station.physics.plateau_course import PlateauCourse
 from station.physics.trajectory import RigTrajectory, build_plateau_trajectory, build_trajectory
 from station.physics.unit import UnitTruth, draw_unit
 from station.session.model import Session
@@ -35,7 +35,7 @@ class SimResult:
         environment: the room (ambient temperature at power-on = ``T_ref``, ambient drift).
         trajectory: the rig trajectory and segment table.
         temperature: the unit's true temperature course when the session ran at temperature
-            plateaus (:class:`~station.physics.thermal.PlateauCourse`), else None.
+            plateaus (:class:`~station.physics.plateau_course.PlateauCourse`), else None.
     """
 
     session: Session
@@ -75,7 +75,7 @@ def simulate_session(
     plan's rest, poses and rate steps run once per plateau (:func:`build_plateau_trajectory`; every
     plateau after the first begins with a ``soak_s`` rest while the chamber moves), and the unit's
     temperature follows the setpoints with a first-order lag ``thermal_lag_s`` plus its own
-    self-heating (:class:`~station.physics.thermal.PlateauCourse`). The unit is powered on soaked at
+    self-heating (:class:`~station.physics.plateau_course.PlateauCourse`). The unit is powered on soaked at
     the first plateau, which is therefore the temperature effects' ``T_ref``. Without it, nothing
     changes (same seed, same bytes).
     """

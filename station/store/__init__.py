@@ -11,7 +11,7 @@
 
 # Lazy (PEP 562): importing the package, e.g. for its CLI commands, loads no heavy dependency.
 _EXPORTS = {
-    "DEFAULT_URL": "station.store.url",
+    "DEFAULT_URL": "station.store.default_url",
     "Database": "station.store.db",
     "StoreError": "station.store.db",
     "open_database": "station.store.db",

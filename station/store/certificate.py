@@ -21,11 +21,11 @@ from datetime import UTC, datetime
 import numpy as np
 from sqlalchemy import select
 
-from station.fit.params import ParameterSet, TriadParams
 from station.kernel.display import Display, display_for, display_of_check, format_number
 from station.kernel.errors import StationError
 from station.kernel.limits import GUARD_BAND
 from station.kernel.limits_file import LimitsFile, load_limits
+from station.kernel.parameters import ParameterSet, TriadParams
 from station.store.db import Database
 from station.store.models import (
     UNFINISHED,

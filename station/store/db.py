@@ -28,6 +28,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from station.kernel.datafiles import data_path
 from station.kernel.errors import path_problem, shorten
+from station.store.default_url import DEFAULT_URL, ENV_VAR
 from station.store.opening import (
     DatabaseRefused,
     StoreError,
@@ -37,7 +38,6 @@ from station.store.opening import (
     classify_failure,
     lock_timeout_s,
 )
-from station.store.url import DEFAULT_URL, ENV_VAR
 
 """The default database: a SQLite file in the working directory."""
 

@@ -12,8 +12,8 @@ from datetime import UTC, datetime
 
 from sqlalchemy import func, select
 
-from station.fit.params import ParameterSet
 from station.kernel.nest_frames import FORMAT, NestCalibration, nest_calibration_from_json
+from station.kernel.parameters import ParameterSet
 from station.store.db import Database
 from station.store.models import NestCalibrationRecord, ParameterSetRecord, Run, RunUnit, Unit
 

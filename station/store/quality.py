@@ -16,7 +16,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from datetime import date
-from typing import Any
+from typing import Any, TypeVar
 
 from sqlalchemy import Select, case, func, literal, select
 
@@ -98,7 +98,11 @@ def _station_id(s: Any, name: str | None) -> int | None:
     return s.scalar(select(StationRow.id).where(StationRow.name == name)) or -1
 
 
-def _where(q: Select[Any], table: Any, f: QualityFilter, station_id: int | None) -> Select[Any]:
+#: A select of any row shape (``_where`` keeps it).
+_Q = TypeVar("_Q", bound="Select[*tuple[Any, ...]]")
+
+
+def _where(q: _Q, table: Any, f: QualityFilter, station_id: int | None) -> _Q:
     if f.date_from is not None:
         q = q.where(table.day >= f.date_from.isoformat())
     if f.date_to is not None:

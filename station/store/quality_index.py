@@ -120,21 +120,21 @@ def index_run(s: Session, run_pk: int) -> int:
         if not tested:
             continue
         seen: set[str] = set()
-        for c in s.scalars(select(LimitCheck).where(LimitCheck.run_unit_id == ru.id, LimitCheck.step == "limits",
+        for check in s.scalars(select(LimitCheck).where(LimitCheck.run_unit_id == ru.id, LimitCheck.step == "limits",
                                                     LimitCheck.value.is_not(None)).order_by(LimitCheck.id)):
-            if c.name in seen or c.value is None:
+            if check.name in seen or check.value is None:
                 continue
-            seen.add(c.name)
-            p = _param(s, cache, c.name, c.unit, c.low, c.high, c.value)
-            s.add(QualityValue(result_id=row.id, param_id=p.id, day=day, value=c.value))
-            d = c.value - p.ref
-            acc = sums.setdefault(p.id, [0, 0.0, 0.0, c.value, c.value, c.low, c.high, 0, 0])
+            seen.add(check.name)
+            p = _param(s, cache, check.name, check.unit, check.low, check.high, check.value)
+            s.add(QualityValue(result_id=row.id, param_id=p.id, day=day, value=check.value))
+            d = check.value - p.ref
+            acc = sums.setdefault(p.id, [0, 0.0, 0.0, check.value, check.value, check.low, check.high, 0, 0])
             acc[0] += 1
             acc[1] += d
             acc[2] += d * d
-            acc[3], acc[4] = min(acc[3], c.value), max(acc[4], c.value)
-            acc[7] += int(c.low is not None and c.value < c.low)
-            acc[8] += int(c.high is not None and c.value > c.high)
+            acc[3], acc[4] = min(acc[3], check.value), max(acc[4], check.value)
+            acc[7] += int(check.low is not None and check.value < check.low)
+            acc[8] += int(check.high is not None and check.value > check.high)
     if counts:
         _upsert_yield(s, [dict(day=k[0], quarter=k[1], station_id=k[2], lot=k[3], limits_version=k[4], results=v[0],
                                not_tested=v[1], tested=v[2], first_tested=v[3], first_pass=v[4], final_pass=v[5],

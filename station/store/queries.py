@@ -15,7 +15,7 @@ from typing import Any
 from sqlalchemy import func, select
 
 from station.eeprom.image import encode_image, run_image
-from station.fit.params import ParameterSet
+from station.kernel.parameters import ParameterSet
 from station.store.db import Database
 from station.store.models import (
     UNFINISHED,

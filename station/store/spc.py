@@ -175,7 +175,8 @@ def run_rules(z: Sequence[float | None]) -> list[set[int]]:
         if i + 1 < k:
             return None
         w = z[i + 1 - k: i + 1]
-        return None if any(v is None for v in w) else [float(v) for v in w]  # type: ignore[arg-type]
+        given = [float(v) for v in w if v is not None]
+        return given if len(given) == len(w) else None
 
     for i, v in enumerate(z):
         if v is None:

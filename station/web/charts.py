@@ -5,7 +5,7 @@ and the fitted normal, and a yield trend. Values are drawn in the parameter's un
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from html import escape
 
 from station.store.quality import Histogram, ParameterChart
@@ -21,7 +21,7 @@ def _fmt(x: float) -> str:
     return f"{x:.4g}"
 
 
-def _scale(lo: float, hi: float, a: float, b: float) -> tuple[float, float, callable]:  # type: ignore[valid-type]
+def _scale(lo: float, hi: float, a: float, b: float) -> tuple[float, float, Callable[[float], float]]:
     if not hi > lo:
         pad = abs(lo) * 0.01 or 1e-9
         lo, hi = lo - pad, hi + pad
@@ -35,7 +35,7 @@ def _frame(title: str, width: int = W, height: int = H) -> list[str]:
             f'<text x="{ML}" y="15" {FONT} font-size="12" font-weight="600">{escape(title)}</text>']
 
 
-def _yticks(lo: float, hi: float, y: callable, width: int = W) -> list[str]:  # type: ignore[valid-type]
+def _yticks(lo: float, hi: float, y: Callable[[float], float], width: int = W) -> list[str]:
     out = []
     for k in range(5):
         v = lo + (hi - lo) * k / 4

@@ -139,7 +139,7 @@ def list_unit_results(
             uq = select(Unit.id, Unit.serial).where(*unit_conds, matching.exists()).order_by(Unit.serial)
             page = s.execute(uq.limit(take) if take else uq).all()
             ids = [u[0] for u in page]
-            rows = []
+            rows: list[Any] = []
             for i in range(0, len(ids), 500):
                 rows += s.execute(
                     select(RunUnit.unit_id, RunUnit.outcome, Run.run_uid, Run.started_at, Run.station_id)
@@ -238,7 +238,8 @@ def population(db: Database, *, station: str | None = None, name: str | None = N
             q = q.where(StationRow.name == station)
         latest: dict[int, int] = {}
         for ru_id, unit_id in s.execute(q.order_by(Run.started_at.desc(), Run.id.desc())).all():
-            latest.setdefault(unit_id, ru_id)
+            if unit_id is not None:  # the query keeps units only; the column allows NULL
+                latest.setdefault(unit_id, ru_id)
         if not latest:
             return []
         q2 = select(LimitCheck).where(LimitCheck.run_unit_id.in_(list(latest.values())), LimitCheck.step == "limits")

@@ -28,9 +28,9 @@ from matplotlib.figure import Figure
 from station.correct.session_correct import correct_session
 from station.fit.acf import finite_record_acf, lowpass_record
 from station.fit.allan import overlapping_allan_deviation
-from station.fit.params import ParameterSet
 from station.kernel.display import display_for
 from station.kernel.errors import FitError
+from station.kernel.parameters import ParameterSet
 from station.session.model import Kind, Session
 from station.web.diagnosis_worker import Curve
 
@@ -181,7 +181,8 @@ def residuals_svg(params: ParameterSet) -> str:
     fig = Figure(figsize=(10, 3.4))
     axs = fig.subplots(1, 2)
     for ax, what, scale, unit in ((axs[0], "accel", _MG.scale, _MG.unit), (axs[1], "gyro", _DEG, "deg/s")):
-        segs = (params.quality.get(what) or {}).get("segments") or {}
+        figures = params.quality.residual(what)
+        segs = (figures.segments if figures is not None else None) or {}
         keys = sorted(segs, key=lambda k: int(k) if str(k).isdigit() else 0)
         if keys:
             vals = np.array([[np.nan if v is None else float(v) for v in segs[k]] for k in keys]) * scale

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, Field
 
@@ -25,7 +25,7 @@ class ErrorDetail(BaseModel):
     detail: str = Field(description="what is wrong, one line")
 
 
-def problem(description: str) -> dict[str, object]:
+def problem(description: str) -> dict[str, Any]:
     """An OpenAPI ``responses`` entry: an :class:`ErrorDetail` body, with ``description``."""
     return {"model": ErrorDetail, "description": description}
 

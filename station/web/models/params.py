@@ -1,4 +1,4 @@
-"""A fitted parameter set (``station-params/2``, see :mod:`station.fit.params`) in the JSON API.
+"""A fitted parameter set (``station-params/2``, see :mod:`station.kernel.parameters`) in the JSON API.
 
 SI units: accelerometer quantities in m/s^2, gyroscope quantities in rad/s, times in s. An
 estimate the recording could not resolve is null. Vectors are per axis (x, y, z); matrices

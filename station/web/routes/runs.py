@@ -8,7 +8,7 @@ unset hooks answer 503.
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, Depends, HTTPException, Query, Request, Response
 
@@ -19,7 +19,8 @@ from station.web.listing import PAGED, CursorError, list_runs, next_page
 from station.web.models import RunAbortAccepted, RunAccepted, RunFilter, RunSummary, StartRunRequest, problem
 
 router = APIRouter(tags=["runs"])
-UNAUTHORIZED = {401: problem("no operator signed in and a missing or wrong bearer token (or no token configured)")}
+UNAUTHORIZED: dict[int | str, dict[str, Any]] = {
+    401: problem("no operator signed in and a missing or wrong bearer token (or no token configured)")}
 
 
 @router.get("/api/runs", response_model=list[RunSummary], responses=PAGED)

@@ -74,14 +74,14 @@ def parameters(seed: int = 0) -> list[SyntheticParameter]:
                      ("fit.gyro.M_std", fq.gyro_misalignment_std, "1", 9),
                      ("fit.accel.bias_static_std", fq.accel_bias_static_std_mps2, "m/s^2", 3),
                      ("fit.gyro.bias_static_std", fq.gyro_bias_static_std_radps, "rad/s", 3)]
-        for base, hi, u, k in one_sided:
-            if hi is None:
+        for base, top, u, k in one_sided:
+            if top is None:
                 continue
             suffixes = [f"{AXES[i]}{AXES[j]}" for i in range(3) for j in range(3)] if k == 9 else list(AXES)
             for sfx in suffixes:
-                mean = hi * float(rng.uniform(0.25, 0.45))
-                out.append(SyntheticParameter(f"{base}.{sfx}", u, None, hi, mean,
-                                              (hi - mean) / (3 * float(rng.uniform(1.6, 2.6)))))
+                mean = top * float(rng.uniform(0.25, 0.45))
+                out.append(SyntheticParameter(f"{base}.{sfx}", u, None, top, mean,
+                                              (top - mean) / (3 * float(rng.uniform(1.6, 2.6)))))
     return out
 
 

@@ -1,4 +1,7 @@
-"""The calibration result: a frozen, versioned parameter set with a JSON round trip.
+"""The calibration result: a frozen, versioned parameter set with a JSON round trip, and its typed fit quality.
+
+It lives in the kernel (not beside the estimator in :mod:`station.fit`) because everything below the fit that
+uses a calibration (Algorithm 1, the IMU model, the EEPROM image, the store) needs the set, not the estimator.
 
 Units (SI): accelerometer quantities in m/s^2, gyroscope quantities in rad/s, times
 in s. The model per triad is the paper's eq. (1):
@@ -18,7 +21,10 @@ with ``dT = T - T_ref`` the unit's temperature minus :attr:`ParameterSet.referen
 nonlinearity ``u + k u|u|`` applied to ``(M x)_k (1 + s dT)``, the gyro's g-sensitivity, and the unit's
 time offset. A ``station-params/1`` file still loads, with all of them zero and no reference temperature.
 Every estimate carries a standard uncertainty (``*_std``, same unit). An estimate
-that the recording cannot resolve is NaN in memory and ``null`` in JSON.
+that the recording cannot resolve is NaN in memory and ``null`` in JSON; an estimate that the fit computed
+but the recording cannot determine (e.g. a correlation time far beyond the record's length) keeps its number
+and is flagged in :attr:`FitQuality.undetermined` (``quality.determinability`` in JSON), so that no reader
+prints it as a result (:meth:`ParameterSet.constant_bias_values` states the rule an export uses instead).
 """
 
 from __future__ import annotations
@@ -26,7 +32,8 @@ from __future__ import annotations
 import json
 import math
 import os
-from dataclasses import dataclass, field, fields
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -256,6 +263,279 @@ class ThermalFit:
                    rule=str(d.get("rule", "")))
 
 
+#: The parameters whose determinability :class:`FitQuality` states, per triad and axis.
+DETERMINABLE = ("bias_static", "bias_drift", "correlation_time_s")
+AXES = "xyz"
+
+
+def _numbers(v: Any, what: str) -> tuple[float, ...]:
+    if not isinstance(v, list) or not all(
+            x is None or (isinstance(x, int | float) and not isinstance(x, bool)) for x in v):
+        raise TypeError(f"{what!r} must be a list of numbers")
+    return tuple(math.nan if x is None else float(x) for x in v)
+
+
+def _num_json(x: float) -> float | None:
+    return x if math.isfinite(x) else None
+
+
+@dataclass(frozen=True)
+class ResidualFigures:
+    """RMS of the fit residual of one triad (its unit) over the samples the fit kept: per axis, and per segment
+    (segment index as text -> per axis) when the fit went segment by segment; ``samples`` the count (None when
+    not stated, e.g. a rig-free fit)."""
+
+    rms: tuple[float, ...]
+    segments: Mapping[str, tuple[float, ...]] | None = None
+    samples: int | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"rms": [_num_json(x) for x in self.rms]}
+        if self.segments is not None:
+            out["segments"] = {k: [_num_json(x) for x in v] for k, v in self.segments.items()}
+        if self.samples is not None:
+            out["samples"] = self.samples
+        return out
+
+    @classmethod
+    def from_dict(cls, d: Any, what: str) -> ResidualFigures:
+        if not isinstance(d, dict):
+            raise TypeError(f"'quality.{what}' must be an object")
+        segs = d.get("segments")
+        if segs is not None and not isinstance(segs, dict):
+            raise TypeError(f"'quality.{what}.segments' must be an object")
+        samples = d.get("samples")
+        if samples is not None and (isinstance(samples, bool) or not isinstance(samples, int)):
+            raise TypeError(f"'quality.{what}.samples' must be an integer")
+        return cls(rms=_numbers(d.get("rms"), f"quality.{what}.rms"),
+                   segments=None if segs is None else {str(k): _numbers(v, f"quality.{what}.segments")
+                                                       for k, v in segs.items()},
+                   samples=samples)
+
+
+@dataclass(frozen=True)
+class GoodnessOfFit:
+    """The fit's test against its own recording (``station-goodness/1``): ``passed``, the names of the failed
+    tests (``'<triad> <segment kind>'``), and the whole report as the fit wrote it (per-test statistics, or a
+    rig-free fit's ``note``), read-only."""
+
+    passed: bool
+    failed: tuple[str, ...] = ()
+    report: Mapping[str, Any] = field(default_factory=dict)
+
+    @property
+    def note(self) -> str:
+        return str(self.report.get("note", ""))
+
+    def to_dict(self) -> dict[str, Any]:
+        return {**self.report, "passed": self.passed, "failed": list(self.failed)}
+
+    @classmethod
+    def from_dict(cls, d: Any) -> GoodnessOfFit:
+        if not isinstance(d, dict) or not isinstance(d.get("passed"), bool):
+            raise TypeError("'quality.goodness_of_fit' must be an object with a boolean 'passed'")
+        failed = d.get("failed", [])
+        if not isinstance(failed, list) or not all(isinstance(x, str) for x in failed):
+            raise TypeError("'quality.goodness_of_fit.failed' must be a list of names")
+        return cls(passed=d["passed"], failed=tuple(failed), report=json.loads(json.dumps(d)))
+
+
+@dataclass(frozen=True)
+class NonlinearityNote:
+    """Whether the gyro scale nonlinearity ``u + k u|u|`` was fitted: ``status`` (``'fitted'``,
+    ``'not_significant'``, ``'not_identifiable'``), the axes kept, the rule, a reason when not fitted, and the
+    rest of the fit's note (rate levels per axis, Wald statistics) read-only in ``detail``."""
+
+    status: str
+    axes: tuple[str, ...] = ()
+    rule: str = ""
+    reason: str = ""
+    detail: Mapping[str, Any] = field(default_factory=dict)
+
+    @property
+    def fitted(self) -> bool:
+        return self.status == "fitted"
+
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"status": self.status, "rule": self.rule, "axes": list(self.axes)}
+        out.update(self.detail)
+        if self.reason:
+            out["reason"] = self.reason
+        return out
+
+    @classmethod
+    def from_dict(cls, d: Any) -> NonlinearityNote:
+        if not isinstance(d, dict) or not isinstance(d.get("status"), str):
+            raise TypeError("'quality.scale_nonlinearity' must be an object with a 'status'")
+        axes = d.get("axes", [])
+        if not isinstance(axes, list) or not all(isinstance(a, str) for a in axes):
+            raise TypeError("'quality.scale_nonlinearity.axes' must be a list of axis names")
+        detail = {k: v for k, v in d.items() if k not in ("status", "rule", "axes", "reason")}
+        return cls(status=d["status"], axes=tuple(axes), rule=str(d.get("rule", "")), reason=str(d.get("reason", "")),
+                   detail=json.loads(json.dumps(detail)))
+
+
+@dataclass(frozen=True)
+class Undetermined:
+    """One parameter of one triad axis that the recording cannot determine (its number is kept in the set but
+    is not a result): ``triad`` ``'accel'`` or ``'gyro'``, ``parameter`` a :data:`DETERMINABLE` field name,
+    ``axis`` 0..2, ``reason`` one line for people (with the numbers that decided it)."""
+
+    triad: str
+    parameter: str
+    axis: int
+    reason: str
+
+    def __post_init__(self) -> None:
+        if self.triad not in ("accel", "gyro") or self.parameter not in DETERMINABLE or self.axis not in (0, 1, 2):
+            raise FormatError(f"undetermined parameter {self.triad!r} {self.parameter!r} axis {self.axis!r}: "
+                              f"expected accel/gyro, one of {', '.join(DETERMINABLE)}, axis 0..2")
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"triad": self.triad, "parameter": self.parameter, "axis": AXES[self.axis], "reason": self.reason}
+
+    @classmethod
+    def from_dict(cls, d: Any) -> Undetermined:
+        if not isinstance(d, dict) or d.get("axis") not in tuple(AXES):
+            raise TypeError("'quality.determinability.undetermined' entries must be objects with an axis x, y or z")
+        return cls(triad=str(d.get("triad")), parameter=str(d.get("parameter")), axis=AXES.index(d["axis"]),
+                   reason=str(d.get("reason", "")))
+
+
+@dataclass(frozen=True)
+class FitQuality:
+    """How good a parameter set is, as the fit judged it (one typed object; a dict only in JSON, ``quality``).
+
+    Attributes:
+        accel, gyro: residual figures per triad (None: not stated, e.g. an EEPROM image).
+        gyro_scale_method: how M_w was found (``'rate'``, ``'angle'``, ``'rig-free'``; ``''`` not stated).
+        outliers: samples the noise estimate left out, per triad and axis.
+        drift_likelihood_ratio: eq. 3's drift against none, per triad and axis.
+        known_angle: the known-angle gyro fit's report (a Ferraris recording), read-only JSON.
+        scale_nonlinearity: the nonlinearity note (None when the fit did not consider it).
+        goodness_of_fit: the test against the recording (None: not tested, e.g. an image or an old file).
+        rig_free: a rig-free fit's report (``station-rigfree/1``: convention, gravity-norm and move figures,
+            covariances, cross-validation, read timing), read-only JSON; None for a rig fit.
+        determinability_rule: the rule that decided :attr:`undetermined` (``''``: not assessed, e.g. an old file).
+        undetermined: the parameters the recording cannot determine.
+        record_end_s: time since power-on of the recording's last sample (s; NaN: not stated), where
+            :meth:`ParameterSet.constant_bias_values` evaluates the bias of an axis whose b_stat is not determined.
+        extra: sections this software does not know (kept for the round trip), read-only JSON.
+    """
+
+    accel: ResidualFigures | None = None
+    gyro: ResidualFigures | None = None
+    gyro_scale_method: str = ""
+    outliers: Mapping[str, tuple[int, ...]] | None = None
+    drift_likelihood_ratio: Mapping[str, tuple[float, ...]] | None = None
+    known_angle: Mapping[str, Any] | None = None
+    scale_nonlinearity: NonlinearityNote | None = None
+    goodness_of_fit: GoodnessOfFit | None = None
+    rig_free: Mapping[str, Any] | None = None
+    determinability_rule: str = ""
+    undetermined: tuple[Undetermined, ...] = ()
+    record_end_s: float = math.nan
+    extra: Mapping[str, Any] = field(default_factory=dict)
+
+    _KNOWN = ("rig_free", "accel", "gyro", "gyro_scale_method", "outliers", "drift_likelihood_ratio", "known_angle",
+              "scale_nonlinearity", "goodness_of_fit", "determinability")
+
+    @property
+    def passed(self) -> bool:
+        """False only when the goodness-of-fit test ran and failed."""
+        return self.goodness_of_fit is None or self.goodness_of_fit.passed
+
+    def is_determined(self, triad: str, parameter: str, axis: int) -> bool:
+        return self.why_undetermined(triad, parameter, axis) is None
+
+    def why_undetermined(self, triad: str, parameter: str, axis: int) -> str | None:
+        """The reason ``parameter`` of ``triad`` on ``axis`` is not determined, or None when it is."""
+        for u in self.undetermined:
+            if (u.triad, u.parameter, u.axis) == (triad, parameter, axis):
+                return u.reason
+        return None
+
+    def residual(self, triad: str) -> ResidualFigures | None:
+        return self.accel if triad == "accel" else self.gyro if triad == "gyro" else None
+
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        if self.rig_free is not None:
+            out["rig_free"] = dict(self.rig_free)
+        if self.accel is not None:
+            out["accel"] = self.accel.to_dict()
+        if self.gyro is not None:
+            out["gyro"] = self.gyro.to_dict()
+        if self.gyro_scale_method:
+            out["gyro_scale_method"] = self.gyro_scale_method
+        if self.outliers is not None:
+            out["outliers"] = {k: list(v) for k, v in self.outliers.items()}
+        if self.drift_likelihood_ratio is not None:
+            out["drift_likelihood_ratio"] = {k: [_num_json(x) for x in v]
+                                             for k, v in self.drift_likelihood_ratio.items()}
+        if self.known_angle is not None:
+            out["known_angle"] = dict(self.known_angle)
+        if self.scale_nonlinearity is not None:
+            out["scale_nonlinearity"] = self.scale_nonlinearity.to_dict()
+        if self.goodness_of_fit is not None:
+            out["goodness_of_fit"] = self.goodness_of_fit.to_dict()
+        if self.determinability_rule:
+            out["determinability"] = {"rule": self.determinability_rule, "record_end_s": _num_json(self.record_end_s),
+                                      "undetermined": [u.to_dict() for u in self.undetermined]}
+        out.update(self.extra)
+        return out
+
+    @classmethod
+    def from_dict(cls, d: Any) -> FitQuality:
+        """The quality section of a parameter file; a known section of the wrong shape is a TypeError."""
+        if not isinstance(d, dict):
+            raise TypeError("'quality' must be an object")
+
+        def section(name: str) -> Mapping[str, Any] | None:
+            v = d.get(name)
+            if v is not None and not isinstance(v, dict):
+                raise TypeError(f"'quality.{name}' must be an object")
+            return None if v is None else json.loads(json.dumps(v))
+
+        def per_triad(name: str) -> dict[str, list[Any]] | None:
+            v = section(name)
+            if v is not None and not all(isinstance(x, list) for x in v.values()):
+                raise TypeError(f"'quality.{name}' must map triads to lists")
+            return None if v is None else dict(v)
+
+        outliers = per_triad("outliers")
+        if outliers is not None and not all(isinstance(i, int) and not isinstance(i, bool)
+                                            for v in outliers.values() for i in v):
+            raise TypeError("'quality.outliers' must map triads to lists of counts")
+        lr = per_triad("drift_likelihood_ratio")
+        det = section("determinability")
+        if det is not None and not isinstance(det.get("undetermined", []), list):
+            raise TypeError("'quality.determinability.undetermined' must be a list")
+        end = None if det is None else det.get("record_end_s")
+        if end is not None and (isinstance(end, bool) or not isinstance(end, int | float)):
+            raise TypeError("'quality.determinability.record_end_s' must be a number or null")
+        method = d.get("gyro_scale_method", "")
+        if not isinstance(method, str):
+            raise TypeError("'quality.gyro_scale_method' must be text")
+        return cls(
+            accel=None if d.get("accel") is None else ResidualFigures.from_dict(d["accel"], "accel"),
+            gyro=None if d.get("gyro") is None else ResidualFigures.from_dict(d["gyro"], "gyro"),
+            gyro_scale_method=method,
+            outliers=None if outliers is None else {k: tuple(v) for k, v in outliers.items()},
+            drift_likelihood_ratio=None if lr is None else {k: _numbers(v, f"quality.drift_likelihood_ratio.{k}")
+                                                           for k, v in lr.items()},
+            known_angle=section("known_angle"),
+            scale_nonlinearity=(None if d.get("scale_nonlinearity") is None
+                                else NonlinearityNote.from_dict(d["scale_nonlinearity"])),
+            goodness_of_fit=None if d.get("goodness_of_fit") is None else GoodnessOfFit.from_dict(d["goodness_of_fit"]),
+            rig_free=section("rig_free"),
+            determinability_rule="" if det is None else str(det.get("rule", "")),
+            undetermined=() if det is None else tuple(Undetermined.from_dict(u) for u in det.get("undetermined", [])),
+            record_end_s=math.nan if end is None else float(end),
+            extra=json.loads(json.dumps({k: v for k, v in d.items() if k not in cls._KNOWN})),
+        )
+
+
 @dataclass(frozen=True, eq=False)
 class ParameterSet:
     """Everything Algorithm 1 and the station need about one calibrated unit.
@@ -266,7 +546,8 @@ class ParameterSet:
         moving_average_length: n of the one-sided moving average, eq. (6).
         accel: accelerometer triad (m/s^2).
         gyro: gyroscope triad (rad/s).
-        quality: fit-quality figures (residual RMS per axis and per segment, ...).
+        quality: how good the set is, as the fit judged it, and which parameters the recording cannot
+            determine (:class:`FitQuality`).
         source: where the parameters came from (session hash, software version, ...).
         reference_temperature_degc: T_ref of the temperature terms (degC); NaN when the set has none.
         time_offset_s: the unit's sample time minus the rig's (s); 0 when not fitted. Carried for the
@@ -279,7 +560,7 @@ class ParameterSet:
     accel: TriadParams
     gyro: TriadParams
     moving_average_length: int = 40
-    quality: dict[str, Any] = field(default_factory=dict)
+    quality: FitQuality = field(default_factory=FitQuality)
     source: dict[str, Any] = field(default_factory=dict)
     reference_temperature_degc: float = math.nan
     time_offset_s: float = 0.0
@@ -296,6 +577,47 @@ class ParameterSet:
     def has_nonlinearity(self) -> bool:
         return bool(np.any(self.accel.scale_nonlinearity != 0) or np.any(self.gyro.scale_nonlinearity != 0))
 
+    def constant_bias_values(self) -> tuple[ParameterSet, tuple[str, ...]]:
+        """The set with one constant bias per axis where b_stat is not determined (for a consumer that holds a
+        constant bias only: the exports), and one note per such axis.
+
+        Rule: where the recording cannot determine b_stat (:attr:`FitQuality.undetermined`; T_c beyond the
+        recording), the fitted bias at the end of the recording, ``b_stat + b_drift exp(-t_end/T_c)`` (what the
+        recording last saw), with b_drift 0 and T_c unresolved (NaN), instead of an extrapolated asymptote; its
+        uncertainty is not stated (NaN: the fit gives no covariance to combine). Other axes unchanged. Raises
+        :class:`FormatError` when an axis needs the rule but the set does not state the recording's end time
+        (refused rather than guessed).
+
+        A device that applies Algorithm 1 keeps the fitted warm-up curve instead (the recording determines the
+        curve over its length, after every power-on; see :mod:`station.eeprom.image`).
+        """
+        triads: dict[str, TriadParams] = {}
+        notes: list[str] = []
+        for name, tri in (("accel", self.accel), ("gyro", self.gyro)):
+            axes = sorted({u.axis for u in self.quality.undetermined
+                           if u.triad == name and u.parameter == "bias_static"})
+            if not axes:
+                triads[name] = tri
+                continue
+            b_stat, b_drift = tri.bias_static.copy(), tri.bias_drift.copy()
+            tc, b_stat_std = tri.correlation_time_s.copy(), tri.bias_static_std.copy()
+            b_drift_std, tc_std = tri.bias_drift_std.copy(), tri.correlation_time_s_std.copy()
+            t_end = self.quality.record_end_s
+            for k in axes:
+                if not math.isfinite(t_end):
+                    raise FormatError(f"{name} {AXES[k]}: b_stat not determined and no recording end time to "
+                                      "evaluate the bias at: no constant bias")
+                b_stat[k] = float(tri.bias_static[k]) + float(tri.warmup_drift(np.array([t_end]))[0, k])
+                b_stat_std[k] = b_drift_std[k] = tc_std[k] = math.nan
+                b_drift[k], tc[k] = 0.0, math.nan
+                notes.append(f"{name} {AXES[k]}: the bias at the end of the recording (t = {t_end:.1f} s), "
+                             f"{b_stat[k]:.6g}, instead of b_stat {float(tri.bias_static[k]):.6g} (not determined)")
+            triads[name] = replace(tri, bias_static=b_stat, bias_static_std=b_stat_std, bias_drift=b_drift,
+                                   bias_drift_std=b_drift_std, correlation_time_s=tc, correlation_time_s_std=tc_std)
+        if not notes:
+            return self, ()
+        return replace(self, accel=triads["accel"], gyro=triads["gyro"]), tuple(notes)
+
     def to_dict(self) -> dict[str, Any]:
         return {
             "format": FORMAT,
@@ -309,7 +631,7 @@ class ParameterSet:
             "thermal": self.thermal.to_dict(),
             "accel": self.accel.to_dict(),
             "gyro": self.gyro.to_dict(),
-            "quality": self.quality,
+            "quality": self.quality.to_dict(),
             "source": self.source,
         }
 
@@ -354,7 +676,7 @@ class ParameterSet:
                 moving_average_length=n,
                 accel=TriadParams.from_dict(d["accel"], version),
                 gyro=TriadParams.from_dict(d["gyro"], version),
-                quality=dict(d.get("quality", {})),
+                quality=FitQuality.from_dict(d.get("quality", {})),
                 source=dict(d.get("source", {})),
                 **extra,
             )

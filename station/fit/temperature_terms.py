@@ -18,7 +18,7 @@ split them. The terms are fitted only when the plan moves the temperature: the s
 block-mean temperature spans at least ``min_temperature_span_k``, and what is left of it after the
 best warm-up shape ``a + b exp(-t/tau)`` over any tau (2 s to 50 record spans; a ramp is the long-tau
 limit) is taken out has an RMS of at least ``min_temperature_independent_k``. Otherwise the result says
-so (:class:`~station.fit.params.ThermalFit`, status ``not_separable``) and the fit is eq. 1 as before.
+so (:class:`~station.kernel.parameters.ThermalFit`, status ``not_separable``) and the fit is eq. 1 as before.
 
 **Order** (:data:`ORDER_RULE`): backward elimination by Wald tests at the full model's (T_c, q).
 """
@@ -29,9 +29,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from station.fit.axis_ml import AxisFit, _inverse, _Problem
+from station.fit.axis_ml import AxisFit, AxisProblem, information_inverse
 from station.fit.blocks import Blocks, block_exp_mean, make_blocks
-from station.fit.params import MAX_TEMP_ORDER, ThermalFit
+from station.kernel.parameters import MAX_TEMP_ORDER, ThermalFit
 from station.session.model import Session
 
 ORDER_RULE = (
@@ -198,9 +198,9 @@ def select_orders(
     nb, ns = start if start is not None else (max_order, (max_order if m_row is not None else 0))
     while True:
         design = np.column_stack([base, axis_regressors(blocks, m_row, nb, ns)])
-        prob = _Problem(blocks, y, design, sigma_w, with_drift=full.drift_resolved)
+        prob = AxisProblem(blocks, y, design, sigma_w, with_drift=full.drift_resolved)
         _, beta, xw, _ = prob.solve(tc, max(full.drift_noise, 1e-300) ** 2)
-        var = np.diag(_inverse(xw.T @ xw))
+        var = np.diag(information_inverse(xw.T @ xw))
         p0 = base.shape[1]
         top_b, top_s = p0 + nb - 1, p0 + nb + ns - 1
         drop_b = nb > 1 and beta[top_b] ** 2 < wald * var[top_b]

@@ -5,7 +5,7 @@
 
 Common query parameters: ``unit`` (Modbus unit id, 1 by default), ``timeout`` (per-request I/O
 timeout, wall s, 1.0 by default), ``retries`` (extra attempts after no answer, 2 by default).
-The parsing is :mod:`station.modbus.url`'s.
+The parsing is :mod:`station.modbus.modbus_url`'s.
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from station.kernel.errors import StationError
-from station.modbus.url import SCHEMES, ModbusUrl, UrlDialect, parse_modbus_url
+from station.modbus.modbus_url import SCHEMES, ModbusUrl, UrlDialect, parse_modbus_url
 
 
 class ChamberUrlError(StationError, ValueError):
@@ -22,7 +22,7 @@ class ChamberUrlError(StationError, ValueError):
 
 @dataclass(frozen=True)
 class ChamberUrl(ModbusUrl):
-    """A parsed chamber URL (fields: :class:`~station.modbus.url.ModbusUrl`; 9600 baud by default)."""
+    """A parsed chamber URL (fields: :class:`~station.modbus.modbus_url.ModbusUrl`; 9600 baud by default)."""
 
     baud: int = 9600
 

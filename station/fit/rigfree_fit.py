@@ -47,10 +47,11 @@ from station import __version__
 from station.fit.axis_ml import AxisFit, fit_axis
 from station.fit.blocks import make_blocks
 from station.fit.boundary import numerics
-from station.fit.calibrate import _allan, _noise
+from station.fit.calibrate import residual_allan, white_noise
 from station.fit.checks import check_finite, check_time
+from station.fit.determinability import assess
 from station.fit.multipos import (
-    _UPPER,
+    UPPER_TRIANGLE,
     AccelJointFit,
     AccelNormFit,
     GyroRotationFit,
@@ -62,9 +63,9 @@ from station.fit.multipos import (
     norm_residuals,
     rough_directions,
 )
-from station.fit.params import ParameterSet, TriadParams
 from station.fit.readtiming import ReadTiming, detect_stale_reads
 from station.kernel.errors import FitError
+from station.kernel.parameters import FitQuality, GoodnessOfFit, ParameterSet, ResidualFigures, TriadParams
 from station.session.model import Kind, Segment, Session
 
 __all__ = [
@@ -271,8 +272,8 @@ def prepare(session: Session, options: RigFreeOptions | None = None) -> tuple[Ri
                        "label them (station import ... runs the still detector)")
     runs = _runs(still)
     with numerics("noise of the still segments"):
-        a_noise = _noise(session, session.accel_mps2, runs, options.outlier_sigma)
-        g_noise = _noise(session, session.gyro_radps, runs, options.outlier_sigma)
+        a_noise = white_noise(session, session.accel_mps2, runs, options.outlier_sigma)
+        g_noise = white_noise(session, session.gyro_radps, runs, options.outlier_sigma)
     rest = [s for s in still if s.kind == Kind.REST]
     with numerics("accelerometer warm-up (eq. 3) over the initial still"):
         a_drift = (_fit_drift(session, session.accel_mps2, _runs(rest[:1]), a_noise.keep, a_noise.sigma, options,
@@ -428,12 +429,12 @@ def _a_param_cov(m: np.ndarray, b: np.ndarray, cov9: np.ndarray) -> np.ndarray:
     """Covariance of (A00, A01, A02, A11, A12, A22, b) with A = M^-1 from that of (M00, ..., M22, b): linear."""
     def f(x: np.ndarray) -> np.ndarray:
         mm = np.zeros((3, 3))
-        for k, (i, j) in enumerate(_UPPER):
+        for k, (i, j) in enumerate(UPPER_TRIANGLE):
             mm[i, j] = x[k]
         a = np.linalg.inv(mm)
-        return np.array([a[i, j] for i, j in _UPPER] + list(x[6:9]))
+        return np.array([a[i, j] for i, j in UPPER_TRIANGLE] + list(x[6:9]))
 
-    x0 = np.array([m[i, j] for i, j in _UPPER] + list(b))
+    x0 = np.array([m[i, j] for i, j in UPPER_TRIANGLE] + list(b))
     jac = np.empty((9, 9))
     for k in range(9):
         h = 1e-7 * max(1.0, abs(x0[k]))
@@ -493,7 +494,7 @@ def _fit_accel(session: Session, still: list[Segment], extra: dict[str, Any], op
     a_matrix = np.linalg.inv(joint.misalignment)
     resid = norm_residuals(a_matrix, joint.bias, means, g)
     norm = AccelNormFit(a_matrix=a_matrix, bias=joint.bias,
-                        params=np.array([a_matrix[i, j] for i, j in _UPPER] + list(joint.bias)),
+                        params=np.array([a_matrix[i, j] for i, j in UPPER_TRIANGLE] + list(joint.bias)),
                         cov=_a_param_cov(joint.misalignment, joint.bias, joint.cov[:9, :9]), residual_mps2=resid,
                         scale_mps2=float(np.sqrt(np.sum(resid**2) / max(len(resid) - 9, 1))), gravity_mps2=g)
     return _AccelResult(norm, joint, drift)
@@ -512,13 +513,13 @@ def _gyro_cov_with_frame(gyr: GyroRotationFit, prep: RigFreeData, accel_fit: _Ac
     if joint is not None:
         free = np.flatnonzero(joint.tc_free)
         t_seg = [session.t_s[s.start:s.stop][keep[s.start:s.stop]] for s in prep.still]
-        x0 = np.concatenate([[joint.misalignment[i, j] for i, j in _UPPER], joint.bias, joint.drift,
+        x0 = np.concatenate([[joint.misalignment[i, j] for i, j in UPPER_TRIANGLE], joint.bias, joint.drift,
                              np.log(joint.tc_s[free])])
         cov = joint.cov
 
         def directions(x: np.ndarray) -> np.ndarray:
             m = np.zeros((3, 3))
-            for k, (i, j) in enumerate(_UPPER):
+            for k, (i, j) in enumerate(UPPER_TRIANGLE):
                 m[i, j] = x[k]
             tc = joint.tc_s.copy()
             tc[free] = np.exp(x[12:])
@@ -613,14 +614,14 @@ def _fit(session: Session, options: RigFreeOptions) -> ParameterSet:
     else:
         accel_terms = {
             "misalignment": np.linalg.inv(acc.a_matrix),
-            "misalignment_std": _inverse_std(acc.a_matrix, acc.cov[:6, :6], _UPPER),
+            "misalignment_std": _inverse_std(acc.a_matrix, acc.cov[:6, :6], UPPER_TRIANGLE),
             "bias_static": acc.bias, "bias_static_std": np.sqrt(np.diag(acc.cov)[6:9]),
             **_drift_params(None),
         }
     accel = TriadParams(
         **accel_terms,
         noise_std=a_noise.sigma, noise_std_std=a_noise.sigma_std,
-        allan=_allan(session, a_res, a_noise.keep),
+        allan=residual_allan(session, a_res, a_noise.keep),
         residual_rms=np.sqrt(np.mean(a_res[mask & a_noise.keep] ** 2, axis=0)),
     )
     g_par = _drift_params(g_drift)
@@ -630,7 +631,7 @@ def _fit(session: Session, options: RigFreeOptions) -> ParameterSet:
         bias_static_std=np.array([np.sqrt(max(f.beta_cov[0, 0], 0.0)) for f in g_drift]),
         **g_par,
         noise_std=g_noise.sigma, noise_std_std=g_noise.sigma_std,
-        allan=_allan(session, g_res, g_noise.keep),
+        allan=residual_allan(session, g_res, g_noise.keep),
         residual_rms=np.sqrt(np.mean(g_res[mask & g_noise.keep] ** 2, axis=0)),
     )
     report = {
@@ -656,19 +657,18 @@ def _fit(session: Session, options: RigFreeOptions) -> ParameterSet:
     }
     verdict_ok = bool(cv) and cv["accel_norm_rms_mps2"] <= 3.0 * max(acc.rms_mps2, 1e-6) and \
         cv["gyro_direction_rms_deg"] <= 3.0 * max(gyr.rms_deg, 1e-6)
-    quality: dict[str, Any] = {
-        "rig_free": report,
-        "gyro_scale_method": "rig-free",
-        "goodness_of_fit": {
-            "format": "station-goodness/1", "passed": verdict_ok, "failed": [] if verdict_ok else ["rig-free cv"],
-            "tests": [],
+    quality = FitQuality(
+        rig_free=report,
+        gyro_scale_method="rig-free",
+        goodness_of_fit=GoodnessOfFit(passed=verdict_ok, failed=() if verdict_ok else ("rig-free cv",), report={
+            "format": "station-goodness/1", "tests": [],
             "note": "rig-free fit: judged by leave-poses-out cross-validation (held-out RMS within 3x the fitted "
                     "RMS for the gravity norm and the move rotations)",
-        },
-        "accel": {"rms": accel.residual_rms.round(9).tolist()},
-        "gyro": {"rms": gyro.residual_rms.round(9).tolist()},
-    }
-    return ParameterSet(
+        }),
+        accel=ResidualFigures(rms=tuple(accel.residual_rms.round(9).tolist())),
+        gyro=ResidualFigures(rms=tuple(gyro.residual_rms.round(9).tolist())),
+    )
+    params = ParameterSet(
         serial=session.serial,
         sample_period_s=1.0 / session.sample_rate_hz,
         moving_average_length=options.moving_average_length,
@@ -684,3 +684,4 @@ def _fit(session: Session, options: RigFreeOptions) -> ParameterSet:
             "gravity_mps2": g,
         },
     )
+    return assess(params, float(session.t_s[-1]))

@@ -18,7 +18,8 @@ import typer
 from station.kernel.errors import StationError
 
 if TYPE_CHECKING:
-    from station.fit.params import ParameterSet
+    from station.kernel.parameters import ParameterSet
+    from station.session.still import StillOptions
 
 WindowOption = Annotated[float, typer.Option("--still-window", help="still detector: moving window (s)")]
 ThresholdOption = Annotated[float, typer.Option(
@@ -50,7 +51,7 @@ def _fail(exc: StationError) -> typer.Exit:
     return typer.Exit(2)
 
 
-def _still_options(window: float, threshold: float, min_still: float, initial: float, rate: float) -> object:
+def _still_options(window: float, threshold: float, min_still: float, initial: float, rate: float) -> StillOptions:
     from station.session.still import StillOptions
 
     return StillOptions(window_s=window, threshold=threshold, min_still_s=min_still, initial_still_s=initial,
@@ -95,7 +96,7 @@ def import_openaxes_command(
         g, extra = _gravity(gravity, latitude, height, 9.8128)
         session = import_openaxes(log, accel=accel.lower(), gravity_mps2=g, serial=serial,
                                   still=_still_options(still_window, still_threshold, min_still, initial_still,
-                                                       still_rate))  # type: ignore[arg-type]
+                                                       still_rate))
         session = session.replace(metadata={**session.metadata, **extra})
         write_session(session, output)
     except StationError as exc:
@@ -155,7 +156,7 @@ def import_imu_tk_command(
                                 gyro_lsb_per_radps=gyro_lsb_per_radps, accel_offset_lsb=a_off, gyro_offset_lsb=g_off,
                                 gravity_mps2=g, serial=serial,
                                 still=_still_options(still_window, still_threshold, min_still, initial_still,
-                                                     still_rate))  # type: ignore[arg-type]
+                                                     still_rate))
         session = session.replace(metadata={**session.metadata, **extra})
         write_session(session, output)
     except StationError as exc:
@@ -191,8 +192,8 @@ def export_command(
     alias of ``--format kalibr`` that will go.
     """
     from station.commands.output import check_output
-    from station.fit.export import imu_tk_calib_files, imu_tk_document, kalibr_imu_yaml, openaxes_text
-    from station.fit.params import ParameterSet
+    from station.fit.export import export_notes, imu_tk_calib_files, imu_tk_document, kalibr_imu_yaml, openaxes_text
+    from station.kernel.parameters import ParameterSet
 
     written: list[Path] = []
     try:
@@ -209,6 +210,8 @@ def export_command(
         sets = [_store_params(serial, db)] if serial is not None else [ParameterSet.read(p) for p in inputs]
         if fmt != "openaxes" and len(sets) != 1:
             raise StationError(f"--format {fmt} exports one parameter set")
+        for note in (n for p in sets for n in export_notes(p)):
+            typer.echo(f"note: {note}", err=True)
         if fmt == "imu-tk":
             assert output is not None
             files = imu_tk_calib_files(sets[0])

@@ -7,7 +7,7 @@ Common query parameters: ``unit`` (Modbus unit/device id, 1 by default),
 ``timeout`` (per-request I/O timeout in wall seconds, 1.0 by default),
 ``retries`` (extra attempts after a request got no answer, 2 by default).
 RTU defaults follow the Modbus serial line spec: 19200 baud, 8 data bits, even
-parity, 1 stop bit. The parsing is :mod:`station.modbus.url`'s.
+parity, 1 stop bit. The parsing is :mod:`station.modbus.modbus_url`'s.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from station.kernel.errors import StationError
-from station.modbus.url import SCHEMES, ModbusUrl, UrlDialect, parse_modbus_url
+from station.modbus.modbus_url import SCHEMES, ModbusUrl, UrlDialect, parse_modbus_url
 
 
 class RigUrlError(StationError, ValueError):
@@ -24,7 +24,7 @@ class RigUrlError(StationError, ValueError):
 
 @dataclass(frozen=True)
 class RigUrl(ModbusUrl):
-    """A parsed rig URL (fields: :class:`~station.modbus.url.ModbusUrl`; 19200 baud by default)."""
+    """A parsed rig URL (fields: :class:`~station.modbus.modbus_url.ModbusUrl`; 19200 baud by default)."""
 
     def __str__(self) -> str:
         if self.is_tcp:
