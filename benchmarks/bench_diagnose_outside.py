@@ -74,7 +74,7 @@ def main() -> None:
             s = seed + i * len(gen_outside.KINDS) + gen_outside.KINDS.index(kind)
             rec = gen_outside.generate(s, kind)
             t0 = time.process_time()
-            rep = diagnose(rec.session, warmup_tc_s=tc).report
+            rep = diagnose(rec.session, warmup_tc_s=tc).report.to_json()
             dt = time.process_time() - t0
             times.append(dt)
             named = sorted({f"{f['effect']}:{f['sensor']}" for f in rep["findings"]})

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 import sys
 from pathlib import Path
@@ -10,6 +11,7 @@ import numpy as np
 import pytest
 
 from station.diagnose import empirical, locator
+from station.diagnose.results import load_report
 from station.kernel.sensor_class import TABLE1
 from station.session.model import Kind, Session
 
@@ -107,8 +109,11 @@ def test_outside_physics_is_located_not_named(seed: int, kind: str, sensor: str,
     from station.kernel.limits_file import DEFAULT_LIMITS_PATH, load_limits
 
     rec = gen_outside.generate(seed, kind)
-    rep = diagnose(rec.session, warmup_tc_s=dict(load_limits(DEFAULT_LIMITS_PATH).correlation_time_s),
-                   resamples=0).report
+    report = diagnose(rec.session, warmup_tc_s=dict(load_limits(DEFAULT_LIMITS_PATH).correlation_time_s),
+                      resamples=0).report
+    rep = report.to_json()
+    # the locator's entries read back into the types give the same JSON
+    assert json.dumps(load_report(json.loads(json.dumps(rep))).to_json()) == json.dumps(rep)
     assert rep["findings"] == []
     mine = [u for u in rep["unexplained"] if u["sensor"] == sensor]
     assert mine and "xyz"[rec.axis] in mine[0]["axes"]
