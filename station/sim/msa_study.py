@@ -12,6 +12,7 @@ The nests' mounting errors are the simulated rig's configuration (``nest_errors_
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -46,6 +47,35 @@ class StudyDesign:
                 for _ in range(self.repeats) for s in range(self.parts)]
 
 
+@dataclass(frozen=True)
+class SimRig:
+    """Where the simulated runs go: the rig's name (its lock and nest-calibration key ``fake-rig://NAME``), its
+    nests' mounting errors, the clock scale and plan, the limits, the database and the output folder."""
+
+    station_id: str
+    db_url: str
+    scale: float
+    plan: RigPlan
+    nest_errors_deg: Sequence[Sequence[float]] | None
+    limits_path: Path | None
+    out_dir: Path | None
+
+    def run(self, seed: int, keys: Sequence[int], noise_index: int, lot: str, *, nest_calibration: bool,
+            on_start: Callable[[FakeStation], None] | None = None) -> RunResult:
+        """One run of the station's sequence with units ``keys`` of ``seed`` in its nests (retest policy off:
+        a study measures the same parts again on purpose)."""
+        with FakeStation(len(keys), self.scale, seed, name=self.station_id, plan=self.plan, unit_keys=keys,
+                         noise_index=noise_index, nest_errors_deg=self.nest_errors_deg) as sim:
+            if on_start is not None:
+                on_start(sim)
+            config = StationConfig(
+                sim.rig_url, tuple(sim.sensor_urls), station_id=self.station_id, db_url=self.db_url, record=True,
+                limits_path=self.limits_path, out_dir=self.out_dir, clock_scale=self.scale, plan=self.plan, lot=lot,
+                rig_options=sim.rig_client_options(), nest_calibration=nest_calibration,
+            )
+            return Station(config, clock=sim.clock, options=SequenceOptions(), admit=lambda *_: None).run()
+
+
 def run_study(
     design: StudyDesign,
     db_url: str,
@@ -67,20 +97,12 @@ def run_study(
     database (as every production run does). ``out_dir``: where the sessions and parameter files go (the
     records keep the parameter sets, which a nest calibration reads).
     """
-    plan = plan if plan is not None else default_plan()
+    rig = SimRig(station_id, db_url, scale, plan if plan is not None else default_plan(), nest_errors_deg,
+                 limits_path, out_dir)
     runs = design.schedule()
     results: list[RunResult] = []
     for k, parts in enumerate(runs):
-        with FakeStation(design.nests, scale, design.seed, name=station_id, plan=plan, unit_keys=parts,
-                         noise_index=k + 1,
-                         nest_errors_deg=nest_errors_deg) as sim:
-            config = StationConfig(
-                sim.rig_url, tuple(sim.sensor_urls), station_id=station_id, db_url=db_url, record=True,
-                limits_path=limits_path, out_dir=out_dir, clock_scale=scale, plan=plan, lot=lot,
-                rig_options=sim.rig_client_options(), nest_calibration=nest_calibration,
-            )
-            station = Station(config, clock=sim.clock, options=SequenceOptions(), admit=lambda *_: None)
-            result = station.run()
+        result = rig.run(design.seed, parts, k + 1, lot, nest_calibration=nest_calibration)
         results.append(result)
         if on_run is not None:
             on_run(k, len(runs), result)
@@ -111,26 +133,26 @@ def run_nest_calibration(
     line would have from a calibration elsewhere; ``station nest-cal estimate [--reference-params FILE]``
     (:func:`station.commands.nest_cal.estimate_from_records`) then fits the nests from the runs.
     """
-    plan = plan if plan is not None else default_plan()
+    rig = SimRig(station_id, db_url, scale, plan if plan is not None else default_plan(), nest_errors_deg,
+                 limits_path, out_dir)
     results: list[RunResult] = []
-    serial = ""
-    lab: Path | None = None
+    found: dict[str, object] = {}
+
+    def note_reference(sim: FakeStation, nest: int) -> None:
+        truth = sim.units[nest].truth
+        found["serial"] = truth.serial
+        if out_dir is not None and "lab" not in found:
+            out_dir.mkdir(parents=True, exist_ok=True)
+            lab_path = out_dir / "reference-lab.json"
+            lab_path.write_text(truth.as_parameter_set(1.0 / rig.plan.sample_rate_hz).to_json())
+            found["lab"] = lab_path
+
     for j in range(nests):
         keys = [REFERENCE_KEY if i == j else 20_000 + i for i in range(nests)]
-        with FakeStation(nests, scale, seed, name=station_id, plan=plan, unit_keys=keys, noise_index=1000 + j,
-                         nest_errors_deg=nest_errors_deg) as sim:
-            serial = sim.units[j].truth.serial
-            if out_dir is not None and lab is None:
-                out_dir.mkdir(parents=True, exist_ok=True)
-                lab = out_dir / "reference-lab.json"
-                lab.write_text(sim.units[j].truth.as_parameter_set(1.0 / plan.sample_rate_hz).to_json())
-            config = StationConfig(
-                sim.rig_url, tuple(sim.sensor_urls), station_id=station_id, db_url=db_url, record=True,
-                limits_path=limits_path, out_dir=out_dir, clock_scale=scale, plan=plan, lot="nest-calibration",
-                rig_options=sim.rig_client_options(), nest_calibration=False,
-            )
-            result = Station(config, clock=sim.clock, options=SequenceOptions(), admit=lambda *_: None).run()
+        result = rig.run(seed, keys, 1000 + j, "nest-calibration", nest_calibration=False,
+                         on_start=functools.partial(note_reference, nest=j))
         results.append(result)
         if on_run is not None:
             on_run(j, nests, result)
-    return serial, results, lab
+    lab = found.get("lab")
+    return str(found.get("serial", "")), results, lab if isinstance(lab, Path) else None
