@@ -161,23 +161,25 @@ def _unique(prob: SensorProblem, best: Test, twin: Test, regs: Mapping[str, np.n
 
 def select(baseline: Baseline, *, max_effects: int = 4,
            candidates: Mapping[str, Collection[str]] | None = None, resamples: int = bootstrap.RESAMPLES,
-           seed: int = bootstrap.SEED) -> Decision:
+           seed: int = bootstrap.SEED, locate: bool = True) -> Decision:
     """Forward selection of candidate effects per sensor (see the module docstring).
 
     ``candidates``: per sensor, the mean candidates to test (None: every one of the library); a recording that
     cannot test some (e.g. a rig-free one, :mod:`station.diagnose.rigfree_diagnosis`) says so itself.
     ``bias_random_walk`` and ``outliers`` are always tested. ``resamples``: the bootstrap's over segments for each
-    finding's confidence (:mod:`station.diagnose.bootstrap`, seeded with ``seed``; 0: none).
+    finding's confidence (:mod:`station.diagnose.bootstrap`, seeded with ``seed``; 0: none). ``locate``: run the
+    locator (its stochastic terms are frozen at the station's sensor class, Table 1: off for a recording of a
+    sensor that is not of that class, e.g. a hand-held one).
     """
     return Decision.join(
         select_sensor(baseline, sensor, max_effects=max_effects,
                       candidates=None if candidates is None else candidates.get(sensor, ()),
-                      resamples=resamples, seed=seed)
+                      resamples=resamples, seed=seed, locate=locate)
         for sensor in SENSORS)
 
 
 def select_sensor(baseline: Baseline, sensor: str, *, max_effects: int = 4, candidates: Collection[str] | None = None,
-                  resamples: int = bootstrap.RESAMPLES, seed: int = bootstrap.SEED) -> Decision:
+                  resamples: int = bootstrap.RESAMPLES, seed: int = bootstrap.SEED, locate: bool = True) -> Decision:
     """:func:`select` for one sensor, in its steps: the candidates' regressors; the forward selection; the checks
     that hold when the model is wrong (robust.py, consistency.py); the locator (locator.py) and the findings'
     sizes re-fitted under the final model (retest.py); the bootstrap's confidence; the candidates' rejections; the
@@ -194,7 +196,8 @@ def select_sensor(baseline: Baseline, sensor: str, *, max_effects: int = 4, cand
         if not _forward_step(prob, fwd, out):
             break
     confidence, checks = _audit(prob, baseline, fwd, out)
-    _locate(prob, baseline, fwd, out)
+    if locate:
+        _locate(prob, baseline, fwd, out)
     fitted_final = _fitted_samples(prob, baseline, fwd)
     sizes = retest.sizes(prob, fwd.names, {f.effect: (f.theta, f.theta_std) for f in fwd.found
                                            if f.theta is not None})
