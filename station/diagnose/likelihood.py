@@ -270,6 +270,19 @@ class SensorProblem:
             self._eig_cache.clear()
             self._eig_cache.update(cache)
 
+    @contextlib.contextmanager
+    def drift_noise_at_most(self, q_max: np.ndarray) -> Iterator[None]:
+        """Inside: eq. 3's drift noise q per axis bounded by ``q_max`` (3,), e.g. the sensor class's
+        (:func:`station.diagnose.locator.class_drift_noise`); afterwards as before."""
+        q, cache = self.q.copy(), dict(self._eig_cache)
+        self.q = np.minimum(self.q, q_max)
+        try:
+            yield
+        finally:
+            self.q = q
+            self._eig_cache.clear()
+            self._eig_cache.update(cache)
+
     def heldout_errors(self) -> np.ndarray:
         """Per held-out block, the prediction error of the current model (see :meth:`heldout`)."""
         return self._heldout_errors(self._accepted, self._heldout_folds())

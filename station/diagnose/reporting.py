@@ -142,7 +142,8 @@ def finding(sd: SensorData, t: Test, before: ModelQuality, after: ModelQuality, 
                  round(t.heldout_after, 4), round(t.heldout_change_se, 4), form),
         FitChange(block_fit(before), block_fit(after)),
         theta=np.array(t.theta, dtype=float),  # fitted SI parameters, for the simulator re-run (rerun.py)
-        block_residual=(before.block_residual, after.block_residual))
+        block_residual=(before.block_residual, after.block_residual),
+        theta_std=np.sqrt(np.clip(np.diag(t.cov), 0.0, None)))  # their stated uncertainty (retest.py)
 
 
 __all__ = ["AX", "DETECT_POWER", "OUTLIER_ALLOWANCE", "OutlierTest", "detectable_from", "finding", "outlier_test"]

@@ -16,7 +16,7 @@ Where an entry's content depends on the effect (a finding's ``parameters``, an i
 from __future__ import annotations
 
 from collections.abc import Iterator, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -105,6 +105,8 @@ class Confidence:
     walk_consistency: Mapping[str, float] | None = None
     drop_one_level: str | None = None
     bootstrap_accepted_fraction: float | None = None
+    #: why the level was lowered after the checks (e.g. the size re-test, :mod:`station.diagnose.retest`)
+    capped_by: str | None = None
 
     @property
     def gain(self) -> float:
@@ -125,6 +127,10 @@ class Confidence:
         return Confidence(boot.level, self.quasi_gain_chi2, self.threshold, self.walk_consistency, self.level,
                           boot.accepted_fraction)
 
+    def capped(self, level: str, reason: str) -> Confidence:
+        """This confidence stated at ``level`` at most, ``reason`` saying why."""
+        return replace(self, level=level, capped_by=reason)
+
     def to_json(self) -> Json:
         out: Json = {"level": self.level}
         if self.quasi_gain_chi2 is not None:
@@ -135,13 +141,15 @@ class Confidence:
         if self.bootstrapped:
             out["drop_one_level"] = self.drop_one_level
             out["bootstrap_accepted_fraction"] = self.bootstrap_accepted_fraction
+        if self.capped_by is not None:
+            out["capped_by"] = self.capped_by
         return out
 
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> Confidence:
         return cls(level=d["level"], quasi_gain_chi2=d.get("quasi_gain_chi2"), threshold=d.get("threshold"),
                    walk_consistency=d.get("consistency"), drop_one_level=d.get("drop_one_level"),
-                   bootstrap_accepted_fraction=d.get("bootstrap_accepted_fraction"))
+                   bootstrap_accepted_fraction=d.get("bootstrap_accepted_fraction"), capped_by=d.get("capped_by"))
 
 
 @dataclass(frozen=True)
@@ -174,6 +182,8 @@ class Evidence:
     heldout_after: float
     heldout_change_se: float
     form_inseparable_from: FormInseparable | None = None
+    #: its size re-fitted under the final model (:mod:`station.diagnose.retest`); None where not re-tested
+    retest: SizeRetest | None = None
 
     def to_json(self) -> Json:
         out: Json = {"likelihood_gain_chi2": self.likelihood_gain_chi2, "params": self.params,
@@ -182,14 +192,38 @@ class Evidence:
                      "heldout_change_se": self.heldout_change_se}
         if self.form_inseparable_from is not None:
             out["form_inseparable_from"] = self.form_inseparable_from.to_json()
+        if self.retest is not None:
+            out["retest"] = self.retest.to_json()
         return out
 
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> Evidence:
-        form = d.get("form_inseparable_from")
+        form, retest = d.get("form_inseparable_from"), d.get("retest")
         return cls(d["likelihood_gain_chi2"], d["params"], d["bic_gain"], d["critical_chi2"], d["heldout_before"],
                    d["heldout_after"], d["heldout_change_se"],
-                   None if form is None else FormInseparable.from_json(form))
+                   None if form is None else FormInseparable.from_json(form),
+                   None if retest is None else SizeRetest.from_json(retest))
+
+
+@dataclass(frozen=True)
+class SizeRetest:
+    """A finding's size fitted again in the final model, with eq. 3's drift noise free and bounded by the sensor
+    class (engineering units, as the effect registry gives them), and the largest change between the three fits
+    over the finding's standard deviation (:mod:`station.diagnose.retest`)."""
+
+    final_model: Mapping[str, Any]
+    final_model_drift_noise_at_class: Mapping[str, Any]
+    change_over_std: float
+    note: str
+
+    def to_json(self) -> Json:
+        return {"final_model": dict(self.final_model),
+                "final_model_drift_noise_at_class": dict(self.final_model_drift_noise_at_class),
+                "change_over_std": self.change_over_std, "note": self.note}
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> SizeRetest:
+        return cls(d["final_model"], d["final_model_drift_noise_at_class"], d["change_over_std"], d["note"])
 
 
 @dataclass(frozen=True)
@@ -272,8 +306,8 @@ class Finding:
     entry with the reason where none could run); ``bootstrap``: None where not run; ``rerun``: the simulator
     re-run's part (None where not simulated); ``calibration``: whether the station's calibration compensates it
     (None before that is assessed). ``theta`` (the fitted SI parameters, for the simulator re-run) and
-    ``block_residual`` (the block residual before and after the effect, (m, 3), sensor units) are not part of the
-    JSON entry.
+    ``block_residual`` (the block residual before and after the effect, (m, 3), sensor units) and ``theta_std``
+    (the stated standard deviations of ``theta``, for the size re-test) are not part of the JSON entry.
     """
 
     effect: str
@@ -289,6 +323,7 @@ class Finding:
     calibration: Compensation | None = None
     theta: np.ndarray | None = field(default=None, repr=False)
     block_residual: tuple[np.ndarray, np.ndarray] | None = field(default=None, repr=False)
+    theta_std: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def selection_test(self) -> Evidence | None:
@@ -431,20 +466,97 @@ class Unexplained:
     dispersion: dict[str, list[float]]  # kind -> mean square innovation per axis (1 = noise)
     excess_chi2: float
     periodic: dict[str, Any] | None = None
+    #: the mismatch locator's evidence (:mod:`station.diagnose.locator`); None where the entry is robust.py's
+    locator: LocatorEvidence | None = None
+    #: empirical models of the located axes (:mod:`station.diagnose.empirical`); None where none were fitted
+    empirical: tuple[EmpiricalModel, ...] | None = None
 
     def to_json(self) -> Json:
         out: Json = {"sensor": self.sensor, "axes": list(self.axes), "segment_kinds": list(self.segment_kinds),
                      "covariate": self.covariate, "dispersion": self.dispersion,
                      "excess_chi2": round(self.excess_chi2, 1), "explained_by": None,
                      "note": "no candidate of the library explains this: physics outside the model"}
+        if self.locator is not None:
+            out["locator"] = self.locator.to_json()
+        if self.empirical is not None:
+            out["empirical"] = [e.to_json() for e in self.empirical]
         if self.periodic:
             out["periodic"] = self.periodic
         return out
 
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> Unexplained:
+        loc, emp = d.get("locator"), d.get("empirical")
         return cls(d["sensor"], tuple(d["axes"]), tuple(d["segment_kinds"]), d["covariate"], d["dispersion"],
-                   d["excess_chi2"], d.get("periodic"))
+                   d["excess_chi2"], d.get("periodic"), None if loc is None else LocatorEvidence.from_json(loc),
+                   None if emp is None else tuple(EmpiricalModel.from_json(e) for e in emp))
+
+
+@dataclass(frozen=True)
+class CovariateTest:
+    """One covariate the locator tried on one axis: its chi^2 gain (whitened, 1 dof) and its share of the
+    excess."""
+
+    axis: str
+    name: str
+    gain_chi2: float
+    share_of_excess: float
+
+    def to_json(self) -> Json:
+        return {"axis": self.axis, "covariate": self.name, "gain_chi2": round(self.gain_chi2, 1),
+                "share_of_excess": round(self.share_of_excess, 3)}
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> CovariateTest:
+        return cls(d["axis"], d["covariate"], d["gain_chi2"], d["share_of_excess"])
+
+
+@dataclass(frozen=True)
+class LocatorEvidence:
+    """How the locator located an :class:`Unexplained` entry: the covariate per axis (or ``none``), the fitted
+    drift noise over the class bound per axis, the covariates tried, the accepted effects it rejected as
+    stand-ins."""
+
+    covariate_per_axis: tuple[tuple[str, str], ...]
+    q_over_class: tuple[float, ...]
+    tests: tuple[CovariateTest, ...]
+    stand_ins: tuple[str, ...] = ()
+    stochastic_terms: str = "drift noise q bounded by the sensor class"
+
+    def to_json(self) -> Json:
+        return {"stochastic_terms": self.stochastic_terms, "covariate_per_axis": dict(self.covariate_per_axis),
+                "q_over_class": [round(v, 3) for v in self.q_over_class],
+                "tests": [t.to_json() for t in self.tests], "stand_ins_rejected": list(self.stand_ins)}
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> LocatorEvidence:
+        return cls(tuple(d["covariate_per_axis"].items()), tuple(d["q_over_class"]),
+                   tuple(CovariateTest.from_json(t) for t in d["tests"]), tuple(d["stand_ins_rejected"]),
+                   d["stochastic_terms"])
+
+
+@dataclass(frozen=True)
+class EmpiricalModel:
+    """A sparse model of one axis's located structure, scored on held-out segments
+    (:mod:`station.diagnose.empirical`): empirical, not in the library."""
+
+    sensor: str
+    axis: str
+    terms: tuple[str, ...]
+    coefficients: tuple[float, ...]  # sensor SI unit per covariate unit (covariates in SI: rad/s, m/s^2, K, s)
+    heldout_improvement: float  # 1 - held-out error with the model / without it (0: nothing)
+    folds: int
+
+    def to_json(self) -> Json:
+        return {"sensor": self.sensor, "axis": self.axis, "status": "empirical, not in the library",
+                "terms": [{"covariate": t, "coefficient_si": float(f"{c:.6g}")}
+                          for t, c in zip(self.terms, self.coefficients, strict=True)],
+                "heldout_improvement": round(self.heldout_improvement, 3), "folds": self.folds}
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> EmpiricalModel:
+        return cls(d["sensor"], d["axis"], tuple(t["covariate"] for t in d["terms"]),
+                   tuple(t["coefficient_si"] for t in d["terms"]), d["heldout_improvement"], d["folds"])
 
 
 
@@ -664,8 +776,34 @@ def load_report(d: Mapping[str, Any]) -> DiagnosisReport:
 
 
 __all__ = [
-    "FORMAT", "BlockFit", "BlockStatistics", "CheckEntry", "Compensation", "Confidence", "DetectableSize",
-    "DiagnosisReport", "Evidence", "Finding", "FindingRerun", "FitChange", "FormInseparable", "Improvement",
-    "Inseparable", "KindStatistics", "OutlierEvidence", "Rejection", "ReportFormatError", "RerunError",
-    "RerunSummary", "RigFreeSection", "SensorReport", "Unexplained", "Untestable", "load_report",
+    "FORMAT",
+    "BlockFit",
+    "BlockStatistics",
+    "CheckEntry",
+    "Compensation",
+    "Confidence",
+    "CovariateTest",
+    "DetectableSize",
+    "DiagnosisReport",
+    "EmpiricalModel",
+    "Evidence",
+    "Finding",
+    "FindingRerun",
+    "FitChange",
+    "FormInseparable",
+    "Improvement",
+    "Inseparable",
+    "KindStatistics",
+    "LocatorEvidence",
+    "OutlierEvidence",
+    "Rejection",
+    "ReportFormatError",
+    "RerunError",
+    "RerunSummary",
+    "RigFreeSection",
+    "SensorReport",
+    "SizeRetest",
+    "Unexplained",
+    "Untestable",
+    "load_report",
 ]

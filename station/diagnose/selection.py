@@ -21,7 +21,10 @@ listed as inseparable with the rig step that separates them.
 
 
 After the forward selection, :mod:`station.diagnose.robust` re-tests every accepted effect against
-the full model under the final model's dispersion and locates what stays unexplained.
+the full model under the final model's dispersion and locates what stays unexplained;
+:mod:`station.diagnose.locator` then locates structure with the stochastic terms held at the sensor class
+(rejecting effects that stand in for it), and :mod:`station.diagnose.retest` re-fits each finding's size and
+recounts the outliers under the final model.
 """
 
 from __future__ import annotations
@@ -32,7 +35,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy import linalg
 
-from station.diagnose import bootstrap, finding_consistency, robust
+from station.diagnose import bootstrap, finding_consistency, locator, retest, robust
 from station.diagnose.bootstrap import Bootstrap
 from station.diagnose.candidates import MAX_DELAY_S, delay_regressor
 from station.diagnose.effect_registry import LIBRARY, REGISTRY, RIG_STEPS
@@ -42,12 +45,14 @@ from station.diagnose.residuals import SENSORS, Baseline, SensorData
 from station.diagnose.results import (
     Confidence,
     DetectableSize,
+    Evidence,
     Finding,
     FormInseparable,
     Inseparable,
     Rejection,
     Unexplained,
 )
+from station.session.model import Kind
 
 #: Two candidates are inseparable when each one's fitted signal is explained this well (R^2) by the other.
 COLLINEAR_R2 = 0.9
@@ -67,6 +72,13 @@ WALK_EXPLAINS = ("significant only while no bias random walk is allowed: with on
                  "in both hypotheses) its gain is below the threshold, a slow wander explains its signal as well")
 #: Fixed-point rounds of the exact-delay fit (:func:`_refine_delay`).
 DELAY_ROUNDS = 6
+#: Rounds of the locator (:func:`_locate`): after stand-ins are rejected, the location is taken once more.
+LOCATOR_ROUNDS = 2
+#: Why an effect the locator finds standing in for located structure is rejected.
+STAND_IN = ("a stand-in: most of its fitted signal lies where the class-frozen model locates structure "
+            "(see unexplained)")
+#: Why a finding's confidence is capped by the size re-test (retest.py).
+RETEST_CAP = "retest: its size changes by more than its uncertainty between fits"
 
 
 @dataclass(frozen=True)
@@ -149,26 +161,29 @@ def _unique(prob: SensorProblem, best: Test, twin: Test, regs: Mapping[str, np.n
 
 def select(baseline: Baseline, *, max_effects: int = 4,
            candidates: Mapping[str, Collection[str]] | None = None, resamples: int = bootstrap.RESAMPLES,
-           seed: int = bootstrap.SEED) -> Decision:
+           seed: int = bootstrap.SEED, locate: bool = True) -> Decision:
     """Forward selection of candidate effects per sensor (see the module docstring).
 
     ``candidates``: per sensor, the mean candidates to test (None: every one of the library); a recording that
     cannot test some (e.g. a rig-free one, :mod:`station.diagnose.rigfree_diagnosis`) says so itself.
     ``bias_random_walk`` and ``outliers`` are always tested. ``resamples``: the bootstrap's over segments for each
-    finding's confidence (:mod:`station.diagnose.bootstrap`, seeded with ``seed``; 0: none).
+    finding's confidence (:mod:`station.diagnose.bootstrap`, seeded with ``seed``; 0: none). ``locate``: run the
+    locator (its stochastic terms are frozen at the station's sensor class, Table 1: off for a recording of a
+    sensor that is not of that class, e.g. a hand-held one).
     """
     return Decision.join(
         select_sensor(baseline, sensor, max_effects=max_effects,
                       candidates=None if candidates is None else candidates.get(sensor, ()),
-                      resamples=resamples, seed=seed)
+                      resamples=resamples, seed=seed, locate=locate)
         for sensor in SENSORS)
 
 
 def select_sensor(baseline: Baseline, sensor: str, *, max_effects: int = 4, candidates: Collection[str] | None = None,
-                  resamples: int = bootstrap.RESAMPLES, seed: int = bootstrap.SEED) -> Decision:
+                  resamples: int = bootstrap.RESAMPLES, seed: int = bootstrap.SEED, locate: bool = True) -> Decision:
     """:func:`select` for one sensor, in its steps: the candidates' regressors; the forward selection; the checks
-    that hold when the model is wrong (robust.py, consistency.py); the bootstrap's confidence; the candidates'
-    rejections; the pairs the recording cannot tell apart; the outlier count."""
+    that hold when the model is wrong (robust.py, consistency.py); the locator (locator.py) and the findings'
+    sizes re-fitted under the final model (retest.py); the bootstrap's confidence; the candidates' rejections; the
+    pairs the recording cannot tell apart; the outlier count under the final model."""
     sd = baseline.sensor(sensor)
     prob = SensorProblem(baseline, sd)
     out = _Entries()
@@ -181,17 +196,23 @@ def select_sensor(baseline: Baseline, sensor: str, *, max_effects: int = 4, cand
         if not _forward_step(prob, fwd, out):
             break
     confidence, checks = _audit(prob, baseline, fwd, out)
+    if locate:
+        _locate(prob, baseline, fwd, out)
+    fitted_final = _fitted_samples(prob, baseline, fwd)
+    sizes = retest.sizes(prob, fwd.names, {f.effect: (f.theta, f.theta_std) for f in fwd.found
+                                           if f.theta is not None})
     boot = (bootstrap.bootstrap(prob, fwd.names, {n: c.limit for n, c in confidence.items()},
                                 robust.dispersion(prob)[0], resamples=resamples, seed=seed)
             if fwd.names and resamples else {})
-    out.findings.extend(_checked(f, confidence, boot, checks) for f in fwd.found)
+    out.findings.extend(_retested(_checked(f, confidence, boot, checks), sizes.get(f.effect)) for f in fwd.found)
     out.rejected.extend(_not_named(t) for t in fwd.last.values())
     twin = _wander_or_temperature(fwd.last, fwd.walk)
     if twin is not None:
         out.inseparable.append(twin)
     if "temperature_bias" in fwd.pool and np.any(baseline.d_temp):
         _warmup_shaped_temperature(prob, out)
-    _outliers(sd, out)
+    # counted again on the residual of the final model (retest.py), not the base fit's
+    _outliers(retest.recount_outliers(baseline.session, sd, fitted_final), out)
     return out.decision()
 
 
@@ -342,6 +363,40 @@ def _audit(prob: SensorProblem, baseline: Baseline, fwd: _Forward, out: _Entries
             out.unexplained.extend(robust.audit(prob, baseline, fwd.names, fwd.regs, fwd.walk,
                                                 _fitted_samples(prob, baseline, fwd)).unexplained)
     return confidence, checks
+
+
+def _locate(prob: SensorProblem, baseline: Baseline, fwd: _Forward, out: _Entries) -> None:
+    """The locator (locator.py): the final model with the stochastic terms at the sensor class's values. Its entry
+    replaces the sensor's unexplained entries (their cells are located with it); an effect standing in for what it
+    locates is rejected, then the location is taken again without it."""
+    for _round in range(LOCATOR_ROUNDS):
+        cells = {(k, "xyz".index(a)) for u in out.unexplained for a in u.axes for k in _kind_codes(u.segment_kinds)}
+        located = locator.locate(prob, baseline, fwd.names, extra_cells=cells,
+                                 fitted=_fitted_samples(prob, baseline, fwd))
+        if located is None:
+            return
+        out.unexplained[:] = [located]
+        gone = set(located.locator.stand_ins) if located.locator is not None else set()
+        if not gone:
+            return
+        out.rejected.extend(Rejection(name, fwd.sensor, STAND_IN) for name in sorted(gone))
+        _drop(prob, fwd, gone)
+
+
+def _retested(f: Finding, size: retest.SizeCheck | None) -> Finding:
+    """Finding ``f`` with its size under the final model (retest.py) in its evidence; a spread beyond its standard
+    deviation caps a high confidence at medium."""
+    if size is None or not isinstance(f.evidence, Evidence):
+        return f
+    conf = f.confidence
+    if size.change_over_std > retest.SPREAD_STD and conf is not None and conf.level == "high":
+        conf = conf.capped("medium", RETEST_CAP)
+    return replace(f, evidence=replace(f.evidence, retest=size.result()), confidence=conf)
+
+
+def _kind_codes(labels: Collection[str]) -> list[int]:
+    """Segment-kind codes of the labels (rest, pose, rate, move)."""
+    return [int(k) for k in Kind if k.label in labels]
 
 
 def _drop(prob: SensorProblem, fwd: _Forward, gone: set[str]) -> None:

@@ -1,0 +1,129 @@
+"""The diagnosis on physics outside its library (``benchmarks/gen_outside.py``): is it located, not named?
+
+Per recording: the planted kind, the findings named, and every ``unexplained`` entry (sensor, axes, segment
+kinds, covariate). Per kind: ``right`` = an ``unexplained`` entry at one of the kind's sensors and segment
+kinds (``gen_outside.LOCATION``) and no finding; ``cov`` = right, and every such entry's covariate text names
+what the kind follows (``gen_outside.COVARIATE``; on a null: an unexplained entry that says no covariate);
+``unexpl`` = any ``unexplained``; ``named`` = recordings with
+a finding (each a false finding: none of these kinds is in the library); ``held-out`` = median over the
+recordings of the empirical model's held-out improvement (best located axis at the kind's sensors).
+Nulls (``none``, ``ar1_noise``):
+``named`` counts false findings; an ``unexplained`` on a null is listed with its covariate.
+
+Seeds: development used 0-999 (``--base 0``); report seeds start at 50000 and were drawn after the
+locator was settled.
+
+Run: ``python benchmarks/bench_diagnose_outside.py [--base 50000] [--per 4] [--kinds telegraph,...]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import gen_outside
+
+from station.diagnose import diagnose
+from station.kernel.limits_file import DEFAULT_LIMITS_PATH, load_limits
+
+
+def warmup_tc() -> dict[str, tuple[float, float]] | None:
+    try:
+        return dict(load_limits(DEFAULT_LIMITS_PATH).correlation_time_s)
+    except Exception:
+        return None
+
+
+def right_place(kind: str, unexplained: list[dict]) -> bool:
+    if kind not in gen_outside.LOCATION:
+        return False
+    sensors, kinds = gen_outside.LOCATION[kind]
+    return any(u["sensor"] in sensors and set(u["segment_kinds"]) & kinds for u in unexplained)
+
+
+def covariate_right(kind: str, unexplained: list[dict]) -> bool:
+    """Whether every unexplained entry at the kind's place names its covariate (a null's: none, or noise colour)."""
+    words = gen_outside.COVARIATE[kind]
+    loc = gen_outside.LOCATION.get(kind)
+    mine = [u for u in unexplained if loc is None or (u["sensor"] in loc[0] and set(u["segment_kinds"]) & loc[1])]
+    if loc is not None:  # a "none" text lists the dictionary: it names no covariate
+        return bool(mine) and all(not u["covariate"].startswith("none") and any(w in u["covariate"] for w in words)
+                                  for u in mine)
+    return bool(mine) and all(any(w in u["covariate"] for w in words) for u in mine)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--base", type=int, default=50_000, help="first seed (development used 0-999)")
+    ap.add_argument("--per", type=int, default=4, help="recordings per kind")
+    ap.add_argument("--kinds", default=",".join(gen_outside.KINDS), help="comma-separated kinds")
+    args = ap.parse_args()
+    tc = warmup_tc()
+    kinds = [k for k in args.kinds.split(",") if k]
+    stats: dict[str, Counter] = {}
+    times: list[float] = []
+    improvements: dict[str, list[float]] = {}
+    seed = args.base
+    for i in range(args.per):
+        for kind in kinds:
+            s = seed + i * len(gen_outside.KINDS) + gen_outside.KINDS.index(kind)
+            rec = gen_outside.generate(s, kind)
+            t0 = time.process_time()
+            rep = diagnose(rec.session, warmup_tc_s=tc).report.to_json()
+            dt = time.process_time() - t0
+            times.append(dt)
+            named = sorted({f"{f['effect']}:{f['sensor']}" for f in rep["findings"]})
+            un = rep["unexplained"]
+            st = stats.setdefault(kind, Counter())
+            st["n"] += 1
+            st["named"] += bool(named)
+            st["unexpl"] += bool(un)
+            ok = right_place(kind, un) and not named
+            st["right"] += ok
+            st["cov"] += covariate_right(kind, un) and (ok or kind in gen_outside.NULLS)
+            loc = gen_outside.LOCATION.get(kind)
+            emp = [e["heldout_improvement"] for u in un for e in u.get("empirical", [])
+                   if loc is None or u["sensor"] in loc[0]]
+            if emp:
+                improvements.setdefault(kind, []).append(max(emp))
+            where = "; ".join(f"{u['sensor']} {''.join(u['axes'])} {'/'.join(u['segment_kinds'])}: "
+                              f"{u['covariate'][:60]}" for u in un) or "-"
+            flag = "RIGHT" if ok else ("" if kind in gen_outside.NULLS else "miss")
+            print(f"  {kind:16s} seed {s}: {rec.plan.rate_hz:4.0f} Hz {rec.session.duration_s:4.0f} s "
+                  f"axis {'xyz'[rec.axis]} named {named or '-'} | unexplained {where} {flag} ({dt:.1f} s)",
+                  flush=True)
+    print()
+    print(f"outside-library generator (benchmarks/gen_outside.py), seeds from {args.base}, {args.per} per kind")
+    print(f"{'kind':16s} {'n':>3s} {'right':>6s} {'cov':>4s} {'unexpl':>7s} {'named':>6s} {'held-out':>9s}"
+          "   where it acts")
+    tot_n = tot_r = null_n = null_named = 0
+    for kind, st in stats.items():
+        loc = gen_outside.LOCATION.get(kind)
+        where = (f"{'/'.join(sorted(loc[0]))} in {'/'.join(sorted(loc[1]))}" if loc else "null (no physics)")
+        imp = improvements.get(kind)
+        held = f"{sorted(imp)[len(imp) // 2]:.2f}" if imp else "-"
+        print(f"{kind:16s} {st['n']:3d} {st['right'] if loc else '-':>6} {st['cov']:4d} {st['unexpl']:7d} "
+              f"{st['named']:6d} {held:>9s}   {where}")
+        if loc:
+            tot_n += st["n"]
+            tot_r += st["right"]
+        else:
+            null_n += st["n"]
+            null_named += st["named"]
+    if tot_n:
+        print(f"outside kinds unexplained at the right place with no finding: {tot_r}/{tot_n} "
+              f"({100.0 * tot_r / tot_n:.0f} %)")
+    if null_n:
+        print(f"nulls with a (false) finding: {null_named}/{null_n}")
+    if times:
+        times.sort()
+        print(f"diagnosis CPU time: median {times[len(times) // 2]:.1f} s, max {times[-1]:.1f} s")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,340 @@
+"""Where the final model and the recording disagree, with the base model's stochastic terms held at their class.
+
+The forward selection (:mod:`station.diagnose.selection`) and its checks (:mod:`station.diagnose.robust`) fit
+eq. 3's drift noise ``q`` per axis by maximum likelihood without an upper bound. A flexible ``q`` takes up
+structure that a deterministic or physical explanation would leave: a bias that jumps between two levels has
+the exponential autocorrelation of eq. 3 (eq. 4), a bias that follows the rate or the temperature becomes
+"drift noise"; after such a fit the dispersion of the rest and rate blocks is far *below* 1, which nothing
+else treats as a symptom. Here, per sensor, after the selection:
+
+1. **Stochastic terms frozen at the sensor class.** ``q`` is bounded by the class's drift noise
+   (:data:`station.kernel.sensor_class.TABLE1`: the stationary std of eq. 3's noise is ``drift_noise_rel``
+   of ``|b_drift|``, the unit's own warm-up between :data:`B_DRIFT_FLOOR` of the class's largest and the largest;
+   :data:`CLASS_MARGIN` times that), T_c stays
+   in the class range the selection kept it in, a bias random walk found by the selection stays. The final
+   mean model (base terms and the accepted effects) is re-fitted by GLS under that covariance.
+2. **Located by segment kind.** Its innovations per block (whitened residual, 1 = noise) are grouped by
+   segment kind and axis; a cell whose mean square exceeds :data:`PHI_LOCATED` with a chi^2 tail below
+   :data:`ALPHA_LOCATED` holds structure the model cannot explain. ``q`` fitted above the class bound is
+   reported with it (``q_over_class``): the free fit had to stretch the drift noise for it.
+3. **The covariate it follows, or none.** Each flagged axis's whitened residual is regressed on one physical
+   covariate at a time (:data:`COVARIATES`: the rate and its magnitude, powers, angular acceleration,
+   specific force, temperature and its direction, time since the last rate step, a delay growing with
+   time); one that takes at least :data:`COVARIATE_SHARE` of the axis's excess chi^2 in its flagged cells,
+   significant at :data:`ALPHA_LOCATED`, is named; otherwise a term periodic at the rate table's spin
+   frequency when a cos/sin of the table's angle takes that share of the structure inside the rate holds
+   (sample level, :func:`_spin_periodic`); otherwise a test of the drift model's own consequence:
+   its increments are Gaussian; a bias that jumps between levels (telegraph) has a few increments of the
+   0.5 s window means in the still and rate-hold segments beyond 6 robust sigmas (:func:`_jumps`);
+   otherwise "none".
+4. **Empirical model** per flagged axis (:mod:`station.diagnose.empirical`): a sparse model over the covariate
+   dictionary chosen on held-out segments, reported as "empirical, not in the library".
+5. **Stand-ins.** An accepted effect whose fitted signal lies mostly (:data:`STAND_IN_SHARE`) in the
+   located cells of its sensor stands in for that structure: the selection rejects it.
+
+The result is an :class:`station.diagnose.results.Unexplained` entry (the same keys as robust.py's) carrying the
+locator's evidence (:class:`~station.diagnose.results.LocatorEvidence`: ``locator`` in the JSON) and the empirical
+models (:class:`~station.diagnose.results.EmpiricalModel`: ``empirical``).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from scipy import linalg, stats
+from scipy.ndimage import uniform_filter1d
+from scipy.signal import lfilter
+
+from station.diagnose import empirical
+from station.diagnose.results import CovariateTest, EmpiricalModel, LocatorEvidence, Unexplained
+from station.kernel.sensor_class import TABLE1, SensorClass
+from station.session.model import Kind
+
+#: The class's drift-noise std is taken this many times larger (a unit at the edge of its class is still in it).
+CLASS_MARGIN = 3.0
+#: The warm-up that bounds a unit's drift noise is taken at least this share of the class's largest.
+B_DRIFT_FLOOR = 0.1
+#: A cell's dispersion under the class-frozen model above this ...
+PHI_LOCATED = 2.0
+#: ... with a chi^2 tail below this is located structure.
+ALPHA_LOCATED = 1e-6
+#: A covariate is named when it takes at least this share of the axis's excess chi^2 in its located cells.
+COVARIATE_SHARE = 0.5
+#: Jumps: increments of the residual's window means (this long, s) inside still and rate-hold segments ...
+JUMP_WINDOW_S = 0.5
+#: ... further than this many robust sigmas (a Gaussian increment: 2e-9) ...
+JUMP_SIGMAS = 6.0
+#: ... at least this many, and this share of the increments, make the bias one that jumps between levels.
+JUMP_MIN = 4
+JUMP_MIN_SHARE = 0.004
+#: An accepted effect with at least this share of its whitened fitted signal's energy in located cells is a
+#: stand-in for the located structure.
+STAND_IN_SHARE = 0.5
+AX = "xyz"
+NUISANCE = "~"
+#: Time constants (s) of the decay after a rate step that the ``since the last rate step`` covariate tries.
+KICK_TAU_S = (4.0, 10.0, 25.0, 60.0)
+
+
+def class_drift_noise(sensor: str, b_drift: np.ndarray | None = None, cls: SensorClass = TABLE1) -> np.ndarray:
+    """Largest stationary variance of eq. 3's drift noise per axis (SI unit^2) the sensor class grants a unit
+    whose warm-up is ``b_drift`` (3,): :data:`CLASS_MARGIN` times ``drift_noise_rel`` of ``|b_drift|``, the
+    warm-up taken at least :data:`B_DRIFT_FLOOR` of the class's largest and at most that largest (None: the
+    largest)."""
+    lo, hi = cls.gyro_bias_drift_dps if sensor == "gyro" else cls.accel_bias_drift_mps2
+    scale = math.pi / 180.0 if sensor == "gyro" else 1.0
+    top = max(abs(lo), abs(hi)) * scale
+    b = np.full(3, top) if b_drift is None else np.clip(np.abs(np.nan_to_num(b_drift, nan=top)),
+                                                        B_DRIFT_FLOOR * top, top)
+    return np.asarray((CLASS_MARGIN * cls.drift_noise_rel * b) ** 2, dtype=float)
+
+
+def _smooth_derivative(x: np.ndarray, fs: float) -> np.ndarray:
+    """d/dt of per-sample x (n, ...) over a ~50 ms window (the reference's sample noise)."""
+    w = max(3, round(0.05 * fs) | 1)
+    return np.gradient(uniform_filter1d(x, size=w, axis=0, mode="nearest"), 1.0 / fs, axis=0)
+
+
+def covariates(baseline: Any, sd: Any, k: int, *, extended: bool = False) -> dict[str, np.ndarray]:
+    """Block-mean physical covariates for axis ``k`` of ``sd`` (m,), by name; ``extended``: also the rate
+    components' products, the time since power-on and the table's spin phase (the empirical models')."""
+    session = baseline.session
+    fs = session.sample_rate_hz
+    rate = np.nan_to_num(session.ref_gyro_radps)
+    force = np.nan_to_num(session.ref_accel_mps2)
+    t = session.t_s
+    mag = np.linalg.norm(rate, axis=1)
+    out: dict[str, np.ndarray] = {"|rate|": mag}
+    for j in range(3):
+        out[f"rate {AX[j]}"] = rate[:, j]
+        out[f"|rate {AX[j]}|"] = np.abs(rate[:, j])
+        out[f"rate^2 {AX[j]}"] = rate[:, j] ** 2
+        out[f"rate^3 {AX[j]}"] = rate[:, j] ** 3
+        out[f"specific force {AX[j]}"] = force[:, j]
+    alpha = _smooth_derivative(rate, fs)
+    for j in range(3):
+        out[f"angular acceleration {AX[j]}"] = alpha[:, j]
+    temp = baseline.d_temp
+    if np.ptp(temp) > 0:
+        out["temperature"] = temp
+        dtemp = _smooth_derivative(temp, fs)
+        scale = max(float(np.percentile(np.abs(dtemp), 90)), 1e-12)
+        out["temperature direction (heating vs cooling: hysteresis)"] = np.tanh(dtemp / (0.2 * scale))
+    # a kick after each rate step, by the step's size, decaying: |d|w|/dt| through a first-order lag
+    step = np.abs(_smooth_derivative(mag, fs))
+    if np.any(step > 0):
+        for tau in KICK_TAU_S:
+            out[f"time since the last rate step (decay {tau:g} s, by the step's size)"] = lfilter(
+                [1.0 / fs], [1.0, -math.exp(-1.0 / (fs * tau))], step)
+    du = _smooth_derivative(sd.u[:, k], fs)
+    out["delay growing with time (sample clock rate)"] = -du * t
+    if extended:
+        for i, j in ((0, 1), (0, 2), (1, 2)):
+            out[f"rate {AX[i]} * rate {AX[j]}"] = rate[:, i] * rate[:, j]
+        out["time since power-on"] = t
+        angle = np.concatenate([[0.0], np.cumsum(0.5 * (mag[1:] + mag[:-1]) * np.diff(t))])
+        out["spin phase cos"] = np.cos(angle)
+        out["spin phase sin"] = np.sin(angle)
+    return {name: sd.block_mean(v) for name, v in out.items() if np.ptp(v) > 0}
+
+
+def _spin_periodic(session: Any, sd: Any, residual: np.ndarray, k: int) -> tuple[float, int, float, float]:
+    """Axis ``k``'s ``residual`` (n, 3) in the rate-table holds against the table's angle (integrated from the
+    rate reference): per hold of at least one turn, the least-squares cos/sin part beside a mean and a trend.
+    Returns (its chi^2 in white-noise units, dof, its share of the holds' structure above the white noise, its
+    rms amplitude over the holds in the sensor's SI unit): a term periodic at the spin frequency takes most of
+    the structure; slow or jumping structure leaves most outside it."""
+    rate = np.nan_to_num(session.ref_gyro_radps)
+    chi = excess = amp2 = 0.0
+    dof = n_all = 0
+    for seg in session.segments():
+        if seg.kind != Kind.RATE or len(seg) < 50:
+            continue
+        sl = seg.slice
+        w = np.linalg.norm(rate[sl], axis=1)
+        t = session.t_s[sl]
+        ang = np.concatenate([[0.0], np.cumsum(0.5 * (w[1:] + w[:-1]) * np.diff(t))])
+        if ang[-1] < 2.0 * math.pi:
+            continue
+        keep = sd.keep[sl]
+        r = residual[sl, k][keep]
+        tt = t[keep] - t[keep].mean()
+        x = np.column_stack([np.ones(len(r)), tt, np.cos(ang[keep]), np.sin(ang[keep])])
+        beta, *_ = np.linalg.lstsq(x, r, rcond=None)
+        left = r - x[:, :2] @ np.linalg.lstsq(x[:, :2], r, rcond=None)[0]
+        per = x[:, 2:] @ beta[2:]
+        var = float(sd.sigma[k]) ** 2
+        chi += float(per @ per) / var
+        excess += max(float(left @ left) - len(r) * var, 0.0) / var
+        dof += 2
+        amp2 += float(np.sum(beta[2:] ** 2)) * len(seg)
+        n_all += len(seg)
+    return chi, dof, (chi / excess if excess > 0 else 0.0), math.sqrt(amp2 / max(n_all, 1))
+
+
+def _jumps(session: Any, residual: np.ndarray, k: int) -> tuple[int, int]:
+    """Jumps of axis ``k``'s ``residual`` (n, 3) inside the still and rate-hold segments: (number of increments
+    between adjacent :data:`JUMP_WINDOW_S` window means further than :data:`JUMP_SIGMAS` robust sigmas, number
+    of increments). Eq. 3's drift, a random walk and short-correlated noise have Gaussian increments; a bias
+    that jumps between levels has a few very large ones."""
+    fs = session.sample_rate_hz
+    w = max(10, round(JUMP_WINDOW_S * fs))
+    inc: list[np.ndarray] = []
+    for seg in session.segments():
+        if seg.kind == Kind.MOVE or len(seg) < 3 * w:
+            continue
+        x = residual[seg.start:seg.stop, k]
+        nwin = len(x) // w
+        means = x[:nwin * w].reshape(nwin, w).mean(axis=1)
+        inc.append(np.diff(means))
+    if not inc:
+        return 0, 0
+    d = np.concatenate(inc)
+    scale = 1.4826 * float(np.median(np.abs(d - np.median(d))))
+    if scale <= 0:
+        return 0, len(d)
+    return int(np.sum(np.abs(d) > JUMP_SIGMAS * scale)), len(d)
+
+
+def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[int, int]] | None = None,
+           fitted: np.ndarray | None = None) -> Unexplained | None:
+    """Run the module's steps on the final model of one sensor (``prob``, a
+    :class:`station.diagnose.likelihood.SensorProblem` with the accepted effects ``names``). ``extra_cells``:
+    (kind code, axis) cells located by other checks (e.g. :mod:`station.diagnose.robust`'s) to name the
+    covariate of as well; ``fitted``: the accepted effects' signal per sample (n, 3), for the jump test (None:
+    not run). None when nothing is located."""
+    sd = prob.sd
+    q_cls = class_drift_noise(sd.sensor, sd.params.bias_drift)
+    q_fit = prob.q.copy()
+    with prob.drift_noise_at_most(q_cls):
+        chols, yw = prob.whitened()
+        x, nbase = prob.design(chols, prob.accepted)
+        beta, *_ = linalg.lstsq(x, yw, check_finite=False)
+        res = yw - x @ beta
+        m = prob.m
+        z = res.reshape(3, m).T
+        cells: set[tuple[int, int]] = set()
+        table: dict[str, list[float]] = {}
+        for kind in Kind:
+            sel = sd.kind == int(kind)
+            if sel.sum() < 3:
+                continue
+            ms = np.mean(z[sel] ** 2, axis=0)
+            table[kind.label] = [round(float(v), 3) for v in ms]
+            for k in range(3):
+                chi = float(np.sum(z[sel, k] ** 2))
+                if chi / sel.sum() > PHI_LOCATED and stats.chi2.sf(chi, int(sel.sum())) < ALPHA_LOCATED:
+                    cells.add((int(kind), k))
+        cells |= set(extra_cells or ())
+        if not cells:
+            return None
+        axes = sorted({k for _, k in cells})
+        # --- covariate per axis ---
+        tests: list[CovariateTest] = []
+        chosen: list[tuple[str, str]] = []
+        models: list[EmpiricalModel] = []
+        for k in axes:
+            rows = slice(k * m, (k + 1) * m)
+            xk = x[rows]
+            xk = xk[:, np.any(xk != 0, axis=0)]
+            rk = res[rows]
+            kinds_k = [c for c, kk in cells if kk == k]
+            in_cells = np.isin(sd.kind, kinds_k)
+            excess = max(float(np.sum(rk[in_cells] ** 2)) - float(in_cells.sum()), 1e-9)
+            proj, *_ = linalg.lstsq(xk, np.eye(m), check_finite=False)  # for residualizing covariates
+            best: tuple[str, float, float] = ("none", 0.0, 0.0)
+            for name, v in covariates(baseline, sd, k).items():
+                cw = linalg.solve_triangular(chols[k], v, lower=True, check_finite=False)
+                cw = cw - xk @ (proj @ cw)
+                nn = float(cw @ cw)
+                if nn <= 1e-300:
+                    continue
+                coef = float(cw @ rk) / nn
+                gain = coef**2 * nn
+                new = rk - coef * cw
+                share = (float(np.sum(rk[in_cells] ** 2)) - float(np.sum(new[in_cells] ** 2))) / excess
+                tests.append(CovariateTest(AX[k], name, gain, share))
+                if share >= COVARIATE_SHARE and stats.chi2.sf(gain, 1) < ALPHA_LOCATED and gain > best[1]:
+                    best = (name, gain, share)
+            if best[0] == "none" and fitted is not None:
+                chi, dof, share, _amp = _spin_periodic(baseline.session, sd, sd.residual - fitted, k)
+                tests.append(CovariateTest(AX[k], "periodic at the spin frequency", chi, share))
+                if dof and share >= COVARIATE_SHARE and stats.chi2.sf(chi, dof) < ALPHA_LOCATED:
+                    best = ("periodic", chi, share)
+            if best[0] == "none" and fitted is not None:
+                count, total = _jumps(baseline.session, sd.residual - fitted, k)
+                tests.append(CovariateTest(AX[k], "jumps (two-level)", float(count), count / max(total, 1)))
+                if count >= JUMP_MIN and count >= JUMP_MIN_SHARE * total:
+                    best = ("two-level", float(count), 0.0)
+            chosen.append((AX[k], best[0]))
+            models.append(empirical.fit(sd.sensor, AX[k], prob.y[:, k] - _mean_fit(prob, beta, nbase, k),
+                                        1.0 / prob.white[:, k], sd.segment,
+                                        covariates(baseline, sd, k, extended=True)))
+        tests.sort(key=lambda t: (not t.name.startswith("jumps"), -t.gain_chi2))
+        # --- stand-ins among the accepted effects ---
+        stand: list[str] = []
+        if names:
+            cell_rows = np.concatenate([[(int(sd.kind[i]), k) in cells for i in range(m)] for k in range(3)])
+            col = nbase
+            for name, zb in zip(names, prob.accepted, strict=True):
+                p = zb.shape[2]
+                sig = x[:, col:col + p] @ beta[col:col + p]
+                col += p
+                if name.startswith(NUISANCE):
+                    continue
+                e = float(sig @ sig)
+                if e > 0 and float(sig[cell_rows] @ sig[cell_rows]) / e >= STAND_IN_SHARE:
+                    stand.append(name)
+        excess_all = 0.0
+        for c, k in cells:
+            sel = sd.kind == c
+            excess_all += float(np.sum(z[sel, k] ** 2)) - float(sel.sum())
+        periodic = None
+        if fitted is not None and any(c == "periodic" for _, c in chosen):
+            per = [_spin_periodic(baseline.session, sd, sd.residual - fitted, k) for k in range(3)]
+            factor, unit = (180.0 / math.pi, "deg/s") if sd.sensor == "gyro" else (1.0, "m/s^2")
+            periodic = {"axes": [a for a, c in chosen if c == "periodic"], "chi2": [round(p[0], 1) for p in per],
+                        "dof": per[0][1], "amplitude": [round(p[3] * factor, 6) for p in per], "unit": unit}
+        names_used = {c for _, c in chosen}
+        cov = _text(chosen[0][1]) if len(names_used) == 1 else "; ".join(f"{a}: {_text(c)}" for a, c in chosen)
+        return Unexplained(
+            sensor=sd.sensor, axes=tuple(AX[k] for k in axes),
+            segment_kinds=tuple(sorted({Kind(c).label for c, _ in cells})), covariate=cov,
+            dispersion=table, excess_chi2=excess_all, periodic=periodic,
+            locator=LocatorEvidence(
+                covariate_per_axis=tuple(chosen),
+                q_over_class=tuple(float(v / c) for v, c in zip(q_fit, q_cls, strict=True)), tests=tuple(tests[:8]),
+                stand_ins=tuple(stand)),
+            empirical=tuple(models))
+
+
+def _mean_fit(prob: Any, beta: np.ndarray, nbase: int, k: int) -> np.ndarray:
+    """The GLS mean fit of axis k (its base terms and the accepted effects) per block, unwhitened (m,)."""
+    col = sum(b.shape[1] for b in prob.base[:k])
+    nb = prob.base[k].shape[1]
+    out = prob.base[k] @ beta[col:col + nb]
+    c = nbase
+    for zb in prob.accepted:
+        p = zb.shape[2]
+        out = out + zb[:, k, :] @ beta[c:c + p]
+        c += p
+    return np.asarray(out)
+
+
+def _text(name: str) -> str:
+    if name == "none":
+        return ("none: no covariate of the dictionary (rate, |rate|, rate^2, rate^3, angular acceleration, specific "
+                "force, temperature and its direction, time since the last rate step, a delay growing with time) "
+                f"takes {COVARIATE_SHARE:.0%} of it, and it is not two-level")
+    if name == "periodic":
+        return ("periodic at the rate table's spin frequency: a cos/sin of the table's angle takes most of the "
+                "structure inside the rate holds")
+    if name == "two-level":
+        return ("two-level: the bias jumps between levels inside still segments (increments far from Gaussian), not "
+                "eq. 3's Gaussian drift, and follows no covariate")
+    return f"follows {name}"
+
+
+__all__ = ["ALPHA_LOCATED", "PHI_LOCATED", "class_drift_noise", "covariates", "locate"]

@@ -1,0 +1,121 @@
+"""The mismatch locator, the empirical models and the re-tests of findings (locator, empirical, retest)."""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from station.diagnose import empirical, locator
+from station.diagnose.results import load_report
+from station.kernel.sensor_class import TABLE1
+from station.session.model import Kind, Session
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+
+
+def _still_session(n: int, fs: float, seg_len: int) -> Session:
+    t = np.arange(n) / fs
+    seg = np.arange(n) // seg_len
+    kind = np.where(seg == 0, int(Kind.REST), int(Kind.POSE))
+    z = np.zeros((n, 3))
+    return Session(metadata={"serial": "T", "sample_rate_hz": str(fs), "gravity_mps2": "9.81"}, t_s=t, segment=seg,
+                   kind=kind, accel_mps2=z, gyro_radps=z, temp_degc=np.full(n, 25.0), ref_accel_mps2=z,
+                   ref_gyro_radps=z)
+
+
+def test_class_drift_noise_is_the_class_share_of_the_warmup() -> None:
+    top = max(abs(v) for v in TABLE1.gyro_bias_drift_dps) * math.pi / 180.0
+    q = locator.class_drift_noise("gyro", np.array([top, 0.0, 2.0 * top]))
+    rel = locator.CLASS_MARGIN * TABLE1.drift_noise_rel
+    # own warm-up, floored at B_DRIFT_FLOOR of the class's largest, capped at the largest
+    assert q == pytest.approx([(rel * top) ** 2, (rel * locator.B_DRIFT_FLOOR * top) ** 2, (rel * top) ** 2])
+    assert locator.class_drift_noise("accel")[0] == pytest.approx((rel * 0.018) ** 2)
+
+
+def test_jumps_tell_a_two_level_bias_from_gaussian_drift() -> None:
+    fs, n = 100.0, 60_000
+    rng = np.random.default_rng(3)
+    session = _still_session(n, fs, 6000)
+    noise = rng.standard_normal((n, 3)) * 0.01
+    # Gauss-Markov drift (T_c 300 s) of the same size as the levels: increments Gaussian, no jumps
+    phi = math.exp(-1.0 / (fs * 300.0))
+    gm = np.zeros(n)
+    e = rng.standard_normal(n) * 0.02 * math.sqrt(1 - phi**2)
+    for i in range(1, n):
+        gm[i] = phi * gm[i - 1] + e[i]
+    smooth = noise.copy()
+    smooth[:, 1] += gm
+    jumps, total = locator._jumps(session, smooth, 1)
+    assert jumps <= 1 and total > 1000
+    # a telegraph bias +-0.02 with a dwell of 20 s
+    flips = np.cumsum(rng.exponential(20.0 * fs, size=100)).astype(int)
+    level = np.where(np.searchsorted(flips, np.arange(n)) % 2 == 0, 0.02, -0.02)
+    tele = noise.copy()
+    tele[:, 1] += level
+    jumps, total = locator._jumps(session, tele, 1)
+    assert jumps >= locator.JUMP_MIN and jumps >= locator.JUMP_MIN_SHARE * total
+
+
+def test_empirical_model_finds_the_planted_covariate_on_held_out_segments() -> None:
+    rng = np.random.default_rng(5)
+    m = 300
+    seg = np.repeat(np.arange(60), 5)
+    d = {"a": rng.standard_normal(m), "b": rng.standard_normal(m), "c": rng.standard_normal(m)}
+    r = 0.7 * d["b"] + rng.standard_normal(m) * 0.1
+    model = empirical.fit("gyro", "x", r, np.ones(m), seg, d)
+    assert model.terms == ("b",)
+    assert model.coefficients[0] == pytest.approx(0.7, abs=0.02)
+    assert model.heldout_improvement > 0.95
+    assert model.to_json()["status"] == "empirical, not in the library"
+    # pure noise: no term survives the held-out test
+    noise = empirical.fit("gyro", "x", rng.standard_normal(m), np.ones(m), seg, d)
+    assert noise.terms == () and noise.heldout_improvement == 0.0
+
+
+def test_recount_outliers_under_the_final_model() -> None:
+    import gen_outside
+
+    from station.diagnose.residuals import fit_baseline
+    from station.diagnose.retest import recount_outliers
+
+    rec = gen_outside.generate(0, "none")
+    b = fit_baseline(rec.session)
+    sd = b.gyro
+    # a signal the base model lacks, 20 noise sigmas in one still segment: outliers against the base model ...
+    seg = next(s for s in rec.session.segments() if s.kind == Kind.POSE)
+    extra = np.zeros_like(sd.residual)
+    extra[seg.start + (seg.stop - seg.start) // 2:seg.stop, 0] = 20.0 * sd.sigma[0]
+    from dataclasses import replace
+
+    bad = replace(sd, residual=sd.residual + extra)
+    assert recount_outliers(rec.session, bad, np.zeros_like(extra)).outlier_count[0] > 0
+    # ... none once the accepted effects' fitted signal (here: exactly that signal) is taken out
+    assert recount_outliers(rec.session, bad, extra).outlier_count[0] == sd.outlier_count[0]
+
+
+@pytest.mark.parametrize(("seed", "kind", "sensor", "words"), [
+    (2, "telegraph", "gyro", "two-level"),
+    (4, "rate_norm_bias", "gyro", "|rate|"),
+])
+def test_outside_physics_is_located_not_named(seed: int, kind: str, sensor: str, words: str) -> None:
+    import gen_outside
+
+    from station.diagnose import diagnose
+    from station.kernel.limits_file import DEFAULT_LIMITS_PATH, load_limits
+
+    rec = gen_outside.generate(seed, kind)
+    report = diagnose(rec.session, warmup_tc_s=dict(load_limits(DEFAULT_LIMITS_PATH).correlation_time_s),
+                      resamples=0).report
+    rep = report.to_json()
+    # the locator's entries read back into the types give the same JSON
+    assert json.dumps(load_report(json.loads(json.dumps(rep))).to_json()) == json.dumps(rep)
+    assert rep["findings"] == []
+    mine = [u for u in rep["unexplained"] if u["sensor"] == sensor]
+    assert mine and "xyz"[rec.axis] in mine[0]["axes"]
+    assert words in mine[0]["covariate"]
+    assert mine[0]["empirical"] and mine[0]["empirical"][0]["status"] == "empirical, not in the library"
