@@ -436,6 +436,7 @@ def engineering(theta: np.ndarray, cov: np.ndarray) -> dict[str, object]:
         return {"value": round(float(theta[i]) / _DEG, 6), "std": round(float(std[i]) / _DEG, 6)}
 
     pairs: dict[str, dict[str, object]] = {}
+    halves: list[float] = []  # the pairs' half-differences (deg), for their RMS
     per_pose: dict[str, dict[str, float]] = {}
     for i, name in enumerate(PARAMETERS[::2]):
         key = name.split(":")[0]
@@ -443,6 +444,7 @@ def engineering(theta: np.ndarray, cov: np.ndarray) -> dict[str, object]:
         if d is None:
             continue  # neither pose of the pair, or a pair the base fit absorbs entirely
         pairs[key] = {"half_difference": d, "half_sum": s}
+        halves.append(d["value"])
         if s is not None:
             axis = key.split()[0][2]
             about = key.split()[-1]
@@ -455,7 +457,7 @@ def engineering(theta: np.ndarray, cov: np.ndarray) -> dict[str, object]:
                 }
     out: dict[str, object] = {"unit": "deg", "pairs": pairs, "per_pose": per_pose}
     if pairs:
-        vals = np.array([v["half_difference"]["value"] for v in pairs.values()])  # type: ignore[index]
+        vals = np.array(halves)
         out["rms_half_difference_deg"] = round(float(np.sqrt(np.mean(vals**2))), 6)
     extra = theta[len(PARAMETERS):]
     if len(extra):
