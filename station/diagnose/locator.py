@@ -47,7 +47,7 @@ from scipy import linalg, stats
 from scipy.ndimage import uniform_filter1d
 from scipy.signal import lfilter
 
-from station.diagnose import empirical
+from station.diagnose import empirical, robust
 from station.diagnose.results import CovariateTest, EmpiricalModel, LocatorEvidence, Unexplained
 from station.kernel.sensor_class import TABLE1, SensorClass
 from station.session.model import Kind
@@ -70,10 +70,9 @@ JUMP_SIGMAS = 6.0
 JUMP_MIN = 4
 JUMP_MIN_SHARE = 0.004
 #: An accepted effect with at least this share of its whitened fitted signal's energy in located cells is a
-#: stand-in for the located structure.
-STAND_IN_SHARE = 0.5
+#: stand-in for the located structure (the robust checks' rule, :func:`station.diagnose.robust.stand_ins`).
+STAND_IN_SHARE = robust.STAND_IN_SHARE
 AX = "xyz"
-NUISANCE = "~"
 #: Time constants (s) of the decay after a rate step that the ``since the last rate step`` covariate tries.
 KICK_TAU_S = (4.0, 10.0, 25.0, 60.0)
 
@@ -277,16 +276,7 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
         stand: list[str] = []
         if names:
             cell_rows = np.concatenate([[(int(sd.kind[i]), k) in cells for i in range(m)] for k in range(3)])
-            col = nbase
-            for name, zb in zip(names, prob.accepted, strict=True):
-                p = zb.shape[2]
-                sig = x[:, col:col + p] @ beta[col:col + p]
-                col += p
-                if name.startswith(NUISANCE):
-                    continue
-                e = float(sig @ sig)
-                if e > 0 and float(sig[cell_rows] @ sig[cell_rows]) / e >= STAND_IN_SHARE:
-                    stand.append(name)
+            stand = robust.stand_ins(names, prob.accepted, x, beta, nbase, cell_rows)
         excess_all = 0.0
         for c, k in cells:
             sel = sd.kind == c

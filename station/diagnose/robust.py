@@ -29,6 +29,7 @@ Confidence of a finding: the drop-one quasi-likelihood gain over its threshold
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -51,6 +52,26 @@ STAND_IN_SHARE = 0.5
 MARGINAL = 1.5
 DOMINANT = 100.0
 AX = "xyz"
+def stand_ins(names: Sequence[str], accepted: Sequence[np.ndarray], x: np.ndarray, beta: np.ndarray, nbase: int,
+              rows: np.ndarray) -> list[str]:
+    """The accepted effects (``names``, regressor blocks ``accepted`` after the ``nbase`` base columns of the
+    whitened design ``x``, coefficients ``beta``) whose fitted signal lies mostly (:data:`STAND_IN_SHARE` of its
+    energy) in the design rows ``rows`` (a boolean mask): stand-ins for structure located there. Nuisance terms
+    are never one."""
+    out: list[str] = []
+    col = nbase
+    for name, zb in zip(names, accepted, strict=True):
+        p = zb.shape[2]
+        sig = x[:, col:col + p] @ beta[col:col + p]
+        col += p
+        if name.startswith(NUISANCE):
+            continue
+        e = float(sig @ sig)
+        if e > 0 and float(sig[rows] @ sig[rows]) / e >= STAND_IN_SHARE:
+            out.append(name)
+    return out
+
+
 #: Prefix of an accepted term that no finding names (see :data:`station.diagnose.selection.NUISANCE`).
 NUISANCE = "~"
 
@@ -180,18 +201,9 @@ def audit(prob: SensorProblem, baseline: Baseline, names: list[str], regs: dict[
         x, nbase = prob.design(chols, prob.accepted)
         yw = prob.whitened()[1]
         beta, *_ = linalg.lstsq(x, yw, check_finite=False)
-        col = nbase
         cell_of_row = np.concatenate([[(int(sd.kind[i]), k) for i in range(prob.m)] for k in range(3)])
         in_bad = np.array([(int(a), int(b)) in bad_cells for a, b in cell_of_row])
-        for name, zb in zip(names, prob.accepted, strict=True):
-            p = zb.shape[2]
-            sig = x[:, col:col + p] @ beta[col:col + p]
-            col += p
-            if name.startswith(NUISANCE):
-                continue
-            e = float(sig @ sig)
-            if e > 0 and float(sig[in_bad] @ sig[in_bad]) / e >= STAND_IN_SHARE:
-                stand_in.add(name)
+        stand_in.update(stand_ins(names, prob.accepted, x, beta, nbase, in_bad))
     # --- drop-one re-test of every accepted effect under the dispersion ---
     with prob.inflated_noise(phi):
         for i, name in enumerate(names):
