@@ -16,19 +16,10 @@ from typing import Annotated
 
 import typer
 
+from station.commands.common_options import DbOption, refuse
 from station.kernel.errors import StationError
-from station.store.default_url import ENV_VAR
 
 golden_app = typer.Typer(no_args_is_help=True, help="The golden unit: register it, list, chart its checks.")
-
-DbOption = Annotated[str | None, typer.Option("--db", help=f"database URL (default: ${ENV_VAR} or "
-                                                            "sqlite:///station.sqlite)")]
-
-
-def _fail(exc: StationError) -> typer.Exit:
-    typer.echo(f"error: {exc}", err=True)
-    return typer.Exit(2)
-
 
 @golden_app.command("register")
 def register_command(
@@ -53,7 +44,7 @@ def register_command(
                                      k_sigma=k_sigma, fraction=fraction)
             version = save_golden(database, golden)
     except StationError as exc:
-        raise _fail(exc) from None
+        raise refuse(exc) from None
     typer.echo(f"golden unit {serial} registered (version {version}) from {len(runs)} runs: "
                f"{len(golden.references)} parameters")
 
@@ -70,7 +61,7 @@ def list_command(as_json: Annotated[bool, typer.Option("--json", help="print as 
             units = golden_units(database)
             checks = golden_checks(database)
     except StationError as exc:
-        raise _fail(exc) from None
+        raise refuse(exc) from None
     if as_json:
         sys.stdout.write(json.dumps([{**g.to_json(), "version": v} for v, g in units.values()], indent=2) + "\n")
         return
@@ -103,7 +94,7 @@ def chart_command(
                 raise StationError(f"{serial!r} is not a registered golden unit")
             checks = golden_checks(database, serial=serial)
     except StationError as exc:
-        raise _fail(exc) from None
+        raise refuse(exc) from None
     trends = golden_trends(units[serial][1], [c.deviations for c in checks], run_rules)
     if as_json:
         sys.stdout.write(json.dumps({"serial": serial, "checks": [c.checked_at.isoformat() for c in checks],

@@ -16,17 +16,13 @@ from typing import TYPE_CHECKING, Annotated
 import numpy as np
 import typer
 
+from station.commands.common_options import DbOption
 from station.kernel.errors import StationError
-from station.store.default_url import ENV_VAR
 
 if TYPE_CHECKING:
     from station.kernel.nest_frames import NestCalibration
 
 nest_app = typer.Typer(no_args_is_help=True, help="Nest mounting errors of a rig (reference-unit calibration).")
-
-DbOption = Annotated[str | None, typer.Option("--db", help=f"database URL (default: ${ENV_VAR} or "
-                                                            "sqlite:///station.sqlite)")]
-
 
 def estimate_from_records(db_url: str | None, rig: str, serial: str, runs: tuple[str, ...] = (),
                           store: bool = True, reference: Path | None = None) -> NestCalibration:

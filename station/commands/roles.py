@@ -17,6 +17,7 @@ from typing import Annotated
 
 import typer
 
+from station.commands.common_options import DbOption, refuse
 from station.compose import make_clock
 from station.fit.calibrate import FitOptions
 from station.kernel.errors import StationError
@@ -30,18 +31,8 @@ from station.rig import open_rig, rig_client_options
 from station.sensor import open_sensor
 from station.sequence.options import SequenceOptions
 from station.store.db import open_database
-from station.store.default_url import ENV_VAR
 
 line_app = typer.Typer(no_args_is_help=True, help="The calibration line: soak rack and rig roles.")
-
-DbOption = Annotated[str | None, typer.Option("--db", help=f"database URL (default: ${ENV_VAR} or "
-                                                            "sqlite:///station.sqlite)")]
-
-
-def _fail(exc: StationError) -> typer.Exit:
-    typer.echo(f"error: {exc}", err=True)
-    return typer.Exit(2)
-
 
 @line_app.command("rack")
 def rack_command(
@@ -79,7 +70,7 @@ def rack_command(
                 s.close()
             database.close()
     except StationError as exc:
-        raise _fail(exc) from None
+        raise refuse(exc) from None
     raise typer.Exit(2 if missing else 0)
 
 
@@ -125,7 +116,7 @@ def rig_command(
                 s.close()
             database.close()
     except (StationError, OSError) as exc:
-        raise _fail(exc if isinstance(exc, StationError) else StationError(str(exc))) from None
+        raise refuse(exc if isinstance(exc, StationError) else StationError(str(exc))) from None
     for u in result.units:
         typer.echo(f"slot {u.slot} {u.serial}: {u.outcome.value}{' - ' + u.message if u.message else ''}")
     typer.echo(f"rig time per unit: {result.sequence_s / max(len(result.units), 1):.0f} s")

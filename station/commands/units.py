@@ -10,8 +10,8 @@ from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
+from station.commands.common_options import DbOption
 from station.kernel.errors import StationError
-from station.store.default_url import ENV_VAR
 
 if TYPE_CHECKING:  # the database code loads only when a command runs
     pass
@@ -19,10 +19,6 @@ if TYPE_CHECKING:  # the database code loads only when a command runs
 units_app = typer.Typer(no_args_is_help=True, rich_markup_mode="markdown",
                         help="Per-unit records in the station database.")
 
-DbOption = Annotated[
-    str | None,
-    typer.Option("--db", help=f"database URL (default: ${ENV_VAR} or sqlite:///station.sqlite)"),
-]
 
 
 def _query(db_url: str | None, query: Callable[..., Any], *args: Any, writes: bool = False, **kwargs: Any) -> Any:
