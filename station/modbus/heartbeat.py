@@ -1,8 +1,8 @@
 """The heartbeat a Modbus device's watchdog expects, shared by the rig and the chamber clients.
 
 :class:`Heartbeat` writes an incrementing counter to the device's HEARTBEAT holding register from a
-daemon thread every ``heartbeat_period_s`` (device seconds on the device's clock, so wall period =
-period / clock scale). A failed beat is counted and logged, never raised: the device's watchdog
+daemon thread every ``heartbeat_period_s`` (device seconds on the device's clock: wall period =
+period / clock scale, or on a :class:`~station.kernel.virtual_clock.VirtualClock` an actor's wait). A failed beat is counted and logged, never raised: the device's watchdog
 decides what a missing heartbeat means.
 """
 
@@ -13,6 +13,7 @@ import threading
 from typing import ClassVar
 
 from station.kernel.clock import Clock
+from station.kernel.virtual_clock import Actor, acting, enroll, wait_event
 
 
 class Heartbeat:
@@ -44,7 +45,11 @@ class Heartbeat:
         self._hb_counter = (self._hb_counter + 1) & 0xFFFF
         self._write(self._heartbeat_register, [self._hb_counter], "heartbeat", retries=0)
 
-    def _heartbeat_loop(self) -> None:
+    def _heartbeat_loop(self, actor: Actor | None) -> None:
+        with acting(self.clock, actor):
+            self._beat_until_stopped()
+
+    def _beat_until_stopped(self) -> None:
         while not self._hb_stop.is_set():
             try:
                 self.beat()
@@ -52,14 +57,16 @@ class Heartbeat:
                 self.heartbeat_failures += 1
                 self.last_heartbeat_error = exc
                 self._log.warning("%s heartbeat failed: %s", self._role, exc)
-            self._hb_stop.wait(self.heartbeat_period_s / self.clock.scale)
+            wait_event(self.clock, self._hb_stop, self.heartbeat_period_s)
 
     def start_heartbeat(self) -> None:
         """Start the heartbeat thread (idempotent)."""
         if self._hb_thread is not None and self._hb_thread.is_alive():
             return
         self._hb_stop.clear()
-        self._hb_thread = threading.Thread(target=self._heartbeat_loop, name=f"{self._role}-heartbeat", daemon=True)
+        name = f"{self._role}-heartbeat"
+        self._hb_thread = threading.Thread(target=self._heartbeat_loop, args=(enroll(self.clock, name),), name=name,
+                                           daemon=True)
         self._hb_thread.start()
 
     def stop_heartbeat(self) -> None:

@@ -19,6 +19,7 @@ from collections import deque
 import numpy as np
 
 from station.kernel.clock import Clock, WallClock
+from station.kernel.virtual_clock import is_virtual
 from station.kernel.errors import FormatError, HardwareError
 from station.sensor.commands import (
     MAX_EEPROM_READ,
@@ -339,10 +340,36 @@ class ProtocolSensor:
         span = duration_s if duration_s is not None else (n or 0) / rate  # n is given when duration_s is not
         if timeout_s is None:
             timeout_s = 1.5 * span + 1.0
+        if is_virtual(self._clock):
+            return self._read_virtual(n, duration_s, timeout_s)
         return self._read(n, duration_s, timeout_s)
 
+    def _read_virtual(self, n: int | None, duration_s: float | None, timeout_s: float) -> SampleBlock:
+        """:meth:`read_samples` on a virtual clock: a GET_STATUS round trip is the barrier after which every
+        sample due by now has been received (the sensor sends them before its answer); if the buffer does not
+        hold the span yet, let the missing sensor time pass on the clock and look again."""
+        deadline = self._clock.now() + timeout_s
+        rate = float(self._rate_hz or 10)
+        while True:
+            self.status()
+            with self._cond:
+                self._check_fault()
+                block = self._buffer.take(n, duration_s)
+                if block is not None:
+                    return block
+                missing = self._buffer.shortfall_s(n, duration_s, rate)
+            if self._clock.now() >= deadline:
+                raise self._samples_timeout(timeout_s)
+            self._clock.sleep(max(missing, 1e-6) + 1e-6)
+
     def drain(self) -> SampleBlock:
-        """Everything buffered right now, without waiting (raises if the link is faulty)."""
+        """Everything buffered right now, without waiting (raises if the link is faulty).
+
+        On a virtual clock "right now" is exact: a GET_STATUS round trip first (the sensor sends every
+        sample due before its answer), so what is taken does not depend on how fast the frames travelled.
+        """
+        if is_virtual(self._clock) and self._rate_hz is not None:
+            self.status()
         with self._cond:
             self._check_fault()
             return self._buffer.take_all()

@@ -27,6 +27,7 @@ import numpy as np
 
 from station.kernel.clock import Clock
 from station.kernel.errors import HardwareError
+from station.kernel.virtual_clock import is_virtual, wait_event
 from station.sensor.commands import SensorIdentity
 from station.sensor.protocol import SampleBlock, Sensor, SensorTimeout
 from station.session.model import Kind, Session
@@ -179,6 +180,9 @@ class UnitChannel:
             CaptureStopped: ``stop`` was set.
             CrcStormError, SensorLinkError: the link is faulty.
         """
+        if is_virtual(self.clock):
+            self._collect_virtual(t_end_s, stop)
+            return
         last_progress = time.monotonic()
         while True:
             if self.pull():
@@ -193,6 +197,28 @@ class UnitChannel:
                     f"after t = {self._t_last:.3f} s"
                 )
             time.sleep(_POLL_WALL_S)
+
+    def _collect_virtual(self, t_end_s: float, stop: threading.Event) -> None:
+        """:meth:`collect_until` on a virtual clock: decided from the samples' own times, never their arrival.
+
+        A GET_STATUS round trip is the barrier: the sensor sends every sample due before it answers, and its
+        uptime is the sensor time now. After it the record holds exactly the samples due by now; if the one
+        at or after ``t_end_s`` is not among them, the time until it is due (on the sensor's sample grid)
+        passes on the clock, and the barrier is repeated.
+        """
+        period = 1.0 / self.rate_hz if self.rate_hz else 0.01
+        while True:
+            now_s = self.sensor.status().uptime_s
+            self.pull()
+            if self._t_last >= t_end_s - _T_SLACK_S:
+                return
+            if stop.is_set():
+                raise CaptureStopped
+            due = now_s + period
+            if math.isfinite(self._t_last) and math.isfinite(t_end_s):
+                due = self._t_last + max(1, math.ceil((t_end_s - _T_SLACK_S - self._t_last) / period)) * period
+            if wait_event(self.clock, stop, max(due - now_s, 0.0) + 1e-6):
+                raise CaptureStopped
 
     def wait_first(self, stop: threading.Event, silence_wall_s: float) -> float:
         """Wait for the first sample of the stream; returns its sensor time (s)."""

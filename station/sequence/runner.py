@@ -29,7 +29,7 @@ import threading
 import time
 import uuid
 from collections.abc import Callable, Mapping, Sequence
-from concurrent.futures import Future, ThreadPoolExecutor, wait
+from concurrent.futures import Future, wait
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
@@ -45,6 +45,7 @@ from station.kernel.measurement import Measurement, Verdict
 from station.kernel.nest_frames import NestCalibration
 from station.kernel.parameters import ParameterSet
 from station.kernel.plan import RigPlan, default_plan
+from station.kernel.virtual_clock import ActorPool, acting, busy
 from station.rig.protocol import Rig, RigState
 from station.sensor.protocol import Sensor
 from station.sequence.capture import UnitChannel, build_session
@@ -392,7 +393,8 @@ class SequenceRunner:
         """Run every step, tear down, fit, check limits, save; see the module docstring."""
         result: RunResult | None = None
         try:
-            result = self._run()
+            with acting(self.clock, name="sequence-runner"):  # on a virtual clock the run owns time
+                result = self._run()
         finally:
             amended = self.sequence.after_run(self, result)
         assert amended is not None
@@ -418,7 +420,7 @@ class SequenceRunner:
         completed = False
         loaded = False  # the operator confirmed the prompts before the rig moves (or there were none)
         rig_at_rest = False
-        pool = ThreadPoolExecutor(max_workers=len(channels), thread_name_prefix="capture")
+        pool = ActorPool(clock, max_workers=len(channels), thread_name_prefix="capture")
         fx = Fixture(
             self.rig, channels, clock, self.options, self.plan.gravity_mps2, int(self.plan.sample_rate_hz), pool
         )
@@ -451,7 +453,8 @@ class SequenceRunner:
             sequence_s = clock.now() - t_start
             post_wall0 = time.monotonic()
             self.sequence.before_fits(self, channels)
-            units = self._finish_units(channels, verdicts, aborted, run_message, completed)
+            with busy(clock):  # fits: long work that holds time, not a stall
+                units = self._finish_units(channels, verdicts, aborted, run_message, completed)
             self.finish_wall_s = time.monotonic() - post_wall0
         finally:
             self.rig.listeners.remove(self._rig_reading)

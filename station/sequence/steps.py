@@ -28,6 +28,7 @@ from station.kernel.errors import HardwareError
 from station.kernel.geometry import AXIS_INDEX, POSE_ANGLES_DEG, up_vector
 from station.kernel.measurement import Measurement
 from station.kernel.plan import RigPlan
+from station.kernel.virtual_clock import is_virtual, wait_futures
 from station.rig.protocol import Rig, RigFault, RigState
 from station.rig.registers import FaultCode, angle_error_deg
 from station.sequence.capture import CaptureStopped, UnitChannel, Window
@@ -118,7 +119,10 @@ class Fixture:
 
     @property
     def silence_wall_s(self) -> float:
+        """Wall seconds without samples after which a sensor is silent (not derived from a virtual clock)."""
         o = self.options
+        if is_virtual(self.clock):
+            return max(o.silence_timeout_s, o.silence_floor_wall_s)
         return max(o.silence_timeout_s / self.clock.scale, o.silence_floor_wall_s)
 
 
@@ -259,7 +263,11 @@ def capture(fx: Fixture, step: Step, start: str) -> StepReport:
         while pending:
             if fx.abort.is_set():
                 raise KeyboardInterrupt
-            _, pending = wait(pending, timeout=o.supervise_period_s / clock.scale, return_when=FIRST_EXCEPTION)
+            if is_virtual(clock):  # time passes while the captures wait on the clock
+                wait_futures(clock, pending, o.supervise_period_s, first_exception=True)
+                pending = {f for f in pending if not f.done()}
+            else:
+                _, pending = wait(pending, timeout=o.supervise_period_s / clock.scale, return_when=FIRST_EXCEPTION)
             if pending:
                 check_rig_holding(fx.rig.state(), step, o)
         check_rig_holding(fx.rig.state(), step, o)

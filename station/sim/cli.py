@@ -88,6 +88,9 @@ def demo(
     lot: Annotated[str | None, typer.Option("--lot", help="production lot of the units, recorded with the run "
                                                           "(quality page filter, certificate)")] = None,
     operator: Annotated[str | None, typer.Option(help="operator name for the records")] = None,
+    clock: Annotated[str, typer.Option("--clock", help="'virtual' (default without --scale): discrete-event time, "
+                                       "the same seed gives the same bytes under any load; 'scaled': simulated "
+                                       "time runs --scale times the wall clock")] = "",
 ) -> None:
     """Simulated rig + N sensors, the whole sequence, fit, limits, summary: the station end to end.
 
@@ -101,9 +104,16 @@ def demo(
     Exit code: 0 all PASS, 1 a unit FAILed, 2 ERROR (station fault), 3 a unit REFUSED by the retest
     policy, 4 a unit to RETEST (inconclusive verdict), 130 ABORTED (Ctrl-C, SIGTERM, SIGHUP).
     """
+    from station.kernel.clock import SimClock
+    from station.kernel.virtual_clock import VirtualClock
     from station.sequence.prompts import AutoConfirm
     from station.sim.demo import DEMO_SCALE, THERMAL_SCALE, run_demo, run_line_demo, run_thermal_demo
 
+    mode = clock or ("scaled" if scale is not None else "virtual")
+    if mode not in ("virtual", "scaled"):
+        raise fail(StationError(f"--clock {clock!r}: 'virtual' or 'scaled'"))
+    if mode == "virtual" and scale is not None:
+        raise fail(StationError("--scale sets the speed of the scaled clock: give --clock scaled (or no --scale)"))
     try:
         if line:
             result = run_line_demo(units, rack_s, seed, limits_path=limits)
@@ -111,8 +121,9 @@ def demo(
             result, _ = run_thermal_demo(units, scale or THERMAL_SCALE, seed, out, db_url=db, record=True,
                                          limits_path=limits, lot=lot or "", operator=operator or "")
         else:  # the simulated fixture loads itself: its prompts are shown and confirmed at once
-            result = run_demo(units, scale or DEMO_SCALE, seed, out, db_url=db, record=True, limits_path=limits,
-                              lot=lot or "", operator=operator or "", prompter=AutoConfirm("the demo"))
+            sim_clock = VirtualClock() if mode == "virtual" else SimClock(scale or DEMO_SCALE)
+            result = run_demo(units, sim_clock.scale, seed, out, db_url=db, record=True, limits_path=limits,
+                              lot=lot or "", operator=operator or "", prompter=AutoConfirm("the demo"), clock=sim_clock)
     except StationError as exc:
         raise fail(exc) from None
     except KeyboardInterrupt:

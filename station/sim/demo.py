@@ -33,7 +33,9 @@ from rich.console import Console
 from station.compose import Station, StationConfig, abort_on_signals
 from station.fit.calibrate import FitOptions
 from station.kernel.display import limits_identity
+from station.kernel.clock import Clock
 from station.kernel.plan import RigPlan, default_plan
+from station.kernel.virtual_clock import is_virtual
 from station.kernel.thermal_plan import ThermalPlan
 from station.physics.effects import Effects
 from station.sequence.options import SequenceOptions
@@ -70,6 +72,7 @@ def run_demo(
     lot: str = "",
     operator: str = "",
     prompter: Operator | None = None,
+    clock: Clock | None = None,
 ) -> RunResult:
     """Start the simulated station, run the sequence for ``units`` units at clock ``scale``, print, return.
 
@@ -94,6 +97,8 @@ def run_demo(
         admit: the retest policy (see :class:`~station.sequence.runner.SequenceRunner`).
         lot, operator: the production lot and the operator recorded with the run ('' none).
         prompter: answers the station's prompts (None: a run without prompts).
+        clock: the clock of the simulated station and the station (default ``SimClock(scale)``); a
+            :class:`~station.kernel.virtual_clock.VirtualClock` makes the run repeat bit for bit.
 
     In the main thread SIGTERM and SIGHUP abort the run as Ctrl-C does (the result is ABORTED); a signal before
     the run started raises :class:`KeyboardInterrupt`.
@@ -103,17 +108,17 @@ def run_demo(
     wall0 = time.monotonic()
     runners: list[SequenceRunner] = []
     with abort_on_signals(lambda: runners[-1] if runners else None), \
-            SimStation(units, scale, seed, plan=plan, effects=effects) as sim:
+            SimStation(units, scale, seed, plan=plan, effects=effects, clock=clock) as sim:
         for u in sim.units:
             install_firmware(u.sensor, sim.clock)
         console.print(f"simulated rig at {sim.rig_url}; {units} sensor(s) on "
-                      f"{', '.join(u.sensor.device for u in sim.units)}; clock x{scale:g}")
+                      f"{', '.join(u.sensor.device for u in sim.units)}; {clock_words(sim.clock)}")
         config = StationConfig(
             sim.rig_url, tuple(sim.sensor_urls), station_id="demo", db_url=db_url, record=record,
-            limits_path=limits_path, out_dir=out_dir, clock_scale=scale, plan=plan, provision=provision,
+            limits_path=limits_path, out_dir=out_dir, clock_scale=sim.scale, plan=plan, provision=provision,
             rig_options=sim.rig_client_options(), lot=lot, operator=operator,
         )
-        display = ProgressDisplay(console, [u.truth.serial for u in sim.units], scale)
+        display = ProgressDisplay(console, [u.truth.serial for u in sim.units], sim.scale)
         station = Station(config, clock=sim.clock, options=options, subscribers=[display, *subscribers],
                           admit=admit, on_provision=on_provision, prompter=prompter)
         with display:
@@ -128,6 +133,12 @@ def run_demo(
     console.print(f"demo finished in {time.monotonic() - wall0:.1f} s wall time")
     return result
 
+
+def clock_words(clock: Clock) -> str:
+    """How the demo's clock runs, for its first line."""
+    if is_virtual(clock):
+        return "virtual clock (discrete events: the same seed gives the same bytes)"
+    return f"clock x{clock.scale:g}"
 
 
 

@@ -30,6 +30,7 @@ from __future__ import annotations
 import contextlib
 import os
 import select
+import sys
 import threading
 import tty
 from dataclasses import dataclass
@@ -39,6 +40,7 @@ import numpy as np
 
 from station.kernel.clock import Clock
 from station.kernel.errors import FormatError
+from station.kernel.virtual_clock import is_virtual
 from station.sensor.commands import BootEvent, BootReason, Command, NakCode, decode_command, encode_ack, encode_nak
 from station.sensor.frames import SAMPLE_FRAME_SIZE, FrameParser, FrameType, encode_frame, frame_sample_records
 from station.sim.sensor_core import (
@@ -106,7 +108,9 @@ class SimulatedSensor(SensorUnit):
         self.bit_error_rate = 0.0
         self.drop_frame_rate = 0.0
         self._tick_s = float(tick_s)
-        self._tx_limit = int(tx_backlog_limit)
+        # On a virtual clock nothing waits for the host to read: time may run ahead of the pty, and a frame
+        # lost to the host's speed would make the run depend on it. The backlog is unbounded there.
+        self._tx_limit = int(tx_backlog_limit) if not is_virtual(self.core.clock) else sys.maxsize
 
         ss = np.random.SeedSequence(seed)
         drop_ss, count_ss, pos_ss, other_ss = ss.spawn(4)
@@ -117,6 +121,7 @@ class SimulatedSensor(SensorUnit):
 
         self._parser = FrameParser(track_sequence=False)
         self._tx = bytearray()
+        self._tx_sent = 0  # bytes of _tx already written (dropped from its front in large pieces)
         self._stats = dict.fromkeys(PeerStats.__dataclass_fields__, 0)
         self._last_cmd: list[bytes | None] | None = None  # [command payload, reply frame or None while pending]
         self._delayed: list[tuple[float, bytes]] = []  # (clock time due, reply frame)
@@ -162,6 +167,7 @@ class SimulatedSensor(SensorUnit):
     def _power_off(self) -> None:
         super()._power_off()
         self._tx.clear()
+        self._tx_sent = 0
         self._delayed.clear()
         self._last_cmd = None
 
@@ -188,7 +194,7 @@ class SimulatedSensor(SensorUnit):
 
     def _serve(self) -> None:
         while not self._stop.is_set():
-            want_write = bool(self._tx)
+            want_write = len(self._tx) > self._tx_sent
             try:
                 readable, _, _ = select.select([self._master], [self._master] if want_write else [], [], self._tick_s)
             except (OSError, ValueError):
@@ -227,16 +233,24 @@ class SimulatedSensor(SensorUnit):
         self._generate_due()
 
     def _flush(self) -> None:
-        while self._tx:
+        while len(self._tx) > self._tx_sent:
             try:
-                n = os.write(self._master, self._tx[:65536])
+                with memoryview(self._tx) as view:
+                    n = os.write(self._master, view[self._tx_sent : self._tx_sent + 65536])
             except (BlockingIOError, InterruptedError):
-                return
+                break
             except OSError:
                 self._tx.clear()
+                self._tx_sent = 0
                 return
             self._stats["bytes_sent"] += n
-            del self._tx[:n]
+            self._tx_sent += n
+        if self._tx_sent >= len(self._tx):
+            self._tx.clear()
+            self._tx_sent = 0
+        elif self._tx_sent > 1 << 20:  # drop the sent front in large pieces (a small del per write is quadratic)
+            del self._tx[: self._tx_sent]
+            self._tx_sent = 0
 
     def _send(self, frame: bytes) -> None:
         """Queue a non-sample frame (ACK/NAK/EVENT), with bit errors if enabled."""
@@ -280,7 +294,7 @@ class SimulatedSensor(SensorUnit):
             return
         self._stats["frames_dropped"] += int(n - keep.sum())
         out = frames[keep]
-        if len(self._tx) + out.nbytes > self._tx_limit:
+        if len(self._tx) - self._tx_sent + out.nbytes > self._tx_limit:
             self.core.tx_overruns += out.shape[0]
             return
         self._tx += out.tobytes()

@@ -25,6 +25,7 @@ from typing import Any, Self
 import numpy as np
 
 from station.kernel.clock import Clock, SimClock
+from station.kernel.virtual_clock import is_virtual
 from station.kernel.plan import RigPlan, default_plan
 from station.kernel.sensor_class import TABLE1, SensorClass
 from station.physics.effects import Effects
@@ -67,7 +68,8 @@ class SimulatedStation:
         sensor_class: distribution the units are drawn from (default: the paper's Table 1).
         effects: optional physics for every unit.
         rig_options: extra keyword arguments of the rig model (motion limits, settle time).
-        clock: the clock everything lives by (default ``SimClock(scale)``).
+        clock: the clock everything lives by (default ``SimClock(scale)``); a
+            :class:`~station.kernel.virtual_clock.VirtualClock` makes runs repeat bit for bit (``docs/simulation.md``).
         chamber: start a simulated climate chamber (:class:`~station.sim.chamber_server.SimulatedChamber`,
             a Modbus/TCP server on 127.0.0.1) with these model options (``{}``: the defaults); the units'
             temperature then follows its load, their self-heating on top. None: no chamber.
@@ -266,8 +268,12 @@ class SimStation(SimulatedStation):
         return SimulatedRig(self.clock, self._host, self._port, transport=self._transport, **options).start()
 
     def _start_sensor(self, source: PhysicsSource, truth: UnitTruth, rate_hz: int, seed: int) -> SimulatedSensor:
+        # On a virtual clock time is frozen while the station waits on I/O for the EEPROM's answer, so a
+        # write cycle that must pass before the answer could never end: it takes no time there.
+        cycle = {"write_cycle_s": 0.0} if is_virtual(self.clock) else {}
         return SimulatedSensor(
-            source, self.clock, serial=truth.serial, default_rate_hz=rate_hz, eeprom=Eeprom(clock=self.clock), seed=seed
+            source, self.clock, serial=truth.serial, default_rate_hz=rate_hz, eeprom=Eeprom(clock=self.clock, **cycle),
+            seed=seed,
         )
 
     def _stop_rig(self) -> None:
