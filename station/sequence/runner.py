@@ -35,6 +35,8 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, Protocol
 
+from threadpoolctl import threadpool_limits
+
 from station.fit.calibrate import FitOptions, fit_session
 from station.fit.determinability import assess
 from station.fit.goodness import summary as goodness_summary
@@ -453,7 +455,11 @@ class SequenceRunner:
             sequence_s = clock.now() - t_start
             post_wall0 = time.monotonic()
             self.sequence.before_fits(self, channels)
-            with busy(clock):  # fits: long work that holds time, not a stall
+            # Fits run concurrently: each limits BLAS to one thread, but that limit is process-wide and each
+            # fit restores what it found when it ends, so one fit's end would give the others' remaining BLAS
+            # calls two threads (another order of summation: the last bits of a parameter set would depend on
+            # timing). One limit held around all of them keeps every fit single-threaded.
+            with busy(clock), threadpool_limits(limits=1, user_api="blas"):  # fits hold time: not a stall
                 units = self._finish_units(channels, verdicts, aborted, run_message, completed)
             self.finish_wall_s = time.monotonic() - post_wall0
         finally:
