@@ -26,7 +26,6 @@ advances time at once. ``scale`` is 1.0 (there is no wall time to relate to). No
 from __future__ import annotations
 
 import contextlib
-import heapq
 import itertools
 import threading
 import time
@@ -227,7 +226,10 @@ class VirtualClock:
                         f"virtual clock stalled at t = {self._t:.6f} s for {self.stall_wall_s:g} wall s: "
                         f"{actor.name} waits on it while {', '.join(holders) or 'nobody'} hold(s) time "
                         "(an actor blocked on another actor or on I/O that never comes)")
-        finally:
+        finally:  # also when interrupted (Ctrl-C in the main thread): the actor runs again
+            if actor.waiting:
+                actor.waiting = False
+                self._progress += 1
             actor.event = None
             actor.deadline = float("inf")
         return event.is_set() if event is not None else False

@@ -2,8 +2,9 @@
 
 :class:`Heartbeat` writes an incrementing counter to the device's HEARTBEAT holding register from a
 daemon thread every ``heartbeat_period_s`` (device seconds on the device's clock: wall period =
-period / clock scale, or on a :class:`~station.kernel.virtual_clock.VirtualClock` an actor's wait). A failed beat is counted and logged, never raised: the device's watchdog
-decides what a missing heartbeat means.
+period / clock scale; on a :class:`~station.kernel.virtual_clock.VirtualClock` the thread is an actor
+waiting on the clock). A failed beat is counted and logged, never raised: the device's watchdog decides
+what a missing heartbeat means.
 """
 
 from __future__ import annotations

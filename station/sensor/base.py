@@ -19,8 +19,8 @@ from collections import deque
 import numpy as np
 
 from station.kernel.clock import Clock, WallClock
-from station.kernel.virtual_clock import is_virtual
 from station.kernel.errors import FormatError, HardwareError
+from station.kernel.virtual_clock import is_virtual
 from station.sensor.commands import (
     MAX_EEPROM_READ,
     Command,

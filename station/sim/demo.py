@@ -32,11 +32,11 @@ from rich.console import Console
 
 from station.compose import Station, StationConfig, abort_on_signals
 from station.fit.calibrate import FitOptions
+from station.kernel.clock import Clock, SimClock
 from station.kernel.display import limits_identity
-from station.kernel.clock import Clock
 from station.kernel.plan import RigPlan, default_plan
-from station.kernel.virtual_clock import is_virtual
 from station.kernel.thermal_plan import ThermalPlan
+from station.kernel.virtual_clock import acting, is_virtual
 from station.physics.effects import Effects
 from station.sequence.options import SequenceOptions
 from station.sequence.prompts import Operator
@@ -107,7 +107,9 @@ def run_demo(
     plan = plan if plan is not None else default_plan()
     wall0 = time.monotonic()
     runners: list[SequenceRunner] = []
-    with abort_on_signals(lambda: runners[-1] if runners else None), \
+    clock = clock if clock is not None else SimClock(scale)
+    # on a virtual clock this thread owns time from the start: none passes while the station is set up
+    with abort_on_signals(lambda: runners[-1] if runners else None), acting(clock, name="demo"), \
             SimStation(units, scale, seed, plan=plan, effects=effects, clock=clock) as sim:
         for u in sim.units:
             install_firmware(u.sensor, sim.clock)

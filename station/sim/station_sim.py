@@ -25,9 +25,9 @@ from typing import Any, Self
 import numpy as np
 
 from station.kernel.clock import Clock, SimClock
-from station.kernel.virtual_clock import is_virtual
 from station.kernel.plan import RigPlan, default_plan
 from station.kernel.sensor_class import TABLE1, SensorClass
+from station.kernel.virtual_clock import is_virtual
 from station.physics.effects import Effects
 from station.physics.unit import UnitTruth, draw_unit
 from station.rig import rig_client_options
@@ -270,11 +270,9 @@ class SimStation(SimulatedStation):
     def _start_sensor(self, source: PhysicsSource, truth: UnitTruth, rate_hz: int, seed: int) -> SimulatedSensor:
         # On a virtual clock time is frozen while the station waits on I/O for the EEPROM's answer, so a
         # write cycle that must pass before the answer could never end: it takes no time there.
-        cycle = {"write_cycle_s": 0.0} if is_virtual(self.clock) else {}
-        return SimulatedSensor(
-            source, self.clock, serial=truth.serial, default_rate_hz=rate_hz, eeprom=Eeprom(clock=self.clock, **cycle),
-            seed=seed,
-        )
+        eeprom = Eeprom(clock=self.clock, write_cycle_s=0.0) if is_virtual(self.clock) else Eeprom(clock=self.clock)
+        return SimulatedSensor(source, self.clock, serial=truth.serial, default_rate_hz=rate_hz, eeprom=eeprom,
+                               seed=seed)
 
     def _stop_rig(self) -> None:
         self.rig.stop()
