@@ -2,7 +2,7 @@
 
 Two simulated units sit on one simulated rig; the station opens them with the same
 client code it uses for hardware and runs a sequence with short poses and rate steps
-(six 10 s poses, +-100 deg/s about each axis for 5 s, 50 Hz) on a fast simulated clock.
+(six 10 s poses, +-100 deg/s about each axis for 5 s, 50 Hz) on the virtual (discrete-event) clock.
 The power-on rest is long (900 s): with the gyro's Table 1 correlation times (1000 to
 3800 s) a shorter rest leaves the gyro drift poorly determined, and the fit then
 under-reports the uncertainty of the gyro's b_stat (also for directly simulated
@@ -24,6 +24,7 @@ import pytest
 from station.fit.calibrate import fit_session
 from station.kernel.geometry import up_vector
 from station.kernel.plan import RigPlan
+from station.kernel.virtual_clock import VirtualClock, acting
 from station.rig import open_rig
 from station.sensor import open_sensor
 from station.sensor.client import SerialSensor
@@ -48,7 +49,6 @@ from station.sim.station_sim import SimStation
 
 pytestmark = pytest.mark.integration
 
-SCALE = 150.0
 SEED = 7
 PLAN = RigPlan(
     sample_rate_hz=50.0,
@@ -95,12 +95,13 @@ class Done:
 def done(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Done]:
     out_dir = tmp_path_factory.mktemp("runs")
     provisioner = MarkerProvisioner()
-    with SimStation(2, SCALE, SEED, plan=PLAN) as sim:
+    clock = VirtualClock()
+    with acting(clock, name="test"), SimStation(2, clock.scale, SEED, plan=PLAN, clock=clock) as sim:
         rig = open_rig(sim.rig_url, sim.clock, **sim.rig_client_options())
         sensors = [open_sensor(url, sim.clock) for url in sim.sensor_urls]
         try:
             runner = SequenceRunner(
-                rig, sensors, sim.clock, plan=PLAN, options=SequenceOptions().for_scale(SCALE), out_dir=out_dir,
+                rig, sensors, sim.clock, plan=PLAN, options=SequenceOptions(), out_dir=out_dir,
                 provisioner=provisioner, station="pytest", rig_name="sim", sensor_urls=sim.sensor_urls,
             )
             result = runner.run()
@@ -149,8 +150,8 @@ def test_session_has_plan_segments_and_references(done: Done) -> None:
         s = read_session(unit.session_path)
         assert s.serial == unit.serial and s.sample_rate_hz == PLAN.sample_rate_hz
         # t is time since power-on (the drift starts at g(0) = 1, eq. 3); the stream starts right after
-        # the power cycle: a few ms of wall time, times the clock scale
-        assert 0.0 < s.t_s[0] < 5.0
+        # the power cycle: on the virtual clock its commands take no time, the first sample is at power-on
+        assert s.t_s[0] == 0.0
         settled = [seg for seg in s.segments() if seg.kind != Kind.MOVE]
         steps = plan_steps(PLAN)
         assert [seg.kind for seg in settled] == [st.kind for st in steps]

@@ -18,9 +18,11 @@ import pytest
 
 from station.chamber import chamber_client_options, open_chamber
 from station.chamber.registers import AlarmCode, Mode
+from station.kernel.clock import Clock
 from station.kernel.limits import table1_limits
 from station.kernel.plan import PlanError, RigPlan
 from station.kernel.thermal_plan import ThermalPlan
+from station.kernel.virtual_clock import VirtualClock, acting
 from station.rig import open_rig
 from station.sensor import open_sensor
 from station.sequence import Measured, Outcome, Record, RunResult, SequenceOptions, StepStarted
@@ -43,7 +45,6 @@ from station.sim.station_sim import SimStation
 
 pytestmark = pytest.mark.integration
 
-SCALE = 150.0
 BASE = RigPlan(sample_rate_hz=50.0, rest_s=30.0, pose_hold_s=4.0, rate_hold_s=3.0, settle_s=1.0,
                rate_steps=(("x", 100.0), ("x", -100.0), ("y", 100.0), ("y", -100.0), ("z", 100.0), ("z", -100.0)))
 # a small, quick chamber: the load follows within minutes
@@ -99,7 +100,8 @@ def test_temperature_slope() -> None:
 
 @pytest.fixture
 def sim() -> Iterator[SimStation]:
-    with SimStation(2, SCALE, seed=11, plan=BASE, chamber=CHAMBER) as station:
+    clock = VirtualClock()  # discrete events: hours of chamber time in seconds, whatever the host's load
+    with SimStation(2, clock.scale, seed=11, plan=BASE, chamber=CHAMBER, clock=clock) as station:
         for u in station.units:
             install_firmware(u.sensor, station.clock)
         yield station
@@ -124,6 +126,12 @@ def at_step(name: str, action: Callable[[], None]) -> Callable[[Record], None]:
 def run(sim: SimStation, *subscribers: Callable[[Record], None], plan: ThermalPlan = PLAN,
         on_runner: Callable[[SequenceRunner], None] | None = None) -> tuple[RunResult, SequenceRunner]:
     clock = sim.clock
+    with acting(clock, name="test"):  # no time passes while the test opens the station
+        return _run(sim, clock, subscribers, plan, on_runner)
+
+
+def _run(sim: SimStation, clock: Clock, subscribers: tuple[Callable[[Record], None], ...], plan: ThermalPlan,
+         on_runner: Callable[[SequenceRunner], None] | None) -> tuple[RunResult, SequenceRunner]:
     rig = open_rig(sim.rig_url + "&timeout=0.2&retries=1", clock, **sim.rig_client_options())
     chamber = open_chamber(sim.chamber_url + "&timeout=0.2&retries=1", clock, **chamber_client_options(clock.scale))
     sensors = [open_sensor(url, clock, command_timeout_s=0.2, attempts=2) for url in sim.sensor_urls]
@@ -217,7 +225,7 @@ def test_chamber_not_answering_is_a_station_error(sim: SimStation) -> None:
     model = sim.chamber.model  # type: ignore[union-attr]
     deadline = time.monotonic() + 10.0
     while model.alarm_code != AlarmCode.WATCHDOG and time.monotonic() < deadline:
-        time.sleep(0.05)
+        sim.clock.sleep(5.0)  # chamber time passes (nobody else acts on the virtual clock now)
         model.update()
     assert model.alarm_code == AlarmCode.WATCHDOG and not model.running
 

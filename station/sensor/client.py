@@ -31,6 +31,7 @@ import serial
 
 from station.kernel.clock import Clock
 from station.kernel.errors import FormatError
+from station.kernel.virtual_clock import is_virtual
 from station.sensor.base import ProtocolSensor
 from station.sensor.commands import BootEvent, Command, Reply, decode_reply, encode_command
 from station.sensor.frames import Frame, FrameParser, FrameType, ParserStats, decode_sample_payloads
@@ -224,12 +225,28 @@ class SerialSensor(ProtocolSensor):
                     self._counts["retries"] += 1
                 attempt += 1
                 self._write(frame)
-                if pending.event.wait(self.command_timeout_s):
+                if self._await(pending):
                     break
                 self._check_fault()
         finally:
             self._pending = None
         return pending.reply, attempt
+
+    def _await(self, pending: _Pending) -> bool:
+        """Wait for the answer to one transmission: ``command_timeout_s`` wall seconds.
+
+        On a virtual clock the sensor answers after every sample due by now, and time may have run far
+        ahead of the link: while frames keep arriving the link is alive, and the wait goes on (the backlog
+        is finite, as no time passes meanwhile); ``command_timeout_s`` then counts from the last frame.
+        """
+        if not is_virtual(self._clock):
+            return pending.event.wait(self.command_timeout_s)
+        seen = self._parser.frames
+        while not pending.event.wait(self.command_timeout_s):
+            if self._parser.frames == seen:
+                return False
+            seen = self._parser.frames
+        return True
 
     def _wall(self, clock_s: float) -> float:
         return clock_s / self._clock.scale

@@ -186,6 +186,7 @@ class SensorCore:
         self.output = OutputMode.RAW
         self.seq = 0
         self.next_t_us = 0
+        self.last_t_us = -1  # time of the last sample rendered since power-on (µs), -1: none
         self.pending_flags = 0
 
     # --- power --------------------------------------------------------------------------------------
@@ -211,6 +212,7 @@ class SensorCore:
         self.rate_hz = self.identity.default_rate_hz
         self.output = OutputMode.RAW
         self.seq = 0
+        self.last_t_us = -1
         self.pending_flags = 0
         self.source.power_on()
         reset = getattr(self.corrector, "reset", None)
@@ -246,6 +248,7 @@ class SensorCore:
         records = sample_records(self.seq, t_us, accel, gyro, temp, flags)
         self.seq = (self.seq + n) % SEQ_MODULUS
         self.next_t_us += n * period
+        self.last_t_us = int(t_us[-1])
         self.pending_flags = 0
         return records
 
@@ -294,7 +297,9 @@ class SensorCore:
             if not self.streaming:
                 self.rate_hz = rate
                 self.streaming = True
-                self.next_t_us = self.uptime_us()
+                # a restart at the instant of the last sample (no time passes between commands on a virtual
+                # clock) begins just after it: the physics renders each time once
+                self.next_t_us = max(self.uptime_us(), self.last_t_us + 1)
                 self.pending_flags = SampleFlag.STREAM_START
             elif rate != self.rate_hz:
                 self._change_rate(rate)
