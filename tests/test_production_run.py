@@ -156,6 +156,7 @@ def test_a_run_started_through_the_api_provisions_and_serves_the_same_image(tmp_
     from station.kernel.limits import table1_limits
     from station.kernel.limits_file import load_limits
     from station.kernel.plan import RigPlan
+    from station.kernel.virtual_clock import VirtualClock
     from station.sequence import Outcome
     from station.sim.firmware import install_firmware
     from station.sim.station_sim import SimStation
@@ -167,7 +168,7 @@ def test_a_run_started_through_the_api_provisions_and_serves_the_same_image(tmp_
     db_url = f"sqlite:///{tmp_path / 'api.sqlite'}"
     os.environ["STATION_LOCK_DIR"] = str(tmp_path / "locks")
     try:
-        with SimStation(1, 100.0, 8, plan=plan) as sim:
+        with SimStation(1, 1.0, 8, plan=plan, clock=VirtualClock()) as sim:  # discrete events: no load can hurry it
             for unit in sim.units:
                 install_firmware(unit.sensor, sim.clock)
             config = StationConfig(sim.rig_url, tuple(sim.sensor_urls), station_id="api", db_url=db_url,

@@ -1,7 +1,7 @@
 """Retest policy: a unit's own failures count; over its attempts it is REFUSED before anything moves.
 
 A simulated station (the in-process fakes: fake-rig:// and fake-sensor:// URLs, no port, no pty; a
-fast clock) runs one unit with a limits file it cannot meet, so every run FAILs: two failed attempts,
+virtual clock) runs one unit with a limits file it cannot meet, so every run FAILs: two failed attempts,
 then the third run refuses the unit before the rig moves (REFUSED, its own exit code), until a
 disposition is recorded.
 """
@@ -15,12 +15,12 @@ from station.compose import Station, StationConfig
 from station.kernel.limits import table1_limits
 from station.kernel.limits_file import LimitsFile, RetestPolicy, load_limits
 from station.kernel.plan import RigPlan
+from station.kernel.virtual_clock import VirtualClock, acting
 from station.sequence import Outcome, RigReading, StepStarted
 from station.sim.fakes import FakeStation
 from station.store.queries import attempt_count
 from station.store.recorder import record_disposition
 
-SCALE = 100.0
 PLAN = RigPlan(sample_rate_hz=50.0, rest_s=60.0, pose_hold_s=4.0,
                rate_steps=(("x", 100.0), ("y", 100.0), ("z", 100.0)), rate_hold_s=3.0)
 
@@ -36,7 +36,8 @@ def unmeetable_limits() -> LimitsFile:
 def test_failures_count_and_the_refusal_comes_before_any_motion(tmp_path: Path) -> None:
     url = f"sqlite:///{tmp_path / 'retest.sqlite'}"
     results = []
-    with FakeStation(1, SCALE, 5, plan=PLAN) as sim:
+    clock = VirtualClock()
+    with acting(clock, name="test"), FakeStation(1, clock.scale, 5, plan=PLAN, clock=clock) as sim:
         serial = sim.units[0].truth.serial
         config = StationConfig(sim.rig_url, tuple(sim.sensor_urls), station_id="pytest", db_url=url, out_dir=None,
                                plan=PLAN, rig_options=sim.rig_client_options(), provision=False)

@@ -1,4 +1,4 @@
-"""The operator's prompts as steps of the sequence (in-process fakes, a fast clock).
+"""The operator's prompts as steps of the sequence (in-process fakes, the virtual clock).
 
 A scripted operator answers each prompt; the records show the prompts in order with their nests, a
 prompt not confirmed before the rig moves ends the run ABORTED without motion, a timeout says so, an
@@ -9,6 +9,8 @@ in the nest refuses that unit before anything moves.
 from __future__ import annotations
 
 import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import replace
 
 import pytest
@@ -17,6 +19,7 @@ from station.compose import Station, StationConfig
 from station.kernel.limits import table1_limits
 from station.kernel.limits_file import load_limits
 from station.kernel.plan import RigPlan
+from station.kernel.virtual_clock import VirtualClock, acting
 from station.sequence import Outcome, PromptAnswered, PromptShown, RigReading, StepStarted
 from station.sequence.prompts import (
     Answer,
@@ -30,7 +33,6 @@ from station.sequence.prompts import (
 )
 from station.sim.fakes import FakeStation
 
-SCALE = 100.0
 PLAN = RigPlan(sample_rate_hz=50.0, rest_s=30.0, pose_hold_s=3.0,
                rate_steps=(("x", 100.0), ("y", 100.0), ("z", 100.0)), rate_hold_s=3.0)
 
@@ -50,6 +52,14 @@ class Scripted:
         return a, "pytest"
 
 
+@contextmanager
+def virtual_station(units: int, seed: int) -> Iterator[FakeStation]:
+    """The fakes on a virtual clock; the test's thread owns time until the run does."""
+    clock = VirtualClock()
+    with acting(clock, name="test"), FakeStation(units, clock.scale, seed, plan=PLAN, clock=clock) as sim:
+        yield sim
+
+
 def _station(sim: FakeStation, prompter: object) -> Station:
     config = StationConfig(sim.rig_url, tuple(sim.sensor_urls), station_id="pytest", record=False, out_dir=None,
                            plan=PLAN, rig_options=sim.rig_client_options(), provision=False)
@@ -67,7 +77,7 @@ def test_nest_list() -> None:
 
 def test_prompts_in_order_with_their_nests_and_the_unload_names_each_verdict() -> None:
     op = Scripted(["confirmed", "confirmed", "confirmed"])
-    with FakeStation(2, SCALE, 3, plan=PLAN) as sim:
+    with virtual_station(2, 3) as sim:
         result = _station(sim, op).run()
     assert result.outcome == Outcome.PASS, [u.message for u in result.units]
     shown = [r for r in result.records if isinstance(r, PromptShown)]
@@ -88,7 +98,7 @@ def test_prompts_in_order_with_their_nests_and_the_unload_names_each_verdict() -
                                              ("timeout", "aborted: no answer to the prompt 'close-lid' within 600 s")])
 def test_a_prompt_not_confirmed_aborts_before_anything_moves(answer: Answer, why: str) -> None:
     op = Scripted(["confirmed", answer])
-    with FakeStation(1, SCALE, 4, plan=PLAN) as sim:
+    with virtual_station(1, 4) as sim:
         result = _station(sim, op).run()
     assert result.outcome == Outcome.ABORTED and result.outcome.exit_code == 130
     assert result.units[0].outcome == Outcome.ABORTED and result.units[0].message == why
@@ -100,7 +110,7 @@ def test_a_prompt_not_confirmed_aborts_before_anything_moves(answer: Answer, why
 
 def test_an_operator_out_of_reach_is_a_station_fault() -> None:
     op = Scripted([NoOperator("the terminal was closed (end of input)")])
-    with FakeStation(1, SCALE, 4, plan=PLAN) as sim:
+    with virtual_station(1, 4) as sim:
         result = _station(sim, op).run()
     assert result.outcome == Outcome.ERROR
     assert "the terminal was closed" in result.units[0].message
@@ -111,14 +121,14 @@ def test_an_operator_out_of_reach_is_a_station_fault() -> None:
 
 def test_unload_not_confirmed_leaves_the_verdicts() -> None:
     op = Scripted(["confirmed", "confirmed", "timeout"])
-    with FakeStation(1, SCALE, 3, plan=PLAN) as sim:
+    with virtual_station(1, 3) as sim:
         result = _station(sim, op).run()
     assert result.units[0].outcome == Outcome.PASS and result.outcome == Outcome.PASS
     assert result.message == "unload not confirmed (timeout)"
 
 
 def test_a_scanned_serial_that_is_not_the_unit_in_the_nest_is_refused() -> None:
-    with FakeStation(2, SCALE, 6, plan=PLAN) as sim:
+    with virtual_station(2, 6) as sim:
         serials = [u.truth.serial for u in sim.units]
         station = _station(sim, AutoConfirm())
         station.prompter = None
@@ -139,7 +149,7 @@ def test_auto_confirm() -> None:
 
 def test_a_plan_without_prompts_asks_nothing() -> None:
     op = Scripted([])
-    with FakeStation(1, SCALE, 3, plan=PLAN) as sim:
+    with virtual_station(1, 3) as sim:
         station = _station(sim, op)
         config = station.config
         result = station.run(on_runner=lambda r: setattr(r, "prompts", PromptPlan(before=(), unload=False)))
