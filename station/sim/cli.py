@@ -70,8 +70,9 @@ def simulate(
 
 def demo(
     units: Annotated[int, typer.Option(min=1, max=64, help="units in the fixture")] = 4,
-    scale: Annotated[float | None, typer.Option(min=0.1, help="simulated seconds per wall second "
-                                                "(default 30, with --thermal 120)")] = None,
+    scale: Annotated[float | None, typer.Option(min=0.1, help="simulated seconds per wall second of the scaled "
+                                                "clock (default 30, with --thermal 120); giving it selects that "
+                                                "clock")] = None,
     seed: Annotated[int, typer.Option(min=0, max=2**63 - 1, help="seed: the same seed gives the same units")] = 0,
     out: Annotated[Path, typer.Option(help="directory for session CSVs and parameter JSONs")] = Path("demo-out"),
     db: DbOption = None,
@@ -118,8 +119,10 @@ def demo(
         if line:
             result = run_line_demo(units, rack_s, seed, limits_path=limits)
         elif thermal:
-            result, _ = run_thermal_demo(units, scale or THERMAL_SCALE, seed, out, db_url=db, record=True,
-                                         limits_path=limits, lot=lot or "", operator=operator or "")
+            thermal_clock = VirtualClock() if mode == "virtual" else SimClock(scale or THERMAL_SCALE)
+            result, _ = run_thermal_demo(units, thermal_clock.scale, seed, out, db_url=db, record=True,
+                                         limits_path=limits, lot=lot or "", operator=operator or "",
+                                         clock=thermal_clock)
         else:  # the simulated fixture loads itself: its prompts are shown and confirmed at once
             sim_clock = VirtualClock() if mode == "virtual" else SimClock(scale or DEMO_SCALE)
             result = run_demo(units, sim_clock.scale, seed, out, db_url=db, record=True, limits_path=limits,

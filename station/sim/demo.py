@@ -363,11 +363,14 @@ def run_thermal_demo(
     record: bool = False,
     lot: str = "",
     operator: str = "",
+    clock: Clock | None = None,
 ) -> tuple[RunResult, Any]:
     """``station demo --thermal``: a simulated rig, chamber and ``units`` sensors; the thermal plan
     (:func:`thermal_demo_plan`), fit, EEPROM write, verification at the verification temperature; prints the
     run, the cycle time and, per unit, the corrected errors at the verification temperature with the thermal
     model and without, next to a unit without temperature effects (the last slot when ``reference_unit``).
+
+    ``clock``: as for :func:`run_demo` (default ``SimClock(scale)``; a virtual clock repeats bit for bit).
 
     Returns the run's result and the runner (its check recordings, verification results and timing).
     """
@@ -381,20 +384,21 @@ def run_thermal_demo(
         unit_effects[-1] = Effects()
     wall0 = time.monotonic()
     holder: list[Any] = []
-    with abort_on_signals(lambda: holder[-1] if holder else None), \
+    clock = clock if clock is not None else SimClock(scale)
+    with abort_on_signals(lambda: holder[-1] if holder else None), acting(clock, name="demo"), \
             SimStation(units, scale, seed, plan=plan, effects=effects, chamber={"ambient_degc": thermal.ambient_degc},
-                       unit_effects=unit_effects) as sim:
+                       unit_effects=unit_effects, clock=clock) as sim:
         for u in sim.units:
             install_firmware(u.sensor, sim.clock)
         console.print(f"simulated rig at {sim.rig_url}; chamber at {sim.chamber_url}; {units} sensor(s); "
-                      f"clock x{scale:g}")
+                      f"{clock_words(sim.clock)}")
         config = StationConfig(
             sim.rig_url, tuple(sim.sensor_urls), station_id="demo-thermal", db_url=db_url, record=record,
-            limits_path=limits_path, out_dir=out_dir, clock_scale=scale, provision=True,
+            limits_path=limits_path, out_dir=out_dir, clock_scale=sim.scale, provision=True,
             rig_options=sim.rig_client_options(), chamber_url=sim.chamber_url, thermal=thermal, lot=lot,
             operator=operator,
         )
-        display = ProgressDisplay(console, [u.truth.serial for u in sim.units], scale)
+        display = ProgressDisplay(console, [u.truth.serial for u in sim.units], sim.scale)
         station = Station(config, clock=sim.clock, subscribers=[display])
         with display:
             result = station.run(on_runner=holder.append)
