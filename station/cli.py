@@ -385,6 +385,9 @@ def run_station(
     out: Annotated[Path | None, typer.Option(help="directory for session CSVs and parameter JSONs "
                                                   "[default: runs]")] = None,
     scale: Annotated[float | None, typer.Option(min=0.1, help="clock scale; 1 = real time (as `station sim`)")] = None,
+    clock: Annotated[str | None, typer.Option("--clock", help="virtual://HOST:PORT: the virtual clock `station sim "
+                                              "--clock virtual` serves (a simulated run that repeats bit for "
+                                              "bit)")] = None,
     gravity: Annotated[float | None, typer.Option(help="local gravity (m/s^2); default from the plan")] = None,
     latitude: Annotated[float | None, typer.Option(help="site latitude (deg); default from the plan")] = None,
     name: Annotated[str | None, typer.Option("--station", help="station id for the records and images")] = None,
@@ -440,6 +443,7 @@ def run_station(
     console = Console()
     try:
         cfg = station_config(config, rig, sensor, station_id=name, db_url=db, out_dir=out, clock_scale=scale,
+                             clock_url=clock,
                              plan=plan, operator=operator, lot=lot, limits_path=limits, provision=True,
                              chamber_url=chamber, thermal=thermal)
         display = ProgressDisplay(console, list(cfg.sensor_urls), cfg.clock_scale)

@@ -37,6 +37,7 @@ from station.kernel.nest_frames import NestCalibration
 from station.kernel.plan import RigPlan, default_plan
 from station.kernel.thermal_plan import ThermalPlan
 from station.kernel.urls import split_url
+from station.kernel.virtual_clock import acting
 from station.rig import RIGS, open_rig, rig_client_options
 from station.rig.protocol import Rig, RigIdentity
 from station.rig_lock import RigLock
@@ -50,6 +51,7 @@ from station.sequence.runner import RunResult, SequenceRunner
 from station.sequence.steps import plan_steps
 from station.sequence.thermal_sequence import thermal_runner
 from station.sequence.verify import RigVerifier
+from station.timelink import open_clock
 
 if TYPE_CHECKING:  # the database code loads only when a station records
     from station.store.recorder import Recorder, RunContext
@@ -80,6 +82,8 @@ class StationConfig:
         limits_path: limits file (None: ``fixtures/limits/default.toml``).
         out_dir: where session CSVs and parameter JSONs go (None: not saved).
         clock_scale: 1 for real hardware; a simulated station's scale otherwise.
+        clock_url: ``virtual://HOST:PORT``: the virtual clock ``station sim --clock virtual`` serves (the run
+            repeats bit for bit); None: the wall clock or the scaled one (``clock_scale``).
         plan: the rig plan (poses, rate steps, durations, site gravity).
         operator: who runs the station (recorded on every run).
         lot: the production lot of the units the station calibrates (recorded on every run; '' unknown).
@@ -121,6 +125,7 @@ class StationConfig:
     nest_calibration: bool = True
     golden: str = "off"
     shifts: str = "A=06:00,B=14:00,C=22:00"
+    clock_url: str | None = None
 
     @property
     def nest_rig(self) -> str:
@@ -215,8 +220,11 @@ class StationConfig:
         return cls(**kw)
 
 
-def make_clock(scale: float) -> Clock:
-    """The wall clock at scale 1, a scaled clock (``station sim``'s speed) otherwise."""
+def make_clock(scale: float, url: str | None = None) -> Clock:
+    """The wall clock at scale 1, a scaled clock (``station sim``'s speed) otherwise; with ``url``
+    (``virtual://HOST:PORT``, served by ``station sim --clock virtual``) the simulator's virtual clock."""
+    if url:
+        return open_clock(url)
     return WallClock() if scale == 1.0 else SimClock(scale)
 
 
@@ -430,7 +438,7 @@ class Station:
         config.check_urls()
         if config.out_dir is not None:
             prepare_out_dir(config.out_dir)
-        self.clock = clock if clock is not None else make_clock(config.clock_scale)
+        self.clock = clock if clock is not None else make_clock(config.clock_scale, config.clock_url)
         self.limits = limits if limits is not None else load_limits(config.limits_path)
         self.options = (options if options is not None else SequenceOptions()).for_scale(self.clock.scale)
         # the sensor class's T_c range (the limits file's correlation_time_s) is the fit's prior on T_c
@@ -546,7 +554,8 @@ class Station:
         if self.recorder is not None:
             who = c.operator if operator is None else operator
             self.recorder.context = replace(self.recorder.context, operator=who, lot=c.lot if lot is None else lot)
-        with RigLock(c.rig_url, c.station_id, db), open_hardware(
+        # on a virtual clock this thread owns time from the opening of the hardware to its closing
+        with acting(self.clock, name="station"), RigLock(c.rig_url, c.station_id, db), open_hardware(
             c.rig_url, c.sensor_urls, self.clock, rig_options=self._rig_options(), sensor_options=c.sensor_options
         ) as hw:
             self.reconciled = self.reconcile(hw.sensors)

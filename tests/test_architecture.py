@@ -39,6 +39,8 @@ ALLOWED: dict[str, set[str]] = {
     "rack": {"kernel", "modbus"},
     "sensor": {"kernel"},
     "eeprom": {"kernel", "sensor"},
+    # a virtual clock served across processes (simulator <-> station): time-advance request and grant
+    "timelink": {"kernel"},
     # the sequence: steps, runner, records, limits, gates, provisioning, on-rig verification
     "sequence": {"kernel", "session", "fit", "correct", "rig", "chamber", "sensor", "eeprom"},
     # subscribers to the records
@@ -49,7 +51,7 @@ ALLOWED: dict[str, set[str]] = {
     "line": {"kernel", "session", "fit", "sensor", "rack", "sequence", "store"},
     # the composition root, its one-run-per-rig lock, and the command line
     "rig_lock": {"kernel", "store"},
-    "compose": {"kernel", "session", "fit", "rig", "chamber", "sensor", "sequence", "store", "rig_lock"},
+    "compose": {"kernel", "session", "fit", "rig", "chamber", "sensor", "sequence", "store", "rig_lock", "timelink"},
     "commands": NUMERICS | {"rig", "chamber", "rack", "sensor", "eeprom", "sequence", "store", "compose", "rig_lock",
                             "line"},
     "cli": NUMERICS | {"rig", "chamber", "sensor", "eeprom", "sequence", "store", "terminal", "web", "compose",

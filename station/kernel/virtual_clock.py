@@ -145,14 +145,17 @@ class VirtualClock:
     @contextlib.contextmanager
     def busy(self) -> Iterator[None]:
         """Declare long work without clock waits (a fit): the stall guard does not fire meanwhile."""
-        with self._cond:
-            self._busy += 1
+        self.add_busy(1)
         try:
             yield
         finally:
-            with self._cond:
-                self._busy -= 1
-                self._progress += 1
+            self.add_busy(-1)
+
+    def add_busy(self, n: int) -> None:
+        """:meth:`busy` by hand: +1 when long work starts, -1 when it ends."""
+        with self._cond:
+            self._busy += n
+            self._progress += 1
 
     def actors(self) -> list[str]:
         """The registered actors, for messages."""

@@ -142,22 +142,39 @@ def sim(
     port: Annotated[int, typer.Option(min=0, max=65535, help="Modbus/TCP port of the rig (0: a free port)")] = 0,
     chamber: Annotated[bool, typer.Option("--chamber", help="also serve a simulated climate chamber (Modbus/TCP "
                                           "on a free port); the units' temperature follows it")] = False,
+    clock: Annotated[str, typer.Option("--clock", help="'scaled' (default): simulated time runs --scale times the "
+                                       "wall clock, as real hardware does; 'virtual': a discrete-event clock served "
+                                       "on 127.0.0.1 (`station run --clock virtual://...`): the same seed gives the "
+                                       "same bytes")] = "scaled",
 ) -> None:
     """Start a simulated rig and sensors, print their URLs, run until Ctrl-C (or SIGTERM).
 
     Each simulated unit runs the calibration firmware (Algorithm 1 from its EEPROM image), as a real
     unit does, so ``station run`` against it provisions and verifies the corrected output.
+
+    With ``--clock virtual`` this process owns a virtual clock and serves it; the station's threads become its
+    actors, so time moves only when all of them wait (docs/simulation.md).
     """
+    import contextlib
     import signal
     import threading
 
+    from station.kernel.clock import Clock, SimClock
+    from station.kernel.virtual_clock import VirtualClock
     from station.sim.firmware import install_firmware
     from station.sim.station_sim import SimStation
+    from station.timelink import ClockServer
 
+    if clock not in ("scaled", "virtual"):
+        raise fail(StationError(f"--clock {clock!r}: 'scaled' or 'virtual'"))
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
 
-    with SimStation(units, scale, seed, port=port, chamber={} if chamber else None) as station:
+    sim_clock: Clock = VirtualClock() if clock == "virtual" else SimClock(scale)
+    with contextlib.ExitStack() as stack:
+        served = stack.enter_context(ClockServer(sim_clock)) if isinstance(sim_clock, VirtualClock) else None
+        station = stack.enter_context(SimStation(units, scale, seed, port=port, chamber={} if chamber else None,
+                                                 clock=sim_clock))
         for unit in station.units:
             install_firmware(unit.sensor, station.clock)
         sys.stdout.flush()
@@ -167,7 +184,10 @@ def sim(
         for unit in station.units:
             typer.echo(f"sensor {unit.slot}: {unit.sensor.url} (serial {unit.truth.serial})")
         args = " ".join(f"--sensor {u}" for u in station.sensor_urls)
-        typer.echo(f"run the sequence with:\n  station run --rig '{station.rig_url}' {args} --scale {scale:g}")
+        timing = f"--clock {served.url}" if served is not None else f"--scale {scale:g}"
+        if served is not None:
+            typer.echo(f"clock: {served.url}")
+        typer.echo(f"run the sequence with:\n  station run --rig '{station.rig_url}' {args} {timing}")
         typer.echo("Ctrl-C stops the simulation.")
         sys.stdout.flush()
         try:
