@@ -132,9 +132,11 @@ def run(sim: SimStation, *subscribers: Callable[[Record], None], plan: ThermalPl
 
 def _run(sim: SimStation, clock: Clock, subscribers: tuple[Callable[[Record], None], ...], plan: ThermalPlan,
          on_runner: Callable[[SequenceRunner], None] | None) -> tuple[RunResult, SequenceRunner]:
-    rig = open_rig(sim.rig_url + "&timeout=0.2&retries=1", clock, **sim.rig_client_options())
-    chamber = open_chamber(sim.chamber_url + "&timeout=0.2&retries=1", clock, **chamber_client_options(clock.scale))
-    sensors = [open_sensor(url, clock, command_timeout_s=0.2, attempts=2) for url in sim.sensor_urls]
+    # wall-clock I/O timeouts, short so that a peer that does not answer fails fast, long enough for a host under
+    # heavy load (0.2 s tripped at a load average of 40 on 2 cores; the virtual clock waits for nothing in wall time)
+    rig = open_rig(sim.rig_url + "&timeout=2&retries=1", clock, **sim.rig_client_options())
+    chamber = open_chamber(sim.chamber_url + "&timeout=2&retries=1", clock, **chamber_client_options(clock.scale))
+    sensors = [open_sensor(url, clock, command_timeout_s=1.0, attempts=2) for url in sim.sensor_urls]
     try:
         options = OPTIONS.for_scale(clock.scale)
         verifier = RigVerifier(rig, clock, gravity_mps2=plan.base.gravity_mps2, sample_rate_hz=50, options=options)

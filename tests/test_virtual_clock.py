@@ -153,3 +153,18 @@ def test_busy_actors_do_not_trip_the_stall_guard() -> None:
         clock.sleep(1.0)
     t.join(10.0)
     assert done.is_set() and clock.now() == 1.0
+
+
+def test_time_runs_at_most_a_horizon_ahead_of_a_follower() -> None:
+    clock = VirtualClock(horizon_s=2.0, stall_wall_s=0.3)
+    follower = clock.follow("sensor")
+    with acting(clock, name="main"):
+        with pytest.raises(ClockStalled, match=r"sensor \(a follower, produced to 0.000000 s\)"):
+            clock.sleep(5.0)  # the follower never catches up: time stops at its horizon
+        assert clock.now() == 2.0
+        follower.caught_up(2.5)
+        clock.sleep(2.5)  # to 4.5, which the follower at 2.5 allows
+        assert clock.now() == 4.5
+    follower.close()
+    clock.sleep(1.0)  # no follower, no actor: time moves at once
+    assert clock.now() == 5.5

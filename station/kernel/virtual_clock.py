@@ -75,6 +75,23 @@ class Actor:
         return f"{self.name} ({state})"
 
 
+class Follower:
+    """A passive peer's report of how far it has produced its data (:meth:`VirtualClock.follow`)."""
+
+    def __init__(self, clock: VirtualClock, name: str, t: float) -> None:
+        self.clock = clock
+        self.name = name
+        self.t = t
+
+    def caught_up(self, t: float) -> None:
+        """Everything due up to time ``t`` (s) has been produced."""
+        self.clock._caught_up(self, t)
+
+    def close(self) -> None:
+        """Stop following (the peer is gone)."""
+        self.clock._unfollow(self)
+
+
 class VirtualClock:
     """Virtual time of a discrete-event simulation (s).
 
@@ -82,13 +99,14 @@ class VirtualClock:
         start: time at construction (s).
         stall_wall_s: wall seconds without any progress of the clock, while an actor waits on it,
             after which the waiting actors raise :class:`ClockStalled`.
+        horizon_s: how far time may run ahead of the slowest :class:`Follower` (s).
     """
 
     scale = 1.0
     #: code that needs to know (capture, sample reads) asks ``getattr(clock, "virtual", False)``
     virtual = True
 
-    def __init__(self, start: float = 0.0, *, stall_wall_s: float = 120.0) -> None:
+    def __init__(self, start: float = 0.0, *, stall_wall_s: float = 120.0, horizon_s: float = 2.0) -> None:
         self._t = float(start)
         self._cond = threading.Condition(threading.Lock())
         self._actors: list[Actor] = []
@@ -97,6 +115,8 @@ class VirtualClock:
         self._progress = 0  # changes on every advance, registration, wake or wait
         self._busy = 0
         self.stall_wall_s = float(stall_wall_s)
+        self.horizon_s = float(horizon_s)
+        self._followers: list[Follower] = []
         self.advances = 0
 
     # --- reading --------------------------------------------------------------------------------
@@ -156,6 +176,28 @@ class VirtualClock:
         with self._cond:
             self._busy += n
             self._progress += 1
+
+    def follow(self, name: str) -> Follower:
+        """A passive peer that produces data as time passes (a streaming sensor): time runs at most
+        ``horizon_s`` ahead of the time it reports with :meth:`Follower.caught_up`, so that the data due at a
+        barrier stays bounded whatever the host's load. It changes when, in wall time, time moves, never what
+        happens at a virtual instant."""
+        follower = Follower(self, name, self._t)
+        with self._cond:
+            self._followers.append(follower)
+        return follower
+
+    def _caught_up(self, follower: Follower, t: float) -> None:
+        with self._cond:
+            if t > follower.t:
+                follower.t = t
+                self._step_locked()
+
+    def _unfollow(self, follower: Follower) -> None:
+        with self._cond:
+            if follower in self._followers:
+                self._followers.remove(follower)
+                self._step_locked()
 
     def actors(self) -> list[str]:
         """The registered actors, for messages."""
@@ -225,6 +267,8 @@ class VirtualClock:
                 elif time.monotonic() - since > self.stall_wall_s:
                     actor.waiting = False
                     holders = [repr(a) for a in self._actors if not a.waiting]
+                    holders += [f"{f.name} (a follower, produced to {f.t:.6f} s)" for f in self._followers
+                                if f.t + self.horizon_s <= self._t]
                     raise ClockStalled(
                         f"virtual clock stalled at t = {self._t:.6f} s for {self.stall_wall_s:g} wall s: "
                         f"{actor.name} waits on it while {', '.join(holders) or 'nobody'} hold(s) time "
@@ -246,10 +290,15 @@ class VirtualClock:
             t = min(a.deadline for a in self._actors)
             if t == float("inf"):
                 return  # every actor waits for an event: only the stall guard can tell
+            if self._followers:  # not further than the horizon ahead of the slowest follower
+                t = min(t, max(self._t, min(f.t for f in self._followers) + self.horizon_s))
             if t > self._t:
                 self._t = t
                 self.advances += 1
+                self._progress += 1
             ready = [a for a in self._actors if a.deadline <= self._t]
+            if not ready:
+                return  # time moved as far as the followers allow: they call again when they caught up
         for a in ready:
             a.waiting = False
         self._progress += 1
@@ -270,6 +319,11 @@ def wait_event(clock: Any, event: threading.Event, seconds: float | None) -> boo
     if is_virtual(clock):
         return bool(clock.wait(event, seconds))
     return event.wait(None if seconds is None else seconds / clock.scale)
+
+
+def follow(clock: Any, name: str) -> Follower | None:
+    """A :class:`Follower` of ``clock`` for a passive peer that streams data (None unless the clock is virtual)."""
+    return clock.follow(name) if isinstance(clock, VirtualClock) else None
 
 
 def enroll(clock: Any, name: str) -> Actor | None:
@@ -374,5 +428,17 @@ def wait_futures(clock: Any, futures: Any, seconds: float | None = None, *, firs
     return bool(clock.wait(done, seconds))
 
 
-__all__ = ["Actor", "ActorPool", "ClockStalled", "VirtualClock", "acting", "busy", "enroll", "is_virtual", "wait_event",
-           "wait_futures"]
+__all__ = [
+    "Actor",
+    "ActorPool",
+    "ClockStalled",
+    "Follower",
+    "VirtualClock",
+    "acting",
+    "busy",
+    "enroll",
+    "follow",
+    "is_virtual",
+    "wait_event",
+    "wait_futures",
+]

@@ -40,7 +40,7 @@ import numpy as np
 
 from station.kernel.clock import Clock
 from station.kernel.errors import FormatError
-from station.kernel.virtual_clock import is_virtual
+from station.kernel.virtual_clock import follow, is_virtual
 from station.sensor.commands import BootEvent, BootReason, Command, NakCode, decode_command, encode_ack, encode_nak
 from station.sensor.frames import SAMPLE_FRAME_SIZE, FrameParser, FrameType, encode_frame, frame_sample_records
 from station.sim.sensor_core import (
@@ -134,6 +134,8 @@ class SimulatedSensor(SensorUnit):
 
         with self._lock:
             self._boot(BootReason.POWER_ON)
+        # on a virtual clock time runs at most a horizon ahead of what this sensor has produced
+        self._follower = follow(self.core.clock, f"sensor {self.identity.serial}")
         self._stop = threading.Event()
         self._error: BaseException | None = None
         self._thread = threading.Thread(target=self._run, name=f"sim-sensor-{self.identity.serial}", daemon=True)
@@ -152,6 +154,8 @@ class SimulatedSensor(SensorUnit):
             return
         self._stop.set()
         self._thread.join(timeout=5.0)
+        if self._follower is not None:
+            self._follower.close()
         for fd in (self._master, self._slave):
             with contextlib.suppress(OSError):
                 os.close(fd)
@@ -202,8 +206,11 @@ class SimulatedSensor(SensorUnit):
             with self._lock:
                 if readable:
                     self._receive()
+                produced_to = self._clock.now()
                 self._service()
                 self._flush()
+            if self._follower is not None:
+                self._follower.caught_up(produced_to)
 
     def _receive(self) -> None:
         try:
