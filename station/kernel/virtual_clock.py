@@ -45,7 +45,9 @@ class ClockStalled(StationError):
     """Virtual time cannot move: an actor waits on the clock while another holds it and makes no progress."""
 
 
-class _Waitable(Protocol):
+class Waitable(Protocol):
+    """What a clock wait can wait for besides time (a ``threading.Event``)."""
+
     def is_set(self) -> bool: ...
 
 
@@ -58,7 +60,7 @@ class Actor:
         self.thread: threading.Thread | None = None
         self.waiting = False
         self.deadline = float("inf")
-        self.event: _Waitable | None = None
+        self.event: Waitable | None = None
         self.closed = False
 
     @contextlib.contextmanager
@@ -92,7 +94,42 @@ class Follower:
         self.clock._unfollow(self)
 
 
-class VirtualClock:
+class ActorClock:
+    """What the local :class:`VirtualClock` and one served from another process share: actors by thread,
+    ``sleep`` as a wait, long work declared."""
+
+    scale = 1.0
+    #: code that needs to know (capture, sample reads) asks ``getattr(clock, "virtual", False)``
+    virtual = True
+    _by_thread: dict[int, Any]
+
+    def wait(self, event: Waitable | None, seconds: float | None) -> bool:
+        raise NotImplementedError
+
+    def enroll(self, name: str) -> Any:
+        raise NotImplementedError
+
+    def add_busy(self, n: int) -> None:
+        raise NotImplementedError
+
+    def current_actor(self) -> Any:
+        """The current thread's actor (None: it is none)."""
+        return self._by_thread.get(threading.get_ident())
+
+    def actor(self, name: str | None = None) -> contextlib.AbstractContextManager[Any]:
+        """Register the current thread as an actor for the ``with`` block (nested use keeps the outer one)."""
+        return thread_actor(self, name)
+
+    def busy(self) -> contextlib.AbstractContextManager[None]:
+        """Declare long work without clock waits (a fit): the stall guard does not fire meanwhile."""
+        return busy_block(self)
+
+    def sleep(self, seconds: float) -> None:
+        """Let ``seconds`` of virtual time pass (an actor waits; anyone else advances time directly)."""
+        self.wait(None, seconds)
+
+
+class VirtualClock(ActorClock):
     """Virtual time of a discrete-event simulation (s).
 
     Args:
@@ -101,10 +138,6 @@ class VirtualClock:
             after which the waiting actors raise :class:`ClockStalled`.
         horizon_s: how far time may run ahead of the slowest :class:`Follower` (s).
     """
-
-    scale = 1.0
-    #: code that needs to know (capture, sample reads) asks ``getattr(clock, "virtual", False)``
-    virtual = True
 
     def __init__(self, start: float = 0.0, *, stall_wall_s: float = 120.0, horizon_s: float = 2.0) -> None:
         self._t = float(start)
@@ -152,24 +185,6 @@ class VirtualClock:
             self._progress += 1
             self._step_locked()
 
-    @contextlib.contextmanager
-    def actor(self, name: str | None = None) -> Iterator[Actor]:
-        """Register the current thread as an actor for the ``with`` block (nested use keeps the outer one)."""
-        current = self._by_thread.get(threading.get_ident())
-        if current is not None:
-            yield current
-            return
-        with self.enroll(name or threading.current_thread().name).bind() as a:
-            yield a
-
-    @contextlib.contextmanager
-    def busy(self) -> Iterator[None]:
-        """Declare long work without clock waits (a fit): the stall guard does not fire meanwhile."""
-        self.add_busy(1)
-        try:
-            yield
-        finally:
-            self.add_busy(-1)
 
     def add_busy(self, n: int) -> None:
         """:meth:`busy` by hand: +1 when long work starts, -1 when it ends."""
@@ -206,15 +221,11 @@ class VirtualClock:
 
     # --- waiting --------------------------------------------------------------------------------
 
-    def sleep(self, seconds: float) -> None:
-        """Let ``seconds`` of virtual time pass (an actor waits; anyone else advances time directly)."""
-        self.wait(None, seconds)
-
     def sleep_until(self, t: float) -> None:
         """Wait until virtual time ``t`` (s)."""
         self.wait(None, t - self._t)
 
-    def wait(self, event: _Waitable | None, seconds: float | None) -> bool:
+    def wait(self, event: Waitable | None, seconds: float | None) -> bool:
         """Wait until ``event`` is set or ``seconds`` of virtual time passed (None: no time limit);
         returns whether the event is set. Like ``threading.Event.wait`` in virtual seconds."""
         actor = self._by_thread.get(threading.get_ident())
@@ -244,7 +255,7 @@ class VirtualClock:
                     self._progress += 1
                     self._step_locked()
 
-    def _wait_locked(self, actor: Actor, event: _Waitable | None, seconds: float | None) -> bool:
+    def _wait_locked(self, actor: Actor, event: Waitable | None, seconds: float | None) -> bool:
         if event is not None and event.is_set():
             return True
         actor.deadline = self._t + max(0.0, seconds) if seconds is not None else float("inf")
@@ -306,6 +317,28 @@ class VirtualClock:
 
 
 # --- helpers for code that runs on any clock ---------------------------------------------------------
+
+
+@contextlib.contextmanager
+def thread_actor(clock: Any, name: str | None = None) -> Iterator[Any]:
+    """The current thread's actor of a virtual ``clock`` (local or served) if it has one, else a new one for the
+    ``with`` block."""
+    current = clock.current_actor()
+    if current is not None:
+        yield current
+        return
+    with clock.enroll(name or threading.current_thread().name).bind() as a:
+        yield a
+
+
+@contextlib.contextmanager
+def busy_block(clock: Any) -> Iterator[None]:
+    """``clock.add_busy`` +1 for the ``with`` block (a virtual clock, local or served)."""
+    clock.add_busy(1)
+    try:
+        yield
+    finally:
+        clock.add_busy(-1)
 
 
 def is_virtual(clock: object) -> bool:
@@ -430,15 +463,19 @@ def wait_futures(clock: Any, futures: Any, seconds: float | None = None, *, firs
 
 __all__ = [
     "Actor",
+    "ActorClock",
     "ActorPool",
     "ClockStalled",
     "Follower",
     "VirtualClock",
+    "Waitable",
     "acting",
     "busy",
+    "busy_block",
     "enroll",
     "follow",
     "is_virtual",
+    "thread_actor",
     "wait_event",
     "wait_futures",
 ]

@@ -30,7 +30,7 @@ from typing import Any
 from urllib.parse import urlsplit
 
 from station.kernel.errors import StationError
-from station.kernel.virtual_clock import ClockStalled, VirtualClock
+from station.kernel.virtual_clock import ActorClock, ClockStalled, VirtualClock, Waitable
 
 SCHEME = "virtual"
 #: wall seconds between looks at a local event while a wait is granted remotely
@@ -194,7 +194,7 @@ class RemoteActor:
         finally:
             self.clock.leave(self)
 
-    def wait(self, event: threading.Event | None, seconds: float | None) -> bool:
+    def wait(self, event: Waitable | None, seconds: float | None) -> bool:
         self.seq += 1
         seq = self.seq
         self.t = None
@@ -231,15 +231,12 @@ class RemoteActor:
         return f"{self.name} (remote)"
 
 
-class RemoteClock:
+class RemoteClock(ActorClock):
     """A :class:`~station.kernel.virtual_clock.VirtualClock` served by another process (``virtual://HOST:PORT``).
 
     Same interface: actors (:meth:`actor`, :meth:`enroll`), :meth:`sleep`, :meth:`wait`, :meth:`busy`; ``scale``
     is 1 and wall-clock I/O timeouts are not derived from it.
     """
-
-    scale = 1.0
-    virtual = True
 
     def __init__(self, host: str, port: int, *, connect_timeout_s: float = 5.0) -> None:
         self.address = (host, port)
@@ -253,8 +250,8 @@ class RemoteClock:
         self._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         self._f = self._sock.makefile("rwb")
         self._lock = threading.Lock()
-        self._by_thread: dict[int, RemoteActor] = {}
-        self._waiters: list[tuple[RemoteActor, threading.Event | None, int]] = []
+        self._by_thread: dict[int, Any] = {}
+        self._waiters: list[tuple[RemoteActor, Waitable | None, int]] = []
         self._woken: set[tuple[int, int]] = set()
         self._wait_lock = threading.Lock()
         self._call({"op": "control"})
@@ -291,29 +288,12 @@ class RemoteClock:
                 del self._by_thread[k]
         actor.close()
 
-    @contextlib.contextmanager
-    def actor(self, name: str | None = None) -> Iterator[RemoteActor]:
-        current = self._by_thread.get(threading.get_ident())
-        if current is not None:
-            yield current
-            return
-        with self.enroll(name or threading.current_thread().name).bind() as a:
-            yield a
-
-    @contextlib.contextmanager
-    def busy(self) -> Iterator[None]:
-        self._call({"op": "busy", "n": 1})
-        try:
-            yield
-        finally:
-            self._call({"op": "busy", "n": -1})
+    def add_busy(self, n: int) -> None:
+        self._call({"op": "busy", "n": n})
 
     # --- waiting ---------------------------------------------------------------------------------------
 
-    def sleep(self, seconds: float) -> None:
-        self.wait(None, seconds)
-
-    def wait(self, event: threading.Event | None, seconds: float | None) -> bool:
+    def wait(self, event: Waitable | None, seconds: float | None) -> bool:
         if event is not None and event.is_set():
             return True
         actor = self._by_thread.get(threading.get_ident())
@@ -323,11 +303,11 @@ class RemoteClock:
         self._flush_wakes()
         return actor.wait(event, None if seconds is None else max(0.0, seconds))
 
-    def _add_waiter(self, waiter: tuple[RemoteActor, threading.Event | None, int]) -> None:
+    def _add_waiter(self, waiter: tuple[RemoteActor, Waitable | None, int]) -> None:
         with self._wait_lock:
             self._waiters.append(waiter)
 
-    def _drop_waiter(self, waiter: tuple[RemoteActor, threading.Event | None, int]) -> None:
+    def _drop_waiter(self, waiter: tuple[RemoteActor, Waitable | None, int]) -> None:
         with self._wait_lock:
             self._waiters.remove(waiter)
             self._woken.discard((waiter[0].ident, waiter[2]))
