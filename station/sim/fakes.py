@@ -336,8 +336,8 @@ class FakeStation(SimulatedStation):
 
     The units, their physics and seeds are :class:`~station.sim.station_sim.SimStation`'s; the rig
     is ``fake-rig://NAME``, the sensors ``fake-sensor://NAME/0`` ... Arguments are those of
-    :class:`~station.sim.station_sim.SimulatedStation` (pass ``clock=ManualClock()`` for runs
-    that repeat sample for sample), plus ``name`` (default: a new one per station).
+    :class:`~station.sim.station_sim.SimulatedStation` (pass ``clock=VirtualClock()`` for runs
+    that repeat bit for bit, the sequence's threads included), plus ``name`` (default: a new one per station).
     """
 
     def __init__(self, units: int = 4, scale: float = 30.0, seed: int = 0, *, name: str | None = None,
