@@ -7,8 +7,8 @@ with conditioning off (STOP, or any alarm) the air relaxes to the room temperatu
 fixture and the units on it) follows the air with its own lag (``load_tau_s``). The units' own
 self-heating is added on top by their physics (:class:`station.sim.physics_source.PhysicsSource`),
 which reads :meth:`ChamberModel.load_temperature` at any past clock time. The state is integrated
-exactly per step of ``dt_s`` (exponential update, the slew limit applied per step) up to the current
-clock time, lazily, whenever anything asks.
+exactly per step of ``dt_s`` (exponential update, the slew limit applied per step) through the step that
+contains the current clock time, lazily, whenever anything asks; a command takes effect from the next step.
 
 :class:`SimulatedChamber` serves the map of :mod:`station.chamber.registers`
 (``station/chamber/register-map.md``) over Modbus/TCP on a background thread. Faults are switched at
@@ -167,7 +167,10 @@ class ChamberModel:
         self._load.append(new_load)
 
     def _advance(self, t: float) -> None:
-        while self._t[-1] + self.dt_s <= t + 1e-9:
+        # Integrate every step that has begun by ``t`` (the grid covers ``t``): a step's value then depends only
+        # on the state and the setpoint at its start, never on when someone asked (a sample rendered early or
+        # late, on a virtual clock the same run): a command takes effect from the next step.
+        while self._t[-1] < t - 1e-9:
             self._step()
 
     def _trip(self, code: int, why: str) -> None:
