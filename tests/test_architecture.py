@@ -49,7 +49,7 @@ ALLOWED: dict[str, set[str]] = {
     "line": {"kernel", "session", "fit", "sensor", "rack", "sequence", "store"},
     # the composition root, its one-run-per-rig lock, and the command line
     "rig_lock": {"kernel", "store"},
-    "compose": {"kernel", "session", "fit", "rig", "chamber", "sensor", "sequence", "store", "rig_lock"},
+    "compose": {"kernel", "session", "fit", "rig", "chamber", "sensor", "sequence", "store", "rig_lock", "line"},
     "commands": NUMERICS | {"rig", "chamber", "rack", "sensor", "eeprom", "sequence", "store", "compose", "rig_lock",
                             "line"},
     "cli": NUMERICS | {"rig", "chamber", "sensor", "eeprom", "sequence", "store", "terminal", "web", "compose",
