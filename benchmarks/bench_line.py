@@ -30,7 +30,16 @@ Two parts, one command, one table each:
 
    The row "truth" corrects with the unit's true parameters: the floor of each figure.
 
-    PYTHONPATH=. python benchmarks/bench_line.py [--units 30] [--seed0 900000] [--rig-units 1 4 16]
+3. **Predicted against measured accuracy** (``--parts predict``; ``line_predict.py``): the plan designer's
+   predicted standard uncertainties per parameter group against the RMS error (estimate - truth) over
+   ``--predict-units`` units (seeds ``--predict-seed0`` + 1000 i).
+
+4. **Line throughput** (``--parts throughput``; ``line_throughput.py``): a ``--rack-slots`` rack and one rig at
+   ``--line-rig-units``, from the plan designer and from a simulated run of the rack and rig roles.
+
+    PYTHONPATH=. python benchmarks/bench_line.py [--parts rig accuracy predict throughput] [--units 30]
+        [--seed0 900000] [--rig-units 1 4 16] [--predict-units 20] [--predict-seed0 N] [--rack-slots 64]
+        [--line-rig-units 16] [--throughput-rate 10]
 """
 
 from __future__ import annotations
@@ -190,10 +199,36 @@ def main() -> None:
     ap.add_argument("--rig-units", type=int, nargs="*", default=[1, 4, 16], help="N for the rig-time part (none: skip)")
     ap.add_argument("--scale", type=float, default=30.0)
     ap.add_argument("--max-frames", type=float, default=12000.0)
+    ap.add_argument("--parts", nargs="+", default=["rig", "accuracy", "predict", "throughput"],
+                    choices=["rig", "accuracy", "predict", "throughput"])
+    ap.add_argument("--predict-units", type=int, default=20)
+    ap.add_argument("--predict-seed0", type=int, default=910000)
+    ap.add_argument("--rack-slots", type=int, default=64)
+    ap.add_argument("--line-rig-units", type=int, default=16)
+    ap.add_argument("--throughput-rate", type=int, default=10, help="sample rate of the throughput run (Hz)")
     args = ap.parse_args()
 
     t0 = time.monotonic()
-    if args.rig_units:
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    if "predict" in args.parts:
+        import line_predict
+
+        limits = load_limits()
+        seeds = [args.predict_seed0 + 1000 * i for i in range(args.predict_units)]
+        rows = line_predict.compare(LinePlan(rack_s=args.rack_s, rig=line_rig(0.0)),
+                                    FitOptions(tc_range_s=dict(limits.correlation_time_s)), seeds)
+        line_predict.print_table(rows, len(seeds))
+    if "throughput" in args.parts:
+        import line_throughput
+
+        from station.kernel.line_plan import load_line_plan_file
+
+        lf = load_line_plan_file(None)
+        lf = replace(lf, plan=replace(lf.plan, rack_s=args.rack_s))
+        run = line_throughput.simulate(lf, rack_slots=args.rack_slots, rig_units=args.line_rig_units,
+                                       rate_hz=args.throughput_rate, max_frames=args.max_frames)
+        line_throughput.print_table(lf, run, args.throughput_rate)
+    if args.rig_units and "rig" in args.parts:
         print("rig time (real station code, simulated rig and sensors):", flush=True)
         rows = rig_times(args.rig_units, args.scale, args.max_frames)
         print("\n| plan | " + " | ".join(f"N={n}" for n in args.rig_units) + " |")
@@ -204,6 +239,9 @@ def main() -> None:
             print(f"| {name} | " + " | ".join(cells) + " |")
         print()
 
+    if "accuracy" not in args.parts:
+        print(f"wall time {time.monotonic() - t0:.0f} s")
+        return
     limits = load_limits()
     options = FitOptions(tc_range_s=dict(limits.correlation_time_s))
     per: dict[str, dict[str, list[float]]] = {}

@@ -59,7 +59,8 @@ ALLOWED: dict[str, set[str]] = {
     "__init__": set(),
 }
 # the simulator's own applications (the demo and its commands) sit on top of everything
-SIM_APPS = {"station.sim.demo", "station.sim.cli", "station.sim.msa_study", "station.sim.golden_study"}
+SIM_APPS = {"station.sim.demo", "station.sim.cli", "station.sim.msa_study", "station.sim.golden_study",
+            "station.sim.line_station"}
 EVERYTHING = set(ALLOWED)
 
 

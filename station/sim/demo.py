@@ -170,14 +170,9 @@ def run_line_demo(
     ``interrupt`` lose power on the way to the rig: the rig role refuses them (they get the full plan or go
     back to the rack) and says why.
     """
-    from station.kernel.clock import SimClock
     from station.kernel.line_plan import load_line_plan_file
     from station.line.recordings import DatabaseArchive
-    from station.line.soak import SoakRack
-    from station.rack.board import RelayBoard
-    from station.sensor import open_sensor
-    from station.sim.rack_sim import StaticMount
-    from station.sim.relay_server import SimulatedRelayBoard
+    from station.sim.line_station import SimLine
     from station.store.db import open_database
 
     console = console if console is not None else Console()
@@ -186,52 +181,22 @@ def run_line_demo(
     plan = line.rig_plan()
     scale = max(1.0, min(DEMO_SCALE, max_frames / (units * plan.sample_rate_hz)))
     runners: list[SequenceRunner] = []
-    with abort_on_signals(lambda: runners[-1] if runners else None), \
-            SimStation(units, scale, seed, plan=plan, clock=SimClock(scale)) as sim:
-        rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(10_000,)))
-        for u in sim.units:
-            install_firmware(u.sensor, sim.clock)
-            u.sensor.power_off()  # the rack's relay powers it
-            tilt = np.radians(rng.uniform(-20.0, 20.0, size=3))
-            u.source.rig = StaticMount(*tilt)  # still in its rack slot, an orientation nobody measured
-
-        def switch(slot: int, on: bool) -> None:
-            sensor = sim.units[slot].sensor
-            sensor.power_on() if on else sensor.power_off()
-
+    with abort_on_signals(lambda: runners[-1] if runners else None), SimLine(units, scale, seed, plan) as sim:
+        console.print(f"soak rack: relay board at {sim.board_url}, {units} unit(s) on "
+                      f"{', '.join(u.sensor.device for u in sim.sim.units)}; clock x{scale:g}; "
+                      f"{rack_s:g} s from power-on")
         with open_database(db_url) as database:
-            archive = DatabaseArchive(database.sessions)
-            sensors = [open_sensor(url, sim.clock) for url in sim.sensor_urls]
-            try:
-                with SimulatedRelayBoard(units, on_switch=switch) as board_sim, RelayBoard(board_sim.url) as board:
-                    console.print(f"soak rack: relay board at {board_sim.url}, {units} unit(s) on "
-                                  f"{', '.join(u.sensor.device for u in sim.units)}; clock x{scale:g}; "
-                                  f"{rack_s:g} s from power-on")
-                    soaked = SoakRack(board, sensors, sim.clock, sample_rate_hz=int(plan.sample_rate_hz),
-                                      gravity_mps2=plan.gravity_mps2, station="demo-rack").soak(range(units), rack_s)
-                    for r in soaked:
-                        if r.session is not None:
-                            sha = archive.save(r.session, station="demo-rack", slot=r.slot)
-                            console.print(f"  slot {r.slot}: {r.serial} {len(r.session)} samples, sha256 {sha[:12]}")
-                        else:
-                            console.print(f"  slot {r.slot}: {r.serial or '?'} no recording: {r.error}")
-            finally:
-                for s_ in sensors:
-                    s_.close()
+            soaked = sim.soak(range(units), rack_s, DatabaseArchive(database.sessions), station="demo-rack")
+        for r in soaked.units:
+            if r.session is not None:
+                console.print(f"  slot {r.slot}: {r.serial} {len(r.session)} samples")
+            else:
+                console.print(f"  slot {r.slot}: {r.serial or '?'} no recording: {r.error}")
         # carried to the rig, still powered (the relay stays on: the unit's supply travels with it)
-        for slot in interrupt:
-            sim.units[slot].sensor.power_off()
-        sim.clock.sleep(transfer_s)
-        for slot in interrupt:
-            sim.units[slot].sensor.power_on()
-        for u in sim.units:
-            u.source.rig = sim.rig
-        config = StationConfig(
-            sim.rig_url, tuple(sim.sensor_urls), station_id="demo-line", db_url=db_url, limits_path=limits_path,
-            out_dir=out_dir, clock_scale=scale, provision=True, rig_options=sim.rig_client_options(), lot=lot,
-            operator=operator, line=line,
-        )
-        display = ProgressDisplay(console, [u.truth.serial for u in sim.units], scale)
+        sim.to_rig(range(units), transfer_s, interrupt)
+        config = sim.rig_config(range(units), line, db_url=db_url, out_dir=out_dir, station_id="demo-line",
+                                limits_path=limits_path, lot=lot, operator=operator)
+        display = ProgressDisplay(console, [u.truth.serial for u in sim.sim.units], scale)
         station = Station(config, clock=sim.clock, subscribers=[display], prompter=prompter)
         with display:
             result = station.run(on_runner=runners.append)
