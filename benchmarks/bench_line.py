@@ -41,6 +41,10 @@ Two parts, one command, one table each:
 5. **Line throughput** (``--parts throughput``; ``line_throughput.py``): a ``--rack-slots`` rack and one rig at
    ``--line-rig-units``, from the plan designer and from a simulated run of the rack and rig roles.
 
+6. **Overhead** (``--parts overhead``, not in the default parts): rig time at N=1 of the line's rig part with
+   the rate axes in the order x, y, z and z-first (one tumble less), against the trajectory's duration, at the
+   clock scales ``--overhead-scales``.
+
     PYTHONPATH=. python benchmarks/bench_line.py [--parts rig accuracy indep predict throughput] [--units 30]
         [--seed0 900000] [--rig-units 1 4 16] [--predict-units 20] [--predict-seed0 N] [--rack-slots 64]
         [--line-rig-units 16] [--throughput-rate 10]
@@ -165,6 +169,38 @@ def rig_times(units: list[int], scale: float, max_frames: float) -> list[dict[st
     return rows
 
 
+def rig_seconds(plan: RigPlan, n: int, scale: float) -> float:
+    """Rig time of one run of ``plan`` with ``n`` units at clock ``scale`` (the plain sequence runner)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    import bench_sequence
+
+    original = bench_sequence.default_plan
+    bench_sequence.default_plan = lambda p=plan: p  # type: ignore[assignment]
+    try:
+        return float(bench_sequence.run_one(n, scale, 1)["rig_s"])  # type: ignore[arg-type]
+    finally:
+        bench_sequence.default_plan = original  # type: ignore[assignment]
+
+
+def overhead(scales: list[float]) -> None:
+    """Rig time at N=1 of the line's rig part with the rate axes in the order x, y, z (before) and z upside down
+    first (after: one tumble less), against the trajectory's own duration; at the given clock scales (a fast
+    simulated clock stretches every command round trip and poll by its scale)."""
+    from station.physics.trajectory import build_trajectory
+
+    after = line_rig()
+    before = replace(after, rate_steps=tuple((a, s_ * 100.0) for a in "xyz" for s_ in (1.0, -1.0)), rate_flip=())
+    print("\n| rate axes | trajectory s | " + " | ".join(f"rig s at x{sc:g} (overhead)" for sc in scales) + " |")
+    print("|---|---|" + "---|" * len(scales))
+    for name, plan in (("x, y, z (before)", before), ("z upside down, x, y (after)", after)):
+        traj = build_trajectory(plan).duration_s
+        cells = []
+        for sc in scales:
+            rig = rig_seconds(plan, 1, sc)
+            cells.append(f"{rig:.1f} ({rig - traj:+.1f})")
+        print(f"| {name} | {traj:.1f} | " + " | ".join(cells) + " |", flush=True)
+
+
 # --- part 2: accuracy ------------------------------------------------------------------------------
 
 def study_unit(seed: int, rack_s: float, options: FitOptions) -> dict[str, dict[str, float]]:
@@ -229,7 +265,8 @@ def main() -> None:
     ap.add_argument("--scale", type=float, default=30.0)
     ap.add_argument("--max-frames", type=float, default=12000.0)
     ap.add_argument("--parts", nargs="+", default=["rig", "accuracy", "indep", "predict", "throughput"],
-                    choices=["rig", "accuracy", "indep", "predict", "throughput"])
+                    choices=["rig", "accuracy", "indep", "predict", "throughput", "overhead"])
+    ap.add_argument("--overhead-scales", type=float, nargs="+", default=[30.0, 5.0])
     ap.add_argument("--predict-units", type=int, default=20)
     ap.add_argument("--predict-seed0", type=int, default=910000)
     ap.add_argument("--rack-slots", type=int, default=64)
@@ -257,6 +294,8 @@ def main() -> None:
         run = line_throughput.simulate(lf, rack_slots=args.rack_slots, rig_units=args.line_rig_units,
                                        rate_hz=args.throughput_rate, max_frames=args.max_frames)
         line_throughput.print_table(lf, run, args.throughput_rate)
+    if "overhead" in args.parts:
+        overhead(args.overhead_scales)
     if args.rig_units and "rig" in args.parts:
         print("rig time (real station code, simulated rig and sensors):", flush=True)
         rows = rig_times(args.rig_units, args.scale, args.max_frames)
