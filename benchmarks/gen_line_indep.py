@@ -302,9 +302,9 @@ WALL0 = 1_800_000_000.0
 
 
 def generate_unit(seed: int, rack_s: float = 3600.0, transfer_s: float = 45.0, rig: RigPlan | None = None,
-                  fs: float = 100.0) -> LineUnit:
+                  fs: float = 100.0, hour_s: float = 3600.0) -> LineUnit:
     """One unit (seed in, same recordings out): rack + rig of one power-on, a full-plan recording of another
-    power-on, and two validation power-ons (full plan; one hour at rest)."""
+    power-on, and two validation power-ons (full plan; ``hour_s`` at rest)."""
     rng = np.random.Generator(np.random.PCG64DXSM(np.random.SeedSequence([seed, 4242])))
     unit = draw_unit(rng)
     serial = f"IND-{seed:07d}"
@@ -335,5 +335,5 @@ def generate_unit(seed: int, rack_s: float = 3600.0, transfer_s: float = 45.0, r
 
     full = whole(default_plan(), 2)
     val_full = whole(default_plan(), 3)
-    val_hour = whole(replace(default_plan(), rest_s=3600.0, poses=(), rate_steps=()), 4)
+    val_hour = whole(replace(default_plan(), rest_s=hour_s, poses=(), rate_steps=()), 4)
     return LineUnit(unit, rack, rig_s, full, val_full, val_hour)
