@@ -105,8 +105,13 @@ def simulate(line: LinePlanFile, *, rack_slots: int = 64, rig_units: int = 16, r
         db_url = f"sqlite:///{Path(tmp) / 'line.sqlite'}"
         with open_database(db_url) as database:
             soak = sim.soak(range(rack_slots), line.plan.rack_s, DatabaseArchive(database.sessions))
+        lost: dict[str, int] = {}
+        for r in soak.units:
+            if r.session is None:
+                lost[r.error] = lost.get(r.error, 0) + 1
         print(f"  rack: {rack_slots} units soaked {soak.ended_s - soak.started_s:.0f} s (clock x{scale:g}, "
-              f"{time.monotonic() - wall0:.0f} s wall)", flush=True)
+              f"{time.monotonic() - wall0:.0f} s wall); {rack_slots - sum(lost.values())} recordings stored"
+              + "".join(f"; {n} without a recording: {why}" for why, n in lost.items()), flush=True)
         for b in range(0, rack_slots, rig_units):
             slots = list(range(b, min(b + rig_units, rack_slots)))
             wait = sim.clock.now() - soak.ended_s
