@@ -398,8 +398,20 @@ def run_station(
                                                 "35 degC) instead of the room-temperature sequence")] = None,
     yes: Annotated[bool, typer.Option("--yes", "-y", help="confirm the station's prompts (load, close the lid, "
                                       "unload) without waiting for Enter: CI, a fixture loaded by a robot")] = False,
+    plan_file: Annotated[Path | None, typer.Option("--plan", help="a line plan written by `station plan` "
+                                                   "(station-line-plan/1): run the line's rig role on units that "
+                                                   "soaked in the rack (their recordings in --db)")] = None,
+    back_to_rack: Annotated[bool, typer.Option("--back-to-rack", help="with --plan: a unit whose power was "
+                                               "interrupted since the rack goes back to the rack (default: it "
+                                               "gets the full plan)")] = False,
 ) -> None:
     """Run the calibration sequence against any rig and sensors (real ones, or `station sim`).
+
+    With ``--plan`` (a line plan file written by ``station plan``) this is the line's rig role: the units come
+    powered from the soak rack, each unit's rack recording is found by serial in the database, the rig runs the
+    plan's rig part, each unit is fitted over both recordings; a unit whose power was interrupted since the rack
+    is REFUSED with the reason (full plan or back to the rack). The run's record names the plan file and its
+    SHA-256.
 
     The station prompts at the terminal before the rig moves (load the units into their nests, close the lid)
     and after the verdicts (unload, each nest with its verdict); Enter confirms, n and Enter cancels (ABORTED,
@@ -422,6 +434,7 @@ def run_station(
 
     from station.compose import Station, abort_on_signals
     from station.kernel.display import limits_identity
+    from station.kernel.line_plan import load_line_plan_file
     from station.kernel.plan import default_plan
     from station.kernel.thermal_plan import default_thermal_plan
     from station.sequence.prompts import AutoConfirm
@@ -439,9 +452,15 @@ def run_station(
     runners: list[SequenceRunner] = []
     console = Console()
     try:
+        line_file = load_line_plan_file(plan_file) if plan_file is not None else None
+        if line_file is not None:
+            rig_part = line_file.plan.rig
+            rig_part = replace(rig_part, gravity_mps2=gravity) if gravity is not None else rig_part
+            rig_part = replace(rig_part, latitude_deg=latitude) if latitude is not None else rig_part
+            line_file = replace(line_file, plan=replace(line_file.plan, rig=rig_part))
         cfg = station_config(config, rig, sensor, station_id=name, db_url=db, out_dir=out, clock_scale=scale,
                              plan=plan, operator=operator, lot=lot, limits_path=limits, provision=True,
-                             chamber_url=chamber, thermal=thermal)
+                             chamber_url=chamber, thermal=thermal, line=line_file, back_to_rack=back_to_rack or None)
         display = ProgressDisplay(console, list(cfg.sensor_urls), cfg.clock_scale)
         prompter = AutoConfirm("--yes") if yes else TerminalOperator(console, cfg.operator)
         with abort_on_signals(lambda: runners[-1] if runners else None):
@@ -464,6 +483,9 @@ def run_station(
         from station.terminal import provisioning_table
 
         console.print(provisioning_table(station.provisioner))
+    if cfg.line is not None:
+        console.print(f"plan {cfg.line.version}, sha256 {cfg.line.sha256}", soft_wrap=True)
+        console.print(f"rig time per unit: {result.sequence_s / max(len(result.units), 1):.0f} s")
     timing = getattr(runners[-1].sequence, "timing", None) if runners else None
     if timing is not None:
         console.print(f"cycle time per batch of {timing.units}: {timing.cycle_s / 60:.1f} min (sequence incl. soaks "
