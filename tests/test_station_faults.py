@@ -68,7 +68,7 @@ def test_rig_gate_reads_the_rigs_own_report() -> None:
     settled = [_state(roll=0.0, pitch=0.0) for _ in range(4)]
     ok = rig_gate(settled, "+z", 0.0, OPT)
     assert ok is not None and ok.passed and ok.value == 1.0
-    unsettled = settled[:3] + [_state(SETTLED & ~Status.IN_POSITION)]
+    unsettled = [*settled[:3], _state(SETTLED & ~Status.IN_POSITION)]
     bad = rig_gate(unsettled, "+z", 0.0, OPT)
     assert bad is not None and not bad.passed and bad.link and bad.value == pytest.approx(0.75)
     spinning = [_state(SETTLED & ~Status.RATE_SETTLED, rate=99.0)]

@@ -141,8 +141,9 @@ def clock_rate_gate(first: tuple[float, float, float], last: tuple[float, float,
 
 def frame_lateness_gate(lateness_s: float, allowance_s: float, opt: SequenceOptions) -> Measurement:
     """``frame_lateness`` (station s): how far behind the station clock the stream was when the window's closing
-    sample arrived; at most ``max_frame_lateness_s`` plus ``allowance_s`` (the silence the station tolerates
-    from a stream anyway, ``silence_floor_wall_s`` wall seconds on the station clock)."""
+    sample arrived; at most ``max_frame_lateness_s`` plus ``allowance_s`` (the capture passes twice the silence
+    the station tolerates from a stream anyway, ``2 silence_floor_wall_s`` wall seconds on the station clock, so
+    that a loaded host that merely polls late is not a fault)."""
     return Measurement.in_range("frame_lateness", lateness_s, -math.inf, opt.max_frame_lateness_s + allowance_s, "s",
                                 link=True)
 

@@ -243,7 +243,7 @@ def _capture_unit(
     unit.collect_until(t1, stop, fx.silence_wall_s)
     assert unit.offset_s is not None
     lateness = fx.clock.now() - (unit.t_last_s + unit.offset_s)
-    late = frame_lateness_gate(lateness, o.silence_floor_wall_s * fx.clock.scale, o)
+    late = frame_lateness_gate(lateness, 2.0 * o.silence_floor_wall_s * fx.clock.scale, o)
     rate = clock_rate_gate(first, _synced(fx, unit), o)
     timing = [late] if rate is None else [rate, late]
     block = unit.window_samples(t0, t1)
