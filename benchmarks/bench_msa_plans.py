@@ -104,6 +104,16 @@ def main() -> None:
             continue
         print(f"{name:24s} {_fmt(sa.grr.pct_tolerance):>10s} -> {_fmt(sb.grr.pct_tolerance):>8s} "
               f"{sa.ndc:>7d} -> {sb.ndc:<7d}  {sa.verdict} -> {sb.verdict}")
+        for label, ps in (("full", a), ("line", b)):
+            st = ps.study if ps is not None else None
+            if ps is None or st is None or not (st.grr.pct_tolerance or 0.0) > 30:
+                continue
+            # where the spread comes from: the part whose repeats scatter most
+            worst = max(ps.cells, key=lambda c: float(np.ptp(c[2])))
+            tol = next(pt for pt in points[label] if pt.parameter == name)
+            width = (tol.high - tol.low) if tol.high is not None and tol.low is not None else math.nan
+            print(f"{'':24s} {label}: widest repeats part {worst[0]} {worst[1]}: range {np.ptp(worst[2]):.3g} "
+                  f"{ps.unit} ({100 * np.ptp(worst[2]) / width:.0f} % of the tolerance)")
 
 
 if __name__ == "__main__":
