@@ -58,15 +58,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from station.kernel.errors import FormatError
-from station.kernel.parameters import ParameterSet, TriadParams
+from station.kernel.parameters import MAX_LAG_SAMPLES, MAX_LEAD_SAMPLES, ParameterSet, TriadParams
 
 CHANNELS: tuple[str, ...] = ("ax", "ay", "az", "gx", "gy", "gz")
 
 # A misalignment matrix whose condition number exceeds this cannot be inverted usefully.
 _MAX_CONDITION = 1e10
-#: Largest lag (samples) line 0 extrapolates over; largest lead (samples) its delay line holds.
-MAX_LAG_SAMPLES = 4.0
-MAX_LEAD_SAMPLES = 1024.0
 #: Newton steps of the polynomial's inverse (line 6').
 NEWTON_STEPS = 3
 

@@ -407,8 +407,11 @@ class NonlinearityNote:
                    detail=json.loads(json.dumps(detail)))
 
 
-#: What :attr:`TimeOffsetNote.status` can say.
-TIME_OFFSET_STATUSES = ("fitted", "not_significant", "not_determined")
+#: What :attr:`TimeOffsetNote.status` can say (``'beyond_range'``: estimated, more than Algorithm 1 applies).
+TIME_OFFSET_STATUSES = ("fitted", "not_significant", "not_determined", "beyond_range")
+#: Largest lag (samples) Algorithm 1's line 0 extrapolates over, and largest lead its delay line holds.
+MAX_LAG_SAMPLES = 4.0
+MAX_LEAD_SAMPLES = 1024.0
 
 
 @dataclass(frozen=True)
@@ -643,7 +646,7 @@ class ParameterSet:
         time_offset_s: tau, the sensor's lag behind the rig (s): the sample stamped t holds the input at rig
             time t - tau (the unit's sample time minus the rig's); 0 when not fitted or not kept. Algorithm 1
             shifts its input by it (:mod:`station.correct.streaming`).
-        time_offset_std_s: its standard uncertainty (s); 0 when not fitted.
+        time_offset_std_s: its standard uncertainty (s); 0 when not fitted, NaN when not stated (an image).
         thermal: whether the temperature terms were fitted, and why not (:class:`ThermalFit`).
     """
 
@@ -726,7 +729,7 @@ class ParameterSet:
     def to_dict(self) -> dict[str, Any]:
         fmt = self.format
         version = FORMATS.index(fmt) + 1
-        extra: dict[str, Any] = {"time_offset_std_s": self.time_offset_std_s} if version >= 3 else {}
+        extra: dict[str, Any] = {"time_offset_std_s": _num_json(self.time_offset_std_s)} if version >= 3 else {}
         return {
             "format": fmt,
             "serial": self.serial,
@@ -780,10 +783,11 @@ class ParameterSet:
                     "thermal": ThermalFit.from_dict(d["thermal"]),
                 }
             if version >= 3:
-                std = d["time_offset_std_s"]
-                if isinstance(std, bool) or not isinstance(std, int | float) or not (math.isfinite(std) and std >= 0):
-                    raise TypeError(f"'time_offset_std_s' must be a finite number >= 0, got {std!r}")
-                extra["time_offset_std_s"] = float(std)
+                std = d["time_offset_std_s"]  # null: not stated (an EEPROM image)
+                if std is not None and (isinstance(std, bool) or not isinstance(std, int | float)
+                                        or not (math.isfinite(std) and std >= 0)):
+                    raise TypeError(f"'time_offset_std_s' must be a finite number >= 0 or null, got {std!r}")
+                extra["time_offset_std_s"] = math.nan if std is None else float(std)
             return cls(
                 serial=serial,
                 sample_period_s=float(period),
