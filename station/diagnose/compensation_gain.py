@@ -102,8 +102,8 @@ def without(params: ParameterSet, effect: str) -> ParameterSet:
             triad_name, name = path.split(".")
             triad = getattr(out, triad_name)
             out = replace(out, **{triad_name: replace(triad, **{name: np.zeros_like(getattr(triad, name))})})
-        else:
-            out = replace(out, **{path: 0.0})
+        elif path == "time_offset_s":
+            out = replace(out, time_offset_s=0.0, time_offset_std_s=0.0)
     return out
 
 

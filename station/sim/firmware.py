@@ -195,10 +195,10 @@ class CalibrationFirmware:
             out_a, out_w = ca[k:], cw[k:]
             # history: the moving average's n - 1 rows and line 0's delay line (d rows) before them
             keep = self._params.moving_average_length - 1 + self._shift_rows
-            self._hist_a = all_a[all_a.shape[0] - keep :] if keep else np.zeros((0, 3))
-            self._hist_w = all_w[all_w.shape[0] - keep :] if keep else np.zeros((0, 3))
+            self._hist_a = all_a[max(0, all_a.shape[0] - keep) :] if keep else np.zeros((0, 3))
+            self._hist_w = all_w[max(0, all_w.shape[0] - keep) :] if keep else np.zeros((0, 3))
             if all_t is not None:
-                self._hist_t = all_t[all_t.shape[0] - keep :] if keep else np.zeros(0)
+                self._hist_t = all_t[max(0, all_t.shape[0] - keep) :] if keep else np.zeros(0)
         self._index += n
         if self._g_sens is not None:
             out_w = out_w - out_a @ self._g_sens.T
