@@ -107,7 +107,9 @@ def without(params: ParameterSet, effect: str) -> ParameterSet:
     return out
 
 
-def _error(session: Session, params: ParameterSet, mask: np.ndarray, sensor: str) -> float:
+def held_out_error(session: Session, params: ParameterSet, mask: np.ndarray, sensor: str) -> float:
+    """RMS over the samples in ``mask`` of the corrected ``sensor`` output minus its reference through eq. 6's
+    one-sided moving average (SI units)."""
     out = correct_session(session, params)
     ref = session.ref_gyro_radps if sensor == "gyro" else session.ref_accel_mps2
     n = params.moving_average_length
@@ -138,9 +140,9 @@ def gains(
     for (_, sensor), effect in zip(findings, physics, strict=True):
         scale, unit = UNITS.get(sensor, UNITS["gyro"])
         try:
-            e_with = scale * _error(session, params, mask, sensor)
+            e_with = scale * held_out_error(session, params, mask, sensor)
             applied = effect in APPLIED
-            e_without = scale * _error(session, without(params, effect), mask, sensor) if applied else e_with
+            e_without = scale * held_out_error(session, without(params, effect), mask, sensor) if applied else e_with
         except StationError as exc:
             out.append(CompensationGain(math.nan, math.nan, unit, counts, effect in APPLIED, str(exc)))
             continue
@@ -148,4 +150,4 @@ def gains(
     return out
 
 
-__all__ = ["HELD_OUT_RULE", "CompensationGain", "gains", "held_out_session", "without"]
+__all__ = ["HELD_OUT_RULE", "CompensationGain", "gains", "held_out_error", "held_out_session", "without"]
