@@ -1,7 +1,7 @@
 """Recovery of the IEEE 952 scale polynomial (k2 u^2 + k3 u^3) and of the time offset tau, and what they do to
 the corrected output; nulls; on the station's simulator and on the independent generator.
 
-    python benchmarks/bench_nonlinearity.py [--seed 41000] [--units 10] [--nulls 20] [--speed]
+    python benchmarks/bench_nonlinearity.py [--seed 51000] [--indep-seed 52000] [--units 10] [--nulls 20] [--speed]
 
 Station's simulator (``station.sim.session_sim``, default plan: 50/100/200 deg/s both signs, 24 moves):
   poly  the truth's polynomial (``EffectTruth.gyro_quadratic``, ``gyro_cubic``: 0.1 % each at 200 deg/s, signs
@@ -16,9 +16,10 @@ Independent generator (``tests/indepgen.py``: other rig kinematics, rates, sampl
 ``x + k2 x^2 + k3 x^3`` acts on the physical input before M, on both sensors): the same rows (even k2, odd k3
 0.1 % at 200 deg/s, time offset, null). Only the gyro is scored (the fit's polynomial is the gyro's).
 
-Seeds: reported seeds start at ``--seed`` (41000 for the simulator, +1000 per row; the independent generator
-at 42000 + 1000 per row), drawn after the method was settled; development used 100-129 and 101-104 (simulator)
-and 20 (independent), the tests 300-316.
+Seeds: reported seeds start at ``--seed`` for the simulator and ``--indep-seed`` for the independent generator
+(+1000 per row), drawn after the method was settled; development used 100-129 and 101-104 (simulator), 20-25
+(independent), the tests 300-316; 41000-45019 were a first report run whose tau rows showed a bias the method
+then lost (docs/found-terms.md), so they count as development seeds now.
 """
 
 from __future__ import annotations
@@ -135,14 +136,14 @@ def nulls_row(name: str, sessions: list[Session], seeds: str) -> None:
           f"tau kept on {tau}/{n} recordings\n")
 
 
-def independent(units: int, nulls: int) -> None:
+def independent(base: int, units: int, nulls: int) -> None:
     print("## independent generator (tests/indepgen.py)\n")
     for row, (name, key) in enumerate((("even k2 1e-3", "scale_nonlinearity_even"),
                                        ("odd k3 1e-3", "scale_nonlinearity_odd"))):
         print(f"{name}: | seed | status | k2 axes kept | k3 axes kept | max abs z | worst rate error with (%) | "
               "without (%) |")
         zs: list[float] = []
-        for s in range(42000 + 1000 * row, 42000 + 1000 * row + units):
+        for s in range(base + 1000 * row, base + 1000 * row + units):
             rec = indepgen.generate(s, {key: 1e-3})
             m = np.diag(np.asarray(rec.truth["gyro_m"]))
             k2 = np.asarray(rec.truth["gyro_k2"]) / m  # the station's convention: on u = (M x)_k
@@ -156,7 +157,7 @@ def independent(units: int, nulls: int) -> None:
         print(f"\n{name}: {summary(zs)}\n")
     print("tau: | seed | tau (ms) | kept | z | held-out gyro error with (deg/s) | without (deg/s) |")
     zs = []
-    for s in range(44000, 44000 + units):
+    for s in range(base + 2000, base + 2000 + units):
         rng = np.random.default_rng(s)
         tau_ms = float(rng.choice([-1.0, 1.0]) * rng.uniform(0.5, 8.0))
         rec = indepgen.generate(s, {"time_offset": tau_ms})
@@ -166,8 +167,8 @@ def independent(units: int, nulls: int) -> None:
         print(f"| {s} | {tau_ms:+.3f} | {z is not None} | {'' if z is None else f'{z:+.2f}'} | {e_with:.5f} | "
               f"{e_without:.5f} |")
     print(f"\ntau: {summary(zs)}\n")
-    nulls_row("independent", [indepgen.generate(s).session for s in range(45000, 45000 + nulls)],
-              f"45000-{45000 + nulls - 1}")
+    nulls_row("independent", [indepgen.generate(s).session for s in range(base + 3000, base + 3000 + nulls)],
+              f"{base + 3000}-{base + 3000 + nulls - 1}")
 
 
 def speed() -> None:
@@ -187,13 +188,14 @@ def speed() -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seed", type=int, default=41000)
+    ap.add_argument("--seed", type=int, default=51000)
+    ap.add_argument("--indep-seed", type=int, default=52000)
     ap.add_argument("--units", type=int, default=10)
     ap.add_argument("--nulls", type=int, default=20)
     ap.add_argument("--speed", action="store_true", help="also the fit's CPU time on a 15-minute recording")
     args = ap.parse_args()
     simulator(args.seed, args.units, args.nulls)
-    independent(args.units, args.nulls)
+    independent(args.indep_seed, args.units, args.nulls)
     if args.speed:
         speed()
 

@@ -7,8 +7,11 @@ reference of time t is, to first order, ``-tau d/dt model(ref(t))``. The estimat
 
     x~_k(t) = model_k(ref(t - tau)) + c_(segment, k) + noise,
 
-over the gyro's ``move`` samples (a constant per segment and axis absorbs the slow drift and what the base
-model leaves out of the segment's mean), the reference interpolated linearly at ``t - tau``, the derivative
+over the gyro's ``move`` segments where the reference changes (:data:`MIN_CHANGING`), each with up to :data:`PAD`
+samples of its still neighbours (a lagging sensor's response spills over the segment's edges; cut there, the
+per-segment constant below would take part of it and pull tau towards 0), a constant per segment and axis
+absorbing the slow drift and what the base model leaves out of the segment's mean, the reference interpolated
+linearly at ``t - tau`` (a modified Akima interpolation did no better on the independent generator), the derivative
 by a central difference of the model in tau, weights 1 / sigma_k^2 (the white noise). Only the gyroscope: in
 the accelerometer's transitions the lever arm (``alpha x r``, ``w x (w x r)``), absent from the base model,
 would pass for a time shift.
@@ -36,6 +39,10 @@ MIN_TRANSITIONS = 3
 STEPS = 4
 #: Samples of the neighbouring segments the reference is interpolated over at a segment's edge.
 PAD = 64
+#: A move segment is a transition when its reference changes on at least this many samples: a segment where the
+#: rig holds still (a pause labelled ``move``) carries only the kink of the motion before it, where the sampled
+#: reference cannot say when the motion stopped, and the linear interpolation's error there would pass for tau.
+MIN_CHANGING = 10
 
 Model = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None], np.ndarray]
 
@@ -64,7 +71,8 @@ def estimate_time_offset(
             f"each give it to one sample period; kept where (tau/sigma)^2 >= {wald:g}")
     pieces = []
     for seg in session.segments_of(Kind.MOVE):
-        if len(seg) < 5:
+        ref = session.ref_gyro_radps[seg.start:seg.stop]
+        if len(seg) < 5 or np.count_nonzero(np.any(np.abs(np.diff(ref, axis=0)) > 0.0, axis=1)) < MIN_CHANGING:
             continue
         win = _window(session, seg.start, seg.stop)
         if win is not None:
@@ -76,18 +84,18 @@ def estimate_time_offset(
         """Per transition: sum of w D^2 and of w D r (both demeaned per segment and axis)."""
         h = 0.5 * ts
         dd, dr = np.zeros(len(pieces)), np.zeros(len(pieces))
-        for i, (a, b, (lo, hi)) in enumerate(pieces):
-            t = session.t_s[a:b]
-            tw = session.t_s[lo:hi]
-            d_t = None if dt is None else dt[a:b]
+        for i, (_, _, (lo, hi)) in enumerate(pieces):
+            # the segment with its still neighbours: the sensor's response to the move spills over its edges by tau
+            t = session.t_s[lo:hi]
+            d_t = None if dt is None else dt[lo:hi]
 
-            def at(shift: float, t: np.ndarray = t, tw: np.ndarray = tw, lo: int = lo, hi: int = hi,
+            def at(shift: float, t: np.ndarray = t, lo: int = lo, hi: int = hi,
                    d_t: np.ndarray | None = d_t) -> np.ndarray:
-                ref = np.column_stack([np.interp(t - shift, tw, session.ref_gyro_radps[lo:hi, j]) for j in range(3)])
-                f = np.column_stack([np.interp(t - shift, tw, force[lo:hi, j]) for j in range(3)])
+                ref = np.column_stack([np.interp(t - shift, t, session.ref_gyro_radps[lo:hi, j]) for j in range(3)])
+                f = np.column_stack([np.interp(t - shift, t, force[lo:hi, j]) for j in range(3)])
                 return model(t, ref, f, d_t)
 
-            r = session.gyro_radps[a:b] - at(tau)
+            r = session.gyro_radps[lo:hi] - at(tau)
             d = (at(tau + h) - at(tau - h)) / (2.0 * h)  # d model / d tau (= -d model / dt)
             r -= r.mean(axis=0)
             d -= d.mean(axis=0)
