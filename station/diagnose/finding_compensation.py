@@ -86,7 +86,7 @@ def compensation(
             out.append(Compensation(name, False, error))
         elif compensated_by(params, eff) and any(
                 np.any(np.asarray(field_value(params, f)) != 0) for f in _fields(eff, sensor)):
-            fields = ", ".join(_fields(eff, sensor))
+            fields = ", ".join(f for f in _fields(eff, sensor) if np.any(np.asarray(field_value(params, f)) != 0))
             out.append(Compensation(name, True, f"the calibration fits and applies it ({fields})"))
         else:
             out.append(Compensation(name, False, _why_not_fitted(params, eff)))
