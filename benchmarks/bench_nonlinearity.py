@@ -29,6 +29,7 @@ import argparse
 import statistics
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
@@ -75,6 +76,16 @@ def poly_z(p: ParameterSet, k2: np.ndarray, k3: np.ndarray) -> tuple[list[float]
     return z, int(np.count_nonzero(p.gyro.scale_quadratic)), int(np.count_nonzero(p.gyro.scale_cubic))
 
 
+def poly_row(seed: int, session: Session, k2: np.ndarray, k3: np.ndarray) -> list[float]:
+    """Fit with and without the polynomial, print the row, return the kept terms' z."""
+    p, o = fit_session(session, AUTO), fit_session(session, OFF)
+    z, n2, n3 = poly_z(p, k2, k3)
+    print(f"| {seed} | {p.quality.scale_nonlinearity.status} | {n2}/3 | {n3}/3 | "  # type: ignore[union-attr]
+          f"{max(map(abs, z), default=float('nan')):.2f} | {100 * worst_rate_error(session, p):.4f} | "
+          f"{100 * worst_rate_error(session, o):.4f} |")
+    return z
+
+
 def tau_row(session: Session, tau_true: float) -> tuple[float | None, float, float]:
     """(z of the kept tau of the fit of the whole recording, as ``station fit`` fits it, or None; held-out gyro
     error with, without tau, in deg/s, of the fit with the held-out segments' references removed)."""
@@ -84,6 +95,21 @@ def tau_row(session: Session, tau_true: float) -> tuple[float | None, float, flo
     p = fit_session(held, AUTO)
     without = replace(p, time_offset_s=0.0, time_offset_std_s=0.0)
     return z, DEG * held_out_error(session, p, mask, "gyro"), DEG * held_out_error(session, without, mask, "gyro")
+
+
+def tau_rows(seeds: range, make: Callable[[int, float], Session]) -> None:
+    """The tau rows: per seed a time offset drawn in +-[0.5, 8] ms, ``make(seed, tau_ms)`` the recording."""
+    print("tau: | seed | tau (ms) | kept | z | held-out gyro error with (deg/s) | without (deg/s) |")
+    zs = []
+    for s in seeds:
+        rng = np.random.default_rng(s)
+        tau_ms = float(rng.choice([-1.0, 1.0]) * rng.uniform(0.5, 8.0))
+        z, e_with, e_without = tau_row(make(s, tau_ms), tau_ms * 1e-3)
+        if z is not None:
+            zs.append(z)
+        print(f"| {s} | {tau_ms:+.3f} | {z is not None} | {'' if z is None else f'{z:+.2f}'} | {e_with:.5f} | "
+              f"{e_without:.5f} |")
+    print(f"\ntau: {summary(zs)}\n")
 
 
 def summary(zs: list[float]) -> str:
@@ -104,25 +130,10 @@ def simulator(seed: int, units: int, nulls: int) -> None:
         k2 = rng.choice([-1.0, 1.0], 3) * rng.uniform(0.5, 1.0, 3) * 1e-3 / W200
         k3 = rng.choice([-1.0, 1.0], 3) * rng.uniform(0.5, 1.0, 3) * 1e-3 / W200**2
         sim = simulate_session(s, effect_truth=replace(et, gyro_quadratic=k2, gyro_cubic=k3))
-        p, o = fit_session(sim.session, AUTO), fit_session(sim.session, OFF)
-        z, n2, n3 = poly_z(p, k2, k3)
-        zs += z
-        print(f"| {s} | {p.quality.scale_nonlinearity.status} | {n2}/3 | {n3}/3 | "  # type: ignore[union-attr]
-              f"{max(map(abs, z), default=float('nan')):.2f} | {100 * worst_rate_error(sim.session, p):.4f} | "
-              f"{100 * worst_rate_error(sim.session, o):.4f} |")
+        zs += poly_row(s, sim.session, k2, k3)
     print(f"\npoly: {summary(zs)}\n")
-    print("tau: | seed | tau (ms) | kept | z | held-out gyro error with (deg/s) | without (deg/s) |")
-    zs = []
-    for s in range(seed + 1000, seed + 1000 + units):
-        rng = np.random.default_rng(s)
-        tau_ms = float(rng.choice([-1.0, 1.0]) * rng.uniform(0.5, 8.0))
-        sim = simulate_session(s, effects=Effects(time_offset=tau_ms))
-        z, e_with, e_without = tau_row(sim.session, tau_ms * 1e-3)
-        if z is not None:
-            zs.append(z)
-        print(f"| {s} | {tau_ms:+.3f} | {z is not None} | {'' if z is None else f'{z:+.2f}'} | {e_with:.5f} | "
-              f"{e_without:.5f} |")
-    print(f"\ntau: {summary(zs)}\n")
+    tau_rows(range(seed + 1000, seed + 1000 + units), lambda s, tau_ms: simulate_session(
+        s, effects=Effects(time_offset=tau_ms)).session)
     nulls_row("simulator", [simulate_session(s).session for s in range(seed + 2000, seed + 2000 + nulls)],
               f"{seed + 2000}-{seed + 2000 + nulls - 1}")
 
@@ -151,25 +162,10 @@ def independent(base: int, units: int, nulls: int) -> None:
             m = np.diag(np.asarray(rec.truth["gyro_m"]))
             k2 = np.asarray(rec.truth["gyro_k2"]) / m  # the station's convention: on u = (M x)_k
             k3 = np.asarray(rec.truth["gyro_k3"]) / m**2
-            p, o = fit_session(rec.session, AUTO), fit_session(rec.session, OFF)
-            z, n2, n3 = poly_z(p, k2, k3)
-            zs += z
-            print(f"| {s} | {p.quality.scale_nonlinearity.status} | {n2}/3 | {n3}/3 | "  # type: ignore[union-attr]
-                  f"{max(map(abs, z), default=float('nan')):.2f} | {100 * worst_rate_error(rec.session, p):.4f} | "
-                  f"{100 * worst_rate_error(rec.session, o):.4f} |")
+            zs += poly_row(s, rec.session, k2, k3)
         print(f"\n{name}: {summary(zs)}\n")
-    print("tau: | seed | tau (ms) | kept | z | held-out gyro error with (deg/s) | without (deg/s) |")
-    zs = []
-    for s in range(base + 2000, base + 2000 + units):
-        rng = np.random.default_rng(s)
-        tau_ms = float(rng.choice([-1.0, 1.0]) * rng.uniform(0.5, 8.0))
-        rec = indepgen.generate(s, {"time_offset": tau_ms})
-        z, e_with, e_without = tau_row(rec.session, tau_ms * 1e-3)
-        if z is not None:
-            zs.append(z)
-        print(f"| {s} | {tau_ms:+.3f} | {z is not None} | {'' if z is None else f'{z:+.2f}'} | {e_with:.5f} | "
-              f"{e_without:.5f} |")
-    print(f"\ntau: {summary(zs)}\n")
+    tau_rows(range(base + 2000, base + 2000 + units), lambda s, tau_ms: indepgen.generate(
+        s, {"time_offset": tau_ms}).session)
     nulls_row("independent", [indepgen.generate(s).session for s in range(base + 3000, base + 3000 + nulls)],
               f"{base + 3000}-{base + 3000 + nulls - 1}")
 

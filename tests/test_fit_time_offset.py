@@ -16,6 +16,7 @@ import pytest
 from station.correct import StreamingCorrector, correct_batch
 from station.eeprom.image import IMAGE_SIZE_2, IMAGE_SIZE_3, CalibrationImage, decode_image, encode_image
 from station.fit.calibrate import FitOptions, fit_session
+from station.kernel.clock import ManualClock
 from station.kernel.errors import UnsupportedVersionError
 from station.kernel.parameters import ParameterSet
 from station.kernel.sensor_class import TABLE1
@@ -106,19 +107,6 @@ def test_layout3_round_trip_and_layout2_for_the_time_offset_alone() -> None:
     assert len(d2) == IMAGE_SIZE_2 and decode_image(d2).to_params().time_offset_s == -0.0123
 
 
-class _Clock:
-    scale = 1.0
-
-    def __init__(self) -> None:
-        self.t = 0.0
-
-    def now(self) -> float:
-        return self.t
-
-    def sleep(self, s: float) -> None:
-        self.t += s
-
-
 @pytest.mark.parametrize("tau_s", [-0.0123, 0.0031])
 def test_firmware_streaming_and_batch_equal_station_correct(tau_s: float) -> None:
     p = dataclasses.replace(_terms(), time_offset_s=tau_s)
@@ -126,8 +114,6 @@ def test_firmware_streaming_and_batch_equal_station_correct(tau_s: float) -> Non
     data = encode_image(img)
     raw = bytearray([0xFF]) * 4096
     raw[0x800:0x800 + len(data)] = data  # slot A2
-    clock = _Clock()
-    ee = Eeprom(clock=clock, image=bytes(raw))
     rng = np.random.default_rng(2)
     n = 700
     t = np.arange(n) * p.sample_period_s
@@ -137,12 +123,13 @@ def test_firmware_streaming_and_batch_equal_station_correct(tau_s: float) -> Non
     sa, sw = StreamingCorrector(p).run(acc, gyr)
     assert np.max(np.abs(sa - ref_a)) < 1e-9 and np.max(np.abs(sw - ref_w)) < 1e-9
     for engine in ("streaming", "batch"):
-        clock.t = 0.0
-        fw = CalibrationFirmware(ee, clock, serial="UNIT-0001", engine=engine)  # type: ignore[arg-type]
+        clock = ManualClock()
+        fw = CalibrationFirmware(Eeprom(clock=clock, image=bytes(raw)), clock, serial="UNIT-0001",
+                                 engine=engine)  # type: ignore[arg-type]
         assert fw.loaded and fw.image is not None and fw.image.layout_version == 3
         outs_a, outs_w, pos = [], [], 0
         for size in (1, 39, 40, 41, 200, 379):
-            clock.t = (pos + size - 1) * p.sample_period_s
+            clock.advance((pos + size - 1) * p.sample_period_s - clock.now())  # the chunk's newest sample is due
             a, w = fw(acc[pos:pos + size], gyr[pos:pos + size])
             outs_a.append(a)
             outs_w.append(w)
