@@ -14,7 +14,14 @@ import numpy as np
 import pytest
 
 from station.correct import StreamingCorrector, correct_batch
-from station.eeprom.image import IMAGE_SIZE_2, IMAGE_SIZE_3, CalibrationImage, decode_image, encode_image
+from station.eeprom.image import (
+    IMAGE_SIZE_2,
+    IMAGE_SIZE_3,
+    CalibrationImage,
+    decode_image,
+    encode_image,
+    image_problems,
+)
 from station.fit.calibrate import FitOptions, fit_session
 from station.kernel.clock import ManualClock
 from station.kernel.errors import UnsupportedVersionError
@@ -105,6 +112,9 @@ def test_layout3_round_trip_and_layout2_for_the_time_offset_alone() -> None:
                                                                scale_cubic=np.zeros(3)))
     d2 = encode_image(CalibrationImage.from_params(only_tau, "ST-01", T0))
     assert len(d2) == IMAGE_SIZE_2 and decode_image(d2).to_params().time_offset_s == -0.0123
+    assert image_problems(img) == []
+    late = CalibrationImage.from_params(dataclasses.replace(p, time_offset_s=0.05), "ST-01", T0)  # 5 samples of lag
+    assert any("time offset" in m for m in image_problems(late))
 
 
 @pytest.mark.parametrize("tau_s", [-0.0123, 0.0031])

@@ -35,7 +35,14 @@ from typing import ClassVar, cast
 import numpy as np
 
 from station.kernel.errors import FormatError, UnsupportedVersionError
-from station.kernel.parameters import AllanCoefficients, ParameterSet, ThermalFit, TriadParams
+from station.kernel.parameters import (
+    MAX_LAG_SAMPLES,
+    MAX_LEAD_SAMPLES,
+    AllanCoefficients,
+    ParameterSet,
+    ThermalFit,
+    TriadParams,
+)
 
 MAGIC = b"SCAL"
 LAYOUT_VERSION = 1  # the layout of an image without the effects of layout 2 (byte for byte as before)
@@ -535,6 +542,11 @@ def image_problems(img: CalibrationImage, rates_hz: tuple[float, ...] | None = N
                     out.append(f"temperature scale terms change the scale by more than {MAX_SCALE_DEVIATION:g} "
                                f"within 100 K of T_ref (at dT = {dt:g} K)")
                     break
+        if math.isfinite(fx.time_offset_s) and img.sample_period_s > 0:
+            s = fx.time_offset_s / img.sample_period_s  # line 0 of Algorithm 1 applies this much at most
+            if s > MAX_LAG_SAMPLES or s < -MAX_LEAD_SAMPLES:
+                out.append(f"time offset {fx.time_offset_s:g} s ({s:.3g} samples) beyond what Algorithm 1 applies "
+                           f"({MAX_LAG_SAMPLES:g} samples of lag, {MAX_LEAD_SAMPLES:g} of lead)")
     return out
 
 
