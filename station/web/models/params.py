@@ -14,10 +14,6 @@ from pydantic import BaseModel, Field
 Vector3 = Annotated[list[float | None], Field(min_length=3, max_length=3)]
 Matrix3 = Annotated[list[Vector3], Field(min_length=3, max_length=3)]
 
-
-def _zeros() -> list[float | None]:
-    return [0.0, 0.0, 0.0]
-
 _U = " (m/s^2 for the accelerometer, rad/s for the gyroscope)"
 
 
@@ -67,15 +63,6 @@ class TriadCalibration(BaseModel):
     temp_scale_coeff_std: Matrix3 = _std("temp_scale_coeff")
     scale_nonlinearity: Vector3 = Field(description="k of u + k u|u| per axis (1/unit); zeros where not fitted")
     scale_nonlinearity_std: Vector3 = _std("scale_nonlinearity")
-    scale_quadratic: Vector3 = Field(
-        default_factory=_zeros, description="k2 of the IEEE 952 scale polynomial u + k2 u^2 + k3 u^3 per axis "
-                                            "(1/unit); zeros where not fitted or in a station-params/1 or /2 set")
-    scale_quadratic_std: Vector3 = Field(default_factory=_zeros, description="standard uncertainty of "
-                                                                             "scale_quadratic, same unit")
-    scale_cubic: Vector3 = Field(default_factory=_zeros, description="k3 of the IEEE 952 scale polynomial per axis "
-                                                                     "(1/unit^2); zeros where not fitted")
-    scale_cubic_std: Vector3 = Field(default_factory=_zeros, description="standard uncertainty of scale_cubic, "
-                                                                         "same unit")
 
 
 class ThermalNote(BaseModel):
@@ -91,20 +78,14 @@ class ThermalNote(BaseModel):
 
 
 class CalibrationParameters(BaseModel):
-    """Everything Algorithm 1 and the station need about one calibrated unit (format ``station-params/2`` or
-    ``/3``)."""
+    """Everything Algorithm 1 and the station need about one calibrated unit (format ``station-params/2``)."""
 
-    format: str = Field(description="the parameter set's format, 'station-params/2' or 'station-params/3' (with "
-                                    "the scale polynomial or a time offset)")
+    format: str = Field(description="the parameter set's format, 'station-params/2'")
     serial: str = Field(description="the unit's serial number")
     sample_period_s: float = Field(description="T_sampl of Algorithm 1 (s)")
     moving_average_length: int = Field(description="n of the one-sided moving average, eq. (6) (samples)")
     reference_temperature_degc: float | None = Field(description="T_ref of the temperature terms (degC); null: none")
-    time_offset_s: float = Field(description="tau, the unit's lag behind the rig (s): the sample stamped t holds "
-                                             "the input at rig time t - tau; applied by Algorithm 1; 0 when not "
-                                             "fitted or kept")
-    time_offset_std_s: float | None = Field(default=0.0, description="standard uncertainty of time_offset_s (s); "
-                                                                     "null when not stated (an EEPROM image)")
+    time_offset_s: float = Field(description="the unit's sample time minus the rig's (s); 0 when not fitted")
     thermal: ThermalNote = Field(description="whether the temperature terms were fitted, and why not")
     accel: TriadCalibration = Field(description="accelerometer triad (m/s^2)")
     gyro: TriadCalibration = Field(description="gyroscope triad (rad/s)")
