@@ -166,17 +166,29 @@ def _print_params(params: object) -> None:
         console.print(f"temperature terms: {note.status}: {note.reason}")
     nl = params.quality.scale_nonlinearity
     if nl is not None:
-        if nl.fitted:
-            from station.kernel.display import format_value
+        from station.kernel.display import format_value
 
-            k = params.gyro.scale_nonlinearity
-            k_std = params.gyro.scale_nonlinearity_std
-            parts = [f"{a} " + format_value(1e6 * k[i] * REF_RATE_RADPS, 1e6 * k_std[i] * REF_RATE_RADPS, "ppm")
-                     for i, a in enumerate("xyz") if a in nl.axes]
-            console.print("gyro scale nonlinearity u + k u|u| fitted (relative error k|u| at 200 deg/s): "
-                          + ", ".join(parts))
+        if nl.fitted:
+            parts = []
+            for name, label, power in (("scale_quadratic", "k2", 1), ("scale_cubic", "k3", 2)):
+                k, k_std = getattr(params.gyro, name), getattr(params.gyro, f"{name}_std")
+                parts += [f"{label} {a} " + format_value(1e6 * k[i] * REF_RATE_RADPS**power,
+                                                         1e6 * k_std[i] * REF_RATE_RADPS**power, "ppm")
+                          for i, a in enumerate("xyz") if k[i] != 0]
+            console.print("gyro scale nonlinearity u + k2 u^2 + k3 u^3 (IEEE 952) fitted (relative error at "
+                          "200 deg/s): " + ", ".join(parts))
         else:
             console.print(f"gyro scale nonlinearity: {nl.status}: {nl.reason}")
+    offset = params.quality.time_offset
+    if offset is not None:
+        if offset.fitted:
+            console.print("time offset (sensor lag behind the rig) fitted, applied by Algorithm 1: "
+                          + format_value(1e3 * params.time_offset_s, 1e3 * params.time_offset_std_s, "ms"))
+        elif offset.status == "not_determined":
+            console.print(f"time offset: not determined: {offset.reason}")
+        else:
+            value = format_value(1e3 * offset.estimate_s, 1e3 * offset.std_s, "ms")
+            console.print(f"time offset: {offset.status} ({value}): {offset.reason}")
 
 
 #: How ``station fit`` names the parameters whose determinability the fit states.
@@ -201,8 +213,11 @@ def fit(
         help="temperature terms: auto (when the recording's temperature course separates them from the warm-up), "
              "off, require (not for a rig-free fit)")] = "auto",
     scale_nonlinearity: Annotated[str, typer.Option(
-        help="gyro scale nonlinearity y = u + k u|u|: auto (on the axes whose rate steps hold two or more rate "
-             "magnitudes, kept where significant), off")] = "auto",
+        help="gyro scale nonlinearity y = u + k2 u^2 + k3 u^3 (IEEE 952): auto (k3 where the rate steps hold two or "
+             "more rate magnitudes, k2 where they also hold both signs, each kept where significant), off")] = "auto",
+    time_offset: Annotated[str, typer.Option(
+        help="the sensor's time offset behind the rig, estimated on the moves and rate ramps and applied by "
+             "Algorithm 1: auto (kept where significant), off")] = "auto",
 ) -> None:
     """Fit the parameter set of eq. (1) to a session and print it.
 
@@ -222,6 +237,8 @@ def fit(
             raise StationError(f"--thermal {thermal!r}: expected auto, off or require")
         if scale_nonlinearity not in ("auto", "off"):
             raise StationError(f"--scale-nonlinearity {scale_nonlinearity!r}: expected auto or off")
+        if time_offset not in ("auto", "off"):
+            raise StationError(f"--time-offset {time_offset!r}: expected auto or off")
         limits_file = load_limits(limits) if limits is not None else None
         tc_range = dict(limits_file.correlation_time_s) if limits_file is not None else {}
         session = read_session(session_path)
@@ -232,7 +249,8 @@ def fit(
             raise StationError("--thermal require needs rig references; the rig-free fit has no temperature terms")
         params = (fit_rig_free(session, RigFreeOptions(tc_range_s=tc_range)) if free
                   else fit_session(session, FitOptions(g_sensitivity=g_sensitivity, tc_range_s=tc_range,
-                                                       thermal=thermal, scale_nonlinearity=scale_nonlinearity)))
+                                                       thermal=thermal, scale_nonlinearity=scale_nonlinearity,
+                                                       time_offset=time_offset)))
         if limits_file is not None:  # the b_stat rule needs the limit ranges' widths
             params = assess(params, params.quality.record_end_s, limits_file.product)
     except StationError as exc:

@@ -112,6 +112,8 @@ def _print_finding(f: Finding) -> None:
     if f.calibration is not None:
         typer.echo(f"    calibration: {'compensates it' if f.calibration.compensated else 'does not compensate it'}: "
                    f"{f.calibration.note}")
+        if f.calibration.gain is not None:
+            typer.echo(f"    {f.calibration.gain.describe()}")
     if f.rerun is not None:
         r = f.rerun
         typer.echo(f"    simulator re-run, block RMS per axis: {list(r.rms_base)} -> {list(r.rms_with_this_effect)} "
