@@ -18,19 +18,10 @@ from typing import Annotated
 import typer
 
 from station.commands.common_options import DbOption, refuse
-from station.compose import make_clock
-from station.fit.calibrate import FitOptions
 from station.kernel.errors import StationError
-from station.kernel.limits_file import load_limits
-from station.kernel.line_plan import default_line_plan, line_plan_from_json
-from station.line.recordings import DatabaseArchive
-from station.line.rigrole import BACK_TO_RACK, FULL, LineRigRunner
-from station.line.soak import SoakRack
-from station.rack.board import RelayBoard
-from station.rig import open_rig, rig_client_options
-from station.sensor import open_sensor
-from station.sequence.options import SequenceOptions
-from station.store.db import open_database
+
+# The roles' machinery (compose, the line, the store, the fit: most of a second of imports) is imported in the
+# command that runs, not when the command line starts: every `station` command builds this app.
 
 line_app = typer.Typer(no_args_is_help=True, help="The calibration line: soak rack and rig roles.")
 
@@ -48,6 +39,13 @@ def rack_command(
     db: DbOption = None,
 ) -> None:
     """Soak the units of the given slots and store their recordings (exit 0: every slot recorded, 2 otherwise)."""
+    from station.compose import make_clock
+    from station.line.recordings import DatabaseArchive
+    from station.line.soak import SoakRack
+    from station.rack.board import RelayBoard
+    from station.sensor import open_sensor
+    from station.store.db import open_database
+
     clock = make_clock(scale)
     try:
         database = open_database(db)
@@ -89,6 +87,17 @@ def rig_command(
     db: DbOption = None,
 ) -> None:
     """Run the line's rig plan on the units that soaked; exit codes as ``station run``'s."""
+    from station.compose import make_clock
+    from station.fit.calibrate import FitOptions
+    from station.kernel.limits_file import load_limits
+    from station.kernel.line_plan import default_line_plan, line_plan_from_json
+    from station.line.recordings import DatabaseArchive
+    from station.line.rigrole import BACK_TO_RACK, FULL, LineRigRunner
+    from station.rig import open_rig, rig_client_options
+    from station.sensor import open_sensor
+    from station.sequence.options import SequenceOptions
+    from station.store.db import open_database
+
     clock = make_clock(scale)
     try:
         line_plan = line_plan_from_json(plan.read_text()) if plan is not None else default_line_plan()
