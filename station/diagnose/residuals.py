@@ -17,12 +17,11 @@ from __future__ import annotations
 import functools
 import itertools
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
-from scipy import sparse
 from scipy.ndimage import uniform_filter1d
 
 from station.fit.calibrate import fit_session, mean_model
@@ -85,21 +84,50 @@ class SensorData:
         return tc if self.tc_range_s is None else np.clip(tc, *self.tc_range_s)
 
     @functools.cached_property
-    def _block_sum(self) -> sparse.csr_array:
-        """(m, n) 0/1 matrix summing each block's kept samples (built once per triad)."""
-        idx = np.flatnonzero(self.label >= 0)
-        return sparse.csr_array((np.ones(idx.size), (self.label[idx], idx)), shape=(len(self.t_s), len(self.label)))
+    def pieces(self) -> tuple[tuple[int, int], ...]:
+        """Row ranges (lo, hi) covering the samples, about :data:`PIECE_ROWS` each, cut only where a block starts:
+        every block lies in one piece, so block sums taken a piece at a time are those of one pass."""
+        n = len(self.label)
+        rows = np.flatnonzero(self.label >= 0)
+        labels = self.label[rows]
+        # blocks follow the samples' order (_blocks); otherwise one piece
+        if n <= PIECE_ROWS or not len(rows) or np.any(np.diff(labels) < 0):
+            return ((0, n),)
+        starts = rows[np.flatnonzero(np.diff(labels, prepend=-1) != 0)]
+        cuts = np.unique(starts[np.searchsorted(starts, np.arange(PIECE_ROWS, n, PIECE_ROWS)).clip(0, len(starts) - 1)])
+        cuts = cuts[(cuts > 0) & (cuts < n)]
+        edges = [0, *(int(c) for c in cuts), n]
+        return tuple((lo, hi) for lo, hi in itertools.pairwise(edges) if hi > lo)
+
+    def block_mean_of(self, rows: Callable[[int, int], np.ndarray]) -> np.ndarray:
+        """:meth:`block_mean` of the per-sample values that ``rows(lo, hi)`` gives for the samples lo:hi, (hi - lo,
+        ...), asked a piece at a time (:attr:`pieces`): the values of the whole recording are never held at once.
+
+        Each block's kept samples are summed in sample order from zero (``np.bincount``), as one pass over the
+        whole recording sums them (the same numbers bit for bit)."""
+        m = len(self.t_s)
+        out: np.ndarray | None = None
+        shape: tuple[int, ...] = ()
+        for lo, hi in self.pieces:
+            v = np.asarray(rows(lo, hi), dtype=float)
+            flat = v.reshape(hi - lo, -1)
+            if out is None:
+                shape = v.shape[1:]
+                out = np.zeros((m, flat.shape[1]))
+            lab = self.label[lo:hi] + 1  # bin 0: samples in no block
+            for j in range(flat.shape[1]):
+                out[:, j] += np.bincount(lab, weights=flat[:, j], minlength=m + 1)[1:]
+        assert out is not None
+        return (out / self.count[:, None]).reshape((m, *shape))
 
     def block_mean(self, values: np.ndarray) -> np.ndarray:
-        """Mean of per-sample ``values`` (n, ...) over each block's kept samples, (m, ...).
+        """Mean of per-sample ``values`` (n, ...) over each block's kept samples, (m, ...), a piece of samples at a
+        time (:meth:`block_mean_of`): no copy of ``values``."""
+        return self.block_mean_of(lambda lo, hi: values[lo:hi])
 
-        One sparse product over the samples: no copy of ``values`` (a candidate's (n, 3, p) regressors are
-        the largest arrays of a diagnosis; selecting the kept rows first copied them whole).
-        """
-        n = len(self.label)
-        v = np.asarray(values, dtype=float).reshape(n, -1)
-        out = self._block_sum @ v
-        return (out / self.count[:, None]).reshape((len(self.t_s), *values.shape[1:]))
+
+#: Samples per piece of :meth:`SensorData.block_mean_of` (and of the candidates' regressors asked for a piece).
+PIECE_ROWS = 1 << 16
 
 
 @dataclass(frozen=True, eq=False)
