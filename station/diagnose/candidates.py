@@ -209,13 +209,9 @@ def _quat_matrix(q: np.ndarray) -> np.ndarray:
     ], axis=1)
 
 
-def attitude(b: Baseline) -> np.ndarray | None:
-    """Sensor-to-world rotations (n, 3, 3) of the station's rig, from the rest pose (yaw 0) and the
-    integrated rate reference; None when the first segment's pose is not one of the rig's six poses.
-
-    The product of the per-sample body-frame increments ``exp([w dt]x)`` (quaternions) is formed
-    by a parallel prefix scan (log2 n vectorized steps).
-    """
+def attitude_rows(b: Baseline) -> Callable[[int, int], np.ndarray] | None:
+    """Rows lo:hi of :func:`attitude` as ``rows(lo, hi)`` -> (hi - lo, 3, 3), from the scanned quaternions kept
+    (n, 4); None when the first segment's pose is not one of the rig's six poses."""
     session = b.session
     f0 = np.nan_to_num(session.ref_accel_mps2[0])
     if not np.any(f0):
@@ -227,52 +223,89 @@ def attitude(b: Baseline) -> np.ndarray | None:
     roll, pitch = POSE_ANGLES_DEG[start[0]]
     r0 = rotation_matrices(np.array(roll * _DEG), np.array(pitch * _DEG), np.array(0.0)).reshape(3, 3)
     quat = _increments(session.t_s, session.ref_gyro_radps)
-    d = 1
-    n = len(quat)
-    while d < n:
-        quat = np.concatenate([quat[:d], _quat_mul(quat[:-d], quat[d:])])
-        d *= 2
-    # the (n, 3, 3) result filled a piece at a time: the matrices of the whole record and their temporaries
-    # held it several times over (elementwise per sample: the same numbers)
+    _prefix_products(quat)
+    return lambda lo, hi: np.einsum("ij,njk->nik", r0, _quat_matrix(quat[lo:hi]))
+
+
+def attitude(b: Baseline) -> np.ndarray | None:
+    """Sensor-to-world rotations (n, 3, 3) of the station's rig, from the rest pose (yaw 0) and the
+    integrated rate reference; None when the first segment's pose is not one of the rig's six poses.
+
+    The product of the per-sample body-frame increments ``exp([w dt]x)`` (quaternions) is formed
+    by a parallel prefix scan (log2 n vectorized steps).
+    """
+    rows = attitude_rows(b)
+    if rows is None:
+        return None
+    n = len(b.session)
     out = np.empty((n, 3, 3))
-    for lo in range(0, n, _PIECE):
-        out[lo:lo + _PIECE] = np.einsum("ij,njk->nik", r0, _quat_matrix(quat[lo:lo + _PIECE]))
+    for lo in range(0, n, _PIECE):  # elementwise per sample: the same numbers a piece at a time
+        out[lo:lo + _PIECE] = rows(lo, min(lo + _PIECE, n))
     return out
 
 
-#: Samples per piece of :func:`attitude`'s rotation matrices.
+def _prefix_products(quat: np.ndarray) -> None:
+    """Replace the quaternions (n, 4) by their prefix products in place, ``q_0 ... q_i`` in row i: a parallel
+    prefix scan (log2 n vectorized steps, row i taking row i - d's product at step d). Each step runs from the
+    last rows down, a piece at a time, so that every piece still reads the step's inputs: no copy of the whole."""
+    n = len(quat)
+    d = 1
+    while d < n:
+        for hi in range(n, d, -_PIECE):
+            lo = max(hi - _PIECE, d)
+            quat[lo:hi] = _quat_mul(quat[lo - d:hi - d], quat[lo:hi])
+        d *= 2
+
+
+#: Samples per piece of :func:`attitude`'s rotation matrices and the scan of its quaternions.
 _PIECE = 1 << 16
 
 
 def _increments(t_s: np.ndarray, rate: np.ndarray) -> np.ndarray:
     """Per-sample body-frame rotation increments ``exp([w dt]x)`` (n, 4), scalar last, of the rate reference
-    (rad/s, NaN -> 0; trapezoid rate over each interval)."""
-    w = np.nan_to_num(rate)
-    dt = np.diff(t_s, prepend=t_s[0])
-    wm = w.copy()
-    wm[1:] = 0.5 * (w[1:] + w[:-1])  # trapezoid rate over each interval
-    rotvec = wm * dt[:, None]
-    angle = np.linalg.norm(rotvec, axis=1, keepdims=True)
-    # sin(a/2)/a, with its limit 1/2 - a^2/48 for small a
-    half = np.where(angle > 1e-6, np.sin(0.5 * angle) / np.where(angle > 1e-6, angle, 1.0), 0.5 - angle**2 / 48.0)
-    return np.concatenate([rotvec * half, np.cos(0.5 * angle)], axis=1)
+    (rad/s, NaN -> 0; trapezoid rate over each interval), made a piece at a time (each with the sample before)."""
+    n = len(t_s)
+    out = np.empty((n, 4))
+    for lo in range(0, n, _PIECE):
+        hi, a = min(lo + _PIECE, n), max(lo - 1, 0)
+        t = t_s[a:hi]
+        w = np.nan_to_num(rate[a:hi])
+        dt = np.diff(t, prepend=t[0])
+        wm = w.copy()
+        wm[1:] = 0.5 * (w[1:] + w[:-1])  # trapezoid rate over each interval
+        rotvec = wm * dt[:, None]
+        angle = np.linalg.norm(rotvec, axis=1, keepdims=True)
+        # sin(a/2)/a, with its limit 1/2 - a^2/48 for small a
+        half = np.where(angle > 1e-6, np.sin(0.5 * angle) / np.where(angle > 1e-6, angle, 1.0),
+                        0.5 - angle**2 / 48.0)
+        out[lo:hi] = np.concatenate([rotvec * half, np.cos(0.5 * angle)], axis=1)[lo - a:]
+    return out
 
 
-def earth_rotation(b: Baseline, s: SensorData) -> np.ndarray | None:
+def earth_rotation_rows(b: Baseline, s: SensorData) -> Rows | None:
     session = b.session
     lat = session.meta_float("latitude_deg")
     if lat is None:
         return None
     head = session.meta_float("heading_deg") or 0.0
     e = earth_rate_world(lat, head)
-    rot = attitude(b)
-    if rot is not None:
-        seen = np.einsum("nij,i->nj", rot, e)  # R^T e
-    else:  # only the vertical part: along 'up' whatever the yaw
-        f = np.nan_to_num(session.ref_accel_mps2)
-        norm = np.linalg.norm(f, axis=1)
-        seen = np.where(norm[:, None] > 0, f / np.where(norm > 0, norm, 1.0)[:, None], 0.0) * e[2]
-    return (seen @ np.nan_to_num(s.params.misalignment).T)[:, :, None]
+    m = np.nan_to_num(s.params.misalignment)
+    rot = attitude_rows(b)
+    ref = session.ref_accel_mps2
+
+    def of(lo: int, hi: int) -> np.ndarray:
+        if rot is not None:
+            seen = np.einsum("nij,i->nj", rot(lo, hi), e)  # R^T e
+        else:  # only the vertical part: along 'up' whatever the yaw
+            f = np.nan_to_num(ref[lo:hi])
+            norm = np.linalg.norm(f, axis=1)
+            seen = np.where(norm[:, None] > 0, f / np.where(norm > 0, norm, 1.0)[:, None], 0.0) * e[2]
+        return (seen @ m.T)[:, :, None]
+
+    return Rows(len(ref), of)
+
+
+earth_rotation = whole(earth_rotation_rows)
 
 
 def time_offset_rows(b: Baseline, s: SensorData) -> Rows | None:
@@ -326,6 +359,7 @@ __all__ = [
     "delay_rows",
     "earth_rate_world",
     "earth_rotation",
+    "earth_rotation_rows",
     "g_sensitivity",
     "g_sensitivity_rows",
     "lever_arm",
