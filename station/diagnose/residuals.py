@@ -196,7 +196,7 @@ def _blocks(session: Session, ref: np.ndarray, keep: np.ndarray, max_settled_blo
 def _sensor_data(
     session: Session, name: str, p: TriadParams, data: np.ndarray, ref: np.ndarray, max_settled_blocks: int
 ) -> SensorData:
-    ref0 = np.nan_to_num(ref)
+    ref0 = np.nan_to_num(ref) if np.isnan(ref).any() else ref  # a reference without NaN is not copied
     residual = data - mean_model(_triad_dict(p), session.t_s, ref0, session.ref_accel_mps2)
     sigma = np.maximum(np.asarray(p.noise_std, dtype=float), 1e-12)
     keep = np.ones(len(session), dtype=bool)
