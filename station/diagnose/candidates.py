@@ -90,7 +90,7 @@ def _diag(values: np.ndarray) -> np.ndarray:
 
 def _diag_rows(b: Baseline, s: SensorData, values: Callable[[slice], np.ndarray]) -> Rows:
     """Rows of the per-axis regressors ``values(rows)`` (elementwise in the samples), diagonal as :func:`_diag`."""
-    return Rows(len(s.u), lambda lo, hi: _diag(values(slice(lo, hi))))
+    return Rows(len(s.ref), lambda lo, hi: _diag(values(slice(lo, hi))))
 
 
 def temperature_bias_rows(b: Baseline, s: SensorData) -> Rows | None:
@@ -102,7 +102,7 @@ def temperature_bias_rows(b: Baseline, s: SensorData) -> Rows | None:
 def temperature_scale_rows(b: Baseline, s: SensorData) -> Rows | None:
     if not np.any(b.d_temp):
         return None
-    return _diag_rows(b, s, lambda r: s.u[r] * b.d_temp[r, None])
+    return _diag_rows(b, s, lambda r: s.u_rows(r.start, r.stop) * b.d_temp[r, None])
 
 
 def g_sensitivity_rows(b: Baseline, s: SensorData) -> Rows:
@@ -119,21 +119,21 @@ def g_sensitivity_rows(b: Baseline, s: SensorData) -> Rows:
 
 
 def nonlinearity_rows(b: Baseline, s: SensorData) -> Rows:
-    return _diag_rows(b, s, lambda r: s.u[r] * np.abs(s.u[r]))
+    return _diag_rows(b, s, lambda r: (u := s.u_rows(r.start, r.stop)) * np.abs(u))
 
 
 def poly_even_rows(b: Baseline, s: SensorData) -> Rows:
     """IEEE scale polynomial, even term: ``k2 u^2`` per axis, k2 relative at the reference input (1/U)."""
-    return _diag_rows(b, s, lambda r: s.u[r] ** 2)
+    return _diag_rows(b, s, lambda r: s.u_rows(r.start, r.stop) ** 2)
 
 
 def poly_odd_rows(b: Baseline, s: SensorData) -> Rows:
     """IEEE scale polynomial, odd term: ``k3 u^3`` per axis (1/U^2)."""
-    return _diag_rows(b, s, lambda r: s.u[r] ** 3)
+    return _diag_rows(b, s, lambda r: s.u_rows(r.start, r.stop) ** 3)
 
 
 def asymmetry_rows(b: Baseline, s: SensorData) -> Rows:
-    return _diag_rows(b, s, lambda r: 0.5 * np.abs(s.u[r]))
+    return _diag_rows(b, s, lambda r: 0.5 * np.abs(s.u_rows(r.start, r.stop)))
 
 
 temperature_bias = whole(temperature_bias_rows)
@@ -313,7 +313,8 @@ def time_offset_rows(b: Baseline, s: SensorData) -> Rows | None:
 
     def of(lo: int, hi: int) -> np.ndarray:
         # y(t) = u(t - delta) ~ u(t) - delta du/dt (first order: the start of the search)
-        return -_gradient_rows(s.u, t, lo, hi)[:, :, None]
+        a, c = max(lo - 1, 0), min(hi + 1, len(t))
+        return -_gradient_rows(s.u_rows(a, c), t[a:c], lo - a, hi - a)[:, :, None]
 
     if not any(np.any(of(lo, min(lo + _PIECE, len(t)))) for lo in range(0, len(t), _PIECE)):
         return None
@@ -328,15 +329,16 @@ def delay_rows(b: Baseline, s: SensorData, tau_s: float) -> Rows:
     around them (np.interp on the table's rows that bracket every query: the same numbers as on the whole)."""
     if abs(tau_s) < 1e-6:
         first = time_offset_rows(b, s)
-        return first if first is not None else Rows(len(s.u), lambda lo, hi: np.zeros((hi - lo, 3, 1)))
+        return first if first is not None else Rows(len(s.ref), lambda lo, hi: np.zeros((hi - lo, 3, 1)))
     t = b.session.t_s
 
     def of(lo: int, hi: int) -> np.ndarray:
         q = t[lo:hi] - tau_s
-        a = max(int(np.searchsorted(t, q.min(), side="right")) - 1, 0)
-        c = min(int(np.searchsorted(t, q.max(), side="left")) + 1, len(t))
-        u = s.u[lo:hi]
-        shifted = np.stack([np.interp(q, t[a:c], s.u[a:c, k]) for k in range(3)], axis=1)
+        a = min(max(int(np.searchsorted(t, q.min(), side="right")) - 1, 0), lo)  # the table holds rows lo:hi too
+        c = max(min(int(np.searchsorted(t, q.max(), side="left")) + 1, len(t)), hi)
+        table = s.u_rows(a, c)
+        u = table[lo - a:hi - a]
+        shifted = np.stack([np.interp(q, t[a:c], table[:, k]) for k in range(3)], axis=1)
         return ((shifted - u) / tau_s)[:, :, None]
 
     return Rows(len(t), of)

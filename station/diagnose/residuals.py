@@ -43,7 +43,8 @@ class SensorData:
         sensor: ``accel`` or ``gyro``.
         params: the base fit of this triad.
         ref: rig reference used by the base model (m/s^2 or rad/s), NaN -> 0, (n, 3).
-        u: ``M ref``, the modelled true input through the misalignment (n, 3).
+        u: ``M ref``, the modelled true input through the misalignment (n, 3): made when asked (a property),
+            :meth:`u_rows` for some rows.
         residual: measurement minus base mean model, (n, 3).
         sigma: white-noise std per sample, (3,).
         keep: samples that are not outliers (n,).
@@ -62,7 +63,6 @@ class SensorData:
     sensor: str
     params: TriadParams
     ref: np.ndarray
-    u: np.ndarray
     residual: np.ndarray
     sigma: np.ndarray
     keep: np.ndarray
@@ -77,6 +77,16 @@ class SensorData:
     kind: np.ndarray
     tc_range_s: tuple[float, float] | None = None
     extra_var: np.ndarray | None = None
+
+    @property
+    def u(self) -> np.ndarray:
+        """``M ref`` (n, 3), made anew at each use (not kept: a long recording's (n, 3) arrays are what a diagnosis
+        holds); :meth:`u_rows` for a piece of rows."""
+        return self.u_rows(0, len(self.ref))
+
+    def u_rows(self, lo: int, hi: int) -> np.ndarray:
+        """Rows lo:hi of :attr:`u` (each row ``M ref_i``: the same numbers as the whole)."""
+        return self.ref[lo:hi] @ np.nan_to_num(self.params.misalignment).T
 
     def clip_tc(self, tc_s: np.ndarray | float) -> np.ndarray:
         """``tc_s`` (s) clipped into :attr:`tc_range_s` (unchanged without a range)."""
@@ -227,10 +237,9 @@ def _sensor_data(
     kind_of = np.zeros(m, dtype=np.int64)
     seg_of[lab] = session.segment[sel]
     kind_of[lab] = session.kind[sel]
-    u = ref0 @ np.nan_to_num(p.misalignment).T
     y = np.stack([np.bincount(lab, weights=residual[sel, j], minlength=m) for j in range(3)], axis=1) / count[:, None]
     return SensorData(
-        sensor=name, params=p, ref=ref0, u=u, residual=residual, sigma=sigma, keep=keep, outlier_count=outliers,
+        sensor=name, params=p, ref=ref0, residual=residual, sigma=sigma, keep=keep, outlier_count=outliers,
         settled_samples=settled_n, label=label, t_s=0.5 * (first + last), width_s=last - first + ts, count=count,
         y=y, segment=seg_of, kind=kind_of,
     )
