@@ -189,7 +189,7 @@ def _blocks(session: Session, ref: np.ndarray, keep: np.ndarray, max_settled_blo
     settled = sum(len(s) for s in segs if s.kind != Kind.MOVE)
     settled_block = max(settled / max_settled_blocks, 20.0)
     move_block = max(MOVE_BLOCK_S * fs, 10.0)
-    label = np.full(len(session), -1, dtype=np.int64)
+    label = np.full(len(session), -1, dtype=np.int32)  # block indices (fewer than 2**31): 4 bytes a sample
     nxt = 0
     for s in segs:
         size = move_block if s.kind == Kind.MOVE else settled_block
