@@ -225,12 +225,8 @@ def fit(
     contradicts its own recording (goodness-of-fit test, ``quality.goodness_of_fit``; for a rig-free fit
     the leave-poses-out cross-validation): the parameters are printed, and stderr names what failed.
     """
-    from station.fit.calibrate import FitOptions, fit_session
-    from station.fit.determinability import assess
-    from station.fit.goodness import EXIT_GOODNESS, summary
-    from station.fit.rigfree_fit import RigFreeOptions, fit_rig_free, is_rig_free
     from station.kernel.limits_file import load_limits
-    from station.session import read_session
+    from station.session import check_session_file, read_session
 
     try:
         if thermal not in ("auto", "off", "require"):
@@ -239,6 +235,12 @@ def fit(
             raise StationError(f"--scale-nonlinearity {scale_nonlinearity!r}: expected auto or off")
         if time_offset not in ("auto", "off"):
             raise StationError(f"--time-offset {time_offset!r}: expected auto or off")
+        check_session_file(session_path)  # a device, a huge or a foreign file: refused before the fit's imports
+        from station.fit.calibrate import FitOptions, fit_session
+        from station.fit.determinability import assess
+        from station.fit.goodness import EXIT_GOODNESS, summary
+        from station.fit.rigfree_fit import RigFreeOptions, fit_rig_free, is_rig_free
+
         limits_file = load_limits(limits) if limits is not None else None
         tc_range = dict(limits_file.correlation_time_s) if limits_file is not None else {}
         session = read_session(session_path)

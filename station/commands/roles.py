@@ -18,15 +18,10 @@ from typing import Annotated
 import typer
 
 from station.commands.common_options import DbOption, refuse
-from station.compose import Station, StationConfig, make_clock
 from station.kernel.errors import StationError
-from station.kernel.line_plan import load_line_plan_file
-from station.line.recordings import DatabaseArchive
-from station.line.soak import SoakRack
-from station.rack.board import RelayBoard
-from station.sensor import open_sensor
-from station.sequence.runner import SequenceRunner
-from station.store.db import open_database
+
+# The roles' machinery (compose, the line, the store, the fit: most of a second of imports) is imported in the
+# command that runs, not when the command line starts: every `station` command builds this app.
 
 line_app = typer.Typer(no_args_is_help=True, help="The calibration line: soak rack and rig roles.")
 
@@ -44,6 +39,13 @@ def rack_command(
     db: DbOption = None,
 ) -> None:
     """Soak the units of the given slots and store their recordings (exit 0: every slot recorded, 2 otherwise)."""
+    from station.compose import make_clock
+    from station.line.recordings import DatabaseArchive
+    from station.line.soak import SoakRack
+    from station.rack.board import RelayBoard
+    from station.sensor import open_sensor
+    from station.store.db import open_database
+
     clock = make_clock(scale)
     try:
         database = open_database(db)
@@ -87,6 +89,10 @@ def rig_command(
     """Run the line's rig plan on the units that soaked (``station run --plan`` without prompts): the rig lock,
     the run recorded in the database's run tables with the plan file and its SHA-256, every PASS unit's EEPROM
     written and verified; exit codes as ``station run``'s."""
+    from station.compose import Station, StationConfig
+    from station.kernel.line_plan import load_line_plan_file
+    from station.sequence.runner import SequenceRunner
+
     try:
         config = StationConfig(rig, tuple(sensor), station_id=station, db_url=db, limits_path=limits, out_dir=out,
                                clock_scale=scale, provision=True, line=load_line_plan_file(plan),
