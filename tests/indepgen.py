@@ -288,6 +288,9 @@ class Recording:
     session: Session
     plan: Plan
     effects: dict[str, float]
+    #: Drawn coefficients some benchmarks score against: per sensor the polynomial's k2, k3 on the physical input
+    #: (1/U, 1/U^2) and M; the time offset (s).
+    truth: dict[str, np.ndarray | float] = field(default_factory=dict)
 
     def write(self, path: str | Path) -> None:
         write_session(self.session, path)
@@ -352,6 +355,7 @@ def generate(seed: int, effects: dict[str, float] | None = None, plan: Plan | No
     temp_read = np.round((temp + rng.normal(0.0, 0.03, n)) * 16.0) / 16.0
 
     out = {}
+    truth: dict[str, np.ndarray | float] = {"time_offset_s": tau}
     for sensor in ("accel", "gyro"):
         gyro = sensor == "gyro"
         x = (w_in if gyro else f_true).copy()
@@ -360,6 +364,7 @@ def generate(seed: int, effects: dict[str, float] | None = None, plan: Plan | No
         k2 = eff.get("scale_nonlinearity_even", 0.0) * rng.choice([-1.0, 1.0], 3) * rng.uniform(0.7, 1.0, 3)
         k3 = eff.get("scale_nonlinearity_odd", 0.0) * rng.choice([-1.0, 1.0], 3) * rng.uniform(0.7, 1.0, 3)
         x = x + k2 * x**2 / ref_scale + k3 * x**3 / ref_scale**2
+        truth[f"{sensor}_k2"], truth[f"{sensor}_k3"] = k2 / ref_scale, k3 / ref_scale**2
         if eff.get("scale_asymmetry"):
             asym = eff["scale_asymmetry"] * rng.choice([-1.0, 1.0], 3)
             x = x * (1.0 + 0.5 * asym * np.sign(x))
@@ -379,6 +384,7 @@ def generate(seed: int, effects: dict[str, float] | None = None, plan: Plan | No
             tc = _uniform(rng, c.accel_correlation_time_s)
             sigma = _uniform(rng, c.accel_noise_std_mps2) * quiet
             lsb = 4.0 * G0 / 2**17
+        truth[f"{sensor}_m"] = m
         y = x @ m.T + b_stat
         # eq. 3 drift: warm-up plus a small stationary Gauss-Markov part (AR(1), exact discretization)
         phi = np.exp(-1.0 / (fs * tc))
@@ -409,7 +415,7 @@ def generate(seed: int, effects: dict[str, float] | None = None, plan: Plan | No
         metadata=meta, t_s=t, segment=seg, kind=kind, accel_mps2=out["accel"], gyro_radps=out["gyro"],
         temp_degc=temp_read, ref_accel_mps2=ref_f, ref_gyro_radps=w_ref,
     )
-    return Recording(session=session, plan=plan, effects=eff)
+    return Recording(session=session, plan=plan, effects=eff, truth=truth)
 
 
 if __name__ == "__main__":

@@ -112,6 +112,8 @@ def _print_finding(f: Finding) -> None:
     if f.calibration is not None:
         typer.echo(f"    calibration: {'compensates it' if f.calibration.compensated else 'does not compensate it'}: "
                    f"{f.calibration.note}")
+        if f.calibration.gain is not None:
+            typer.echo(f"    {f.calibration.gain.describe()}")
     if f.rerun is not None:
         r = f.rerun
         typer.echo(f"    simulator re-run, block RMS per axis: {list(r.rms_base)} -> {list(r.rms_with_this_effect)} "
@@ -183,15 +185,17 @@ def diagnose(
 
     from station.commands.output import check_output
     from station.commands.progress import stderr_progress
-    from station.diagnose.report import diagnose as run_diagnosis
-    from station.diagnose.report import save_figure
-    from station.fit.boundary import numerics
     from station.kernel.limits_file import load_limits
-    from station.session import read_session
+    from station.session import check_session_file, read_session
 
     try:
         if plot is not None:
             check_output(plot, inputs=[session_path], suffix=".png", what="--plot")
+        check_session_file(session_path)  # a device, a huge or a foreign file: refused before the diagnosis's imports
+        from station.diagnose.report import diagnose as run_diagnosis
+        from station.diagnose.report import save_figure
+        from station.fit.boundary import numerics
+
         warmup_tc = load_limits(limits).correlation_time_s if limits is not None else None
         session = read_session(session_path)
         with warnings.catch_warnings(), numerics(f"diagnosis of {session.serial!r}"):
