@@ -12,9 +12,9 @@ EEPROM (:class:`~station.sequence.provision.EepromProvisioner`), lets the unit's
 rig (:class:`~station.sequence.verify.RigVerifier`), and prints a live progress display,
 a summary table and the verification residuals.
 
-``station demo`` runs on a :class:`~station.kernel.virtual_clock.VirtualClock` (the same seed gives the same
-bytes under any load; docs/simulation.md): the sequence takes what its work costs, about 10 s of wall time on
-an idle machine. On the scaled clock (``clock=SimClock(30)``, ``station demo --clock scaled``) it takes about 30 s.
+``station demo --rig-only`` runs it on a :class:`~station.kernel.virtual_clock.VirtualClock` (the same
+seed gives the same bytes under any load; docs/simulation.md): the sequence takes what its work costs, about
+10 s of wall time on an idle machine; on the scaled clock (``station demo --rig-only --clock scaled``) about 30 s.
 
 SIGTERM and SIGHUP do what Ctrl-C does, as in ``station run`` (:func:`station.compose.abort_on_signals`): the
 run ends ABORTED with the signal's name, the rig at rest, every unit's result recorded (none UNFINISHED).
