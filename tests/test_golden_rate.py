@@ -3,7 +3,8 @@
 Registration runs and checks are drawn from known normal distributions for ``m`` parameters; a stable station
 must fail a check at the stated family-wise rate (Bonferroni over ``m`` independent parameters gives
 ``1 - (1 - alpha/m)^m``, just under ``alpha``), and a shift of ``d`` true sigmas on one parameter must be caught
-with the probability integrated over the registered sigma's chi-square distribution (scipy), both within the binomial interval of the simulated count.
+with the probability integrated over the registered sigma's chi-square distribution (scipy), both within
+the binomial interval of the simulated count.
 """
 
 from __future__ import annotations
