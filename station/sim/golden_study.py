@@ -64,8 +64,16 @@ class DriftOutcome:
 
     @property
     def false_stops(self) -> tuple[int, ...]:
-        """The shifts whose check failed on a parameter other than the drifting one (all of them stable)."""
-        return tuple(i + 1 for i, c in enumerate(self.checks) if any(d.parameter != PARAMETER for d in c.failed))
+        """The shifts whose check failed on a parameter other than the drifting one (all of them stable) by a
+        deviation outside its allowance: what the stated false-stop rate bounds."""
+        return tuple(i + 1 for i, c in enumerate(self.checks)
+                     if any(d.parameter != PARAMETER and d.deviation is not None for d in c.failed))
+
+    @property
+    def unmeasured_stops(self) -> tuple[int, ...]:
+        """The shifts whose check failed because a referenced parameter was not measured (the fit could not
+        determine it): a stop too, but not one the false-stop rate speaks for."""
+        return tuple(i + 1 for i, c in enumerate(self.checks) if any(d.deviation is None for d in c.failed))
 
 
 def predicted_detection(drift_sigmas: float, shifts: int, trials: int = 4000, seed: int = 0,
@@ -123,6 +131,7 @@ def run_drifting_golden(
     station_id: str = "golden-sim",
     on_run: Callable[[str, int], None] | None = None,
     false_stop_rate: float = DEFAULT_FALSE_STOP_RATE,
+    fraction: float = 0.1,
 ) -> DriftOutcome:
     """Register the golden unit from its runs, then run it once per shift with a growing bias."""
     plan = plan if plan is not None else default_plan()
@@ -144,7 +153,8 @@ def run_drifting_golden(
         if on_run is not None:
             on_run("registration", i)
     with open_database(db_url) as db:
-        golden = register_golden(serial, base.isoformat(), unit_runs(db, serial), false_stop_rate=false_stop_rate)
+        golden = register_golden(serial, base.isoformat(), unit_runs(db, serial), false_stop_rate=false_stop_rate,
+                                 fraction=fraction)
         save_golden(db, golden)
     ref = golden.reference(PARAMETER)
     assert ref is not None
