@@ -202,8 +202,9 @@ def golden_chart_svg(trend: GoldenTrend, ref: GoldenReference, labels: list[str]
                    f'<title>{escape(tip)}</title></circle>')
     out += _x_labels(labels, x)
     first = trend.first_signal
-    legend = ("±3σ dashed, allowed dotted; " + (f"first signal at check {first + 1}" if first is not None
-                                                 else "in control"))
+    sigma_from = f"σ from {ref.runs} runs, {max(ref.runs - 1, 0)} dof"
+    legend = (f"±3σ dashed ({sigma_from}), allowed dotted; "
+              + (f"first signal at check {first + 1}" if first is not None else "in control"))
     out.append(f'<text x="{ML}" y="{H - 6}" {FONT} font-size="10" fill="#444">{escape(legend)}</text></svg>')
     return "".join(out)
 
