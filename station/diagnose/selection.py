@@ -187,6 +187,7 @@ def select_sensor(baseline: Baseline, sensor: str, *, max_effects: int = 4, cand
     pairs the recording cannot tell apart; the outlier count under the final model."""
     sd = baseline.sensor(sensor)
     prob = SensorProblem(baseline, sd)
+    prob.q_class = locator.class_drift_noise(sensor, sd.params.bias_drift, drift_class)
     out = _Entries()
     regs = _regressors(baseline, sd, candidates, out)
     tau = 0.0
@@ -419,7 +420,28 @@ def _checked(f: Finding, confidence: Mapping[str, Confidence], boot: Mapping[str
     if b is not None:  # the level the report states is the bootstrap's (bootstrap.py)
         conf = conf.with_bootstrap(b)
     found = checks.get(f.effect) or finding_consistency.not_checked(f.effect, f.sensor)
-    return replace(f, confidence=conf, bootstrap=b, consistency=tuple(c.entry() for c in found))
+    return replace(_bootstrap_std(f, b), confidence=conf, bootstrap=b, consistency=tuple(c.entry() for c in found))
+
+
+def _bootstrap_std(f: Finding, b: Bootstrap | None) -> Finding:
+    """Finding ``f`` whose stated standard uncertainty is, per parameter, the larger of the fit's and the bootstrap's
+    spread over segments (bootstrap.py): where the value depends on which segments are in more than the fit's
+    noise model says (the model only approximates the physics, or the residual is correlated beyond it), the fit's
+    own standard error understates it. The fit's is kept as ``std_fit``; ``std_from`` says which one is stated."""
+    std = f.parameters.get("std")
+    if b is None or b.std is None or not isinstance(std, list) or len(std) != len(b.std) \
+            or any(isinstance(v, list) for v in std) or f.theta_std is None:
+        return f
+    fit = np.asarray(std, dtype=float)
+    boot = np.nan_to_num(np.asarray(b.std, dtype=float))
+    if not np.any(boot > fit):
+        return f
+    new = np.maximum(fit, boot)
+    params = dict(f.parameters)
+    params.update(std=[float(f"{v:.4g}") for v in new], std_fit=list(std),
+                  std_from=["bootstrap" if bb > ff else "fit" for ff, bb in zip(fit, boot, strict=True)])
+    scale = np.where(fit > 0, new / np.where(fit > 0, fit, 1.0), 1.0)
+    return replace(f, parameters=params, theta_std=np.asarray(f.theta_std, dtype=float) * scale)
 
 
 def _not_named(t: Test) -> Rejection:
