@@ -289,7 +289,9 @@ class Recording:
     plan: Plan
     effects: dict[str, float]
     #: the drawn parameters of each effect, SI, in the diagnosis's candidate forms where they are per axis or per
-    #: matrix element: ``"<effect> <sensor>"`` -> array (recorded as drawn; the draws are the same as without it)
+    #: matrix element: ``"<effect> <sensor>"`` -> array (recorded as drawn; the draws are the same as without it);
+    #: a scale term that acts on the input before the sensor's matrix M is given as it shows in the output (times
+    #: M's diagonal element)
     truth: dict[str, np.ndarray] = field(default_factory=dict)
 
     def write(self, path: str | Path) -> None:
@@ -390,6 +392,9 @@ def generate(seed: int, effects: dict[str, float] | None = None, plan: Plan | No
             sigma = _uniform(rng, c.accel_noise_std_mps2) * quiet
             lsb = 4.0 * G0 / 2**17
         y = x @ m.T + b_stat
+        for name in ("scale_nonlinearity_even", "scale_nonlinearity_odd", "scale_asymmetry", "temperature_scale"):
+            if f"{name} {sensor}" in truth:  # acting on the input before M: in the output, times M's diagonal
+                truth[f"{name} {sensor}"] = truth[f"{name} {sensor}"] * np.diag(m)
         # eq. 3 drift: warm-up plus a small stationary Gauss-Markov part (AR(1), exact discretization)
         phi = np.exp(-1.0 / (fs * tc))
         gm = np.stack([lfilter([math.sqrt(1 - phi[k] ** 2) * 0.01 * abs(b_drift[k])], [1.0, -phi[k]],
