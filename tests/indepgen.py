@@ -290,8 +290,7 @@ class Recording:
     effects: dict[str, float]
     #: the drawn parameters of each effect, SI, in the diagnosis's candidate forms where they are per axis or per
     #: matrix element: ``"<effect> <sensor>"`` -> array (recorded as drawn; the draws are the same as without it);
-    #: a scale term that acts on the input before the sensor's matrix M is given as it shows in the output (times
-    #: M's diagonal element)
+    #: the IEEE scale terms as coefficients of the powers of ``M x`` (the diagnosis's modelled input)
     truth: dict[str, np.ndarray] = field(default_factory=dict)
 
     def write(self, path: str | Path) -> None:
@@ -392,9 +391,10 @@ def generate(seed: int, effects: dict[str, float] | None = None, plan: Plan | No
             sigma = _uniform(rng, c.accel_noise_std_mps2) * quiet
             lsb = 4.0 * G0 / 2**17
         y = x @ m.T + b_stat
-        for name in ("scale_nonlinearity_even", "scale_nonlinearity_odd", "scale_asymmetry", "temperature_scale"):
-            if f"{name} {sensor}" in truth:  # acting on the input before M: in the output, times M's diagonal
-                truth[f"{name} {sensor}"] = truth[f"{name} {sensor}"] * np.diag(m)
+        # the diagnosis's scale terms are powers of u = M x (its modelled input through M): M (k2 x^2) = (k2 / M) u^2,
+        # M (k3 x^3) = (k3 / M^2) u^3 per axis (M's diagonal; the asymmetry and the temperature scale are as drawn)
+        for name, power in (("scale_nonlinearity_even", 1), ("scale_nonlinearity_odd", 2)):
+            truth[f"{name} {sensor}"] = truth[f"{name} {sensor}"] / np.diag(m) ** power
         # eq. 3 drift: warm-up plus a small stationary Gauss-Markov part (AR(1), exact discretization)
         phi = np.exp(-1.0 / (fs * tc))
         gm = np.stack([lfilter([math.sqrt(1 - phi[k] ** 2) * 0.01 * abs(b_drift[k])], [1.0, -phi[k]],
