@@ -30,7 +30,24 @@ Two parts, one command, one table each:
 
    The row "truth" corrects with the unit's true parameters: the floor of each figure.
 
-    PYTHONPATH=. python benchmarks/bench_line.py [--units 30] [--seed0 900000] [--rig-units 1 4 16]
+3. **Predicted against measured accuracy** (``--parts predict``; ``line_predict.py``): the plan designer's
+   predicted standard uncertainties per parameter group against the RMS error (estimate - truth) over
+   ``--predict-units`` units (seeds ``--predict-seed0`` + 1000 i).
+
+4. **The same accuracy on an independent generator** (``--parts indep``; ``gen_line_indep.py``: its own
+   kinematics, sampling, unit draw and noise): per unit the line's rack rest and rig part, a full-plan recording
+   and the two validation recordings, the same figures as part 2 (no ``model-only`` column).
+
+5. **Line throughput** (``--parts throughput``; ``line_throughput.py``): a ``--rack-slots`` rack and one rig at
+   ``--line-rig-units``, from the plan designer and from a simulated run of the rack and rig roles.
+
+6. **Overhead** (``--parts overhead``, not in the default parts): rig time at N=1 of the line's rig part with
+   the rate axes in the order x, y, z and z-first (one tumble less), against the trajectory's duration, at the
+   clock scales ``--overhead-scales``.
+
+    PYTHONPATH=. python benchmarks/bench_line.py [--parts rig accuracy indep predict throughput] [--units 30]
+        [--seed0 900000] [--rig-units 1 4 16] [--predict-units 20] [--predict-seed0 N] [--rack-slots 64]
+        [--line-rig-units 16] [--throughput-rate 10]
 """
 
 from __future__ import annotations
@@ -152,6 +169,38 @@ def rig_times(units: list[int], scale: float, max_frames: float) -> list[dict[st
     return rows
 
 
+def rig_seconds(plan: RigPlan, n: int, scale: float) -> float:
+    """Rig time of one run of ``plan`` with ``n`` units at clock ``scale`` (the plain sequence runner)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    import bench_sequence
+
+    original = bench_sequence.default_plan
+    bench_sequence.default_plan = lambda p=plan: p  # type: ignore[assignment]
+    try:
+        return float(bench_sequence.run_one(n, scale, 1)["rig_s"])  # type: ignore[arg-type]
+    finally:
+        bench_sequence.default_plan = original  # type: ignore[assignment]
+
+
+def overhead(scales: list[float]) -> None:
+    """Rig time at N=1 of the line's rig part with the rate axes in the order x, y, z (before) and z upside down
+    first (after: one tumble less), against the trajectory's own duration; at the given clock scales (a fast
+    simulated clock stretches every command round trip and poll by its scale)."""
+    from station.physics.trajectory import build_trajectory
+
+    after = line_rig()
+    before = replace(after, rate_steps=tuple((a, s_ * 100.0) for a in "xyz" for s_ in (1.0, -1.0)), rate_flip=())
+    print("\n| rate axes | trajectory s | " + " | ".join(f"rig s at x{sc:g} (overhead)" for sc in scales) + " |")
+    print("|---|---|" + "---|" * len(scales))
+    for name, plan in (("x, y, z (before)", before), ("z upside down, x, y (after)", after)):
+        traj = build_trajectory(plan).duration_s
+        cells = []
+        for sc in scales:
+            rig = rig_seconds(plan, 1, sc)
+            cells.append(f"{rig:.1f} ({rig - traj:+.1f})")
+        print(f"| {name} | {traj:.1f} | " + " | ".join(cells) + " |", flush=True)
+
+
 # --- part 2: accuracy ------------------------------------------------------------------------------
 
 def study_unit(seed: int, rack_s: float, options: FitOptions) -> dict[str, dict[str, float]]:
@@ -182,6 +231,31 @@ def study_unit(seed: int, rack_s: float, options: FitOptions) -> dict[str, dict[
     return out
 
 
+class _Truth:
+    """A triad's true eq. 1 + eq. 3 parameters, in the names the correction reads."""
+
+    def __init__(self, m: np.ndarray, b_stat: np.ndarray, b_drift: np.ndarray, tc: np.ndarray) -> None:
+        self.misalignment, self.bias_static, self.bias_drift, self.correlation_time_s = m, b_stat, b_drift, tc
+
+
+def study_unit_indep(seed: int, rack_s: float, options: FitOptions) -> dict[str, dict[str, float]]:
+    """:func:`study_unit` on recordings of the independent generator (``gen_line_indep.py``)."""
+    import gen_line_indep
+
+    u = gen_line_indep.generate_unit(seed, rack_s=rack_s)
+    truth = tuple(_Truth(t.m, t.b_stat, t.b_drift, t.tc) for t in (u.unit.accel, u.unit.gyro))
+    full = fit_session(u.full, options)
+    line = fit_joint(u.rack, u.rig, options)
+    out: dict[str, dict[str, float]] = {}
+    for name, (acc, gyr), p in (("truth", truth, None), ("full", (full.accel, full.gyro), full),
+                                ("line", (line.accel, line.gyro), line)):
+        out[name] = {"pose": pose_rms_mm(acc, u.val_full), "rate": worst_rate_pct(gyr, u.val_full),
+                     "minute": first_minute_mm(acc, u.val_full), "gyro_hour": gyro_hour_dps(gyr, u.val_hour)}
+        if p is not None:
+            out[name]["gyro_tc_resolved"] = float(np.isfinite(p.gyro.correlation_time_s).sum())
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--units", type=int, default=30, help="simulated units for the accuracy part")
@@ -190,10 +264,39 @@ def main() -> None:
     ap.add_argument("--rig-units", type=int, nargs="*", default=[1, 4, 16], help="N for the rig-time part (none: skip)")
     ap.add_argument("--scale", type=float, default=30.0)
     ap.add_argument("--max-frames", type=float, default=12000.0)
+    ap.add_argument("--parts", nargs="+", default=["rig", "accuracy", "indep", "predict", "throughput"],
+                    choices=["rig", "accuracy", "indep", "predict", "throughput", "overhead"])
+    ap.add_argument("--overhead-scales", type=float, nargs="+", default=[30.0, 5.0])
+    ap.add_argument("--predict-units", type=int, default=20)
+    ap.add_argument("--predict-seed0", type=int, default=910000)
+    ap.add_argument("--rack-slots", type=int, default=64)
+    ap.add_argument("--line-rig-units", type=int, default=16)
+    ap.add_argument("--throughput-rate", type=int, default=10, help="sample rate of the throughput run (Hz)")
     args = ap.parse_args()
 
     t0 = time.monotonic()
-    if args.rig_units:
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    if "predict" in args.parts:
+        import line_predict
+
+        limits = load_limits()
+        seeds = [args.predict_seed0 + 1000 * i for i in range(args.predict_units)]
+        rows = line_predict.compare(LinePlan(rack_s=args.rack_s, rig=line_rig(0.0)),
+                                    FitOptions(tc_range_s=dict(limits.correlation_time_s)), seeds)
+        line_predict.print_table(rows, len(seeds))
+    if "throughput" in args.parts:
+        import line_throughput
+
+        from station.kernel.line_plan import load_line_plan_file
+
+        lf = load_line_plan_file(None)
+        lf = replace(lf, plan=replace(lf.plan, rack_s=args.rack_s))
+        run = line_throughput.simulate(lf, rack_slots=args.rack_slots, rig_units=args.line_rig_units,
+                                       rate_hz=args.throughput_rate, max_frames=args.max_frames)
+        line_throughput.print_table(lf, run, args.throughput_rate)
+    if "overhead" in args.parts:
+        overhead(args.overhead_scales)
+    if args.rig_units and "rig" in args.parts:
         print("rig time (real station code, simulated rig and sensors):", flush=True)
         rows = rig_times(args.rig_units, args.scale, args.max_frames)
         print("\n| plan | " + " | ".join(f"N={n}" for n in args.rig_units) + " |")
@@ -206,24 +309,32 @@ def main() -> None:
 
     limits = load_limits()
     options = FitOptions(tc_range_s=dict(limits.correlation_time_s))
-    per: dict[str, dict[str, list[float]]] = {}
-    for i in range(args.units):
-        seed = args.seed0 + 1000 * i
-        res = study_unit(seed, args.rack_s, options)
-        for name, figs in res.items():
-            for k, v in figs.items():
-                per.setdefault(name, {}).setdefault(k, []).append(v)
-        print(f"  unit {i + 1}/{args.units} (seed {seed}): pose full {res['full']['pose']:.2f} line "
-              f"{res['line']['pose']:.2f} mm/s^2; gyro hour full {res['full']['gyro_hour']:.4f} line "
-              f"{res['line']['gyro_hour']:.4f} deg/s", flush=True)
+    for part, study, label in (("accuracy", study_unit, "station.sim"),
+                               ("indep", study_unit_indep, "the independent generator (gen_line_indep.py)")):
+        if part not in args.parts:
+            continue
+        per: dict[str, dict[str, list[float]]] = {}
+        for i in range(args.units):
+            seed = args.seed0 + 1000 * i
+            res = study(seed, args.rack_s, options)
+            for name, figs in res.items():
+                for k, v in figs.items():
+                    per.setdefault(name, {}).setdefault(k, []).append(v)
+            print(f"  {part} unit {i + 1}/{args.units} (seed {seed}): pose full {res['full']['pose']:.2f} line "
+                  f"{res['line']['pose']:.2f} mm/s^2; gyro hour full {res['full']['gyro_hour']:.4f} line "
+                  f"{res['line']['gyro_hour']:.4f} deg/s", flush=True)
+        print(f"\naccuracy on {label}, {args.units} units (seeds {args.seed0} + 1000 i), rack {args.rack_s:.0f} s:\n")
+        accuracy_table(per)
+    print(f"wall time {time.monotonic() - t0:.0f} s")
 
+
+def accuracy_table(per: dict[str, dict[str, list[float]]]) -> None:
     def med(name: str, k: str) -> float:
         return float(np.median(per[name][k]))
 
     def p90(name: str, k: str) -> float:
         return float(np.percentile(per[name][k], 90))
 
-    print(f"\naccuracy over {args.units} units (seeds {args.seed0} + 1000 i), rack {args.rack_s:.0f} s:\n")
     print("| fit | pose RMS median (mm/s^2) | vs full | worst rate error median / max (%) "
           "| first minute median (mm/s^2) | gyro bias 1st hour median / p90 (deg/s) "
           "| model-only median / p90 (deg/s) | gyro T_c resolved |")
@@ -231,13 +342,13 @@ def main() -> None:
     for name in ("truth", "full", "line"):
         resolved = (f"{np.mean(per[name]['gyro_tc_resolved']) / 3 * 100:.0f} % of axes"
                     if "gyro_tc_resolved" in per[name] else "-")
+        model = (f"{med(name, 'gyro_model'):.5f} / {p90(name, 'gyro_model'):.5f}" if "gyro_model" in per[name]
+                 else "-")
         print(f"| {name} | {med(name, 'pose'):.3f} | {med(name, 'pose') / med('full', 'pose'):.2f} | "
               f"{med(name, 'rate'):.4f} / {max(per[name]['rate']):.4f} | {med(name, 'minute'):.3f} | "
-              f"{med(name, 'gyro_hour'):.5f} / {p90(name, 'gyro_hour'):.5f} | "
-              f"{med(name, 'gyro_model'):.5f} / {p90(name, 'gyro_model'):.5f} | {resolved} |")
+              f"{med(name, 'gyro_hour'):.5f} / {p90(name, 'gyro_hour'):.5f} | {model} | {resolved} |")
     g = (med("full", "gyro_hour") / med("line", "gyro_hour"), p90("full", "gyro_hour") / p90("line", "gyro_hour"))
     print(f"\ngyro bias over the first hour, full / line: median {g[0]:.2f}x, p90 {g[1]:.2f}x")
-    print(f"wall time {time.monotonic() - t0:.0f} s")
 
 
 if __name__ == "__main__":

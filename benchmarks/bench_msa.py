@@ -1,13 +1,15 @@
 """Gage R&R of the simulated station: parts x nests x repeats, nest errors on, before and after nest calibration.
 
     python benchmarks/bench_msa.py [--parts 10] [--nests 4] [--repeats 3] [--seed 0] [--scale 60]
-                                   [--nest-error 0.3] [--out DIR]
+                                   [--nest-error 0.3] [--out DIR] [--plan default|line|FILE]
 
 Runs the study twice on the in-process simulated station with the default plan: once on a rig whose nests
 carry mounting errors (``--nest-error`` deg per axis, drawn from ``--seed``) and no nest calibration, once
 after ``station nest-cal`` (a reference unit in every nest, with its "laboratory calibration": the simulated
 truth; ``--relative`` without it, the datum then the mean nest). Prints per limited parameter %GRR of the
-tolerance and of the total variation, ndc and the verdict, before and after, and the wall time. The
+tolerance and of the total variation, ndc and the verdict, before and after, and the wall time. ``--plan line``
+runs the rig part of the calibration line's short plan (``station.kernel.line_plan.line_rig_plan``), ``--plan
+FILE`` the rig part of a plan file written by ``station plan`` (``station-line-plan/1``). The
 records go to two SQLite files in ``--out`` (default: a temporary directory), so ``station msa report``
 can re-read them.
 """
@@ -18,18 +20,31 @@ import argparse
 import math
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from station.commands.msa import study_report
 from station.commands.nest_cal import describe, estimate_from_records
+from station.kernel.line_plan import line_plan_from_json, line_rig_plan
+from station.kernel.plan import RigPlan, default_plan
 from station.msa.study import StudyReport
 from station.sim.msa_study import StudyDesign, run_nest_calibration, run_study
 
 
 def _fmt(x: float | None) -> str:
     return "-" if x is None or not math.isfinite(x) else f"{x:.1f}"
+
+
+def _plan(choice: str) -> RigPlan:
+    if choice == "default":
+        return default_plan()
+    if choice == "line":
+        # the station's sequence opens with a rest (the power cycle and the stillness gate); 2 s as in
+        # ``station demo --line``
+        return replace(line_rig_plan(), rest_s=2.0)
+    return line_plan_from_json(Path(choice).read_text()).rig
 
 
 def main() -> None:
@@ -43,12 +58,17 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=None)
     ap.add_argument("--relative", action="store_true",
                     help="calibrate the nests without the reference unit's laboratory calibration (datum: mean nest)")
+    ap.add_argument("--plan", default="default",
+                    help="default (the full plan), line (the line's short rig plan) or a station plan file")
+    ap.add_argument("--station-id", default="msa-sim", help="the simulated rig's name (two studies at once need two)")
     args = ap.parse_args()
+    plan = _plan(args.plan)
     out = args.out if args.out is not None else Path(tempfile.mkdtemp(prefix="bench-msa-"))
     out.mkdir(parents=True, exist_ok=True)
     design = StudyDesign(args.parts, args.nests, args.repeats, args.seed)
     rng = np.random.default_rng(np.random.SeedSequence(args.seed, spawn_key=(77,)))
     errors = [tuple(float(v) for v in rng.normal(0.0, args.nest_error, 3)) for _ in range(args.nests)]
+    print(f"plan: {args.plan}: {plan}")
     print(f"nest mounting errors (deg): {[tuple(round(v, 3) for v in e) for e in errors]}")
     reports: dict[str, StudyReport] = {}
     for label, cal in (("before", False), ("after", True)):
@@ -56,12 +76,14 @@ def main() -> None:
         t0 = time.monotonic()
         if cal:
             serial, _, lab = run_nest_calibration(args.nests, db, seed=args.seed, scale=args.scale,
-                                                  nest_errors_deg=errors, out_dir=out / "runs")
-            cal = estimate_from_records(db, "fake-rig://msa-sim", serial, reference=None if args.relative else lab)
+                                                  nest_errors_deg=errors, out_dir=out / "runs", plan=plan,
+                                                  station_id=args.station_id)
+            cal = estimate_from_records(db, f"fake-rig://{args.station_id}", serial,
+                                        reference=None if args.relative else lab)
             for line in describe(cal):
                 print(line)
         results = run_study(design, db, label, scale=args.scale, nest_errors_deg=errors, out_dir=out / "runs",
-                            nest_calibration=cal)
+                            nest_calibration=cal, plan=plan, station_id=args.station_id)
         outcomes: dict[str, int] = {}
         for r in results:
             for u in r.units:

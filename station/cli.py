@@ -166,17 +166,29 @@ def _print_params(params: object) -> None:
         console.print(f"temperature terms: {note.status}: {note.reason}")
     nl = params.quality.scale_nonlinearity
     if nl is not None:
-        if nl.fitted:
-            from station.kernel.display import format_value
+        from station.kernel.display import format_value
 
-            k = params.gyro.scale_nonlinearity
-            k_std = params.gyro.scale_nonlinearity_std
-            parts = [f"{a} " + format_value(1e6 * k[i] * REF_RATE_RADPS, 1e6 * k_std[i] * REF_RATE_RADPS, "ppm")
-                     for i, a in enumerate("xyz") if a in nl.axes]
-            console.print("gyro scale nonlinearity u + k u|u| fitted (relative error k|u| at 200 deg/s): "
-                          + ", ".join(parts))
+        if nl.fitted:
+            parts = []
+            for name, label, power in (("scale_quadratic", "k2", 1), ("scale_cubic", "k3", 2)):
+                k, k_std = getattr(params.gyro, name), getattr(params.gyro, f"{name}_std")
+                parts += [f"{label} {a} " + format_value(1e6 * k[i] * REF_RATE_RADPS**power,
+                                                         1e6 * k_std[i] * REF_RATE_RADPS**power, "ppm")
+                          for i, a in enumerate("xyz") if k[i] != 0]
+            console.print("gyro scale nonlinearity u + k2 u^2 + k3 u^3 (IEEE 952) fitted (relative error at "
+                          "200 deg/s): " + ", ".join(parts))
         else:
             console.print(f"gyro scale nonlinearity: {nl.status}: {nl.reason}")
+    offset = params.quality.time_offset
+    if offset is not None:
+        if offset.fitted:
+            console.print("time offset (sensor lag behind the rig) fitted, applied by Algorithm 1: "
+                          + format_value(1e3 * params.time_offset_s, 1e3 * params.time_offset_std_s, "ms"))
+        elif offset.status == "not_determined":
+            console.print(f"time offset: not determined: {offset.reason}")
+        else:
+            value = format_value(1e3 * offset.estimate_s, 1e3 * offset.std_s, "ms")
+            console.print(f"time offset: {offset.status} ({value}): {offset.reason}")
 
 
 #: How ``station fit`` names the parameters whose determinability the fit states.
@@ -201,8 +213,11 @@ def fit(
         help="temperature terms: auto (when the recording's temperature course separates them from the warm-up), "
              "off, require (not for a rig-free fit)")] = "auto",
     scale_nonlinearity: Annotated[str, typer.Option(
-        help="gyro scale nonlinearity y = u + k u|u|: auto (on the axes whose rate steps hold two or more rate "
-             "magnitudes, kept where significant), off")] = "auto",
+        help="gyro scale nonlinearity y = u + k2 u^2 + k3 u^3 (IEEE 952): auto (k3 where the rate steps hold two or "
+             "more rate magnitudes, k2 where they also hold both signs, each kept where significant), off")] = "auto",
+    time_offset: Annotated[str, typer.Option(
+        help="the sensor's time offset behind the rig, estimated on the moves and rate ramps and applied by "
+             "Algorithm 1: auto (kept where significant), off")] = "auto",
 ) -> None:
     """Fit the parameter set of eq. (1) to a session and print it.
 
@@ -210,18 +225,22 @@ def fit(
     contradicts its own recording (goodness-of-fit test, ``quality.goodness_of_fit``; for a rig-free fit
     the leave-poses-out cross-validation): the parameters are printed, and stderr names what failed.
     """
-    from station.fit.calibrate import FitOptions, fit_session
-    from station.fit.determinability import assess
-    from station.fit.goodness import EXIT_GOODNESS, summary
-    from station.fit.rigfree_fit import RigFreeOptions, fit_rig_free, is_rig_free
     from station.kernel.limits_file import load_limits
-    from station.session import read_session
+    from station.session import check_session_file, read_session
 
     try:
         if thermal not in ("auto", "off", "require"):
             raise StationError(f"--thermal {thermal!r}: expected auto, off or require")
         if scale_nonlinearity not in ("auto", "off"):
             raise StationError(f"--scale-nonlinearity {scale_nonlinearity!r}: expected auto or off")
+        if time_offset not in ("auto", "off"):
+            raise StationError(f"--time-offset {time_offset!r}: expected auto or off")
+        check_session_file(session_path)  # a device, a huge or a foreign file: refused before the fit's imports
+        from station.fit.calibrate import FitOptions, fit_session
+        from station.fit.determinability import assess
+        from station.fit.goodness import EXIT_GOODNESS, summary
+        from station.fit.rigfree_fit import RigFreeOptions, fit_rig_free, is_rig_free
+
         limits_file = load_limits(limits) if limits is not None else None
         tc_range = dict(limits_file.correlation_time_s) if limits_file is not None else {}
         session = read_session(session_path)
@@ -232,7 +251,8 @@ def fit(
             raise StationError("--thermal require needs rig references; the rig-free fit has no temperature terms")
         params = (fit_rig_free(session, RigFreeOptions(tc_range_s=tc_range)) if free
                   else fit_session(session, FitOptions(g_sensitivity=g_sensitivity, tc_range_s=tc_range,
-                                                       thermal=thermal, scale_nonlinearity=scale_nonlinearity)))
+                                                       thermal=thermal, scale_nonlinearity=scale_nonlinearity,
+                                                       time_offset=time_offset)))
         if limits_file is not None:  # the b_stat rule needs the limit ranges' widths
             params = assess(params, params.quality.record_end_s, limits_file.product)
     except StationError as exc:
@@ -398,8 +418,20 @@ def run_station(
                                                 "35 degC) instead of the room-temperature sequence")] = None,
     yes: Annotated[bool, typer.Option("--yes", "-y", help="confirm the station's prompts (load, close the lid, "
                                       "unload) without waiting for Enter: CI, a fixture loaded by a robot")] = False,
+    plan_file: Annotated[Path | None, typer.Option("--plan", help="a line plan written by `station plan` "
+                                                   "(station-line-plan/1): run the line's rig role on units that "
+                                                   "soaked in the rack (their recordings in --db)")] = None,
+    back_to_rack: Annotated[bool, typer.Option("--back-to-rack", help="with --plan: a unit whose power was "
+                                               "interrupted since the rack goes back to the rack (default: it "
+                                               "gets the full plan)")] = False,
 ) -> None:
     """Run the calibration sequence against any rig and sensors (real ones, or `station sim`).
+
+    With ``--plan`` (a line plan file written by ``station plan``) this is the line's rig role: the units come
+    powered from the soak rack, each unit's rack recording is found by serial in the database, the rig runs the
+    plan's rig part, each unit is fitted over both recordings; a unit whose power was interrupted since the rack
+    is REFUSED with the reason (full plan or back to the rack). The run's record names the plan file and its
+    SHA-256.
 
     The station prompts at the terminal before the rig moves (load the units into their nests, close the lid)
     and after the verdicts (unload, each nest with its verdict); Enter confirms, n and Enter cancels (ABORTED,
@@ -422,6 +454,7 @@ def run_station(
 
     from station.compose import Station, abort_on_signals
     from station.kernel.display import limits_identity
+    from station.kernel.line_plan import load_line_plan_file
     from station.kernel.plan import default_plan
     from station.kernel.thermal_plan import default_thermal_plan
     from station.sequence.prompts import AutoConfirm
@@ -439,9 +472,15 @@ def run_station(
     runners: list[SequenceRunner] = []
     console = Console()
     try:
+        line_file = load_line_plan_file(plan_file) if plan_file is not None else None
+        if line_file is not None:
+            rig_part = line_file.plan.rig
+            rig_part = replace(rig_part, gravity_mps2=gravity) if gravity is not None else rig_part
+            rig_part = replace(rig_part, latitude_deg=latitude) if latitude is not None else rig_part
+            line_file = replace(line_file, plan=replace(line_file.plan, rig=rig_part))
         cfg = station_config(config, rig, sensor, station_id=name, db_url=db, out_dir=out, clock_scale=scale,
                              plan=plan, operator=operator, lot=lot, limits_path=limits, provision=True,
-                             chamber_url=chamber, thermal=thermal)
+                             chamber_url=chamber, thermal=thermal, line=line_file, back_to_rack=back_to_rack or None)
         display = ProgressDisplay(console, list(cfg.sensor_urls), cfg.clock_scale)
         prompter = AutoConfirm("--yes") if yes else TerminalOperator(console, cfg.operator)
         with abort_on_signals(lambda: runners[-1] if runners else None):
@@ -464,6 +503,9 @@ def run_station(
         from station.terminal import provisioning_table
 
         console.print(provisioning_table(station.provisioner))
+    if cfg.line is not None:
+        console.print(f"plan {cfg.line.version}, sha256 {cfg.line.sha256}", soft_wrap=True)
+        console.print(f"rig time per unit: {result.sequence_s / max(len(result.units), 1):.0f} s")
     timing = getattr(runners[-1].sequence, "timing", None) if runners else None
     if timing is not None:
         console.print(f"cycle time per batch of {timing.units}: {timing.cycle_s / 60:.1f} min (sequence incl. soaks "

@@ -33,6 +33,7 @@ from station.kernel.clock import Clock, SimClock, WallClock
 from station.kernel.errors import StationError, path_problem, shorten
 from station.kernel.golden import GoldenCheck
 from station.kernel.limits_file import LimitsFile, load_limits
+from station.kernel.line_plan import LinePlanFile
 from station.kernel.nest_frames import NestCalibration
 from station.kernel.plan import RigPlan, default_plan
 from station.kernel.thermal_plan import ThermalPlan
@@ -98,6 +99,12 @@ class StationConfig:
             check on this station in the current shift, and never after a golden check failed
             (:mod:`station.kernel.golden`); every golden unit a run measures is checked and recorded.
         shifts: the shift calendar (``"A=06:00,B=14:00,C=22:00"``, UTC starts) for ``golden``.
+        line: run the calibration line's rig role with this plan file (``station plan``): the units soaked in
+            the line's rack, their rack recordings are in this database (found by serial), the rig runs the
+            plan's rig part (which becomes ``plan``), each unit is fitted over both recordings; a unit whose
+            power was interrupted since the rack is REFUSED with the reason (it gets the full plan, or goes
+            back to the rack with ``back_to_rack``). The run's record names the plan file and its SHA-256.
+        back_to_rack: see ``line``.
     """
 
     rig_url: str
@@ -121,6 +128,8 @@ class StationConfig:
     nest_calibration: bool = True
     golden: str = "off"
     shifts: str = "A=06:00,B=14:00,C=22:00"
+    line: LinePlanFile | None = None
+    back_to_rack: bool = False
 
     @property
     def nest_rig(self) -> str:
@@ -133,6 +142,12 @@ class StationConfig:
             object.__setattr__(self, "plan", self.thermal.base)
             if not self.chamber_url:
                 raise ConfigError("a thermal plan needs a chamber URL")
+        if self.line is not None:
+            object.__setattr__(self, "plan", self.line.rig_plan())
+            if self.thermal is not None:
+                raise ConfigError("the line's rig role runs at room temperature: no thermal plan with a line plan")
+            if not self.record:
+                raise ConfigError("the line's rig role reads the rack recordings from the database (record = true)")
         sid = self.station_id
         if not (isinstance(sid, str) and 1 <= len(sid) <= 16 and sid.isascii() and sid.isprintable()):
             raise ConfigError(f"station id {sid!r}: 1 to 16 printable ASCII characters (it is written into images)")
@@ -442,9 +457,11 @@ class Station:
         self.subscribers: list[Subscriber] = list(subscribers)
         self.recorder: Recorder | None = None
         if config.record:
+            context = run_context(config.plan, self.limits, config.operator, config.lot)
+            if config.line is not None:  # the record names the plan file the units were calibrated with
+                context = replace(context, sequence_version=config.line.version, sequence_hash=config.line.sha256)
             self.recorder = attach_recorder(
-                self.subscribers.append, config.db_url, station_name=config.station_id,
-                operator=config.operator, plan=config.plan, limits=self.limits, lot=config.lot,
+                self.subscribers.append, config.db_url, station_name=config.station_id, context=context,
             )
         if admit is None and self.recorder is not None:
             from station.store.queries import retest_gate
@@ -564,17 +581,39 @@ class Station:
                     chamber.close()
             nests = self.nests()
             self.provisioner = self._provisioner(hw, nests)
-            runner = SequenceRunner(
-                hw.rig, hw.sensors, self.clock, plan=c.plan, options=self.options, limits=self.limits.product,
-                out_dir=c.out_dir, station=c.station_id, rig_name=hw.rig_name, sensor_urls=list(c.sensor_urls),
-                subscribers=self.subscribers, provisioner=self.provisioner, admit=self.admit,
-                fit_options=self.fit_options, nests=nests, operator=self.prompter, expected_serials=serials,
-            )
+            if c.line is not None:
+                runner = self._line_runner(hw, nests, serials)
+            else:
+                runner = SequenceRunner(
+                    hw.rig, hw.sensors, self.clock, plan=c.plan, options=self.options, limits=self.limits.product,
+                    out_dir=c.out_dir, station=c.station_id, rig_name=hw.rig_name, sensor_urls=list(c.sensor_urls),
+                    subscribers=self.subscribers, provisioner=self.provisioner, admit=self.admit,
+                    fit_options=self.fit_options, nests=nests, operator=self.prompter, expected_serials=serials,
+                )
             if on_runner is not None:
                 on_runner(runner)
             result = runner.run()
         self._check_golden_units(result)
         return result
+
+    def _line_runner(self, hw: Hardware, nests: NestCalibration | None,
+                     serials: Mapping[int, str] | None) -> SequenceRunner:
+        """The line's rig role (``config.line``): its units' plans decided from their rack recordings in this
+        station's database before anything moves, each unit fitted over both recordings."""
+        from station.line.recordings import DatabaseArchive
+        from station.line.rigrole import BACK_TO_RACK, FULL, LineRigRunner
+
+        c = self.config
+        assert c.line is not None and self.recorder is not None
+        return LineRigRunner(
+            hw.rig, hw.sensors, self.clock, archive=DatabaseArchive(self.recorder.db.sessions),
+            max_transfer_s=c.line.plan.max_transfer_s, on_interruption=BACK_TO_RACK if c.back_to_rack else FULL,
+            clock_slack_s=2.0 + 0.2 * self.clock.scale,  # a simulated clock's round trips take `scale` times longer
+            plan=c.plan, options=self.options, limits=self.limits.product, out_dir=c.out_dir, station=c.station_id,
+            rig_name=hw.rig_name, sensor_urls=list(c.sensor_urls), subscribers=self.subscribers,
+            provisioner=self.provisioner, admit=self.admit, fit_options=self.fit_options, nests=nests,
+            operator=self.prompter, expected_serials=serials,
+        )
 
     def _check_golden_units(self, result: RunResult) -> None:
         """Judge every registered golden unit the run fitted against its references, and record it."""

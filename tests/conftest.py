@@ -1,9 +1,17 @@
-"""Test-wide hooks: the real-data switch (see tests/realdata.py)."""
+"""Test-wide hooks: the real-data switch (see tests/realdata.py) and a rig-lock directory per test session."""
 
 from __future__ import annotations
 
 import pytest
 import realdata
+
+
+@pytest.fixture(autouse=True)
+def _own_rig_lock_dir(tmp_path_factory: pytest.TempPathFactory, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Rig locks (flock files named after the rig URL) in this test session's own directory: two test runs on
+    one machine (or a station running beside them) never hold each other's rigs. A test may set its own."""
+    monkeypatch.setenv("STATION_LOCK_DIR", str(tmp_path_factory.getbasetemp() / "rig-locks"))
+
 
 _skipped: dict[str, int] = {}  # data set -> tests skipped for it
 REASON = "real recordings absent"

@@ -288,10 +288,11 @@ class Recording:
     session: Session
     plan: Plan
     effects: dict[str, float]
-    #: the drawn parameters of each effect, SI, in the diagnosis's candidate forms where they are per axis or per
-    #: matrix element: ``"<effect> <sensor>"`` -> array (recorded as drawn; the draws are the same as without it);
-    #: the IEEE scale terms as coefficients of the powers of ``M x`` (the diagnosis's modelled input)
-    truth: dict[str, np.ndarray] = field(default_factory=dict)
+    #: Drawn coefficients some benchmarks score against: per sensor the polynomial's k2, k3 on the physical input
+    #: (1/U, 1/U^2) and M; the time offset (s). And, keyed ``"<effect> <sensor>"``, the drawn parameters of each
+    #: effect in the diagnosis's candidate forms (SI, per axis or per matrix element; the IEEE scale terms as
+    #: coefficients of the powers of ``M x``, the diagnosis's modelled input). The draws are the same as without.
+    truth: dict[str, np.ndarray | float] = field(default_factory=dict)
 
     def write(self, path: str | Path) -> None:
         write_session(self.session, path)
@@ -337,7 +338,7 @@ def generate(seed: int, effects: dict[str, float] | None = None, plan: Plan | No
     tau = eff.get("time_offset", 0.0) * 1e-3
     r_true, w_true, al_true = motion.state(t - tau, true=True)
     f_true = plan.gravity * r_true[:, 2, :]
-    truth: dict[str, np.ndarray] = {}
+    truth: dict[str, np.ndarray | float] = {"time_offset_s": tau}
     if eff.get("lever_arm"):
         arm = rng.normal(size=3)
         arm *= eff["lever_arm"] * 1e-3 / np.linalg.norm(arm)
@@ -366,6 +367,7 @@ def generate(seed: int, effects: dict[str, float] | None = None, plan: Plan | No
         k2 = eff.get("scale_nonlinearity_even", 0.0) * rng.choice([-1.0, 1.0], 3) * rng.uniform(0.7, 1.0, 3)
         k3 = eff.get("scale_nonlinearity_odd", 0.0) * rng.choice([-1.0, 1.0], 3) * rng.uniform(0.7, 1.0, 3)
         x = x + k2 * x**2 / ref_scale + k3 * x**3 / ref_scale**2
+        truth[f"{sensor}_k2"], truth[f"{sensor}_k3"] = k2 / ref_scale, k3 / ref_scale**2
         truth[f"scale_nonlinearity_even {sensor}"] = k2 / ref_scale
         truth[f"scale_nonlinearity_odd {sensor}"] = k3 / ref_scale**2
         if eff.get("scale_asymmetry"):
@@ -390,6 +392,7 @@ def generate(seed: int, effects: dict[str, float] | None = None, plan: Plan | No
             tc = _uniform(rng, c.accel_correlation_time_s)
             sigma = _uniform(rng, c.accel_noise_std_mps2) * quiet
             lsb = 4.0 * G0 / 2**17
+        truth[f"{sensor}_m"] = m
         y = x @ m.T + b_stat
         # the diagnosis's scale terms are powers of u = M x (its modelled input through M): M (k2 x^2) = (k2 / M) u^2,
         # M (k3 x^3) = (k3 / M^2) u^3 per axis (M's diagonal; the asymmetry and the temperature scale are as drawn)

@@ -49,7 +49,7 @@ ALLOWED: dict[str, set[str]] = {
     "line": {"kernel", "session", "fit", "sensor", "rack", "sequence", "store"},
     # the composition root, its one-run-per-rig lock, and the command line
     "rig_lock": {"kernel", "store"},
-    "compose": {"kernel", "session", "fit", "rig", "chamber", "sensor", "sequence", "store", "rig_lock"},
+    "compose": {"kernel", "session", "fit", "rig", "chamber", "sensor", "sequence", "store", "rig_lock", "line"},
     "commands": NUMERICS | {"rig", "chamber", "rack", "sensor", "eeprom", "sequence", "store", "compose", "rig_lock",
                             "line"},
     "cli": NUMERICS | {"rig", "chamber", "sensor", "eeprom", "sequence", "store", "terminal", "web", "compose",
@@ -59,7 +59,8 @@ ALLOWED: dict[str, set[str]] = {
     "__init__": set(),
 }
 # the simulator's own applications (the demo and its commands) sit on top of everything
-SIM_APPS = {"station.sim.demo", "station.sim.cli", "station.sim.msa_study", "station.sim.golden_study"}
+SIM_APPS = {"station.sim.demo", "station.sim.cli", "station.sim.msa_study", "station.sim.golden_study",
+            "station.sim.line_station"}
 EVERYTHING = set(ALLOWED)
 
 

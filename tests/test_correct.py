@@ -446,3 +446,69 @@ def test_cross_correlation_basics() -> None:
     y = np.column_stack([2 * np.arange(10.0) + 1, -np.arange(10.0), np.ones(10)])
     r = cross_correlation(x, y)
     assert r[0] == pytest.approx(1.0) and r[1] == pytest.approx(-1.0) and np.isnan(r[2])
+
+
+# --- line 0 (time offset) and the IEEE 952 polynomial in line 6' ----------------------------------
+
+
+def _with_terms(params: ParameterSet, tau_s: float, k2: float = 0.0, k3: float = 0.0) -> ParameterSet:
+    import dataclasses
+
+    gyro = dataclasses.replace(params.gyro, scale_quadratic=np.array([k2, -0.5 * k2, 0.8 * k2]),
+                               scale_cubic=np.array([k3, 0.7 * k3, -k3]))
+    accel = dataclasses.replace(params.accel, scale_quadratic=np.array([0.3 * k2, 0.0, -0.2 * k2]))
+    return dataclasses.replace(params, gyro=gyro, accel=accel, time_offset_s=tau_s)
+
+
+@pytest.mark.parametrize("tau_s", [0.0037, -0.0037, -0.0231, 0.012, 0.04])
+@pytest.mark.parametrize("start_index", [0, 17])
+def test_streaming_equals_batch_with_time_offset_and_polynomial(tau_s: float, start_index: int) -> None:
+    rng = np.random.default_rng(7)
+    params = _with_terms(make_params(), tau_s, k2=2e-3, k3=-1e-3)
+    raw_a, raw_g = noisy_record(rng, 3001)
+    raw_g = raw_g + np.array([3.0, -2.0, 1.0]) * np.sin(np.arange(3001) * 0.01)[:, None]
+    s_a, s_g = stream(params, raw_a, raw_g, start_index=start_index)
+    for chunk in (64, 4096):
+        b_a, b_g = correct_batch(raw_a, raw_g, params, start_index=start_index, chunk_rows=chunk)
+        assert np.max(np.abs(s_a - b_a)) < 1e-9 and np.max(np.abs(s_g - b_g)) < 1e-9
+
+
+@pytest.mark.parametrize("tau_s", [-0.0237, 0.004])
+def test_time_offset_moves_a_ramp_onto_the_rig_time(tau_s: float) -> None:
+    """A sensor lagging (or leading) the rig by tau on a rate ramp: line 0 puts the ramp back on the rig's time
+    (exact for a straight line: linear interpolation and extrapolation are exact on it)."""
+    params = _with_terms(make_params(n=1, accel_drift=(0.0, 0.0, 0.0), gyro_drift=(0.0, 0.0, 0.0)), tau_s)
+    n = 500
+    t = np.arange(n) * TS
+    truth_g = np.column_stack([0.5 * t, -0.2 * t + 0.1, 0.3 + 0.0 * t])  # a ramp, rad/s
+    truth_a = np.tile([0.1, 0.2, 9.8], (n, 1))
+    late = truth_g.copy()
+    late[:] = np.column_stack([0.5 * (t - tau_s), -0.2 * (t - tau_s) + 0.1, 0.3 + 0.0 * t])  # sample t at rig t - tau
+    raw_a = model_output(truth_a, params.accel)
+    raw_g = model_output(late, params.gyro)
+    skip = 4  # the first samples hold the first one (no history)
+    for out_a, out_g in (stream(params, raw_a, raw_g), correct_batch(raw_a, raw_g, params)):
+        np.testing.assert_allclose(out_g[skip:], truth_g[skip:], atol=1e-12)
+        np.testing.assert_allclose(out_a, truth_a, atol=1e-12)
+    plain = _with_terms(params, 0.0)
+    _, g0 = correct_batch(raw_a, raw_g, plain)
+    assert np.max(np.abs(g0[skip:] - truth_g[skip:])) > 0.4 * abs(tau_s) * 0.5  # without it: off by about tau w'
+
+
+def test_polynomial_inverse_recovers_the_input() -> None:
+    params = _with_terms(make_params(n=1, accel_drift=(0.0, 0.0, 0.0), gyro_drift=(0.0, 0.0, 0.0)), 0.0,
+                         k2=3e-3, k3=-2e-3)
+    w = np.column_stack([np.linspace(-5.0, 5.0, 201)] * 3)  # up to 286 deg/s
+    u = w @ M_GYRO.T
+    y = u + params.gyro.scale_quadratic * u**2 + params.gyro.scale_cubic * u**3 + params.gyro.bias_static
+    a = np.tile([0.0, 0.0, 9.8], (201, 1))
+    ya = a @ M_ACCEL.T
+    ya = ya + params.accel.scale_quadratic * ya**2 + params.accel.bias_static
+    out_a, out_g = correct_batch(ya, y, params)
+    np.testing.assert_allclose(out_g, w, atol=1e-12)
+    np.testing.assert_allclose(out_a, a, atol=1e-12)
+
+
+def test_time_offset_beyond_what_line0_applies_is_refused() -> None:
+    with pytest.raises(FormatError, match="time offset"):
+        StreamingCorrector(_with_terms(make_params(), 5.5 * TS))

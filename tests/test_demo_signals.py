@@ -29,8 +29,8 @@ STATION = str(Path(sys.executable).with_name("station"))
 def test_demo_aborts_on_a_signal(tmp_path: Path, sig: signal.Signals) -> None:
     db_url = f"sqlite:///{tmp_path / 'demo.sqlite'}"
     env = {**os.environ, "STATION_LOCK_DIR": str(tmp_path / "locks")}
-    proc = subprocess.Popen([STATION, "demo", "--units", "2", "--scale", "30", "--seed", "2", "--db", db_url,
-                             "--out", str(tmp_path / "out")],
+    proc = subprocess.Popen([STATION, "demo", "--rig-only", "--units", "2", "--scale", "30", "--seed", "2",
+                             "--db", db_url, "--out", str(tmp_path / "out")],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     try:
         assert proc.stdout is not None

@@ -152,7 +152,7 @@ def test_quality_round_trip_and_old_files() -> None:
     with pytest.raises(FormatError):
         ParameterSet.from_dict(bad)
     with pytest.raises(UnsupportedVersionError):
-        ParameterSet.from_dict({**json.loads(text), "format": "station-params/3"})
+        ParameterSet.from_dict({**json.loads(text), "format": "station-params/4"})
     with pytest.raises(FormatError):
         Undetermined("accel", "noise_std", 0, "")
 

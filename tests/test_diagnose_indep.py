@@ -126,7 +126,7 @@ def test_a_mis_modelled_mean_effect_is_not_taken_for_a_random_walk(monkeypatch: 
     from station.diagnose import pose_tilt
 
     monkeypatch.setattr(pose_tilt, "choose_variant",
-                        lambda b, sd: ("segment", {"segment": pose_tilt.build_variant(b, sd, "segment")}))
+                        lambda b, sd: ("segment", pose_tilt.variant_rows(b, sd, "segment")))
     report = diagnose(indepgen.generate(101, {"pose_tilt": 0.1}).session, warmup_tc_s=TC).to_json()
     assert "bias_random_walk" not in {e for e, _ in _named(report)}
     walk = [r for r in report["rejected"] if r["effect"] == "bias_random_walk" and "consistency" in r]

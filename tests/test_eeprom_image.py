@@ -96,8 +96,8 @@ def _recrc(b: bytearray) -> bytes:
 
 
 def test_refusals_name_the_reason() -> None:
-    with pytest.raises(ImageVersionError, match="version 3") as info:  # layout 2 exists since issue 18
-        decode_image(DATA[:4] + struct.pack("<H", 3) + DATA[6:])
+    with pytest.raises(ImageVersionError, match="version 4") as info:  # layouts 2 and 3 exist
+        decode_image(DATA[:4] + struct.pack("<H", 4) + DATA[6:])
     assert isinstance(info.value, UnsupportedVersionError) and isinstance(info.value, FormatError)
     with pytest.raises(ImageLengthError, match="491 bytes"):
         decode_image(DATA[:-1])

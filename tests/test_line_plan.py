@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import hashlib
 import json
 from dataclasses import replace
+from pathlib import Path
 
 import pytest
 
@@ -13,6 +15,7 @@ from station.kernel.line_plan import (
     default_line_plan,
     line_plan_from_json,
     line_plan_to_json,
+    load_line_plan_file,
 )
 from station.kernel.plan import PlanError
 
@@ -61,3 +64,22 @@ def test_the_designer_predicts_from_the_joint_fit_and_picks_the_shortest_plan_me
     assert t.rig_per_unit_s == pytest.approx(best.rig_s / 16)
     assert t.rack_units_per_h == pytest.approx(64 * 3600.0 / 1800.0)
     assert t.line_units_per_h == min(t.rig_units_per_h, t.rack_units_per_h)
+
+
+def test_station_run_refuses_a_plan_file_of_another_version(tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from station.cli import app
+
+    doc = json.loads(line_plan_to_json(default_line_plan()))
+    bad = tmp_path / "plan.json"
+    bad.write_text(json.dumps({**doc, "format": "station-line-plan/9"}))
+    out = CliRunner().invoke(app, ["run", "--rig", "fake-rig://1", "--sensor", "fake-sensor://1", "--plan", str(bad),
+                                   "--db", f"sqlite:///{tmp_path / 'x.sqlite'}", "--yes"])
+    assert out.exit_code == 2 and "station-line-plan/9" in out.output and "Traceback" not in out.output
+    good = tmp_path / "good.json"
+    good.write_text(line_plan_to_json(default_line_plan()))
+    loaded = load_line_plan_file(good)
+    assert loaded.name == "good.json" and loaded.plan == default_line_plan()
+    assert loaded.sha256 == hashlib.sha256(good.read_bytes()).hexdigest()
+    assert loaded.rig_plan().rest_s == 2.0

@@ -131,9 +131,11 @@ def test_records_tell_the_run(done: Done) -> None:
     assert started == [s.name for s in steps] == [r.name for r in finished]
     assert all(r.ok and r.units_active == 2 for r in finished)
     gates = [m.measurement for m in recs if isinstance(m, Measured) and m.step != "limits"]
-    # link gates on every step, stillness + gravity on rest and poses, rate gates on rate steps
-    per_unit = sum(2 + (3 if s.kind in (Kind.REST, Kind.POSE) else 2) for s in steps)
+    # link gates and the station's timing gates (rig settled, clock rate, frame lateness) on every step,
+    # stillness + gravity on rest and poses, rate gates on rate steps
+    per_unit = sum(2 + 3 + (3 if s.kind in (Kind.REST, Kind.POSE) else 2) for s in steps)
     assert len(gates) == 2 * per_unit and all(m.passed for m in gates)
+    assert {m.name for m in gates} >= {"rig_settled_fraction", "sensor_clock_rate", "frame_lateness"}
     ratios = [m.value for m in gates if m.name == "gravity_ratio"]
     assert min(ratios) > 0.95 and max(ratios) < 1.05
     limits = [m.measurement for m in recs if isinstance(m, Measured) and m.step == "limits"]

@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from station.kernel.errors import SessionFormatError, StationError
-from station.session import Session, format_session, parse_session, read_session
+from station.session import Session, check_session_file, format_session, parse_session, read_session
 from station.session.line_source import MAX_LINE_BYTES
 from station.session.session_limits import (
     DEFAULT_MAX_BYTES,
@@ -192,3 +192,44 @@ def test_environment_limit_reaches_read_session(tmp_path: Path, monkeypatch: pyt
     monkeypatch.setenv(MAX_ROWS_ENV, "2")
     with pytest.raises(SessionLimitError, match="more than 2 data rows"):
         read_session(path)
+
+
+# --------------------------------------------------------------------------- the check before a command's imports
+
+
+def _refusal(read: object, path: Path | str, limits: SessionLimits | None = None) -> str:
+    with pytest.raises(SessionFormatError) as info:
+        read(path, limits=limits)  # type: ignore[operator]
+    return str(info.value)
+
+
+def test_the_check_before_the_imports_refuses_as_the_reader_does(tmp_path: Path) -> None:
+    """``check_session_file`` (what ``station fit`` and ``diagnose`` call before importing the fit) refuses what
+    the reader refuses before the data rows, with the reader's message, and passes a good file."""
+    sparse = tmp_path / "sparse.csv"
+    with sparse.open("wb") as f:
+        f.truncate(2 * 2**30)
+    foreign = tmp_path / "foreign.csv"
+    foreign.write_text("time,ax,ay\n0,1,2\n")
+    no_header = tmp_path / "no_header.csv"
+    no_header.write_text("# imu-session: 1\n# serial: X\n")
+    cases: list[tuple[Path | str, SessionLimits | None]] = [
+        (sparse, None), (sparse, SessionLimits(max_bytes=4 * 2**30)), (foreign, None), (no_header, None),
+        (tmp_path, None),
+    ]
+    if os.path.exists("/dev/zero"):
+        cases.append(("/dev/zero", None))
+    for path, limits in cases:
+        expected = _refusal(read_session, path, limits)
+        assert _refusal(check_session_file, path, limits) == expected
+    good = tmp_path / "good.csv"
+    good.write_text(format_session(synthetic_session()))
+    check_session_file(good)  # no error
+    # the data rows are the reader's: a bad row passes the check and is refused by the reader
+    lines = format_session(synthetic_session()).splitlines()
+    lines[-3] = lines[-3].replace(",", ";", 1)
+    bad_row = tmp_path / "bad_row.csv"
+    bad_row.write_text("\n".join(lines) + "\n")
+    check_session_file(bad_row)
+    with pytest.raises(SessionFormatError):
+        read_session(bad_row)

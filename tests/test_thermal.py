@@ -83,8 +83,8 @@ def test_parameter_set_v2_round_trip_and_v1_still_loads() -> None:
     assert not old.compensates_temperature and old.thermal.status == "absent"
     assert not np.any(old.accel.temp_bias_coeff) and np.isnan(old.reference_temperature_degc)
     np.testing.assert_array_equal(old.accel.misalignment, p.accel.misalignment)
-    with pytest.raises(UnsupportedVersionError, match="station-params/3"):
-        ParameterSet.from_dict({**doc, "format": "station-params/3"})
+    with pytest.raises(UnsupportedVersionError, match="station-params/4"):
+        ParameterSet.from_dict({**doc, "format": "station-params/4"})
 
 
 # --- Algorithm 1 ------------------------------------------------------------------------------------

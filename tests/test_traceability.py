@@ -113,8 +113,16 @@ def test_lot_is_a_cli_option(monkeypatch: pytest.MonkeyPatch) -> None:
         raise StationError("stub")
 
     monkeypatch.setattr(station.sim.demo, "run_demo", demo_stub)
-    out = RUN.invoke(app, ["demo", "--lot", "LOT-43"])
+    out = RUN.invoke(app, ["demo", "--rig-only", "--lot", "LOT-43"])
     assert out.exit_code == 2 and seen["demo"] == "LOT-43"
+
+    def line_stub(*_: Any, **kw: Any) -> Any:
+        seen["line"] = kw["lot"]
+        raise StationError("stub")
+
+    monkeypatch.setattr(station.sim.demo, "run_line_demo", line_stub)
+    out = RUN.invoke(app, ["demo", "--lot", "LOT-44"])
+    assert out.exit_code == 2 and seen["line"] == "LOT-44"
 
 
 def test_a_unit_scrapped_during_its_run_is_not_provisioned() -> None:

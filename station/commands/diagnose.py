@@ -112,6 +112,8 @@ def _print_finding(f: Finding) -> None:
     if f.calibration is not None:
         typer.echo(f"    calibration: {'compensates it' if f.calibration.compensated else 'does not compensate it'}: "
                    f"{f.calibration.note}")
+        if f.calibration.gain is not None:
+            typer.echo(f"    {f.calibration.gain.describe()}")
     if f.rerun is not None:
         r = f.rerun
         typer.echo(f"    simulator re-run, block RMS per axis: {list(r.rms_base)} -> {list(r.rms_with_this_effect)} "
@@ -184,16 +186,18 @@ def diagnose(
 
     from station.commands.output import check_output
     from station.commands.progress import stderr_progress
-    from station.diagnose.locator import TABLE1_DRIFT, DriftClass
-    from station.diagnose.report import diagnose as run_diagnosis
-    from station.diagnose.report import save_figure
-    from station.fit.boundary import numerics
     from station.kernel.limits_file import load_limits
-    from station.session import read_session
+    from station.session import check_session_file, read_session
 
     try:
         if plot is not None:
             check_output(plot, inputs=[session_path], suffix=".png", what="--plot")
+        check_session_file(session_path)  # a device, a huge or a foreign file: refused before the diagnosis's imports
+        from station.diagnose.locator import TABLE1_DRIFT, DriftClass
+        from station.diagnose.report import diagnose as run_diagnosis
+        from station.diagnose.report import save_figure
+        from station.fit.boundary import numerics
+
         limits_file = load_limits(limits) if limits is not None else None
         warmup_tc = limits_file.correlation_time_s if limits_file is not None else None
         drift = DriftClass.from_limits(limits_file) if limits_file is not None else TABLE1_DRIFT

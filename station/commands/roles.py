@@ -5,32 +5,23 @@ for ``--rack-s`` and stores the recordings in the database (``rack_recordings``)
 ``station line rig`` runs the line's rig plan (``--plan`` file, default ``line_rig_plan()``) for the units on
 the rig: each unit's plan is decided from its rack recording (found by serial) and what it reports now; a unit
 that lost power is refused with the reason (it gets the full plan, ``station run``, or goes back to the rack);
-the others are fitted over both recordings. See docs/line.md. The rig run is not recorded in the database's
-run tables yet (its session CSVs and parameter JSONs go to ``--out``), and it does not take the rig lock.
+the others are fitted over both recordings. It is ``station run --plan`` (the composition root's line role): it
+takes the rig lock and records the run in the database's run tables with the plan file and its SHA-256. See
+docs/line.md.
 """
 
 from __future__ import annotations
 
-from dataclasses import replace
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
 from station.commands.common_options import DbOption, refuse
-from station.compose import make_clock
-from station.fit.calibrate import FitOptions
 from station.kernel.errors import StationError
-from station.kernel.limits_file import load_limits
-from station.kernel.line_plan import default_line_plan, line_plan_from_json
-from station.line.recordings import DatabaseArchive
-from station.line.rigrole import BACK_TO_RACK, FULL, LineRigRunner
-from station.line.soak import SoakRack
-from station.rack.board import RelayBoard
-from station.rig import open_rig, rig_client_options
-from station.sensor import open_sensor
-from station.sequence.options import SequenceOptions
-from station.store.db import open_database
+
+# The roles' machinery (compose, the line, the store, the fit: most of a second of imports) is imported in the
+# command that runs, not when the command line starts: every `station` command builds this app.
 
 line_app = typer.Typer(no_args_is_help=True, help="The calibration line: soak rack and rig roles.")
 
@@ -48,6 +39,13 @@ def rack_command(
     db: DbOption = None,
 ) -> None:
     """Soak the units of the given slots and store their recordings (exit 0: every slot recorded, 2 otherwise)."""
+    from station.compose import make_clock
+    from station.line.recordings import DatabaseArchive
+    from station.line.soak import SoakRack
+    from station.rack.board import RelayBoard
+    from station.sensor import open_sensor
+    from station.store.db import open_database
+
     clock = make_clock(scale)
     try:
         database = open_database(db)
@@ -88,37 +86,28 @@ def rig_command(
     scale: Annotated[float, typer.Option(min=0.1, help="clock scale (1: real time)")] = 1.0,
     db: DbOption = None,
 ) -> None:
-    """Run the line's rig plan on the units that soaked; exit codes as ``station run``'s."""
-    clock = make_clock(scale)
+    """Run the line's rig plan on the units that soaked (``station run --plan`` without prompts): the rig lock,
+    the run recorded in the database's run tables with the plan file and its SHA-256, every PASS unit's EEPROM
+    written and verified; exit codes as ``station run``'s."""
+    from station.compose import Station, StationConfig
+    from station.kernel.line_plan import load_line_plan_file
+    from station.sequence.runner import SequenceRunner
+
     try:
-        line_plan = line_plan_from_json(plan.read_text()) if plan is not None else default_line_plan()
-        rig_plan = replace(line_plan.rig, rest_s=max(line_plan.rig.rest_s, 2.0))
-        lim = load_limits(limits)
-        database = open_database(db)
-        sensors = [open_sensor(url, clock) for url in sensor]
-        try:
-            rig_client = open_rig(rig, clock, **rig_client_options(scale))
-            try:
-                runner = LineRigRunner(
-                    rig_client, sensors, clock, archive=DatabaseArchive(database.sessions), plan=rig_plan,
-                    options=SequenceOptions().for_scale(scale), limits=lim.product, out_dir=out, station=station,
-                    fit_options=FitOptions(tc_range_s=dict(lim.correlation_time_s)),
-                    max_transfer_s=line_plan.max_transfer_s, on_interruption=BACK_TO_RACK if back_to_rack else FULL,
-                    clock_slack_s=2.0 + 0.2 * scale,  # a simulated clock's round trips take `scale` times longer
-                )
-                for serial, d in runner.decisions.items():
-                    typer.echo(f"{serial}: {d.plan}{' (' + d.reason + ')' if d.reason else ''}")
-                result = runner.run()
-            finally:
-                rig_client.close()
-        finally:
-            for s in sensors:
-                s.close()
-            database.close()
-    except (StationError, OSError) as exc:
-        raise refuse(exc if isinstance(exc, StationError) else StationError(str(exc))) from None
+        config = StationConfig(rig, tuple(sensor), station_id=station, db_url=db, limits_path=limits, out_dir=out,
+                               clock_scale=scale, provision=True, line=load_line_plan_file(plan),
+                               back_to_rack=back_to_rack)
+        runners: list[SequenceRunner] = []
+        result = Station(config).run(on_runner=runners.append)
+    except StationError as exc:
+        raise refuse(exc) from None
+    decisions = getattr(runners[-1], "decisions", {}) if runners else {}
+    for serial, d in decisions.items():
+        typer.echo(f"{serial}: {d.plan}{' (' + d.reason + ')' if d.reason else ''}")
     for u in result.units:
         typer.echo(f"slot {u.slot} {u.serial}: {u.outcome.value}{' - ' + u.message if u.message else ''}")
+    assert config.line is not None
+    typer.echo(f"plan {config.line.version}, sha256 {config.line.sha256}")
     typer.echo(f"rig time per unit: {result.sequence_s / max(len(result.units), 1):.0f} s")
     raise typer.Exit(result.outcome.exit_code)
 

@@ -53,7 +53,7 @@ from functools import lru_cache
 import numpy as np
 from scipy.linalg.blas import dgemm
 
-from station.correct.streaming import CorrectionConstants, compensate_extended
+from station.correct.streaming import CorrectionConstants, compensate_extended, shift_block
 from station.kernel.parameters import ParameterSet
 
 DEFAULT_CHUNK_ROWS = 16384
@@ -365,6 +365,9 @@ def correct_batch(
     start_index = int(start_index)
     c = CorrectionConstants.from_params(params)
     total = a.shape[0]
+    if c.shift[0]:  # line 0: the raw input onto the rig's time (the first row held before itself)
+        x = shift_block(c, np.hstack([a, w]))
+        a, w = np.ascontiguousarray(x[:, :3]), np.ascontiguousarray(x[:, 3:])
     if c.extended:
         # line 6' is per sample and not linear: lines 4-6' directly (g_i = rho^i by pow, within rounding of the
         # streaming product), then lines 7-8 by the pipeline below with zero bias and no drift

@@ -128,6 +128,9 @@ def two_sided_reference(
     t = np.asarray(t_s, dtype=np.float64)
     if raw.shape != (t.shape[0], 6):
         raise ValueError(f"expected (n, 3), (n, 3), (n,) inputs, got raw {raw.shape}, t {t.shape}")
+    if params.time_offset_s != 0.0 and len(t):  # the time offset, two-sided: linear interpolation at i + tau/T
+        pos = np.arange(len(t)) + params.time_offset_s / params.sample_period_s
+        raw = np.column_stack([np.interp(pos, np.arange(len(t)), raw[:, j]) for j in range(6)])
     tc = np.concatenate([params.accel.correlation_time_s, params.gyro.correlation_time_s])
     active = c.bias_drift != 0
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):

@@ -16,6 +16,24 @@ reference (see :mod:`station.kernel.parameters`):
               u = 2 v / (1 + sqrt(1 + 4 k |v|))                                       inverse of u + k u|u|
               x_temp,j = u / (1 + s_1 dT + s_2 dT^2 + s_3 dT^3)                       temperature scale
 
+With the IEEE Std 952 polynomial ``y = u + k u|u| + k2 u^2 + k3 u^3`` (``station-params/3``: k2, k3 non-zero)
+the inverse is three Newton steps from u = v (:func:`invert_scale`; for |k u|, |k2 u|, |k3 u^2| < 0.1 the error
+after them is below 1e-12 u): the same operations, in the same order, in the streaming and the batch code.
+
+Line 0 (``station-params/3`` with a time offset tau, the sensor's lag behind the rig in samples s = tau/T_sampl):
+the raw input is moved onto the rig's time, ``z_i = x~ at sample position i + s``, by a straight line through
+two raw samples (:func:`shift_taps`):
+
+    lead (s < 0):  linear interpolation between the two samples that bracket i + s, both in the past: a
+                   delay line of d = ceil(-s) + ... samples, causal;
+    lag  (s > 0):  the future is not available to a causal corrector: linear extrapolation along the line
+                   through x~_(i-1) and x~_i, z_i = x~_i + s (x~_i - x~_(i-1)); its noise is averaged by line 7
+                   (the variance of eq. 6's output grows by (2 s^2 + 2 s) / n^2 only). At most
+                   :data:`MAX_LAG_SAMPLES` samples of lag are applied; a set with more is refused.
+
+A sample the line needs from before the corrector's first sample is that first sample (held). Lines 4-8 then
+run on z. A set without a time offset skips line 0.
+
 A set without them (every coefficient zero) runs the plain lines 4-8, bit for bit as before.
 
 Conventions (shared with :mod:`station.correct.batch`):
@@ -40,12 +58,55 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from station.kernel.errors import FormatError
-from station.kernel.parameters import ParameterSet, TriadParams
+from station.kernel.parameters import MAX_LAG_SAMPLES, MAX_LEAD_SAMPLES, ParameterSet, TriadParams
 
 CHANNELS: tuple[str, ...] = ("ax", "ay", "az", "gx", "gy", "gz")
 
 # A misalignment matrix whose condition number exceeds this cannot be inverted usefully.
 _MAX_CONDITION = 1e10
+#: Newton steps of the polynomial's inverse (line 6').
+NEWTON_STEPS = 3
+
+
+def shift_taps(time_offset_s: float, sample_period_s: float) -> tuple[int, float, float]:
+    """Line 0's two taps for the time offset: ``z_i = a x_(i-d) + b x_(i-d+1)``; returns (d, a, b), with d = 0
+    for no shift. Raises :class:`FormatError` for an offset beyond :data:`MAX_LAG_SAMPLES` /
+    :data:`MAX_LEAD_SAMPLES`."""
+    s = float(time_offset_s) / float(sample_period_s)
+    if not math.isfinite(s):
+        raise FormatError(f"parameter set: time offset {time_offset_s!r} s is not finite; cannot correct")
+    if s == 0.0:
+        return 0, 0.0, 1.0
+    if s > MAX_LAG_SAMPLES or s < -MAX_LEAD_SAMPLES:
+        raise FormatError(f"parameter set: time offset {time_offset_s:g} s ({s:.3g} samples) is beyond what "
+                          f"Algorithm 1 applies ({MAX_LAG_SAMPLES:g} samples of lag, {MAX_LEAD_SAMPLES:g} of lead)")
+    if s > 0.0:  # lag: extrapolate along x_(i-1) -> x_i
+        return 1, -s, 1.0 + s
+    m = math.floor(s)  # lead: interpolate between x_(i+m) and x_(i+m+1), both in the past
+    f = s - m
+    return -m, 1.0 - f, f
+
+
+def invert_scale(v: float, k: float, k2: float, k3: float) -> float:
+    """u with ``u + k u|u| + k2 u^2 + k3 u^3 = v``: :data:`NEWTON_STEPS` Newton steps from u = v."""
+    u = v
+    for _ in range(NEWTON_STEPS):
+        au = abs(u)
+        f = u + k * u * au + k2 * u * u + k3 * u * u * u - v
+        d = 1.0 + 2.0 * k * au + 2.0 * k2 * u + 3.0 * k3 * u * u
+        u = u - f / d
+    return u
+
+
+def invert_scale_array(v: np.ndarray, k: np.ndarray, k2: np.ndarray, k3: np.ndarray) -> np.ndarray:
+    """:func:`invert_scale` over a block (n, 6), elementwise, the same operations in the same order."""
+    u = v
+    for _ in range(NEWTON_STEPS):
+        au = np.abs(u)
+        f = u + k * u * au + k2 * u * u + k3 * u * u * u - v
+        d = 1.0 + 2.0 * k * au + 2.0 * k2 * u + 3.0 * k3 * u * u
+        u = u - f / d
+    return u
 
 
 def _triad_inverse(triad: TriadParams, name: str) -> np.ndarray:
@@ -88,6 +149,8 @@ class CorrectionConstants:
         reference_temperature_degc: T_ref (degC) of the temperature terms; NaN without them.
         temp_bias: c_1..c_3 per channel, (6, 3) (m/s^2/K^j, rad/s/K^j); temp_scale: s_1..s_3 (1/K^j), (6, 3).
         nonlinearity: k of ``u + k u|u|`` per channel (1/U), (6,).
+        quadratic, cubic: k2 (1/U), k3 (1/U^2) of the IEEE 952 polynomial per channel, (6,).
+        shift: line 0's taps (d, a, b) for the time offset (:func:`shift_taps`); d = 0: no shift.
         extended: line 6' is active (a temperature term or a nonlinearity is non-zero).
     """
 
@@ -102,10 +165,18 @@ class CorrectionConstants:
     temp_bias: np.ndarray = field(default_factory=lambda: np.zeros((6, 3)))
     temp_scale: np.ndarray = field(default_factory=lambda: np.zeros((6, 3)))
     nonlinearity: np.ndarray = field(default_factory=lambda: np.zeros(6))
+    quadratic: np.ndarray = field(default_factory=lambda: np.zeros(6))
+    cubic: np.ndarray = field(default_factory=lambda: np.zeros(6))
+    shift: tuple[int, float, float] = (0, 0.0, 1.0)
 
     @property
     def extended(self) -> bool:
-        return self.uses_temperature or bool(np.any(self.nonlinearity != 0))
+        return self.uses_temperature or bool(np.any(self.nonlinearity != 0)) or self.polynomial
+
+    @property
+    def polynomial(self) -> bool:
+        """The IEEE 952 polynomial (k2 or k3 non-zero): line 6' inverts by Newton steps."""
+        return bool(np.any(self.quadratic != 0) or np.any(self.cubic != 0))
 
     @property
     def uses_temperature(self) -> bool:
@@ -130,7 +201,10 @@ class CorrectionConstants:
         temp_bias = np.vstack([params.accel.temp_bias_coeff, params.gyro.temp_bias_coeff]).astype(np.float64)
         temp_scale = np.vstack([params.accel.temp_scale_coeff, params.gyro.temp_scale_coeff]).astype(np.float64)
         nonlin = np.concatenate([params.accel.scale_nonlinearity, params.gyro.scale_nonlinearity]).astype(np.float64)
-        if not (np.isfinite(temp_bias).all() and np.isfinite(temp_scale).all() and np.isfinite(nonlin).all()):
+        quad = np.concatenate([params.accel.scale_quadratic, params.gyro.scale_quadratic]).astype(np.float64)
+        cubic = np.concatenate([params.accel.scale_cubic, params.gyro.scale_cubic]).astype(np.float64)
+        if not (np.isfinite(temp_bias).all() and np.isfinite(temp_scale).all() and np.isfinite(nonlin).all()
+                and np.isfinite(quad).all() and np.isfinite(cubic).all()):
             raise FormatError("parameter set: temperature or nonlinearity terms have non-finite entries; "
                               "cannot correct")
         if (np.any(temp_bias != 0) or np.any(temp_scale != 0)) and not math.isfinite(t_ref):
@@ -147,9 +221,12 @@ class CorrectionConstants:
             temp_bias=temp_bias,
             temp_scale=temp_scale,
             nonlinearity=nonlin,
+            quadratic=quad,
+            cubic=cubic,
+            shift=shift_taps(params.time_offset_s, ts),
         )
         for name in ("rho", "bias_drift", "bias_static", "accel_inverse", "gyro_inverse", "temp_bias", "temp_scale",
-                     "nonlinearity"):
+                     "nonlinearity", "quadratic", "cubic"):
             getattr(out, name).flags.writeable = False
         return out
 
@@ -168,12 +245,26 @@ def compensate_extended(c: CorrectionConstants, v: np.ndarray, temp_degc: np.nda
         b = c.temp_bias
         out -= ((b[:, 2] * dt + b[:, 1]) * dt + b[:, 0]) * dt
     k = c.nonlinearity
-    if np.any(k != 0):
+    if c.polynomial:
+        out = invert_scale_array(out, k, c.quadratic, c.cubic)
+    elif np.any(k != 0):
         out = 2.0 * out / (1.0 + np.sqrt(np.maximum(1.0 + 4.0 * k * np.abs(out), 0.0)))
     if dt is not None:
         sc = c.temp_scale
         out /= 1.0 + ((sc[:, 2] * dt + sc[:, 1]) * dt + sc[:, 0]) * dt
     return out
+
+
+def shift_block(c: CorrectionConstants, x: np.ndarray) -> np.ndarray:
+    """Line 0 over a block (n, k) whose first row is the corrector's first sample: ``a x_(i-d) + b x_(i-d+1)``,
+    rows before the first held at it; ``x`` itself without a shift."""
+    d, a, b = c.shift
+    if d == 0 or len(x) == 0:
+        return x
+    idx = np.arange(len(x))
+    older = x[np.maximum(idx - d, 0)]
+    newer = x[np.maximum(idx - d + 1, 0)]
+    return a * older + b * newer
 
 
 Vec3 = tuple[float, float, float]
@@ -203,6 +294,10 @@ class StreamingCorrector:
         self._tb = [[float(x) for x in row] for row in c.temp_bias]
         self._ts = [[float(x) for x in row] for row in c.temp_scale]
         self._k = [float(v) for v in c.nonlinearity]
+        self._k2 = [float(v) for v in c.quadratic]
+        self._k3 = [float(v) for v in c.cubic]
+        self._poly = c.polynomial
+        self._shift_d, self._shift_a, self._shift_b = c.shift
         self.reset(start_index)
 
     def reset(self, start_index: int = 0) -> None:
@@ -215,6 +310,7 @@ class StreamingCorrector:
         self._buf = [[0.0] * self._n for _ in range(6)]  # ring buffers of x_temp, eq. (6)
         self._slot = 0
         self._count = 0
+        self._delay: list[tuple[float, ...]] = []  # line 0: the last d raw samples, oldest first
 
     @property
     def index(self) -> int:
@@ -238,6 +334,16 @@ class StreamingCorrector:
         raw = (*accel_mps2, *gyro_radps)
         if len(raw) != 6:
             raise ValueError("step() needs three accelerometer and three gyroscope values")
+        d = self._shift_d
+        if d:  # line 0: the raw input moved onto the rig's time (a delay line, first sample held)
+            line = self._delay
+            if not line:
+                line.extend([tuple(raw)] * d)
+            older, newer = line[0], (line[1] if d > 1 else raw)
+            sa, sb = self._shift_a, self._shift_b
+            line.append(tuple(raw))
+            del line[0]
+            raw = tuple(sa * older[j] + sb * newer[j] for j in range(6))
         slot = self._slot
         count = self._count + 1 if self._count < self._n else self._n
         x_ma = [0.0] * 6
@@ -253,7 +359,9 @@ class StreamingCorrector:
             if self._extended:  # line 6': temperature bias, nonlinearity, temperature scale
                 b, sc, k = self._tb[j], self._ts[j], self._k[j]
                 x_temp -= ((b[2] * dt + b[1]) * dt + b[0]) * dt
-                if k != 0.0:
+                if self._poly:
+                    x_temp = invert_scale(x_temp, k, self._k2[j], self._k3[j])
+                elif k != 0.0:
                     x_temp = 2.0 * x_temp / (1.0 + math.sqrt(max(1.0 + 4.0 * k * abs(x_temp), 0.0)))
                 x_temp /= 1.0 + ((sc[2] * dt + sc[1]) * dt + sc[0]) * dt
             buf = self._buf[j]

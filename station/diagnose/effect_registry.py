@@ -203,6 +203,16 @@ class Effect:
         """The per-sample regressors (n, 3, p) of a mean candidate on ``sd`` (None: not a mean term, or no data)."""
         return None if self.build is None else self.build(baseline, sd)
 
+    def regressor_rows(self, baseline: Baseline, sd: SensorData) -> c.Rows | None:
+        """:meth:`regressors` a piece of samples at a time (:class:`~station.diagnose.candidates.Rows`): the
+        candidate's rows where its builder was made of them (:func:`~station.diagnose.candidates.whole`), else the
+        rows of its whole array."""
+        rows = c.rows_builder(self.build) if self.build is not None else None
+        if rows is not None:
+            return rows(baseline, sd)
+        z = self.regressors(baseline, sd)
+        return None if z is None else c.rows_of(z)
+
 
 def _both(accel: tuple[float, str], gyro: tuple[float, str]) -> dict[str, tuple[float, str]]:
     return {"accel": accel, "gyro": gyro}

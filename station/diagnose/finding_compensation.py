@@ -4,15 +4,19 @@ For each finding the report says whether the calibration the station would write
 the effect from the corrected output: the effect has parameters in the parameter set that Algorithm 1 applies
 (:data:`station.fit.compensation.APPLIED`), and the fit, run with those terms enabled on this recording,
 actually fits them (:func:`station.fit.compensation.compensated_by`). Otherwise it says why not: no
-parameter for the effect, or the recording does not let the fit identify it (the fit's own note).
+parameter for the effect, or the recording does not let the fit identify it (the fit's own note). Each entry
+also carries the corrected output's error on held-out segments with and without the compensation
+(:mod:`station.diagnose.compensation_gain`).
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import replace
 
 import numpy as np
 
+from station.diagnose.compensation_gain import gains
 from station.diagnose.effect_registry import REGISTRY
 from station.diagnose.results import Compensation
 from station.fit.calibrate import FitOptions, fit_session
@@ -50,6 +54,10 @@ def _why_not_fitted(params: ParameterSet, effect: str) -> str:
         note = params.quality.scale_nonlinearity
         return (f"the fit has the term but did not fit it here: {note.status if note else None}: "
                 f"{note.reason if note else None}")
+    if effect == "time_offset":
+        offset = params.quality.time_offset
+        return (f"the fit has the term but did not keep it here: {offset.status if offset else None}: "
+                f"{offset.reason if offset else None}")
     return "the fit has the term but it is not significant in this recording"
 
 
@@ -62,9 +70,10 @@ def compensation(
     physics = [_physics(e) for e in effects]
     params: ParameterSet | None = None
     error = ""
+    options = FitOptions(tc_range_s=dict(warmup_tc_s or {}), thermal="auto", scale_nonlinearity="auto",
+                         time_offset="auto" if "time_offset" in physics else "off",
+                         g_sensitivity="g_sensitivity" in physics)
     if any(p in APPLIED for p in physics):
-        options = FitOptions(tc_range_s=dict(warmup_tc_s or {}), thermal="auto", scale_nonlinearity="auto",
-                             g_sensitivity="g_sensitivity" in physics)
         try:
             params = fit_session(session, options)
         except StationError as exc:
@@ -77,10 +86,12 @@ def compensation(
             out.append(Compensation(name, False, error))
         elif compensated_by(params, eff) and any(
                 np.any(np.asarray(field_value(params, f)) != 0) for f in _fields(eff, sensor)):
-            fields = ", ".join(_fields(eff, sensor))
+            fields = ", ".join(f for f in _fields(eff, sensor) if np.any(np.asarray(field_value(params, f)) != 0))
             out.append(Compensation(name, True, f"the calibration fits and applies it ({fields})"))
         else:
             out.append(Compensation(name, False, _why_not_fitted(params, eff)))
+    if findings:  # each finding's corrected error on held-out segments, with and without its compensation
+        out = [replace(c, gain=g) for c, g in zip(out, gains(session, findings, physics, options), strict=True)]
     return out
 
 

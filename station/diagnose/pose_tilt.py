@@ -51,13 +51,15 @@ from collections.abc import Callable, Mapping
 
 import numpy as np
 
+from station.diagnose.candidates import Rows, whole
 from station.diagnose.residuals import Baseline, SensorData
 from station.kernel.geometry import up_vector
 from station.physics.effects import POSES
 from station.session.model import Kind
 
-#: A regressor column of one pose and rotation axis: ``column(pose index, axis (3,))`` -> (n, 3).
-Column = Callable[[int, np.ndarray], np.ndarray]
+#: A regressor column of one pose and rotation axis for the samples lo:hi: ``column(pose index, axis (3,), lo, hi)``
+#: -> (hi - lo, 3).
+Column = Callable[[int, np.ndarray, int, int], np.ndarray]
 
 NAME = "pose_tilt"
 SENSORS = ("accel",)
@@ -116,12 +118,6 @@ def _group_directions(ref: np.ndarray, norm: np.ndarray, rows: np.ndarray
         poses.append((f"pose ({u[0]:+.3f}, {u[1]:+.3f}, {u[2]:+.3f})", u))
         rest = rest[~match]
     return index, poses
-
-
-def _has_free_axis(baseline: Baseline, sd: SensorData, k: int) -> bool:
-    """Whether blocks outside the pose segments see gravity along sensor axis ``k`` (they pin M's column k)."""
-    other = (sd.label >= 0) & (baseline.session.kind != int(Kind.POSE))
-    return bool(np.any(np.abs(sd.ref[other, k]) > 0.1 * np.abs(sd.ref[other]).max(initial=0.0)))
 
 
 def _segment_ends(session_kind: np.ndarray, segment: np.ndarray) -> list[tuple[int, int, int]]:
@@ -183,82 +179,109 @@ def rig_places(baseline: Baseline) -> tuple[np.ndarray, list[tuple[str, np.ndarr
 
 
 def _rig_columns(baseline: Baseline, f: np.ndarray) -> tuple[list[tuple[str, np.ndarray]], Column]:
-    """(pose list, column(p, a)) of the ``rig`` variant: the body-frame tilt ``a`` (rad) of pose ``p``, in ``f x a``
-    (specific force m/s^2 per rad) wherever the rig holds or leaves/approaches that pose (see :func:`rig_places`)."""
+    """(pose list, column(p, a, lo, hi)) of the ``rig`` variant: the body-frame tilt ``a`` (rad) of pose ``p``, in
+    ``f x a`` (specific force m/s^2 per rad) wherever the rig holds or leaves/approaches that pose (see
+    :func:`rig_places`), for the samples lo:hi."""
     index, poses, moves = rig_places(baseline)
-    w_ref = np.nan_to_num(np.asarray(baseline.session.ref_gyro_radps, dtype=float))
+    w_ref = baseline.session.ref_gyro_radps
     dt = 1.0 / baseline.session.sample_rate_hz
     paths = []
     for a, b, before, after in moves:
-        d = _transport(w_ref[a:b], dt)
-        ang = np.concatenate(([0.0], np.cumsum(np.linalg.norm(w_ref[a:b - 1], axis=1)) * dt))
+        w = np.nan_to_num(np.asarray(w_ref[a:b], dtype=float))
+        d = _transport(w, dt)
+        ang = np.concatenate(([0.0], np.cumsum(np.linalg.norm(w[:-1], axis=1)) * dt))
         s = ang / ang[-1] if ang[-1] > 0 else np.linspace(0.0, 1.0, b - a)
         # a world-fixed tilt seen in the body frame along the move: D^T a (pose before), D^T D_end a (pose after)
         d_end = d[-1]
         paths.append((a, b, before, after, d, d_end, s))
 
-    def column(p: int, axis: np.ndarray) -> np.ndarray:
-        out = np.zeros((len(f), 3))
-        sel = index == p
-        out[sel] = np.cross(f[sel], axis)
+    def column(p: int, axis: np.ndarray, lo: int, hi: int) -> np.ndarray:
+        out = np.zeros((hi - lo, 3))
+        sel = index[lo:hi] == p
+        out[sel] = np.cross(f[lo:hi][sel], axis)
         for a, b, before, after, d, d_end, s in paths:
+            r0, r1 = max(a, lo), min(b, hi)
+            if r0 >= r1:
+                continue
+            dm, sm = d[r0 - a:r1 - a], s[r0 - a:r1 - a]
             if before == p:
-                out[a:b] += (1.0 - s)[:, None] * np.cross(f[a:b], np.einsum("nji,j->ni", d, axis))
+                out[r0 - lo:r1 - lo] += (1.0 - sm)[:, None] * np.cross(f[r0:r1], np.einsum("nji,j->ni", dm, axis))
             if after == p:
-                out[a:b] += s[:, None] * np.cross(f[a:b], np.einsum("nji,j->ni", d, d_end @ axis))
+                out[r0 - lo:r1 - lo] += sm[:, None] * np.cross(f[r0:r1], np.einsum("nji,j->ni", dm, d_end @ axis))
         return out
 
     return poses, column
 
 
 def _segment_columns(baseline: Baseline, f: np.ndarray) -> tuple[list[tuple[str, np.ndarray]], Column]:
-    """(pose list, column(p, a)) of the ``segment`` variant: the tilt in pose segments only (as the station's
-    simulator has it)."""
+    """(pose list, column(p, a, lo, hi)) of the ``segment`` variant: the tilt in pose segments only (as the
+    station's simulator has it)."""
     index, poses = pose_groups(baseline)
 
-    def column(p: int, axis: np.ndarray) -> np.ndarray:
-        out = np.zeros((len(f), 3))
-        sel = index == p
-        out[sel] = np.cross(f[sel], axis)
+    def column(p: int, axis: np.ndarray, lo: int, hi: int) -> np.ndarray:
+        out = np.zeros((hi - lo, 3))
+        sel = index[lo:hi] == p
+        out[sel] = np.cross(f[lo:hi][sel], axis)
         return out
 
     return poses, column
 
 
-def _assemble(baseline: Baseline, sd: SensorData, poses: list, column: Column,
-              free_of: Callable[[int], bool]) -> np.ndarray:
+def _pieces(n: int) -> list[tuple[int, int]]:
+    return [(lo, min(lo + _ROWS, n)) for lo in range(0, n, _ROWS)]
+
+
+def _assemble(sd: SensorData, poses: list, column: Column, free_of: Callable[[int], bool]) -> Rows:
+    """The regressors' rows, M (f x a) per column: which half-sums are free is decided here, over all samples
+    (a piece at a time); the rows are made when asked."""
     m = np.nan_to_num(np.asarray(sd.params.misalignment, dtype=float))
-    # the (n, 3, p) array is filled in place, M (f x a) per column: a list of (n, 3) columns stacked and then
-    # multiplied by M held the regressors three times (the largest arrays of a long recording's diagnosis)
+    n = len(sd.label)
     pairs = [(k, _rotation_axes(up_vector("+" + k))) for k in _PAIR_AXES]
     others = [_rotation_axes(poses[p][1]) for p in range(len(POSES), len(poses))]
-    z = np.zeros((len(sd.ref), 3, sum(2 * len(ax) for _, ax in pairs) + sum(len(ax) for ax in others)))
-    col = 0
-    for k, axes in pairs:
+    width = sum(2 * len(ax) for _, ax in pairs) + sum(len(ax) for ax in others)
+    free = []
+    for k, _axes in pairs:
         ip, im = POSES.index("+" + k), POSES.index("-" + k)
-        both = all(np.any(column(i, _rotation_axes(up_vector(POSES[i]))[0])) for i in (ip, im))
-        free = both and free_of(_AXES.index(k))
-        for a in axes:
-            plus, minus = column(ip, a), column(im, a)
-            for lo in range(0, len(z), _ROWS):  # a piece at a time: no (n, 3) temporaries (the same numbers)
-                hi = lo + _ROWS
-                z[lo:hi, :, col] = (plus[lo:hi] - minus[lo:hi]) @ m.T  # d
-                if free:  # s, else zero
-                    z[lo:hi, :, col + 1] = (plus[lo:hi] + minus[lo:hi]) @ m.T
-            del plus, minus
-            col += 2
-    for p, axes in zip(range(len(POSES), len(poses)), others, strict=True):
-        for a in axes:
-            c = column(p, a)
-            for lo in range(0, len(z), _ROWS):
-                z[lo:lo + _ROWS, :, col] = c[lo:lo + _ROWS] @ m.T
-            del c
-            col += 1
-    return z
+        both = all(any(np.any(column(i, _rotation_axes(up_vector(POSES[i]))[0], lo, hi)) for lo, hi in _pieces(n))
+                   for i in (ip, im))
+        free.append(both and free_of(_AXES.index(k)))
+
+    def of(lo: int, hi: int) -> np.ndarray:
+        z = np.zeros((hi - lo, 3, width))
+        col = 0
+        for (k, axes), fr in zip(pairs, free, strict=True):
+            ip, im = POSES.index("+" + k), POSES.index("-" + k)
+            for a in axes:
+                plus, minus = column(ip, a, lo, hi), column(im, a, lo, hi)
+                z[:, :, col] = (plus - minus) @ m.T  # d
+                if fr:  # s, else zero
+                    z[:, :, col + 1] = (plus + minus) @ m.T
+                col += 2
+        for p, axes in zip(range(len(POSES), len(poses)), others, strict=True):
+            for a in axes:
+                z[:, :, col] = column(p, a, lo, hi) @ m.T
+                col += 1
+        return z
+
+    return Rows(n, of)
 
 
-#: Samples per piece where :func:`_assemble` multiplies its columns by M.
+#: Samples per piece where the pose-tilt columns are scanned over the whole recording.
 _ROWS = 1 << 16
+
+
+def _sees_gravity_along(sd: SensorData, other: Callable[[int, int], np.ndarray], k: int) -> bool:
+    """Whether the samples ``other(lo, hi)`` (a mask of rows lo:hi) see gravity along sensor axis ``k``: more than
+    a tenth of the largest reference component among them (a piece at a time)."""
+    n = len(sd.label)
+    top, peak_k = 0.0, 0.0
+    for lo, hi in _pieces(n):
+        r = sd.ref[lo:hi][other(lo, hi)]
+        if len(r):
+            a = np.abs(r)
+            top = max(top, float(a.max()))
+            peak_k = max(peak_k, float(a[:, k].max()))
+    return peak_k > 0.1 * top
 
 
 #: The two places a pose error can act (:func:`build`): ``rig`` (every time the rig holds the pose, rest included,
@@ -266,28 +289,35 @@ _ROWS = 1 << 16
 VARIANTS = ("rig", "segment")
 
 
-def build_variant(baseline: Baseline, sd: SensorData, variant: str) -> np.ndarray | None:
-    """The regressors (n, 3, p) of :func:`build` for one of :data:`VARIANTS`; None without pose segments."""
+def variant_rows(baseline: Baseline, sd: SensorData, variant: str) -> Rows | None:
+    """The regressors' rows (:class:`~station.diagnose.candidates.Rows`) of :func:`build` for one of
+    :data:`VARIANTS`; None without pose segments."""
     if sd.sensor != "accel":
         return None
     index, _ = pose_groups(baseline)
     if not np.any(index >= 0):
         return None
+    del index
     f = sd.ref  # accelerometer reference, NaN -> 0 (m/s^2)
+    kind = baseline.session.kind
     if variant == "segment":
         poses, column = _segment_columns(baseline, f)
-        return _assemble(baseline, sd, poses, column, lambda k: _has_free_axis(baseline, sd, k))
+        return _assemble(sd, poses, column, lambda k: _sees_gravity_along(
+            sd, lambda lo, hi: (sd.label[lo:hi] >= 0) & (kind[lo:hi] != int(Kind.POSE)), k))
     poses, column = _rig_columns(baseline, f)
     touched = np.zeros(len(f), dtype=bool)
-    for p in range(len(poses)):
-        for a in _rotation_axes(poses[p][1]):
-            touched |= np.any(column(p, a) != 0, axis=1)
+    for lo, hi in _pieces(len(f)):
+        for p in range(len(poses)):
+            for a in _rotation_axes(poses[p][1]):
+                touched[lo:hi] |= np.any(column(p, a, lo, hi) != 0, axis=1)
+    return _assemble(sd, poses, column, lambda k: _sees_gravity_along(
+        sd, lambda lo, hi: (sd.label[lo:hi] >= 0) & ~touched[lo:hi], k))
 
-    def free_of(k: int) -> bool:
-        other = (sd.label >= 0) & ~touched
-        return bool(np.any(np.abs(sd.ref[other, k]) > 0.1 * np.abs(sd.ref[other]).max(initial=0.0)))
 
-    return _assemble(baseline, sd, poses, column, free_of)
+def build_variant(baseline: Baseline, sd: SensorData, variant: str) -> np.ndarray | None:
+    """The regressors (n, 3, p) of :func:`build` for one of :data:`VARIANTS`; None without pose segments."""
+    rows = variant_rows(baseline, sd, variant)
+    return None if rows is None else rows.whole()
 
 
 def _explained(sd: SensorData, zb: np.ndarray) -> float:
@@ -312,31 +342,25 @@ def _explained(sd: SensorData, zb: np.ndarray) -> float:
     return gain
 
 
-def choose_variant(baseline: Baseline, sd: SensorData) -> tuple[str, dict[str, np.ndarray | None]]:
+def choose_variant(baseline: Baseline, sd: SensorData) -> tuple[str, Rows | None]:
     """The variant (:data:`VARIANTS`) whose regressors explain more of the block residual (the first of
-    :data:`VARIANTS` on a tie), and its regressors ``{variant: z}``.
+    :data:`VARIANTS` on a tie), and its regressors' rows.
 
-    The variants are built one at a time and only the chosen one is kept (each is (n, 3, p), the largest arrays
-    of a long recording's diagnosis): ``segment`` (cheap) is built, scored and let go, then ``rig``; when ``rig``
-    loses, ``segment`` is built again.
+    Each variant's block means are summed a piece of samples at a time: no (n, 3, p) array (the largest arrays of
+    a long recording's diagnosis) is made.
     """
     gains: dict[str, float] = {}
-    kept: dict[str, np.ndarray | None] = {}
+    rows: dict[str, Rows | None] = {}
     for v in reversed(VARIANTS):
-        z = build_variant(baseline, sd, v)
-        gains[v] = _explained(sd, sd.block_mean(z)) if z is not None else -math.inf
-        if v == VARIANTS[0]:
-            kept[v] = z
-        del z
+        rows[v] = r = variant_rows(baseline, sd, v)
+        gains[v] = _explained(sd, sd.block_mean_of(r.of)) if r is not None else -math.inf
     best = max(VARIANTS, key=lambda v: gains[v])
-    if best in kept:
-        return best, kept
-    kept.clear()  # the losing ``rig`` regressors go before ``segment``'s are built again
-    return best, {best: build_variant(baseline, sd, best)}
+    return best, rows[best]
 
 
-def build(baseline: Baseline, sd: SensorData) -> np.ndarray | None:
-    """Per-sample regressors (n, 3, p) of the pose tilts (rad); None without pose segments.
+def rows(baseline: Baseline, sd: SensorData) -> Rows | None:
+    """Per-sample regressors (n, 3, p) of the pose tilts (rad), as rows (the chosen variant's, kept per
+    baseline: they hold only the pose of each sample and the moves' rotations); None without pose segments.
 
     Accelerometer only (``sd.sensor == "accel"``); M is ``sd.params.misalignment``. A tilt
     ``phi_j`` of pose ``P`` (rotation axis ``a_j``) adds ``M (f_ref x a_j) phi_j`` where the rig holds
@@ -364,22 +388,21 @@ def build(baseline: Baseline, sd: SensorData) -> np.ndarray | None:
     hit = _CACHE.get(baseline)
     if hit is not None and hit[0] is sd:
         return hit[1]
-    best, zs = choose_variant(baseline, sd)
-    z = zs[best]
-    if z is not None:
-        z.flags.writeable = False  # shared through the cache
-    _CACHE[baseline] = (sd, z)
-    return z
+    _best, r = choose_variant(baseline, sd)
+    _CACHE[baseline] = (sd, r)
+    return r
 
 
-#: The last regressors of :func:`build` per baseline (selection, the fitted signal, the re-run and the compensation
-#: ask for the same ones); entries go with their baseline.
-_CACHE: weakref.WeakKeyDictionary[Baseline, tuple[SensorData, np.ndarray | None]] = weakref.WeakKeyDictionary()
+build = whole(rows)
+
+#: The chosen variant's rows of :func:`rows` per baseline (selection, the fitted signal, the re-run and the
+#: compensation ask for the same ones); entries go with their baseline.
+_CACHE: weakref.WeakKeyDictionary[Baseline, tuple[SensorData, Rows | None]] = weakref.WeakKeyDictionary()
 
 
 def release(baseline: Baseline) -> None:
-    """Drop the regressors :func:`build` keeps for ``baseline`` (the largest array of a long diagnosis, (n, 3, p)):
-    for a caller that needs no more of them; a later :func:`build` makes them again."""
+    """Drop what :func:`rows` keeps for ``baseline`` (the pose of each sample, the moves' rotations): for a caller
+    that needs no more of them; a later :func:`rows` makes them again."""
     _CACHE.pop(baseline, None)
 
 
@@ -388,11 +411,15 @@ def specific_force_change(baseline: Baseline, sd: SensorData, theta: np.ndarray)
     sensor frame (m/s^2), (n, 3): ``f_ref x phi`` in each pose's samples, zero elsewhere. Adding it to
     the reference gives the input a simulator re-run of the recording needs (``M^-1`` of the regressors).
     """
-    z = build(baseline, sd)
-    if z is None:
-        return np.zeros((len(baseline.session), 3))
+    r = rows(baseline, sd)
+    out = np.zeros((len(baseline.session), 3))
+    if r is None:
+        return out
     m = np.nan_to_num(np.asarray(sd.params.misalignment, dtype=float))
-    return np.linalg.solve(m, (z @ np.asarray(theta, dtype=float)).T).T
+    th = np.asarray(theta, dtype=float)
+    for lo, hi in _pieces(r.n):  # a piece at a time: no (n, 3, p) regressors
+        out[lo:hi] = np.linalg.solve(m, (r.of(lo, hi) @ th).T).T
+    return out
 
 
 def _parameter_names() -> tuple[str, ...]:
@@ -472,7 +499,22 @@ def engineering(theta: np.ndarray, cov: np.ndarray) -> dict[str, object]:
 PARAMETERS: tuple[str, ...] = _parameter_names()
 
 __all__ = [
-    "ALIGN_COS", "DESCRIPTION", "NAME", "PARAMETERS", "RIG_STEP", "SENSORS", "VARIANTS", "build", "build_variant",
-    "choose_variant", "engineering", "pose_groups", "release", "rig_places",
-    "specific_force_change", "theta_of",
+    "ALIGN_COS",
+    "DESCRIPTION",
+    "NAME",
+    "PARAMETERS",
+    "RIG_STEP",
+    "SENSORS",
+    "VARIANTS",
+    "build",
+    "build_variant",
+    "choose_variant",
+    "engineering",
+    "pose_groups",
+    "release",
+    "rig_places",
+    "rows",
+    "specific_force_change",
+    "theta_of",
+    "variant_rows",
 ]

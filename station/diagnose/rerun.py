@@ -43,13 +43,13 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from station.diagnose import pose_tilt
-from station.diagnose.candidates import attitude
+from station.diagnose.candidates import attitude_rows
 from station.diagnose.effect_registry import EFFECTS, REGISTRY, simulator_input
 from station.diagnose.residuals import SENSORS, Baseline, SensorData
 from station.diagnose.results import BlockStatistics, FindingRerun, Improvement, KindStatistics, RerunSummary
@@ -268,7 +268,7 @@ class Drive:
         finite = temp[np.isfinite(temp)]
         self.t0_degc = float(finite[0]) if len(finite) else 0.0
         self.environment = Environment(ambient_degc=self.t0_degc, ambient_rate_k_per_s=0.0)
-        self._rotation: tuple[np.ndarray | None] | None = None
+        self._rotation: tuple[Callable[[int, int], np.ndarray] | None] | None = None
         self._tilt: dict[bytes, np.ndarray] = {}
         self._cuts: list[int] | None = None
         self._block_index: dict[str, tuple[np.ndarray, np.ndarray | None]] = {}
@@ -281,10 +281,11 @@ class Drive:
         """True temperature (degC) at sensor times (s): the smoothed recorded course."""
         return self.t0_degc + np.interp(t_s, self.baseline.session.t_s, self.baseline.d_temp)
 
-    def rotation(self) -> np.ndarray | None:
-        """Sensor-to-world attitude integrated from the rate reference, None when the start pose is unknown."""
+    def rotation(self) -> Callable[[int, int], np.ndarray] | None:
+        """Sensor-to-world attitude integrated from the rate reference, as rows lo:hi (the scanned quaternions
+        kept, not (n, 3, 3) matrices), None when the start pose is unknown."""
         if self._rotation is None:
-            self._rotation = (attitude(self.baseline),)
+            self._rotation = (attitude_rows(self.baseline),)
         return self._rotation[0]
 
     def tilt_force(self, theta: np.ndarray) -> np.ndarray:
@@ -322,15 +323,15 @@ class Drive:
         alpha = np.gradient(w, tc, axis=0) if n > 1 else np.zeros_like(w)
         keep = slice(a - a0, a - a0 + (b - a))
         f, w, alpha = f[keep], w[keep], alpha[keep]
-        rot = self.rotation() if need_rotation else None
-        if rot is None:
+        rows = self.rotation() if need_rotation else None
+        if rows is None:
             # only row 2 ('up' in the sensor frame) is ever read: by the vertical Earth rate
             norm = np.linalg.norm(f, axis=1)
             up = np.divide(f, norm[:, None], out=np.zeros_like(f), where=norm[:, None] > 0)
             rot = np.zeros((b - a, 3, 3))
             rot[:, 2, :] = up
         else:
-            rot = rot[a:b]
+            rot = rows(a, b)
         return Kinematics(t[a:b], rot, w, alpha), f
 
     def cuts(self) -> list[int]:

@@ -17,12 +17,11 @@ from __future__ import annotations
 import functools
 import itertools
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
-from scipy import sparse
 from scipy.ndimage import uniform_filter1d
 
 from station.fit.calibrate import fit_session, mean_model
@@ -44,7 +43,8 @@ class SensorData:
         sensor: ``accel`` or ``gyro``.
         params: the base fit of this triad.
         ref: rig reference used by the base model (m/s^2 or rad/s), NaN -> 0, (n, 3).
-        u: ``M ref``, the modelled true input through the misalignment (n, 3).
+        u: ``M ref``, the modelled true input through the misalignment (n, 3): made when asked (a property),
+            :meth:`u_rows` for some rows.
         residual: measurement minus base mean model, (n, 3).
         sigma: white-noise std per sample, (3,).
         keep: samples that are not outliers (n,).
@@ -63,7 +63,6 @@ class SensorData:
     sensor: str
     params: TriadParams
     ref: np.ndarray
-    u: np.ndarray
     residual: np.ndarray
     sigma: np.ndarray
     keep: np.ndarray
@@ -79,27 +78,66 @@ class SensorData:
     tc_range_s: tuple[float, float] | None = None
     extra_var: np.ndarray | None = None
 
+    @property
+    def u(self) -> np.ndarray:
+        """``M ref`` (n, 3), made anew at each use (not kept: a long recording's (n, 3) arrays are what a diagnosis
+        holds); :meth:`u_rows` for a piece of rows."""
+        return self.u_rows(0, len(self.ref))
+
+    def u_rows(self, lo: int, hi: int) -> np.ndarray:
+        """Rows lo:hi of :attr:`u` (each row ``M ref_i``: the same numbers as the whole)."""
+        return self.ref[lo:hi] @ np.nan_to_num(self.params.misalignment).T
+
     def clip_tc(self, tc_s: np.ndarray | float) -> np.ndarray:
         """``tc_s`` (s) clipped into :attr:`tc_range_s` (unchanged without a range)."""
         tc = np.asarray(tc_s, dtype=float)
         return tc if self.tc_range_s is None else np.clip(tc, *self.tc_range_s)
 
     @functools.cached_property
-    def _block_sum(self) -> sparse.csr_array:
-        """(m, n) 0/1 matrix summing each block's kept samples (built once per triad)."""
-        idx = np.flatnonzero(self.label >= 0)
-        return sparse.csr_array((np.ones(idx.size), (self.label[idx], idx)), shape=(len(self.t_s), len(self.label)))
+    def pieces(self) -> tuple[tuple[int, int], ...]:
+        """Row ranges (lo, hi) covering the samples, about :data:`PIECE_ROWS` each, cut only where a block starts:
+        every block lies in one piece, so block sums taken a piece at a time are those of one pass."""
+        n = len(self.label)
+        rows = np.flatnonzero(self.label >= 0)
+        labels = self.label[rows]
+        # blocks follow the samples' order (_blocks); otherwise one piece
+        if n <= PIECE_ROWS or not len(rows) or np.any(np.diff(labels) < 0):
+            return ((0, n),)
+        starts = rows[np.flatnonzero(np.diff(labels, prepend=-1) != 0)]
+        cuts = np.unique(starts[np.searchsorted(starts, np.arange(PIECE_ROWS, n, PIECE_ROWS)).clip(0, len(starts) - 1)])
+        cuts = cuts[(cuts > 0) & (cuts < n)]
+        edges = [0, *(int(c) for c in cuts), n]
+        return tuple((lo, hi) for lo, hi in itertools.pairwise(edges) if hi > lo)
+
+    def block_mean_of(self, rows: Callable[[int, int], np.ndarray]) -> np.ndarray:
+        """:meth:`block_mean` of the per-sample values that ``rows(lo, hi)`` gives for the samples lo:hi, (hi - lo,
+        ...), asked a piece at a time (:attr:`pieces`): the values of the whole recording are never held at once.
+
+        Each block's kept samples are summed in sample order from zero (``np.bincount``), as one pass over the
+        whole recording sums them (the same numbers bit for bit)."""
+        m = len(self.t_s)
+        out: np.ndarray | None = None
+        shape: tuple[int, ...] = ()
+        for lo, hi in self.pieces:
+            v = np.asarray(rows(lo, hi), dtype=float)
+            flat = v.reshape(hi - lo, -1)
+            if out is None:
+                shape = v.shape[1:]
+                out = np.zeros((m, flat.shape[1]))
+            lab = self.label[lo:hi] + 1  # bin 0: samples in no block
+            for j in range(flat.shape[1]):
+                out[:, j] += np.bincount(lab, weights=flat[:, j], minlength=m + 1)[1:]
+        assert out is not None
+        return (out / self.count[:, None]).reshape((m, *shape))
 
     def block_mean(self, values: np.ndarray) -> np.ndarray:
-        """Mean of per-sample ``values`` (n, ...) over each block's kept samples, (m, ...).
+        """Mean of per-sample ``values`` (n, ...) over each block's kept samples, (m, ...), a piece of samples at a
+        time (:meth:`block_mean_of`): no copy of ``values``."""
+        return self.block_mean_of(lambda lo, hi: values[lo:hi])
 
-        One sparse product over the samples: no copy of ``values`` (a candidate's (n, 3, p) regressors are
-        the largest arrays of a diagnosis; selecting the kept rows first copied them whole).
-        """
-        n = len(self.label)
-        v = np.asarray(values, dtype=float).reshape(n, -1)
-        out = self._block_sum @ v
-        return (out / self.count[:, None]).reshape((len(self.t_s), *values.shape[1:]))
+
+#: Samples per piece of :meth:`SensorData.block_mean_of` (and of the candidates' regressors asked for a piece).
+PIECE_ROWS = 1 << 16
 
 
 @dataclass(frozen=True, eq=False)
@@ -151,7 +189,7 @@ def _blocks(session: Session, ref: np.ndarray, keep: np.ndarray, max_settled_blo
     settled = sum(len(s) for s in segs if s.kind != Kind.MOVE)
     settled_block = max(settled / max_settled_blocks, 20.0)
     move_block = max(MOVE_BLOCK_S * fs, 10.0)
-    label = np.full(len(session), -1, dtype=np.int64)
+    label = np.full(len(session), -1, dtype=np.int32)  # block indices (fewer than 2**31): 4 bytes a sample
     nxt = 0
     for s in segs:
         size = move_block if s.kind == Kind.MOVE else settled_block
@@ -168,7 +206,7 @@ def _blocks(session: Session, ref: np.ndarray, keep: np.ndarray, max_settled_blo
 def _sensor_data(
     session: Session, name: str, p: TriadParams, data: np.ndarray, ref: np.ndarray, max_settled_blocks: int
 ) -> SensorData:
-    ref0 = np.nan_to_num(ref)
+    ref0 = np.nan_to_num(ref) if np.isnan(ref).any() else ref  # a reference without NaN is not copied
     residual = data - mean_model(_triad_dict(p), session.t_s, ref0, session.ref_accel_mps2)
     sigma = np.maximum(np.asarray(p.noise_std, dtype=float), 1e-12)
     keep = np.ones(len(session), dtype=bool)
@@ -199,10 +237,9 @@ def _sensor_data(
     kind_of = np.zeros(m, dtype=np.int64)
     seg_of[lab] = session.segment[sel]
     kind_of[lab] = session.kind[sel]
-    u = ref0 @ np.nan_to_num(p.misalignment).T
     y = np.stack([np.bincount(lab, weights=residual[sel, j], minlength=m) for j in range(3)], axis=1) / count[:, None]
     return SensorData(
-        sensor=name, params=p, ref=ref0, u=u, residual=residual, sigma=sigma, keep=keep, outlier_count=outliers,
+        sensor=name, params=p, ref=ref0, residual=residual, sigma=sigma, keep=keep, outlier_count=outliers,
         settled_samples=settled_n, label=label, t_s=0.5 * (first + last), width_s=last - first + ts, count=count,
         y=y, segment=seg_of, kind=kind_of,
     )

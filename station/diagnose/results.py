@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from station.diagnose.bootstrap import Bootstrap
+from station.diagnose.compensation_gain import CompensationGain
 from station.diagnose.residuals import SENSORS, BaseFitNoise, SensorLocation
 from station.kernel.errors import StationError
 
@@ -43,13 +44,19 @@ class Compensation:
     effect: str
     compensated: bool
     note: str
+    gain: CompensationGain | None = None  # the corrected error on held-out segments, with and without it
 
     def to_json(self) -> Json:
-        return {"compensated": self.compensated, "note": self.note}
+        out: Json = {"compensated": self.compensated, "note": self.note}
+        if self.gain is not None:
+            out["held_out"] = self.gain.to_json()
+        return out
 
     @classmethod
     def from_json(cls, effect: str, d: Mapping[str, Any]) -> Compensation:
-        return cls(effect, bool(d["compensated"]), str(d["note"]))
+        held = d.get("held_out")
+        return cls(effect, bool(d["compensated"]), str(d["note"]),
+                   None if held is None else CompensationGain.from_json(held))
 
 
 @dataclass(frozen=True)

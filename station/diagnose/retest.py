@@ -37,12 +37,11 @@ NUISANCE = "~"
 def recount_outliers(session: Any, sd: SensorData, fitted: np.ndarray) -> SensorData:
     """``sd`` with its outlier count taken on ``residual - fitted`` (``fitted``: the accepted effects' signal per
     sample, (n, 3)); the same rule as the base count, settled segments only."""
-    residual = sd.residual - fitted
     outliers = np.zeros(3, dtype=int)
     for s in session.segments():
         if len(s) < 10 or s.kind == Kind.MOVE or not np.all(np.isfinite(session.ref_accel_mps2[s.start:s.stop])):
             continue
-        x = residual[s.start:s.stop]
+        x = sd.residual[s.start:s.stop] - fitted[s.start:s.stop]  # a segment at a time: no (n, 3) copy
         local = uniform_filter1d(x, size=max(3, min(len(s), 101)), axis=0, mode="nearest")
         outliers += (np.abs(x - local) > OUTLIER_SIGMA * sd.sigma).sum(axis=0)
     return replace(sd, outlier_count=outliers)

@@ -133,7 +133,7 @@ def periodic_in_spin(baseline: Baseline, sd: SensorData, fitted: np.ndarray) -> 
     the table's angle: per hold and axis the least-squares cos/sin amplitude of the angle integrated from the
     rate reference, summed to a chi^2 per axis (2 per hold). None without rate holds."""
     session = baseline.session
-    rate = np.nan_to_num(session.ref_gyro_radps)
+    rate = session.ref_gyro_radps  # NaN -> 0 a segment at a time (no (n, 3) copy)
     chi = np.zeros(3)
     amp2 = np.zeros(3)
     dof = 0
@@ -141,7 +141,7 @@ def periodic_in_spin(baseline: Baseline, sd: SensorData, fitted: np.ndarray) -> 
         if seg.kind != Kind.RATE or len(seg) < 50:
             continue
         sl = seg.slice
-        w = np.linalg.norm(rate[sl], axis=1)
+        w = np.linalg.norm(np.nan_to_num(rate[sl]), axis=1)
         if np.median(w) < 1e-3:
             continue
         t = session.t_s[sl]

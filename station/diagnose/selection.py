@@ -37,7 +37,7 @@ from scipy import linalg
 
 from station.diagnose import bootstrap, finding_consistency, locator, retest, robust
 from station.diagnose.bootstrap import Bootstrap
-from station.diagnose.candidates import MAX_DELAY_S, delay_regressor
+from station.diagnose.candidates import MAX_DELAY_S, Rows, delay_rows
 from station.diagnose.effect_registry import LIBRARY, REGISTRY, RIG_STEPS
 from station.diagnose.likelihood import RCOND, WANDER_LIKE, SensorProblem, Test
 from station.diagnose.reporting import detectable_from, finding, outlier_test
@@ -226,14 +226,28 @@ def _regressors(baseline: Baseline, sd: SensorData, candidates: Collection[str] 
     regs: dict[str, np.ndarray] = {}
     for name, cand in LIBRARY.items():
         if sd.sensor in cand.sensors and (candidates is None or name in candidates):
-            z = cand.regressors(baseline, sd)
-            if z is not None and np.any(z):
-                regs[name] = sd.block_mean(z)
+            rows = cand.regressor_rows(baseline, sd)
+            zb, excited = _block_regressors(sd, rows) if rows is not None else (None, False)
+            if zb is not None and excited:
+                regs[name] = zb
             else:
-                why = "no data for it" if z is None else "the recording never excites it (all regressors 0)"
+                why = "no data for it" if rows is None else "the recording never excites it (all regressors 0)"
                 out.rejected.append(Rejection(name, sd.sensor, f"not testable: {why}"))
-            del z  # per-sample (n, 3, p): not kept alive while the next candidate's are built
     return regs
+
+
+def _block_regressors(sd: SensorData, rows: Rows) -> tuple[np.ndarray, bool]:
+    """Block means of a candidate's regressors, made a piece of samples at a time (no (n, 3, p) array), and
+    whether any sample's regressor is not zero."""
+    excited = False
+
+    def piece(lo: int, hi: int) -> np.ndarray:
+        nonlocal excited
+        z = rows.of(lo, hi)
+        excited = excited or bool(np.any(z))
+        return z
+
+    return sd.block_mean_of(piece), excited
 
 
 def _forward_step(prob: SensorProblem, fwd: _Forward, out: _Entries) -> bool:
@@ -513,15 +527,16 @@ def _refine_delay(
     prob: SensorProblem, baseline: Baseline, sd: SensorData, first: np.ndarray
 ) -> tuple[np.ndarray, float]:
     """The time offset as an exact delay: start from the first-order estimate (coefficient of ``-du/dt``),
-    then evaluate the reference at ``t - tau`` (:func:`delay_regressor`) and take the coefficient as the
-    next ``tau`` until it is a fixed point (the coefficient equals the delay the regressor was built with:
-    the least-squares delay of ``y = u(t - tau)``). Returns the block regressor and tau (s), |tau| <= 50 ms."""
+    then evaluate the reference at ``t - tau`` (:func:`~station.diagnose.candidates.delay_regressor`) and take
+    the coefficient as the next ``tau`` until it is a fixed point (the coefficient equals the delay the regressor
+    was built with: the least-squares delay of ``y = u(t - tau)``). Returns the block regressor and tau (s),
+    |tau| <= 50 ms."""
     tau = float(np.clip(prob.test_mean("time_offset", first).theta[0], -MAX_DELAY_S, MAX_DELAY_S))
     zb = first
     for _ in range(DELAY_ROUNDS):
         if abs(tau) < 1e-5:
             return first, tau
-        zb = sd.block_mean(delay_regressor(baseline, sd, tau))
+        zb = sd.block_mean_of(delay_rows(baseline, sd, tau).of)
         new = float(np.clip(prob.test_mean("time_offset", zb).theta[0], -MAX_DELAY_S, MAX_DELAY_S))
         done = abs(new - tau) < 1e-6 + 1e-3 * abs(tau)
         tau = new
@@ -545,9 +560,10 @@ def _fitted_samples(prob: SensorProblem, baseline: Baseline, fwd: _Forward) -> n
         theta = beta[col:col + p]
         col += p
         name = name.removeprefix(NUISANCE)
-        z = delay_regressor(baseline, sd, tau) if name == "time_offset" else LIBRARY[name].regressors(baseline, sd)
-        if z is not None:
-            out += np.einsum("nkp,p->nk", z, theta)
+        rows = delay_rows(baseline, sd, tau) if name == "time_offset" else LIBRARY[name].regressor_rows(baseline, sd)
+        if rows is not None:
+            for lo, hi in sd.pieces:  # a piece at a time: no (n, 3, p) regressors
+                out[lo:hi] += np.einsum("nkp,p->nk", rows.of(lo, hi), theta)
     return out
 
 

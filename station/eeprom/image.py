@@ -28,18 +28,27 @@ import math
 import struct
 import zlib
 from dataclasses import dataclass, replace
+from dataclasses import field as dc_field
 from datetime import UTC, datetime
 from typing import ClassVar, cast
 
 import numpy as np
 
 from station.kernel.errors import FormatError, UnsupportedVersionError
-from station.kernel.parameters import AllanCoefficients, ParameterSet, ThermalFit, TriadParams
+from station.kernel.parameters import (
+    MAX_LAG_SAMPLES,
+    MAX_LEAD_SAMPLES,
+    AllanCoefficients,
+    ParameterSet,
+    ThermalFit,
+    TriadParams,
+)
 
 MAGIC = b"SCAL"
 LAYOUT_VERSION = 1  # the layout of an image without the effects of layout 2 (byte for byte as before)
 LAYOUT_VERSION_2 = 2  # adds the compensable effects (temperature terms, nonlinearity, time offset)
-LAYOUT_VERSIONS = (LAYOUT_VERSION, LAYOUT_VERSION_2)
+LAYOUT_VERSION_3 = 3  # adds the IEEE 952 scale polynomial (k2, k3 per triad and axis)
+LAYOUT_VERSIONS = (LAYOUT_VERSION, LAYOUT_VERSION_2, LAYOUT_VERSION_3)
 TEXT_FIELD = 16  # bytes of serial / station id, ASCII, NUL padded
 ID_FIELD = 16  # bytes of the parameter-set id
 
@@ -55,7 +64,11 @@ _EFFECTS_HEAD = struct.Struct("<2d")  # reference temperature (degC; NaN = none)
 _EFFECTS_TRIAD = struct.Struct("<21d")  # c (3x3 axis-major, orders 1..3), s (3x3), k (3): 168 bytes
 BODY_SIZE_2 = BODY_SIZE + _EFFECTS_HEAD.size + 2 * _EFFECTS_TRIAD.size
 IMAGE_SIZE_2 = BODY_SIZE_2 + _CRC.size  # 844 bytes for layout version 2
-_SIZES = {LAYOUT_VERSION: IMAGE_SIZE, LAYOUT_VERSION_2: IMAGE_SIZE_2}
+# layout 3 appends per triad the polynomial's k2 (3) and k3 (3), float64
+_POLY_TRIAD = struct.Struct("<6d")  # k2 (3), k3 (3): 48 bytes
+BODY_SIZE_3 = BODY_SIZE_2 + 2 * _POLY_TRIAD.size
+IMAGE_SIZE_3 = BODY_SIZE_3 + _CRC.size  # 940 bytes for layout version 3 (fits the 1024-byte A2/B2 slots)
+_SIZES = {LAYOUT_VERSION: IMAGE_SIZE, LAYOUT_VERSION_2: IMAGE_SIZE_2, LAYOUT_VERSION_3: IMAGE_SIZE_3}
 MIN_HEADER = 8  # magic, version, length: enough to know what the rest must be
 
 
@@ -142,10 +155,12 @@ class EffectsImage:
 
     Attributes:
         reference_temperature_degc: T_ref of the temperature terms (degC); NaN when they are all zero.
-        time_offset_s: the unit's sample time minus the rig's (s); carried, not used by Algorithm 1.
+        time_offset_s: tau, the unit's lag behind the rig (s); Algorithm 1's line 0 moves the input by it.
         temp_bias: c per triad (accel, gyro), output axis and order 1..3, (2, 3, 3) (U/K^j).
         temp_scale: s likewise, (2, 3, 3) (1/K^j).
         nonlinearity: k of ``u + k u|u|`` per triad and axis, (2, 3) (1/U).
+        quadratic, cubic: k2 (1/U) and k3 (1/U^2) of the IEEE 952 polynomial per triad and axis, (2, 3);
+            non-zero only in a layout-3 image.
     """
 
     reference_temperature_degc: float
@@ -153,9 +168,17 @@ class EffectsImage:
     temp_bias: np.ndarray
     temp_scale: np.ndarray
     nonlinearity: np.ndarray
+    quadratic: np.ndarray = dc_field(default_factory=lambda: np.zeros((2, 3)))
+    cubic: np.ndarray = dc_field(default_factory=lambda: np.zeros((2, 3)))
 
     _SHAPES: ClassVar[dict[str, tuple[int, ...]]] = {"temp_bias": (2, 3, 3), "temp_scale": (2, 3, 3),
-                                                     "nonlinearity": (2, 3)}
+                                                     "nonlinearity": (2, 3), "quadratic": (2, 3),
+                                                     "cubic": (2, 3)}
+
+    @property
+    def polynomial(self) -> bool:
+        """A non-zero k2 or k3: the image needs layout 3."""
+        return bool(np.any(self.quadratic != 0) or np.any(self.cubic != 0))
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "reference_temperature_degc", float(self.reference_temperature_degc))
@@ -179,7 +202,12 @@ class EffectsImage:
             temp_bias=np.stack([params.accel.temp_bias_coeff, params.gyro.temp_bias_coeff]),
             temp_scale=np.stack([params.accel.temp_scale_coeff, params.gyro.temp_scale_coeff]),
             nonlinearity=np.stack([params.accel.scale_nonlinearity, params.gyro.scale_nonlinearity]),
+            quadratic=np.stack([params.accel.scale_quadratic, params.gyro.scale_quadratic]),
+            cubic=np.stack([params.accel.scale_cubic, params.gyro.scale_cubic]),
         )
+
+    def poly_values(self, t: int) -> list[float]:
+        return [*self.quadratic[t].tolist(), *self.cubic[t].tolist()]
 
     def triad_values(self, t: int) -> list[float]:
         return [*self.temp_bias[t].ravel().tolist(), *self.temp_scale[t].ravel().tolist(),
@@ -187,7 +215,7 @@ class EffectsImage:
 
     def problems(self) -> list[str]:
         out = []
-        for name in ("temp_bias", "temp_scale", "nonlinearity"):
+        for name in ("temp_bias", "temp_scale", "nonlinearity", "quadratic", "cubic"):
             if not np.isfinite(getattr(self, name)).all():
                 out.append(f"effects {name} has non-finite entries")
         if not math.isfinite(self.time_offset_s):
@@ -267,8 +295,10 @@ class CalibrationImage:
 
     @property
     def layout_version(self) -> int:
-        """1 without effects (the bytes of a layout-1 image, as before), 2 with."""
-        return LAYOUT_VERSION if self.effects is None else LAYOUT_VERSION_2
+        """1 without effects (the bytes of a layout-1 image, as before), 2 with, 3 with the scale polynomial."""
+        if self.effects is None:
+            return LAYOUT_VERSION
+        return LAYOUT_VERSION_3 if self.effects.polynomial else LAYOUT_VERSION_2
 
     @property
     def size(self) -> int:
@@ -341,6 +371,8 @@ class CalibrationImage:
                 "temp_bias_coeff": fx.temp_bias[i], "temp_scale_coeff": fx.temp_scale[i],
                 "scale_nonlinearity": fx.nonlinearity[i], "temp_bias_coeff_std": np.full((3, 3), np.nan),
                 "temp_scale_coeff_std": np.full((3, 3), np.nan), "scale_nonlinearity_std": nan3,
+                "scale_quadratic": fx.quadratic[i], "scale_cubic": fx.cubic[i],
+                "scale_quadratic_std": nan3, "scale_cubic_std": nan3,
             }
             return TriadParams(
                 misalignment=t.misalignment, misalignment_std=nan33,
@@ -366,6 +398,7 @@ class CalibrationImage:
                     "update_count": self.update_count, "layout_version": self.layout_version},
             reference_temperature_degc=math.nan if fx is None else fx.reference_temperature_degc,
             time_offset_s=0.0 if fx is None else fx.time_offset_s,
+            time_offset_std_s=0.0 if fx is None or fx.time_offset_s == 0.0 else math.nan,
             thermal=ThermalFit() if fx is None else ThermalFit(
                 "fitted" if np.any(fx.temp_bias != 0) or np.any(fx.temp_scale != 0) else "absent",
                 "from the EEPROM image"),
@@ -509,6 +542,11 @@ def image_problems(img: CalibrationImage, rates_hz: tuple[float, ...] | None = N
                     out.append(f"temperature scale terms change the scale by more than {MAX_SCALE_DEVIATION:g} "
                                f"within 100 K of T_ref (at dT = {dt:g} K)")
                     break
+        if math.isfinite(fx.time_offset_s) and img.sample_period_s > 0:
+            s = fx.time_offset_s / img.sample_period_s  # line 0 of Algorithm 1 applies this much at most
+            if s > MAX_LAG_SAMPLES or s < -MAX_LEAD_SAMPLES:
+                out.append(f"time offset {fx.time_offset_s:g} s ({s:.3g} samples) beyond what Algorithm 1 applies "
+                           f"({MAX_LAG_SAMPLES:g} samples of lag, {MAX_LEAD_SAMPLES:g} of lead)")
     return out
 
 
@@ -542,6 +580,8 @@ def encode_image(img: CalibrationImage) -> bytes:
     if fx is not None:
         body += _EFFECTS_HEAD.pack(fx.reference_temperature_degc, fx.time_offset_s)
         body += _EFFECTS_TRIAD.pack(*fx.triad_values(0)) + _EFFECTS_TRIAD.pack(*fx.triad_values(1))
+        if fx.polynomial:
+            body += _POLY_TRIAD.pack(*fx.poly_values(0)) + _POLY_TRIAD.pack(*fx.poly_values(1))
     return body + _CRC.pack(zlib.crc32(body))
 
 
@@ -578,7 +618,7 @@ def decode_image(data: bytes) -> CalibrationImage:
     gyro = TriadImage.from_values(_TRIAD.unpack_from(data, off + _TRIAD.size))
     g = np.reshape(_GSENS.unpack_from(data, off + 2 * _TRIAD.size), (3, 3))
     effects = None
-    if length == IMAGE_SIZE_2:
+    if length in (IMAGE_SIZE_2, IMAGE_SIZE_3):
         at = BODY_SIZE
         t_ref, offset = _EFFECTS_HEAD.unpack_from(data, at)
         at += _EFFECTS_HEAD.size
@@ -589,6 +629,12 @@ def decode_image(data: bytes) -> CalibrationImage:
             temp_scale=np.stack([v[9:18].reshape(3, 3) for v in tri]),
             nonlinearity=np.stack([v[18:21] for v in tri]),
         )
+        if length == IMAGE_SIZE_3:
+            at = BODY_SIZE_2
+            poly = [np.array(_POLY_TRIAD.unpack_from(data, at + k * _POLY_TRIAD.size)) for k in (0, 1)]
+            effects = replace(effects, quadratic=np.stack([v[:3] for v in poly]), cubic=np.stack([v[3:] for v in poly]))
+            if not effects.polynomial:
+                raise ImageContentError("a layout-3 image without a scale polynomial term (layout 2 holds it)")
     img = CalibrationImage(
         serial=_untext(serial, "serial"),
         params_id=pid,
@@ -650,7 +696,8 @@ SLOT_NAMES = ("A", "B")
 
 
 def slots_for(img: CalibrationImage, layout: SlotLayout = DEFAULT_SLOTS) -> SlotLayout:
-    """Where ``img`` is written: ``layout`` (the layout-1 slots) for a layout-1 image, :data:`WIDE_SLOTS` for 2."""
+    """Where ``img`` is written: ``layout`` (the layout-1 slots) for a layout-1 image, :data:`WIDE_SLOTS` for 2
+    and 3."""
     return layout if img.layout_version == LAYOUT_VERSION else WIDE_SLOTS
 
 

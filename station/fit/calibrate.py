@@ -39,6 +39,7 @@ from station.fit.temperature_terms import (
     select_orders,
     temperature_columns,
 )
+from station.fit.time_offset import estimate_time_offset
 from station.kernel.errors import FitError
 from station.kernel.parameters import (
     MAX_TEMP_ORDER,
@@ -49,6 +50,7 @@ from station.kernel.parameters import (
     ParameterSet,
     ResidualFigures,
     ThermalFit,
+    TimeOffsetNote,
     TriadParams,
 )
 from station.session.model import Kind, Session
@@ -90,13 +92,18 @@ class FitOptions:
             ``a + b exp(-t/tau)`` (any tau), at least this (K).
         reference_temperature_degc: T_ref (degC); None: the unit's temperature at power-on (mean of the
             first second of the recording).
-        scale_nonlinearity: the gyro's symmetric quadratic scale term ``y = u + k u|u|`` per output axis
-            (``u`` = M ref, the physics' ``scale_nonlinearity``; Algorithm 1's line 6' inverts it): ``'auto'``
-            fits it on the axes whose rate steps hold at least two distinct rate magnitudes (with one magnitude
-            ``u|u|`` is ``|u| u``, a scale error M already holds) and keeps it where its Wald statistic exceeds
-            ``nonlinearity_wald``; ``'off'`` (the default) never. The result says which
-            (``quality['scale_nonlinearity']``).
-        nonlinearity_wald: Wald statistic (z^2) the coefficient must exceed to be kept (9: 3 sigma).
+        scale_nonlinearity: the gyro's scale-factor polynomial of IEEE Std 952, ``y = u + k2 u^2 + k3 u^3`` per
+            output axis (``u`` = M ref; Algorithm 1's line 6' inverts it): ``'auto'`` fits the odd k3 on the axes
+            whose rate steps hold at least two distinct rate magnitudes (with one, ``u^3`` is ``|u|^2 u``, a scale
+            error M already holds) and the even k2 where they also hold both signs, and keeps each term where its
+            Wald statistic exceeds ``nonlinearity_wald``; ``'off'`` (the default) never. The result says which
+            (``quality['scale_nonlinearity']``). (The older ``u + k u|u|`` term is no longer fitted; sets that
+            hold it still load and are applied.)
+        nonlinearity_wald: Wald statistic (z^2) a term must exceed to be kept (9: 3 sigma).
+        time_offset: the sensor's lag behind the rig's reference (:mod:`station.fit.time_offset`): ``'auto'``
+            estimates it on the transitions (moves, rate ramps) and keeps it where its Wald statistic exceeds
+            ``time_offset_wald``; ``'off'`` (the default) never.
+        time_offset_wald: Wald statistic (z^2) the offset must exceed to be kept (9: 3 sigma).
     """
 
     max_blocks: int = 70
@@ -114,8 +121,13 @@ class FitOptions:
     reference_temperature_degc: float | None = None
     scale_nonlinearity: str = "off"
     nonlinearity_wald: float = 9.0
+    time_offset: str = "off"
+    time_offset_wald: float = 9.0
 
     def __post_init__(self) -> None:
+        if self.time_offset not in NONLINEARITY_MODES:
+            raise ValueError(f"FitOptions.time_offset must be one of {', '.join(NONLINEARITY_MODES)}, "
+                             f"got {self.time_offset!r}")
         if self.scale_nonlinearity not in NONLINEARITY_MODES:
             raise ValueError(f"FitOptions.scale_nonlinearity must be one of {', '.join(NONLINEARITY_MODES)}, "
                              f"got {self.scale_nonlinearity!r}")
@@ -214,7 +226,7 @@ class TriadLinear:
     fits: list[AxisFit]
     n_ref: int  # number of reference columns (3 with M, 0 when M comes from angles)
     extra: int  # extra regressor columns (3 for g-sensitivity)
-    nonlin_col: tuple[int, ...] = ()  # per axis: design column of the nonlinearity term, -1 without one
+    nonlin_col: tuple[tuple[int, int], ...] = ()  # per axis: design columns of k2 u^2, k3 u^3 (-1: not fitted)
 
 
 def _design(blocks: Blocks, with_ref: bool, g_sens: bool) -> np.ndarray:
@@ -236,7 +248,7 @@ def _fit_triad(
     with_ref: bool,
     g_sens: bool,
     triad: str,
-    nonlin_m: np.ndarray | None = None,
+    nonlin_m: Polynomial | None = None,
 ) -> tuple[TriadLinear, Blocks]:
     blocks = make_blocks(  # NaN references count as 0 there
         session.t_s, data, ref, session.ref_accel_mps2, noise.keep, runs, 1.0 / session.sample_rate_hz,
@@ -255,15 +267,27 @@ def _fit_triad(
     return tri, blocks
 
 
+#: A per-axis choice of the IEEE 952 polynomial's terms: M^ (3, 3) and which terms each axis gets, (3, 2) bool
+#: (column 0: the even k2 u^2, column 1: the odd k3 u^3).
+Polynomial = tuple[np.ndarray, np.ndarray]
+
+
 def _with_nonlinearity(
-    design: np.ndarray, blocks: Blocks, nonlin_m: np.ndarray | None, k: int
-) -> tuple[np.ndarray, int]:
-    """Axis ``k``'s design with the scale-nonlinearity regressor ``u|u|`` (``u = M^_k . ref`` per block)
-    appended when row ``k`` of ``nonlin_m`` is given (a NaN row: none); returns the design and the column (-1: none)."""
-    if nonlin_m is None or not np.all(np.isfinite(nonlin_m[k])):
-        return design, -1
-    u = blocks.ref @ nonlin_m[k]
-    return np.column_stack([design, u * np.abs(u)]), design.shape[1]
+    design: np.ndarray, blocks: Blocks, nonlin: Polynomial | None, k: int
+) -> tuple[np.ndarray, tuple[int, int]]:
+    """Axis ``k``'s design with the IEEE 952 polynomial's regressors ``u^2`` and ``u^3`` (``u = M^_k . ref`` per
+    block) appended where ``nonlin`` selects them; returns the design and the two columns (-1: not in it)."""
+    if nonlin is None or not nonlin[1][k].any():
+        return design, (-1, -1)
+    u = blocks.ref @ nonlin[0][k]
+    cols, at = [design], design.shape[1]
+    out = [-1, -1]
+    for j, power in enumerate((2, 3)):
+        if nonlin[1][k, j]:
+            cols.append((u**power)[:, None])
+            out[j] = at
+            at += 1
+    return np.column_stack(cols), (out[0], out[1])
 
 
 def nonlinearity_levels(blocks: Blocks, m_row: np.ndarray) -> int:
@@ -294,7 +318,7 @@ def _fit_triad_thermal(
     dt: np.ndarray,
     m_hat: np.ndarray | None,
     orders: tuple[list[int], list[int]] | None = None,
-    nonlin_m: np.ndarray | None = None,
+    nonlin_m: Polynomial | None = None,
 ) -> tuple[TriadLinear, Blocks, dict[str, np.ndarray], tuple[list[int], list[int]]]:
     """The triad fit with the temperature terms (:mod:`station.fit.temperature_terms`), orders chosen or given.
 
@@ -313,7 +337,7 @@ def _fit_triad_thermal(
     fits: list[AxisFit] = []
     n_bias: list[int] = []
     n_scale: list[int] = []
-    cols: list[int] = []
+    cols: list[tuple[int, int]] = []
     for k in range(3):
         m_row = None if (m_hat is None or not with_ref) else m_hat[k]
         if orders is not None:
@@ -333,7 +357,7 @@ def _fit_triad_thermal(
                                tc_range_s=tc_range)
         if nonlin_m is not None:  # orders chosen without it: refit with the nonlinearity column last
             design, col = _with_nonlinearity(design, blocks, nonlin_m, k)
-            if col >= 0:
+            if max(col) >= 0:
                 fit = fit_axis(blocks, k, design, float(noise.sigma[k]), lr_threshold=options.drift_lr_threshold,
                                tc_range_s=tc_range)
             cols.append(col)
@@ -402,11 +426,14 @@ def unpack_triad(tri: TriadLinear) -> dict[str, np.ndarray]:
         out["drift_noise"][k], out["drift_noise_std"][k] = f.drift_noise, f.drift_noise_std
     out.update(misalignment=m, misalignment_std=m_std, g_sensitivity=g, g_sensitivity_std=g_std)
     if tri.nonlin_col:
-        k_nl, k_std = np.zeros(3), np.zeros(3)
-        for k, (f, col) in enumerate(zip(tri.fits, tri.nonlin_col, strict=True)):
-            if col >= 0:
-                k_nl[k], k_std[k] = f.beta[col], float(np.sqrt(max(f.beta_cov[col, col], 0.0)))
-        out.update(scale_nonlinearity=k_nl, scale_nonlinearity_std=k_std)
+        terms = {name: np.zeros(3) for name in ("scale_quadratic", "scale_quadratic_std", "scale_cubic",
+                                                "scale_cubic_std")}
+        for k, (f, cols) in enumerate(zip(tri.fits, tri.nonlin_col, strict=True)):
+            for name, col in zip(("scale_quadratic", "scale_cubic"), cols, strict=True):
+                if col >= 0:
+                    terms[name][k] = f.beta[col]
+                    terms[f"{name}_std"][k] = float(np.sqrt(max(f.beta_cov[col, col], 0.0)))
+        out.update(terms)
     return out
 
 
@@ -420,6 +447,11 @@ def mean_model(
     k_nl = p.get("scale_nonlinearity")
     if k_nl is not None and np.any(k_nl):
         out += k_nl * lin * np.abs(lin)  # y = u + k u|u| (the physics' scale nonlinearity)
+    k2, k3 = p.get("scale_quadratic"), p.get("scale_cubic")
+    if k2 is not None and np.any(k2):
+        out += k2 * lin**2  # IEEE 952: y = u + k2 u^2 + k3 u^3
+    if k3 is not None and np.any(k3):
+        out += k3 * lin**3
     tc = p["correlation_time_s"]
     for k in range(3):
         if np.isfinite(tc[k]) and p["bias_drift"][k] != 0.0:
@@ -467,7 +499,7 @@ def _sample_design(
     dt: np.ndarray | None = None, order: int = 1,
 ) -> Rows:
     """The linear regressors of eq. (1) per sample: reference (if M is fitted here), 1, force (g-sensitivity);
-    with ``nonlinearity`` (the gyro reference) the nonlinearity's regressors (a superset: ``ref_i |ref_i|``); with
+    with ``nonlinearity`` (the gyro reference) the polynomial's regressors (a superset: ``ref_i^2``, ``ref_i^3``); with
     ``dt`` the temperature regressors the fit used up to ``order`` (a superset for the scale: every ``ref_i dT^j``).
     Made for the rows asked only (the goodness of fit reads them per segment)."""
 
@@ -479,7 +511,7 @@ def _sample_design(
         design = np.column_stack(cols)
         if nonlinearity is not None:
             r = np.nan_to_num(nonlinearity[lo:hi])
-            design = np.column_stack([design, r * np.abs(r)])
+            design = np.column_stack([design, r**2, r**3])
         if dt is not None:
             design = np.column_stack([design, temperature_columns(dt[lo:hi], None if ref is None else ref[lo:hi],
                                                                   order)])
@@ -536,51 +568,81 @@ def _top(note: ThermalFit, triad: str) -> int:
     return max([1, *o.get("bias", []), *o.get("scale", [])])
 
 
+def rate_signs(blocks: Blocks, m_row: np.ndarray) -> int:
+    """How many signs (0, 1 or 2) the rate along axis ``m_row`` takes in the rate blocks (rates over 5 % of the
+    largest)."""
+    u = blocks.ref @ m_row
+    top = float(np.abs(u).max()) if u.size else 0.0
+    if top <= 0.0:
+        return 0
+    big = u[np.abs(u) > 0.05 * top]
+    return int(np.any(big > 0)) + int(np.any(big < 0))
+
+
 def _gyro_nonlinearity(
     session: Session, g_ref: np.ndarray, g_runs: list[tuple[int, int, int]], g_noise: NoiseEstimate,
     options: FitOptions, g: dict[str, np.ndarray], g_tri: TriadLinear, g_blocks: Blocks, *, rate: bool,
     dt: np.ndarray | None, orders: tuple[list[int], list[int]] | None,
 ) -> tuple[dict[str, np.ndarray], TriadLinear, Blocks, dict[str, Any]]:
-    """The gyro refitted with ``k u|u|`` on the axes that identify it and keep it (see
-    :attr:`FitOptions.scale_nonlinearity`): two passes, the regressor's M^ from the previous one. Returns the
-    triad's parameters, fits, blocks and a note (``status`` fitted / not_identifiable / not_significant)."""
-    rule = (f"u + k u|u| per axis where the rate steps hold >= 2 rate magnitudes; kept where "
-            f"(k/sigma_k)^2 >= {options.nonlinearity_wald:g}")
+    """The gyro refitted with the IEEE 952 polynomial ``u + k2 u^2 + k3 u^3`` (see
+    :attr:`FitOptions.scale_nonlinearity`) on the axes and terms the rate steps identify: the odd k3 needs two
+    or more rate magnitudes (with one, ``u^3 = |u|^2 u`` is a scale error M already holds), the even k2 two or
+    more magnitudes and both signs. Two passes, the regressors' M^ from the previous one; a term is kept where
+    its Wald statistic passes. Returns the triad's parameters, fits, blocks and a note (``status`` fitted /
+    not_identifiable / not_significant; per axis the terms identifiable, kept and their z)."""
+    rule = (f"IEEE 952 u + k2 u^2 + k3 u^3 per axis: k3 where the rate steps hold >= 2 rate magnitudes, k2 where "
+            f"they also hold both signs; a term kept where (k/sigma_k)^2 >= {options.nonlinearity_wald:g}")
     if not rate:
         return g, g_tri, g_blocks, {"status": "not_identifiable", "rule": rule, "axes": [],
                                     "reason": "no rate steps (M_w from known angles): the nonlinearity needs rates"}
     m_hat = np.asarray(g["misalignment"], dtype=float)
     levels = [nonlinearity_levels(g_blocks, m_hat[k]) for k in range(3)]
-    use = np.array([lv >= 2 for lv in levels])
+    signs = [rate_signs(g_blocks, m_hat[k]) for k in range(3)]
+    use = np.array([[lv >= 2 and sg == 2, lv >= 2] for lv, sg in zip(levels, signs, strict=True)])
+    identifiable = {"k2": [AXES[k] for k in range(3) if use[k, 0]], "k3": [AXES[k] for k in range(3) if use[k, 1]]}
+    missing = []
+    for k in range(3):
+        if not use[k, 1]:
+            missing.append(f"{AXES[k]}: one rate magnitude, neither term (add a step at a second magnitude, "
+                           "e.g. 50 and 200 deg/s)")
+        elif not use[k, 0]:
+            missing.append(f"{AXES[k]}: one sign, k2 u^2 not separable from the bias and k3 (add the same "
+                           "magnitudes in the other direction)")
+    base = {"rule": rule, "levels": levels, "signs": signs, "identifiable": identifiable}
+    if missing:
+        base["not_identifiable"] = missing
     if not use.any():
-        return g, g_tri, g_blocks, {
-            "status": "not_identifiable", "rule": rule, "axes": [], "levels": levels,
-            "reason": "each axis sees one rate magnitude: with one, k u|u| is a scale error M already holds; "
-                      "add rate steps at a second magnitude (e.g. 50 and 200 deg/s)"}
-    z = np.zeros(3)
+        return g, g_tri, g_blocks, {"status": "not_identifiable", "axes": [], **base,
+                                    "reason": "; ".join(missing)}
+    z = np.zeros((3, 2))
     for _ in range(2):
-        nm = np.where(use[:, None], m_hat, np.nan)
+        poly = (m_hat, use)
         if dt is None:
             tri, blocks = _fit_triad(session, session.gyro_radps, g_ref, g_runs, g_noise, options, with_ref=True,
-                                     g_sens=options.g_sensitivity, triad="gyro", nonlin_m=nm)
+                                     g_sens=options.g_sensitivity, triad="gyro", nonlin_m=poly)
             p = unpack_triad(tri)
         else:
             tri, blocks, coeff, _ = _fit_triad_thermal(
                 session, session.gyro_radps, g_ref, g_runs, g_noise, options, with_ref=True,
-                g_sens=options.g_sensitivity, triad="gyro", dt=dt, m_hat=m_hat, orders=orders, nonlin_m=nm)
+                g_sens=options.g_sensitivity, triad="gyro", dt=dt, m_hat=m_hat, orders=orders, nonlin_m=poly)
             p = {**unpack_triad(tri), **coeff}
-        k_std = p["scale_nonlinearity_std"]
-        z = np.divide(p["scale_nonlinearity"], k_std, out=np.zeros(3), where=k_std > 0)
+        for j, name in enumerate(("scale_quadratic", "scale_cubic")):
+            std = p[f"{name}_std"]
+            z[:, j] = np.divide(p[name], std, out=np.zeros(3), where=std > 0)
         keep = use & (z**2 >= options.nonlinearity_wald)
         m_hat = np.asarray(p["misalignment"], dtype=float)
         if not keep.any():
-            return g, g_tri, g_blocks, {"status": "not_significant", "rule": rule, "axes": [], "levels": levels,
-                                        "z": [round(float(v), 2) for v in z],
-                                        "reason": "no axis's coefficient passes the Wald test"}
-        use = keep  # the second pass: the kept axes, the regressor from this pass's M^
-    axes = [AXES[k] for k in range(3) if use[k]]
-    return p, tri, blocks, {"status": "fitted", "rule": rule, "axes": axes, "levels": levels,
-                            "z": [round(float(v), 2) for v in z], "reason": ""}
+            return g, g_tri, g_blocks, {"status": "not_significant", "axes": [], **base,
+                                        "z": {"k2": [round(float(v), 2) for v in z[:, 0]],
+                                              "k3": [round(float(v), 2) for v in z[:, 1]]},
+                                        "reason": "no axis's term passes the Wald test"}
+        use = keep  # the second pass: the kept terms, the regressors from this pass's M^
+    axes = [AXES[k] for k in range(3) if use[k].any()]
+    return p, tri, blocks, {"status": "fitted", "axes": axes, **base,
+                            "kept": {"k2": [AXES[k] for k in range(3) if use[k, 0]],
+                                     "k3": [AXES[k] for k in range(3) if use[k, 1]]},
+                            "z": {"k2": [round(float(v), 2) for v in z[:, 0]],
+                                  "k3": [round(float(v), 2) for v in z[:, 1]]}, "reason": ""}
 
 
 def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
@@ -656,6 +718,14 @@ def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
         g["misalignment"], g["misalignment_std"] = angle_fit.misalignment, angle_fit.misalignment_std
         angle_report = angle_fit.report
 
+    offset_note: TimeOffsetNote | None = None
+    offset, offset_std = 0.0, 0.0
+    if options.time_offset != "off":
+        with numerics("time offset on the transitions"):
+            offset_note, offset, offset_std = estimate_time_offset(
+                session, lambda t, r, f, d: mean_model(g, t, r, f, d), g_noise.sigma, dt,
+                wald=options.time_offset_wald)
+
     # --- residuals, noise figures and quality ----------------------------------
     a_res = _residual(session, session.accel_mps2, a, session.ref_accel_mps2, dt)
     g_res = _residual(session, session.gyro_radps, g, g_ref, dt)
@@ -670,12 +740,14 @@ def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
         },
         known_angle=angle_report or None,
         scale_nonlinearity=None if nonlin_note is None else NonlinearityNote.from_dict(nonlin_note),
+        time_offset=offset_note,
     )
     deg = float(np.degrees(1.0))
     a_design = _sample_design(len(session), session.ref_accel_mps2, None, dt=dt, order=_top(thermal_note, "accel"))
     g_design = _sample_design(len(session), g_ref if gyro_method == "rate" else None,
                               session.ref_accel_mps2 if options.g_sensitivity else None,
-                              nonlinearity=g_ref if np.any(g.get("scale_nonlinearity", 0.0)) else None,
+                              nonlinearity=g_ref if (np.any(g.get("scale_quadratic", 0.0))
+                                                     or np.any(g.get("scale_cubic", 0.0))) else None,
                               dt=dt, order=_top(thermal_note, "gyro"))
     verdict = goodness_of_fit(session, [
         _triad_residual("accel", a_res, a_design, a_runs, a_noise, a_tri, a_blocks, 1.0, "m/s^2",
@@ -705,6 +777,8 @@ def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
         quality=quality,
         reference_temperature_degc=course.reference_degc if dt is not None else float("nan"),
         thermal=thermal_note,
+        time_offset_s=offset,
+        time_offset_std_s=offset_std,
         source={
             "software": f"station {__version__}",
             "samples": len(session),

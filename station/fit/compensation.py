@@ -4,9 +4,10 @@ The names are those of :class:`station.physics.effects.Effects` (what the diagno
 *compensated* by a parameter set when Algorithm 1 (:mod:`station.correct.streaming`, the firmware) applies
 it from that set's fields, and those fields are non-zero in the set at hand (:func:`compensated_by`).
 
-``time_offset`` is carried (``ParameterSet.time_offset_s``) but not applied to the values: it concerns
-the time stamps. Effects without fields (lever arm, Earth rotation, scale asymmetry, bias random walk,
-outliers, pose tilt) are not compensated: the rig or the fit's design takes care of them, or nothing can.
+``time_offset`` is applied since ``station-params/3``: Algorithm 1's line 0 moves the input onto the rig's
+time by ``ParameterSet.time_offset_s``. Effects without fields (lever arm, Earth rotation, scale asymmetry,
+bias random walk, outliers, pose tilt) are not compensated:
+the rig or the fit's design takes care of them, or nothing can.
 """
 
 from __future__ import annotations
@@ -22,7 +23,8 @@ COMPENSATION: dict[str, tuple[str, ...]] = {
     "temperature_bias": ("accel.temp_bias_coeff", "gyro.temp_bias_coeff"),
     "temperature_scale": ("accel.temp_scale_coeff", "gyro.temp_scale_coeff"),
     "g_sensitivity": ("gyro.g_sensitivity",),
-    "scale_nonlinearity": ("accel.scale_nonlinearity", "gyro.scale_nonlinearity"),
+    "scale_nonlinearity": ("accel.scale_nonlinearity", "gyro.scale_nonlinearity", "accel.scale_quadratic",
+                           "gyro.scale_quadratic", "accel.scale_cubic", "gyro.scale_cubic"),
     "time_offset": ("time_offset_s",),
     "scale_asymmetry": (),
     "lever_arm": (),
@@ -31,8 +33,8 @@ COMPENSATION: dict[str, tuple[str, ...]] = {
     "outliers": (),
     "pose_tilt": (),
 }
-#: Effects Algorithm 1 applies when their fields are non-zero (``time_offset`` is carried, not applied).
-APPLIED = frozenset({"temperature_bias", "temperature_scale", "g_sensitivity", "scale_nonlinearity"})
+#: Effects Algorithm 1 applies when their fields are non-zero.
+APPLIED = frozenset({"temperature_bias", "temperature_scale", "g_sensitivity", "scale_nonlinearity", "time_offset"})
 
 
 def field_value(params: ParameterSet, path: str) -> object:

@@ -20,6 +20,18 @@ with ``dT = T - T_ref`` the unit's temperature minus :attr:`ParameterSet.referen
 (``temp_scale_coeff`` s, ``temp_bias_coeff`` c; zeros beyond the fitted order), the symmetric scale
 nonlinearity ``u + k u|u|`` applied to ``(M x)_k (1 + s dT)``, the gyro's g-sensitivity, and the unit's
 time offset. A ``station-params/1`` file still loads, with all of them zero and no reference temperature.
+
+Format ``station-params/3`` adds the IEEE Std 952 scale-factor polynomial of the gyro and accelerometer
+(the even and the cubic term, per output axis k, on ``u = (M x)_k (1 + s dT)``):
+
+    y_k = u + k_nl u|u| + k2 u^2 + k3 u^3        (``scale_nonlinearity``, ``scale_quadratic``, ``scale_cubic``)
+
+and makes the time offset a compensated term: ``time_offset_s`` (tau, with ``time_offset_std_s``) is the
+sensor's lag behind the rig (the sample stamped t holds the input at rig time t - tau), estimated by the fit
+and applied by Algorithm 1 (:mod:`station.correct.streaming`). A set writes ``/3`` only when it has a
+polynomial term or a non-zero time offset; otherwise it writes ``/2``, byte for byte as before. A ``/2``
+file loads with k2 = k3 = 0 (its ``time_offset_s`` was never fitted: 0). The ``u|u|`` term stays in all
+three formats (old files and images keep meaning what they meant); the fit now fits k2 and k3 instead.
 Every estimate carries a standard uncertainty (``*_std``, same unit). An estimate
 that the recording cannot resolve is NaN in memory and ``null`` in JSON; an estimate that the fit computed
 but the recording cannot determine (e.g. a correlation time far beyond the record's length) keeps its number
@@ -41,9 +53,12 @@ import numpy as np
 
 from station.kernel.errors import FormatError, UnsupportedVersionError
 
-FORMAT = "station-params/2"
-#: Formats :meth:`ParameterSet.from_dict` reads (``/1``: no compensable effects beyond eq. 1 and g-sensitivity).
-FORMATS = ("station-params/1", FORMAT)
+FORMAT_2 = "station-params/2"
+#: The format of a set with a scale polynomial term (k2, k3) or a time offset.
+FORMAT = "station-params/3"
+#: Formats :meth:`ParameterSet.from_dict` reads (``/1``: no compensable effects beyond eq. 1 and g-sensitivity;
+#: ``/2``: no scale polynomial, no applied time offset).
+FORMATS = ("station-params/1", FORMAT_2, FORMAT)
 #: Highest polynomial order of the temperature terms.
 MAX_TEMP_ORDER = 3
 #: What :attr:`ThermalFit.status` can say.
@@ -111,7 +126,10 @@ class TriadParams:
         temp_bias_coeff: c_kj, bias change per K^j of ``T - T_ref`` (U/K^j), (3, 3): row k = output
             axis, column j - 1 = order j (1..3); zeros beyond the fitted order or when not fitted.
         temp_scale_coeff: s_kj, relative scale change per K^j (1/K^j), (3, 3), same layout.
-        scale_nonlinearity: k of ``u + k u|u|`` per axis (1/U), (3,); zeros when not fitted.
+        scale_nonlinearity: k of ``u + k u|u|`` per axis (1/U), (3,); zeros when not fitted (the fit of
+            ``station-params/3`` fits the polynomial below instead; the term stays for older sets).
+        scale_quadratic: k2 of the IEEE 952 polynomial ``u + k2 u^2 + k3 u^3`` per axis (1/U), (3,).
+        scale_cubic: k3 of that polynomial per axis (1/U^2), (3,).
         (``*_std``: standard uncertainties; 0 for terms not in the model.)
     """
 
@@ -137,6 +155,10 @@ class TriadParams:
     temp_scale_coeff_std: np.ndarray = field(default_factory=lambda: np.zeros((3, MAX_TEMP_ORDER)))
     scale_nonlinearity: np.ndarray = field(default_factory=lambda: np.zeros(3))
     scale_nonlinearity_std: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    scale_quadratic: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    scale_quadratic_std: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    scale_cubic: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    scale_cubic_std: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
     _MATRIX_FIELDS = (
         "misalignment", "misalignment_std", "g_sensitivity", "g_sensitivity_std",
@@ -147,6 +169,8 @@ class TriadParams:
         "temp_bias_coeff", "temp_bias_coeff_std", "temp_scale_coeff", "temp_scale_coeff_std",
         "scale_nonlinearity", "scale_nonlinearity_std",
     )
+    #: Fields a ``station-params/2`` file does not have (they default to zero).
+    _V3_FIELDS = ("scale_quadratic", "scale_quadratic_std", "scale_cubic", "scale_cubic_std")
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -155,10 +179,17 @@ class TriadParams:
             shape = (3, 3) if f.name in self._MATRIX_FIELDS else (3,)
             object.__setattr__(self, f.name, _arr(getattr(self, f.name), shape))
 
-    def to_dict(self) -> dict[str, Any]:
+    @property
+    def has_polynomial(self) -> bool:
+        """A non-zero IEEE 952 polynomial term (k2 or k3)."""
+        return bool(np.any(self.scale_quadratic != 0) or np.any(self.scale_cubic != 0))
+
+    def to_dict(self, version: int = 3) -> dict[str, Any]:
         out: dict[str, Any] = {}
         for f in fields(self):
             value = getattr(self, f.name)
+            if version < 3 and f.name in self._V3_FIELDS:
+                continue
             if f.name == "allan":
                 out["allan"] = {g.name: _to_json_value(getattr(value, g.name)) for g in fields(value)}
             else:
@@ -182,10 +213,11 @@ class TriadParams:
         return bool(np.any(self.temp_bias_coeff != 0) or np.any(self.temp_scale_coeff != 0))
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any], version: int = 2) -> TriadParams:
+    def from_dict(cls, d: dict[str, Any], version: int = 3) -> TriadParams:
         try:
             kwargs = {f.name: _from_json_value(d[f.name]) for f in fields(cls)
-                      if f.name != "allan" and (version >= 2 or f.name not in cls._V2_FIELDS)}
+                      if f.name != "allan" and (version >= 2 or f.name not in cls._V2_FIELDS)
+                      and (version >= 3 or f.name not in cls._V3_FIELDS)}
             if not isinstance(d["allan"], dict):
                 raise TypeError("'allan' must be an object")
             allan = AllanCoefficients(**{k: _from_json_value(v) for k, v in d["allan"].items()})
@@ -375,6 +407,61 @@ class NonlinearityNote:
                    detail=json.loads(json.dumps(detail)))
 
 
+#: What :attr:`TimeOffsetNote.status` can say (``'beyond_range'``: estimated, more than Algorithm 1 applies).
+TIME_OFFSET_STATUSES = ("fitted", "not_significant", "not_determined", "beyond_range")
+#: Largest lag (samples) Algorithm 1's line 0 extrapolates over, and largest lead its delay line holds.
+MAX_LAG_SAMPLES = 4.0
+MAX_LEAD_SAMPLES = 1024.0
+
+
+@dataclass(frozen=True)
+class TimeOffsetNote:
+    """The fit's estimate of the time offset tau (the sensor's lag behind the rig's reference, s) and what it did
+    with it: ``'fitted'`` (kept: in :attr:`ParameterSet.time_offset_s`, applied by Algorithm 1),
+    ``'not_significant'`` (estimated, below the Wald threshold: the set keeps 0), ``'not_determined'`` (the
+    recording's transitions do not determine it: ``estimate_s`` NaN, with the reason and the rig step that would).
+    ``transitions``: the move/ramp segments that carried information; ``rule``: the estimator and the selection."""
+
+    status: str
+    estimate_s: float = math.nan
+    std_s: float = math.nan
+    transitions: int = 0
+    rule: str = ""
+    reason: str = ""
+
+    def __post_init__(self) -> None:
+        if self.status not in TIME_OFFSET_STATUSES:
+            raise FormatError(f"time offset status must be one of {', '.join(TIME_OFFSET_STATUSES)}, "
+                              f"got {self.status!r}")
+
+    @property
+    def fitted(self) -> bool:
+        return self.status == "fitted"
+
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"status": self.status, "estimate_s": _num_json(self.estimate_s),
+                               "std_s": _num_json(self.std_s), "transitions": self.transitions, "rule": self.rule}
+        if self.reason:
+            out["reason"] = self.reason
+        return out
+
+    @classmethod
+    def from_dict(cls, d: Any) -> TimeOffsetNote:
+        if not isinstance(d, dict) or not isinstance(d.get("status"), str):
+            raise TypeError("'quality.time_offset' must be an object with a 'status'")
+        vals = []
+        for name in ("estimate_s", "std_s"):
+            v = d.get(name)
+            if v is not None and (isinstance(v, bool) or not isinstance(v, int | float)):
+                raise TypeError(f"'quality.time_offset.{name}' must be a number or null")
+            vals.append(math.nan if v is None else float(v))
+        n = d.get("transitions", 0)
+        if isinstance(n, bool) or not isinstance(n, int):
+            raise TypeError("'quality.time_offset.transitions' must be an integer")
+        return cls(status=d["status"], estimate_s=vals[0], std_s=vals[1], transitions=n, rule=str(d.get("rule", "")),
+                   reason=str(d.get("reason", "")))
+
+
 @dataclass(frozen=True)
 class Undetermined:
     """One parameter of one triad axis that the recording cannot determine (its number is kept in the set but
@@ -413,6 +500,7 @@ class FitQuality:
         drift_likelihood_ratio: eq. 3's drift against none, per triad and axis.
         known_angle: the known-angle gyro fit's report (a Ferraris recording), read-only JSON.
         scale_nonlinearity: the nonlinearity note (None when the fit did not consider it).
+        time_offset: the time-offset note (None when the fit did not consider it).
         goodness_of_fit: the test against the recording (None: not tested, e.g. an image or an old file).
         rig_free: a rig-free fit's report (``station-rigfree/1``: convention, gravity-norm and move figures,
             covariances, cross-validation, read timing), read-only JSON; None for a rig fit.
@@ -436,9 +524,10 @@ class FitQuality:
     undetermined: tuple[Undetermined, ...] = ()
     record_end_s: float = math.nan
     extra: Mapping[str, Any] = field(default_factory=dict)
+    time_offset: TimeOffsetNote | None = None
 
     _KNOWN = ("rig_free", "accel", "gyro", "gyro_scale_method", "outliers", "drift_likelihood_ratio", "known_angle",
-              "scale_nonlinearity", "goodness_of_fit", "determinability")
+              "scale_nonlinearity", "goodness_of_fit", "determinability", "time_offset")
 
     @property
     def passed(self) -> bool:
@@ -477,6 +566,8 @@ class FitQuality:
             out["known_angle"] = dict(self.known_angle)
         if self.scale_nonlinearity is not None:
             out["scale_nonlinearity"] = self.scale_nonlinearity.to_dict()
+        if self.time_offset is not None:
+            out["time_offset"] = self.time_offset.to_dict()
         if self.goodness_of_fit is not None:
             out["goodness_of_fit"] = self.goodness_of_fit.to_dict()
         if self.determinability_rule:
@@ -529,6 +620,7 @@ class FitQuality:
             scale_nonlinearity=(None if d.get("scale_nonlinearity") is None
                                 else NonlinearityNote.from_dict(d["scale_nonlinearity"])),
             goodness_of_fit=None if d.get("goodness_of_fit") is None else GoodnessOfFit.from_dict(d["goodness_of_fit"]),
+            time_offset=None if d.get("time_offset") is None else TimeOffsetNote.from_dict(d["time_offset"]),
             rig_free=section("rig_free"),
             determinability_rule="" if det is None else str(det.get("rule", "")),
             undetermined=() if det is None else tuple(Undetermined.from_dict(u) for u in det.get("undetermined", [])),
@@ -551,8 +643,10 @@ class ParameterSet:
             determine (:class:`FitQuality`).
         source: where the parameters came from (session hash, software version, ...).
         reference_temperature_degc: T_ref of the temperature terms (degC); NaN when the set has none.
-        time_offset_s: the unit's sample time minus the rig's (s); 0 when not fitted. Carried for the
-            product record; Algorithm 1 does not use it (it concerns time stamps, not values).
+        time_offset_s: tau, the sensor's lag behind the rig (s): the sample stamped t holds the input at rig
+            time t - tau (the unit's sample time minus the rig's); 0 when not fitted or not kept. Algorithm 1
+            shifts its input by it (:mod:`station.correct.streaming`).
+        time_offset_std_s: its standard uncertainty (s); 0 when not fitted, NaN when not stated (an image).
         thermal: whether the temperature terms were fitted, and why not (:class:`ThermalFit`).
     """
 
@@ -566,6 +660,7 @@ class ParameterSet:
     reference_temperature_degc: float = math.nan
     time_offset_s: float = 0.0
     thermal: ThermalFit = field(default_factory=ThermalFit)
+    time_offset_std_s: float = 0.0
 
     @property
     def compensates_temperature(self) -> bool:
@@ -576,7 +671,19 @@ class ParameterSet:
 
     @property
     def has_nonlinearity(self) -> bool:
-        return bool(np.any(self.accel.scale_nonlinearity != 0) or np.any(self.gyro.scale_nonlinearity != 0))
+        """Any scale nonlinearity term (``u|u|``, k2 or k3) is non-zero."""
+        return bool(np.any(self.accel.scale_nonlinearity != 0) or np.any(self.gyro.scale_nonlinearity != 0)
+                    or self.has_polynomial)
+
+    @property
+    def has_polynomial(self) -> bool:
+        """An IEEE 952 polynomial term (k2, k3) is non-zero in either triad."""
+        return self.accel.has_polynomial or self.gyro.has_polynomial
+
+    @property
+    def format(self) -> str:
+        """The format the set writes: ``/3`` with a polynomial term or a time offset, else ``/2``."""
+        return FORMAT if (self.has_polynomial or self.time_offset_s != 0.0) else FORMAT_2
 
     def constant_bias_values(self) -> tuple[ParameterSet, tuple[str, ...]]:
         """The set with one constant bias per axis where b_stat is not determined (for a consumer that holds a
@@ -620,8 +727,11 @@ class ParameterSet:
         return replace(self, accel=triads["accel"], gyro=triads["gyro"]), tuple(notes)
 
     def to_dict(self) -> dict[str, Any]:
+        fmt = self.format
+        version = FORMATS.index(fmt) + 1
+        extra: dict[str, Any] = {"time_offset_std_s": _num_json(self.time_offset_std_s)} if version >= 3 else {}
         return {
-            "format": FORMAT,
+            "format": fmt,
             "serial": self.serial,
             "sample_period_s": self.sample_period_s,
             "moving_average_length": self.moving_average_length,
@@ -629,9 +739,10 @@ class ParameterSet:
                 self.reference_temperature_degc if math.isfinite(self.reference_temperature_degc) else None
             ),
             "time_offset_s": self.time_offset_s,
+            **extra,
             "thermal": self.thermal.to_dict(),
-            "accel": self.accel.to_dict(),
-            "gyro": self.gyro.to_dict(),
+            "accel": self.accel.to_dict(version),
+            "gyro": self.gyro.to_dict(version),
             "quality": self.quality.to_dict(),
             "source": self.source,
         }
@@ -671,6 +782,12 @@ class ParameterSet:
                     "time_offset_s": float(offset),
                     "thermal": ThermalFit.from_dict(d["thermal"]),
                 }
+            if version >= 3:
+                std = d["time_offset_std_s"]  # null: not stated (an EEPROM image)
+                if std is not None and (isinstance(std, bool) or not isinstance(std, int | float)
+                                        or not (math.isfinite(std) and std >= 0)):
+                    raise TypeError(f"'time_offset_std_s' must be a finite number >= 0 or null, got {std!r}")
+                extra["time_offset_std_s"] = math.nan if std is None else float(std)
             return cls(
                 serial=serial,
                 sample_period_s=float(period),

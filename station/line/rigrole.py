@@ -31,7 +31,7 @@ from station.kernel.parameters import ParameterSet
 from station.line.recordings import RackArchive, StoredRackRecording
 from station.sensor.protocol import Sensor
 from station.sequence.capture import UnitChannel
-from station.sequence.runner import SequenceRunner
+from station.sequence.runner import SequenceRunner, UnitResult
 from station.session.model import Session
 
 #: what a unit gets
@@ -103,8 +103,16 @@ class KeepPowered:
     def __init__(self, sensor: Sensor) -> None:
         self._sensor = sensor
         self._boot_count = sensor.status().boot_count
+        self.released = False
+
+    def release(self) -> None:
+        """From now on a power cycle is a real one (after the fit: the written image is loaded at power-on)."""
+        self.released = True
 
     def power_cycle(self, boot_timeout_s: float | None = None) -> None:
+        if self.released:
+            self._sensor.power_cycle(boot_timeout_s)
+            return
         now = self._sensor.status().boot_count
         if now != self._boot_count:
             raise HardwareError(f"the unit rebooted on the rig (boot count {self._boot_count} -> {now}): its rack "
@@ -159,6 +167,13 @@ class LineRigRunner(SequenceRunner):
         if offset is not None and math.isfinite(offset):
             meta[OFFSET_KEY] = repr(float(offset))
         return meta
+
+    def _provision(self, results: list[UnitResult]) -> list[UnitResult]:
+        # the fit is done: the written image is loaded by a real power cycle before it is verified on the rig
+        for s in self.sensors:
+            if isinstance(s, KeepPowered):
+                s.release()
+        return super()._provision(results)
 
     def _fit_one(self, session: Session) -> ParameterSet:
         stored = self.archive.latest(session.serial)

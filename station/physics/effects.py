@@ -285,6 +285,9 @@ class EffectTruth:
             perpendicular to the pose's up axis) of the sensor's actual attitude against the
             commanded one, (6, 3): ``R_true = R_nominal exp([phi]x)``, so the specific force the
             sensor feels is ``exp(-[phi]x) f_ref ~ f_ref + f_ref x phi``. Pose segments only.
+        accel_quadratic, gyro_quadratic, accel_cubic, gyro_cubic: the IEEE 952 scale polynomial
+            ``y = u + k2 u^2 + k3 u^3`` per axis (1/U, 1/U^2), (3,); zeros unless given explicitly (no
+            :class:`Effects` magnitude realizes them: benchmarks and tests set them on the truth).
 
     Temperature effects act on ``T - T_ref``, the true sensor temperature minus its
     value at power-on (:attr:`station.physics.imu.Environment.ambient_degc`).
@@ -306,12 +309,18 @@ class EffectTruth:
     gyro_random_walk: float = 0.0
     extra_outlier_probability: float = 0.0
     pose_tilt_rad: np.ndarray | None = None
+    accel_quadratic: np.ndarray | None = None
+    gyro_quadratic: np.ndarray | None = None
+    accel_cubic: np.ndarray | None = None
+    gyro_cubic: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         for f in fields(self):
             value = getattr(self, f.name)
             if f.name == "pose_tilt_rad" and value is None:
                 value = np.zeros((len(POSES), 3))
+            if f.name.endswith(("_quadratic", "_cubic")) and value is None:
+                value = np.zeros(3)
             if isinstance(value, float | int):
                 object.__setattr__(self, f.name, float(value))
             else:

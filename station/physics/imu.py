@@ -154,6 +154,8 @@ class _Triad:
         self.tr = tr
         self.temp_scale = on(getattr(et, f"{name}_temp_scale"))
         self.nonlinearity = on(getattr(et, f"{name}_nonlinearity"))
+        self.quadratic = on(np.asarray(getattr(et, f"{name}_quadratic")))
+        self.cubic = on(np.asarray(getattr(et, f"{name}_cubic")))
         self.asymmetry = on(getattr(et, f"{name}_asymmetry"))
         self.temp_bias = on(getattr(et, f"{name}_temp_bias"))
         self.walk_density = float(getattr(et, f"{name}_random_walk"))
@@ -176,6 +178,10 @@ class _Triad:
             u = u * (1.0 + self.temp_scale * d_temp)
         if self.nonlinearity is not None:
             u = u + self.nonlinearity * u * np.abs(u)
+        if self.quadratic is not None or self.cubic is not None:  # IEEE 952 polynomial
+            q = np.zeros(3) if self.quadratic is None else self.quadratic
+            c = np.zeros(3) if self.cubic is None else self.cubic
+            u = u + q * u * u + c * u * u * u
         if self.asymmetry is not None:
             u = u * (1.0 + 0.5 * self.asymmetry * np.sign(u))
         # b_stat + b_drift g(t): the deterministic part of eq. (3) exactly, plus the stochastic GM part

@@ -41,6 +41,14 @@ class SequenceOptions:
         rate_tolerance, rate_offset_radps: rate steps: the mean gyro rate about the
             commanded axis within ``rate_tolerance * |commanded| + rate_offset_radps`` of it.
         rate_steadiness_radps: rate steps: detrended std about the commanded axis (rad/s).
+
+    Station timing gates (a failure is the station's, ERROR):
+        max_clock_rate_error: station seconds per sensor second within ``1 +-`` this (1), beyond what the
+            clock syncs resolve. Quartz clocks agree to 1e-4; 1 % still keeps a window placed from a sync at
+            the step's start within 0.3 s over a 30 s hold.
+        clock_check_min_s: the clock rate is judged once two syncs are this far apart in sensor time (s).
+        max_frame_lateness_s: the stream may run this far behind the station clock (s), on top of the
+            station's polling period.
     """
 
     move_timeout_s: float = 60.0
@@ -62,6 +70,9 @@ class SequenceOptions:
     rate_tolerance: float = 0.05
     rate_offset_radps: float = math.radians(5.0)
     rate_steadiness_radps: float = math.radians(0.3)
+    max_clock_rate_error: float = 0.01
+    clock_check_min_s: float = 5.0
+    max_frame_lateness_s: float = 5.0
 
     def for_scale(self, scale: float) -> SequenceOptions:
         """The same options with polling slowed down for a fast simulated clock (``scale`` sim s per wall s).

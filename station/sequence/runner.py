@@ -48,6 +48,7 @@ from station.kernel.plan import RigPlan, default_plan
 from station.rig.protocol import Rig, RigState
 from station.sensor.protocol import Sensor
 from station.sequence.capture import UnitChannel, build_session
+from station.sequence.gates import station_fault_text
 from station.sequence.limits import check_limits
 from station.sequence.nest_correction import in_sensor_frame
 from station.sequence.options import SequenceOptions
@@ -541,9 +542,11 @@ class SequenceRunner:
     def apply_report(self, fx: Fixture, step: NamedStep, report: StepReport, verdicts: list[UnitVerdict]) -> list[str]:
         """Emit the step's measurements; end units with a sensor fault (ERROR) or a failed gate.
 
-        A physics gate that every measured unit of the step fails (two units or more) is a common cause, the
-        rig or the station's timing, not the units: those units end ERROR, which the retest policy does not
-        count, with the gate named.
+        A failed link or timing gate (:mod:`station.sequence.gates`: samples, dropped frames, the sensor's clock
+        rate, late frames, a rig that did not report itself settled) is the station's: ERROR, with the gate
+        named. A physics gate that every measured unit of the step fails (two units or more) is a common cause,
+        the rig or the station's timing, not the units: those units end ERROR too. The retest policy counts
+        neither.
         """
         problems: list[str] = []
         common = common_cause(report)
@@ -565,8 +568,11 @@ class SequenceRunner:
             if failed:
                 link = [g for g in failed if g.link]
                 outcome = Outcome.ERROR if link or common else Outcome.FAIL
-                text = "; ".join(g.describe() for g in (link or failed))
-                if common and not link:
+                text = "; ".join(station_fault_text(g) for g in link) if link else "; ".join(
+                    g.describe() for g in failed)
+                if link:
+                    text = f"station fault (not counted against the unit): {text}"
+                elif common:
                     text = (f"station fault: every unit failed {', '.join(sorted(common))} in this step "
                             f"(the rig or the station's timing, not the unit): {text}")
                 self._end_unit(fx, unit, v, outcome, f"step '{step.name}': {text}")

@@ -31,7 +31,7 @@ from station.kernel.plan import RigPlan
 from station.rig.protocol import Rig, RigFault, RigState
 from station.rig.registers import FaultCode, angle_error_deg
 from station.sequence.capture import CaptureStopped, UnitChannel, Window
-from station.sequence.gates import evaluate
+from station.sequence.gates import clock_rate_gate, evaluate, frame_lateness_gate, rig_gate
 from station.sequence.options import SequenceOptions
 from station.session.model import Kind
 
@@ -101,6 +101,8 @@ class Fixture:
         sample_rate_hz: sensor sample rate (Hz).
         pool: worker threads for the concurrent captures (one per unit).
         abort: set to stop every capture (operator abort).
+        first_sync: slot -> (station time s, sensor time s, half round trip s) of the unit's first clock sync
+            in the run (the clock rate gate's origin).
     """
 
     rig: Rig
@@ -111,6 +113,7 @@ class Fixture:
     sample_rate_hz: int
     pool: ThreadPoolExecutor
     abort: threading.Event = field(default_factory=threading.Event)
+    first_sync: dict[int, tuple[float, float, float]] = field(default_factory=dict)
 
     @property
     def active(self) -> list[UnitChannel]:
@@ -214,12 +217,20 @@ def bring_to_rest(rig: Rig, timeout_s: float) -> RigState:
 # --- capture ---------------------------------------------------------------------------------------
 
 
+def _synced(fx: Fixture, unit: UnitChannel) -> tuple[float, float, float]:
+    """Sync the unit's clock: (station time s, the sensor time then s, half round trip s)."""
+    unit.sync(fx.options.sync_tries)
+    assert unit.offset_s is not None
+    t = fx.clock.now()
+    return t, t - unit.offset_s, unit.sync_halfwidth_s
+
+
 def _capture_unit(
     fx: Fixture, unit: UnitChannel, step: Step, start: str, t_confirm: float, stop: threading.Event
 ) -> list[Measurement]:
     """One unit's capture of ``step`` (runs in a worker thread)."""
     o = fx.options
-    unit.sync(o.sync_tries)
+    first = fx.first_sync.setdefault(unit.slot, _synced(fx, unit))
     if start == "stream":
         t0 = unit.wait_first(stop, fx.silence_wall_s)
     elif start == "continue" and unit.windows:
@@ -230,10 +241,15 @@ def _capture_unit(
         t0 = max(t0, unit.windows[-1].t1_s)
     t1 = t0 + step.hold_s
     unit.collect_until(t1, stop, fx.silence_wall_s)
+    assert unit.offset_s is not None
+    lateness = fx.clock.now() - (unit.t_last_s + unit.offset_s)
+    late = frame_lateness_gate(lateness, 2.0 * o.silence_floor_wall_s * fx.clock.scale, o)
+    rate = clock_rate_gate(first, _synced(fx, unit), o)
+    timing = [late] if rate is None else [rate, late]
     block = unit.window_samples(t0, t1)
     ref_f, ref_w = step.reference(fx.gravity_mps2)
     unit.windows.append(Window(step.name, step.kind, t0, t1, ref_f, ref_w))
-    return evaluate(
+    return timing + evaluate(
         block, step.kind, t0, t1, unit.rate_hz, fx.gravity_mps2, o, step.rate_axis, step.rate_dps * _DEG
     )
 
@@ -254,6 +270,13 @@ def capture(fx: Fixture, step: Step, start: str) -> StepReport:
         fx.pool.submit(_capture_unit, fx, u, step, start, t_confirm, stop): u for u in fx.active
     }
     report = StepReport()
+    readings: list[RigState] = []
+
+    def supervise() -> None:
+        st = fx.rig.state()
+        readings.append(st)
+        check_rig_holding(st, step, o)
+
     try:
         pending = set(futures)
         while pending:
@@ -261,15 +284,16 @@ def capture(fx: Fixture, step: Step, start: str) -> StepReport:
                 raise KeyboardInterrupt
             _, pending = wait(pending, timeout=o.supervise_period_s / clock.scale, return_when=FIRST_EXCEPTION)
             if pending:
-                check_rig_holding(fx.rig.state(), step, o)
-        check_rig_holding(fx.rig.state(), step, o)
+                supervise()
+        supervise()
     finally:
         stop.set()
         wait(futures)
     for fut, unit in futures.items():
         exc = fut.exception()
         if exc is None:
-            report.gates[unit.slot] = fut.result()
+            settled = rig_gate(readings, step.pose, step.table_rate_dps, o)
+            report.gates[unit.slot] = ([settled] if settled is not None else []) + fut.result()
         elif isinstance(exc, HardwareError):
             report.errors[unit.slot] = exc
         elif isinstance(exc, CaptureStopped):

@@ -43,6 +43,7 @@ __all__ = [
     "COLUMNS",
     "FORMAT_VERSION",
     "UnsupportedSessionVersionError",
+    "check_session_file",
     "format_session",
     "parse_session",
     "read_session",
@@ -103,6 +104,43 @@ def read_session(path: str | os.PathLike[str], *, limits: SessionLimits | None =
     """
     name = os.fspath(path)
     limits = SessionLimits.from_env() if limits is None else limits
+    with _open_checked(name, limits) as handle:
+        return _parse_stream(_reader(handle, name), name, limits)
+
+
+def check_session_file(path: str | os.PathLike[str], *, limits: SessionLimits | None = None) -> None:
+    """Refuse, as :func:`read_session` would and with its messages, a path that is no session file: not a regular
+    file, larger than the size limit, or a first line, metadata or header that is not CSV v1's (only the preamble
+    is read). For a command to call before it imports its heavy machinery (the fit, the diagnosis), so that
+    ``/dev/zero`` or a 2 GB sparse file is refused in the time it takes to start Python; the data rows are checked
+    by :func:`read_session`, which checks all of this again."""
+    name = os.fspath(path)
+    limits = SessionLimits.from_env() if limits is None else limits
+    with _open_checked(name, limits) as handle:
+        # the preamble is a few hundred bytes: small reads, not the 4 MiB of the reader's pieces
+        source = LineSource(_reader(handle, name), limits.max_bytes, read_bytes=64 * 2**10)
+        try:
+            _read_preamble(source, name)
+        except TooManyBytes as exc:
+            raise SessionLimitError(f"more than {size_text(exc.limit)} of text, the reader's limit "
+                                    f"(set {MAX_BYTES_ENV} to read larger recordings)", path=name) from None
+
+
+def _reader(handle: IO[bytes], name: str) -> Callable[[int], bytes]:
+    """``read(n)`` of an open session file: b"" at its end, an OSError as a :class:`SessionFormatError`."""
+
+    def read(n: int) -> bytes:
+        try:
+            return handle.read(n) or b""
+        except OSError as exc:
+            raise SessionFormatError(f"cannot read session file: {exc.strerror or exc}", path=name) from exc
+
+    return read
+
+
+def _open_checked(name: str, limits: SessionLimits) -> IO[bytes]:
+    """The file ``name`` opened for reading, unbuffered; refused (:class:`SessionFormatError`) before anything is
+    read when it is not a regular file or larger than ``limits.max_bytes``."""
     try:  # O_NONBLOCK: opening a FIFO must not wait for a writer (it is refused below)
         fd = os.open(name, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
     except OSError as exc:
@@ -118,19 +156,10 @@ def read_session(path: str | os.PathLike[str], *, limits: SessionLimits | None =
             raise SessionLimitError(
                 f"the file is {size_text(info.st_size)}, more than the reader's limit of "
                 f"{size_text(limits.max_bytes)} (set {MAX_BYTES_ENV} to read larger recordings)", path=name)
-        handle = os.fdopen(fd, "rb", buffering=0)
+        return os.fdopen(fd, "rb", buffering=0)
     except BaseException:
         os.close(fd)
         raise
-    with handle:
-
-        def read(n: int) -> bytes:
-            try:
-                return handle.read(n) or b""
-            except OSError as exc:
-                raise SessionFormatError(f"cannot read session file: {exc.strerror or exc}", path=name) from exc
-
-        return _parse_stream(read, name, limits)
 
 
 def _file_type(mode: int) -> str:
@@ -174,11 +203,7 @@ def _fail(message: str, line: int | None, path: str | None) -> SessionFormatErro
 def _parse_stream(read: Callable[[int], bytes], path: str | None, limits: SessionLimits) -> Session:
     source = LineSource(read, limits.max_bytes)
     try:
-        head = source.peek()
-        if head.startswith(b"\xef\xbb\xbf"):  # UTF-8 byte-order mark written by some spreadsheet tools
-            source.skip(3)
-        _check_not_empty(source, path)
-        metadata, angles, header_line = _parse_preamble(source, path)
+        metadata, angles, header_line = _read_preamble(source, path)
         first_data_line = header_line + 1
         if not source.peek():
             raise _fail("no data rows after the header", first_data_line, path)
@@ -187,6 +212,16 @@ def _parse_stream(read: Callable[[int], bytes], path: str | None, limits: Sessio
         raise SessionLimitError(f"more than {size_text(exc.limit)} of text, the reader's limit "
                                 f"(set {MAX_BYTES_ENV} to read larger recordings)", path=path) from None
     return _build_session(metadata, angles, fields)
+
+
+def _read_preamble(
+    source: LineSource, path: str | None
+) -> tuple[dict[str, str], dict[int, tuple[float, float, float]], int]:
+    """The preamble (:func:`_parse_preamble`) after an optional byte-order mark, refusing an empty input."""
+    if source.peek().startswith(b"\xef\xbb\xbf"):  # UTF-8 byte-order mark written by some spreadsheet tools
+        source.skip(3)
+    _check_not_empty(source, path)
+    return _parse_preamble(source, path)
 
 
 def _check_not_empty(source: LineSource, path: str | None) -> None:

@@ -80,19 +80,25 @@ def demo(
     thermal: Annotated[bool, typer.Option("--thermal", help="thermal calibration in a simulated climate chamber: "
                                           "plateaus at 5/15/25/45 degC, verification at 35 degC; the last unit has "
                                           "no temperature effects (the reference)")] = False,
-    line: Annotated[bool, typer.Option("--line", help="the calibration line: the units soak in a simulated rack "
-                                       "(relay board on Modbus/TCP) from power-on, go powered to the rig for the "
-                                       "short plan, and are fitted over both recordings")] = False,
-    rack_s: Annotated[float, typer.Option("--rack-s", min=60.0, help="with --line: rest in the rack from power-on "
+    rig_only: Annotated[bool, typer.Option("--rig-only", help="the single rig alone: power-on rest, six poses and "
+                                           "18 rate steps on the rig (about 15 simulated minutes), no rack")] = False,
+    line: Annotated[bool, typer.Option("--line", hidden=True, help="the calibration line (the default)")] = False,
+    rack_s: Annotated[float, typer.Option("--rack-s", min=60.0, help="the line: rest in the rack from power-on "
                                           "(simulated s)")] = 1200.0,
+    plan: Annotated[Path | None, typer.Option("--plan", help="the line: a plan file written by `station plan` "
+                                              "(default: the built-in line plan)")] = None,
     lot: Annotated[str | None, typer.Option("--lot", help="production lot of the units, recorded with the run "
                                                           "(quality page filter, certificate)")] = None,
     operator: Annotated[str | None, typer.Option(help="operator name for the records")] = None,
 ) -> None:
-    """Simulated rig + N sensors, the whole sequence, fit, limits, summary: the station end to end.
+    """The calibration line, simulated end to end: rack, rig, fit, limits, EEPROM, summary.
 
-    With ``--line`` the warm-up is observed in a simulated soak rack and only the poses and rate steps run on
-    the rig; it prints ``rig time per unit``.
+    The units soak in a simulated rack (relay board on Modbus/TCP, sensors on ptys) from power-on, go powered to
+    the simulated rig for the line plan's poses and rate steps, are fitted over both recordings, written and
+    verified; both roles share the database (``--db``). It prints ``rig time per unit`` (simulated seconds).
+    ``--scale`` applies to ``--rig-only`` and ``--thermal``; the line picks its own (at most 30).
+
+    With ``--rig-only`` the single rig runs the whole default sequence (warm-up on the rig), as before the line.
 
     With ``--thermal`` a simulated climate chamber (Modbus/TCP) joins: the units carry temperature bias and
     scale coefficients, are calibrated at four temperatures and verified at a fifth, and a table compares
@@ -104,9 +110,12 @@ def demo(
     from station.sequence.prompts import AutoConfirm
     from station.sim.demo import DEMO_SCALE, THERMAL_SCALE, run_demo, run_line_demo, run_thermal_demo
 
+    if rig_only and (line or thermal):
+        raise fail(StationError("--rig-only is the single rig alone: not with --line or --thermal"))
     try:
-        if line:
-            result = run_line_demo(units, rack_s, seed, limits_path=limits)
+        if not rig_only and not thermal:
+            result = run_line_demo(units, rack_s, seed, limits_path=limits, out_dir=out, db_url=db, plan_path=plan,
+                                   lot=lot or "", operator=operator or "", prompter=AutoConfirm("the demo"))
         elif thermal:
             result, _ = run_thermal_demo(units, scale or THERMAL_SCALE, seed, out, db_url=db, record=True,
                                          limits_path=limits, lot=lot or "", operator=operator or "")

@@ -149,95 +149,71 @@ def run_line_demo(
     limits_path: Path | None = None,
     max_frames: float = LINE_MAX_FRAMES,
     interrupt: Sequence[int] = (),
+    out_dir: Path | None = DEMO_OUT,
+    db_url: str | None = None,
+    plan_path: Path | None = None,
+    lot: str = "",
+    operator: str = "",
+    prompter: Operator | None = None,
 ) -> RunResult:
     """The calibration line, simulated: ``units`` units soak ``rack_s`` in a rack (relay board on Modbus/TCP,
     sensors on ptys, each still in its slot's orientation), are carried powered to the rig (``transfer_s``), run
-    the line's short rig plan there and are fitted over both recordings; prints the run and
-    ``rig time per unit: <seconds> s`` (simulated seconds of rig time divided by the units).
+    the line plan's rig part there (``plan_path``: a file of ``station plan``; default the built-in line plan)
+    and are fitted over both recordings; prints the run and ``rig time per unit: <seconds> s`` (simulated
+    seconds of rig time divided by the units).
 
-    The rack's recordings go to an in-process archive (the same compressed bytes and SHA-256 checks as the
-    database's ``rack_recordings``). The clock scale is chosen so the sensors send at most ``max_frames`` frames
-    per wall second, and at most the plain demo's ``DEMO_SCALE``. The units of the slots in ``interrupt`` lose power
-    on the way to the rig: the rig role
-    refuses them (they get the full plan or go back to the rack) and says why.
+    Both roles share the database at ``db_url`` (None: the default database): the rack stores its recordings
+    (``rack_recordings``), the rig role is the composition root's (:class:`station.compose.Station` with
+    ``line``: the rig lock, the run tables with the plan file's SHA-256, every PASS unit's EEPROM written,
+    read back and verified on the rig). The clock scale is chosen so the sensors send at most ``max_frames``
+    frames per wall second, and at most the plain demo's ``DEMO_SCALE``. The units of the slots in
+    ``interrupt`` lose power on the way to the rig: the rig role refuses them (they get the full plan or go
+    back to the rack) and says why.
     """
-    from station.kernel.clock import SimClock
-    from station.kernel.limits_file import load_limits
-    from station.kernel.line_plan import line_rig_plan
-    from station.line.recordings import MemoryArchive
-    from station.line.rigrole import LineRigRunner
-    from station.line.soak import SoakRack
-    from station.rack.board import RelayBoard
-    from station.rig import open_rig
-    from station.sensor import open_sensor
-    from station.sim.rack_sim import StaticMount
-    from station.sim.relay_server import SimulatedRelayBoard
+    from station.kernel.line_plan import load_line_plan_file
+    from station.line.recordings import DatabaseArchive
+    from station.sim.line_station import SimLine
+    from station.store.db import open_database
 
     console = console if console is not None else Console()
     wall0 = time.monotonic()
-    plan = replace(line_rig_plan(), rest_s=2.0)
+    line = load_line_plan_file(plan_path)
+    plan = line.rig_plan()
     scale = max(1.0, min(DEMO_SCALE, max_frames / (units * plan.sample_rate_hz)))
-    limits = load_limits(limits_path)
-    with SimStation(units, scale, seed, plan=plan, clock=SimClock(scale)) as sim:
-        rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(10_000,)))
-        for u in sim.units:
-            u.sensor.power_off()  # the rack's relay powers it
-            tilt = np.radians(rng.uniform(-20.0, 20.0, size=3))
-            u.source.rig = StaticMount(*tilt)  # still in its rack slot, an orientation nobody measured
-
-        def switch(slot: int, on: bool) -> None:
-            sensor = sim.units[slot].sensor
-            sensor.power_on() if on else sensor.power_off()
-
-        archive = MemoryArchive()
-        sensors = [open_sensor(url, sim.clock) for url in sim.sensor_urls]
-        try:
-            with SimulatedRelayBoard(units, on_switch=switch) as board_sim, RelayBoard(board_sim.url) as board:
-                console.print(f"soak rack: relay board at {board_sim.url}, {units} unit(s) on "
-                              f"{', '.join(u.sensor.device for u in sim.units)}; clock x{scale:g}; "
-                              f"{rack_s:g} s from power-on")
-                soaked = SoakRack(board, sensors, sim.clock, sample_rate_hz=int(plan.sample_rate_hz),
-                                  gravity_mps2=plan.gravity_mps2, station="demo-rack").soak(range(units), rack_s)
-                for r in soaked:
-                    if r.session is not None:
-                        sha = archive.save(r.session, station="demo-rack", slot=r.slot)
-                        console.print(f"  slot {r.slot}: {r.serial} {len(r.session)} samples, sha256 {sha[:12]}")
-                    else:
-                        console.print(f"  slot {r.slot}: {r.serial or '?'} no recording: {r.error}")
-                # carried to the rig, still powered (the relay stays on: the unit's supply travels with it)
-                for slot in interrupt:
-                    sim.units[slot].sensor.power_off()
-                sim.clock.sleep(transfer_s)
-                for slot in interrupt:
-                    sim.units[slot].sensor.power_on()
-                for u in sim.units:
-                    u.source.rig = sim.rig
-                rig = open_rig(sim.rig_url, sim.clock, **sim.rig_client_options())
-                try:
-                    runner = LineRigRunner(
-                        rig, sensors, sim.clock, archive=archive, plan=plan,
-                        options=SequenceOptions().for_scale(scale), limits=limits.product, station="demo-line",
-                        fit_options=FitOptions(tc_range_s=dict(limits.correlation_time_s)),
-                        clock_slack_s=2.0 + 0.2 * scale,  # command round trips take `scale` times longer here
-                    )
-                    for serial, d in runner.decisions.items():
-                        console.print(f"  {serial}: {d.plan}{' (' + d.reason + ')' if d.reason else ''}")
-                    display = ProgressDisplay(console, [u.truth.serial for u in sim.units], scale)
-                    runner.subscribe(display)
-                    with display:
-                        result = runner.run()
-                finally:
-                    rig.close()
-        finally:
-            for s_ in sensors:
-                s_.close()
+    runners: list[SequenceRunner] = []
+    with abort_on_signals(lambda: runners[-1] if runners else None), SimLine(units, scale, seed, plan) as sim:
+        console.print(f"soak rack: relay board at {sim.board_url}, {units} unit(s) on "
+                      f"{', '.join(u.sensor.device for u in sim.sim.units)}; clock x{scale:g}; "
+                      f"{rack_s:g} s from power-on")
+        with open_database(db_url) as database:
+            soaked = sim.soak(range(units), rack_s, DatabaseArchive(database.sessions), station="demo-rack")
+        for r in soaked.units:
+            if r.session is not None:
+                console.print(f"  slot {r.slot}: {r.serial} {len(r.session)} samples")
+            else:
+                console.print(f"  slot {r.slot}: {r.serial or '?'} no recording: {r.error}")
+        # carried to the rig, still powered (the relay stays on: the unit's supply travels with it)
+        sim.to_rig(range(units), transfer_s, interrupt)
+        config = sim.rig_config(range(units), line, db_url=db_url, out_dir=out_dir, station_id="demo-line",
+                                limits_path=limits_path, lot=lot, operator=operator)
+        display = ProgressDisplay(console, [u.truth.serial for u in sim.sim.units], scale)
+        station = Station(config, clock=sim.clock, subscribers=[display], prompter=prompter)
+        with display:
+            result = station.run(on_runner=runners.append)
+    for serial, d in getattr(runners[-1], "decisions", {}).items():
+        console.print(f"  {serial}: {d.plan}{' (' + d.reason + ')' if d.reason else ''}")
     console.print(summary_table(result))
+    if station.provisioner is not None and station.provisioner.records:
+        console.print(provisioning_table(station.provisioner))
     for unit in result.units:
         if unit.params is not None:
-            line = unit.params.quality.extra.get("line", {})
+            extra = unit.params.quality.extra.get("line", {})
             tc = unit.params.gyro.correlation_time_s
-            console.print(f"  {unit.serial}: rack {line.get('rack_span_s', 0):.0f} s + rig; gyro T_c "
+            console.print(f"  {unit.serial}: rack {extra.get('rack_span_s', 0):.0f} s + rig; gyro T_c "
                           f"{', '.join('-' if not np.isfinite(v) else f'{v:.0f}' for v in tc)} s")
+    console.print(f"plan {line.version}, sha256 {line.sha256[:12]}")
+    if out_dir is not None:
+        console.print(f"recordings in {out_dir}/")
     console.print(f"rig time per unit: {result.sequence_s / max(units, 1):.0f} s")
     console.print(f"line demo finished in {time.monotonic() - wall0:.1f} s wall time")
     return result

@@ -9,7 +9,10 @@ of Kolhoff & Kemper with it. In CORRECTED output mode the sensor passes it each 
 raw samples; it returns them corrected: drift ``b_drift g_i`` (eq. 3, forward Euler),
 static bias, one-sided moving average (eq. 6), ``M^-1`` (eq. 1), and, if the image has a
 non-zero gyro g-sensitivity G, ``w -= M_w^-1 G a`` with the corrected specific force a. A
-layout-2 image's temperature terms and scale nonlinearity enter line 6' of Algorithm 1
+layout-2 image's time offset enters line 0 (the raw input moved onto the rig's time: a delay line with linear
+interpolation for a lead, linear extrapolation for a lag; the batch engine carries that many more raw rows of
+history); its temperature terms and scale nonlinearity (layout 3: the IEEE 952 polynomial) enter line 6' of
+Algorithm 1
 (:mod:`station.correct.streaming`) at the unit's own temperature reading of each sample (the
 sensor passes its temperature column: :attr:`CalibrationFirmware.takes_temperature`).
 Without a valid image (or with one for another serial) the output stays raw.
@@ -33,7 +36,7 @@ from typing import Literal
 
 import numpy as np
 
-from station.correct import StreamingCorrector, correct_batch
+from station.correct import CorrectionConstants, StreamingCorrector, correct_batch
 from station.eeprom.image import (
     DEFAULT_SLOTS,
     WIDE_SLOTS,
@@ -86,6 +89,7 @@ class CalibrationFirmware:
         self.load_error = ""
         self.boots = 0
         self._params: ParameterSet | None = None
+        self._shift_rows = 0  # line 0's delay (samples) of the loaded image
         self._g_sens: np.ndarray | None = None
         self._t_boot = self._clock.now()
         self._index: int | None = None  # sample index of the next expected corrected sample
@@ -134,6 +138,7 @@ class CalibrationFirmware:
             self.load_error = f"image in slot {current.name} not usable: {exc}"
             return
         self.image, self._params = current.image, params
+        self._shift_rows = CorrectionConstants.from_params(params).shift[0]
         g = np.asarray(current.image.g_sensitivity)
         if np.any(g != 0):
             self._g_sens = np.linalg.solve(np.asarray(current.image.gyro.misalignment), g)  # M_w^-1 G
@@ -188,11 +193,12 @@ class CalibrationFirmware:
             all_t = None if temp is None else np.concatenate([self._hist_t, temp])
             ca, cw = correct_batch(all_a, all_w, self._params, start_index=self._index - k, temp_degc=all_t)
             out_a, out_w = ca[k:], cw[k:]
-            keep = self._params.moving_average_length - 1
-            self._hist_a = all_a[all_a.shape[0] - keep :] if keep else np.zeros((0, 3))
-            self._hist_w = all_w[all_w.shape[0] - keep :] if keep else np.zeros((0, 3))
+            # history: the moving average's n - 1 rows and line 0's delay line (d rows) before them
+            keep = self._params.moving_average_length - 1 + self._shift_rows
+            self._hist_a = all_a[max(0, all_a.shape[0] - keep) :] if keep else np.zeros((0, 3))
+            self._hist_w = all_w[max(0, all_w.shape[0] - keep) :] if keep else np.zeros((0, 3))
             if all_t is not None:
-                self._hist_t = all_t[all_t.shape[0] - keep :] if keep else np.zeros(0)
+                self._hist_t = all_t[max(0, all_t.shape[0] - keep) :] if keep else np.zeros(0)
         self._index += n
         if self._g_sens is not None:
             out_w = out_w - out_a @ self._g_sens.T

@@ -64,6 +64,7 @@ def simulate_session(
     temperature_plateaus_degc: Sequence[float] | None = None,
     soak_s: float = 600.0,
     thermal_lag_s: float = 150.0,
+    effect_truth: EffectTruth | None = None,
 ) -> SimResult:
     """Simulate one session of a unit (drawn from ``sensor_class`` with ``seed`` unless given).
 
@@ -78,6 +79,9 @@ def simulate_session(
     self-heating (:class:`~station.physics.plateau_course.PlateauCourse`). The unit is powered on soaked at
     the first plateau, which is therefore the temperature effects' ``T_ref``. Without it, nothing
     changes (same seed, same bytes).
+
+    ``effect_truth``: explicit SI effect coefficients instead of realizing ``effects`` (e.g. the IEEE 952
+    polynomial, which no :class:`Effects` magnitude realizes).
     """
     plan = plan if plan is not None else default_plan()
     effects = effects if effects is not None else Effects()
@@ -87,7 +91,8 @@ def simulate_session(
     course: PlateauCourse | None = None
     if temperature_plateaus_degc is None:
         model = ImuModel(
-            unit, sensor_class, effects, imu_seq, latitude_deg=plan.latitude_deg, heading_deg=plan.heading_deg
+            unit, sensor_class, effects, imu_seq, latitude_deg=plan.latitude_deg, heading_deg=plan.heading_deg,
+            effect_truth=effect_truth,
         )
         traj = build_trajectory(plan)
     else:
@@ -96,7 +101,7 @@ def simulate_session(
         course = PlateauCourse(plateaus, starts, thermal_lag_s, unit.self_heating_k, unit.self_heating_tau_s)
         model = ImuModel(
             unit, sensor_class, effects, imu_seq, latitude_deg=plan.latitude_deg, heading_deg=plan.heading_deg,
-            environment=Environment(ambient_degc=plateaus[0]), temperature_degc=course,
+            environment=Environment(ambient_degc=plateaus[0]), temperature_degc=course, effect_truth=effect_truth,
         )
     t = traj.sample_times()
     kin = traj.kinematics(t, time_offset_s=model.time_offset_s, pose_tilt_rad=model.effect_truth.pose_tilts())

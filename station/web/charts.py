@@ -1,6 +1,9 @@
 """Small server-rendered SVG charts for the quality page (plain strings; no plotting library, a few ms each):
 an X-bar control chart with its limits and the points that complete a run rule, a histogram with the limits
-and the fitted normal, and a yield trend. Values are drawn in the parameter's unit."""
+and the fitted normal, a yield trend, and the golden unit's individuals chart (each check's deviation from the
+reference, ± 3 sigma of the registered repeatability dashed red, the check's allowed deviation dotted grey, the
+points completing a Nelson rule red; in the display convention, a deviation being a spread). Values are drawn in
+the parameter's unit."""
 
 from __future__ import annotations
 
@@ -8,6 +11,8 @@ import math
 from collections.abc import Callable, Sequence
 from html import escape
 
+from station.kernel.display import display_of_check
+from station.kernel.golden import GoldenReference, GoldenTrend
 from station.store.quality import Histogram, ParameterChart
 
 W, H = 460, 200
@@ -44,6 +49,27 @@ def _yticks(lo: float, hi: float, y: Callable[[float], float], width: int = W) -
     return out
 
 
+def _slots(n: int) -> Callable[[int], float]:
+    """The x of point ``i`` of ``n`` equally spaced points."""
+    return lambda i: ML + (i + 0.5) * (W - ML - MR) / n
+
+
+def _centre_line(y_px: float) -> str:
+    return (f'<line x1="{ML}" x2="{W - MR}" y1="{y_px:.1f}" y2="{y_px:.1f}" stroke="#2e7d32" '
+            'stroke-width="1.5"/>')
+
+
+def _x_labels(labels: Sequence[str], x: Callable[[int], float]) -> list[str]:
+    """The first, middle and last point's label under the axis."""
+    n = len(labels)
+    out = []
+    for i in sorted({0, n // 2, n - 1}):
+        anchor = "start" if i == 0 and n > 1 else "end" if i == n - 1 and n > 1 else "middle"
+        out.append(f'<text x="{x(i):.1f}" y="{H - MB + 14}" {FONT} font-size="10" text-anchor="{anchor}">'
+                   f'{escape(labels[i])}</text>')
+    return out
+
+
 def control_chart_svg(pc: ParameterChart) -> str:
     """X-bar chart per day: points, centre line, per-day control limits, points completing a run rule in red."""
     ch = pc.chart
@@ -55,13 +81,8 @@ def control_chart_svg(pc: ParameterChart) -> str:
         [p.ucl for p in pts if p.ucl is not None] + [ch.center]
     lo, hi, y = _scale(min(vals), max(vals), H - MB, MT)
     n = len(pts)
-
-    def x(i: int) -> float:
-        return ML + (i + 0.5) * (W - ML - MR) / n
-
-    out = _frame(title) + _yticks(lo, hi, y)
-    out.append(f'<line x1="{ML}" x2="{W - MR}" y1="{y(ch.center):.1f}" y2="{y(ch.center):.1f}" stroke="#2e7d32" '
-               'stroke-width="1.5"/>')
+    x = _slots(n)
+    out = [*_frame(title), *_yticks(lo, hi, y), _centre_line(y(ch.center))]
     for attr in ("ucl", "lcl"):
         seg = " ".join(f"{x(i):.1f},{y(getattr(p, attr)):.1f}" for i, p in enumerate(pts)
                        if getattr(p, attr) is not None)
@@ -74,10 +95,7 @@ def control_chart_svg(pc: ParameterChart) -> str:
         tip = f"{p.label}: mean {_fmt(p.mean)} n={p.n}" + (f" rules {','.join(map(str, p.rules))}" if bad else "")
         out.append(f'<circle cx="{x(i):.1f}" cy="{y(p.mean):.1f}" r="{3.2 if bad else 2.2}" '
                    f'fill="{"#c62828" if bad else "#1565c0"}"><title>{escape(tip)}</title></circle>')
-    for i in sorted({0, n // 2, n - 1}):
-        anchor = "start" if i == 0 and n > 1 else "end" if i == n - 1 and n > 1 else "middle"
-        out.append(f'<text x="{x(i):.1f}" y="{H - MB + 14}" {FONT} font-size="10" text-anchor="{anchor}">'
-                   f'{escape(pts[i].label)}</text>')
+    out += _x_labels([p.label for p in pts], x)
     legend = "UCL/LCL dashed, centre green" + (f"; rules violated: {', '.join(map(str, ch.violations))}"
                                               if ch.violations else "; no rule violated")
     out.append(f'<text x="{ML}" y="{H - 6}" {FONT} font-size="10" fill="#444">{escape(legend)}</text></svg>')
@@ -154,6 +172,42 @@ def yield_trend_svg(labels: Sequence[str], fpy: Sequence[float | None], final: S
     return "".join(out)
 
 
+def golden_chart_svg(trend: GoldenTrend, ref: GoldenReference, labels: list[str]) -> str:
+    """The individuals chart of ``trend`` (one point per check, ``labels`` its dates)."""
+    d = display_of_check(trend.parameter, trend.unit)
+    sigma = d.spread(ref.repeatability) or 0.0
+    allowed = d.spread(ref.allowed) or 0.0
+    dev = [d.spread(v) if v is not None else None for v in trend.deviations]
+    title = f"{trend.parameter} ({d.unit}) golden deviation"
+    shown = [v for v in dev if v is not None]
+    if not shown:
+        return "".join([*_frame(title), f'<text x="{ML}" y="100" {FONT} font-size="12">no check</text></svg>'])
+    lo, hi, y = _scale(min([*shown, -3 * sigma, -allowed]), max([*shown, 3 * sigma, allowed]), H - MB, MT)
+    n = len(dev)
+    x = _slots(n)
+    out = [*_frame(title), *_yticks(lo, hi, y), _centre_line(y(0.0))]
+    limit, band = 'stroke="#c62828" stroke-dasharray="4 3"', 'stroke="#888" stroke-dasharray="1 3"'
+    for level, style in ((3 * sigma, limit), (-3 * sigma, limit), (allowed, band), (-allowed, band)):
+        out.append(f'<line x1="{ML}" x2="{W - MR}" y1="{y(level):.1f}" y2="{y(level):.1f}" {style}/>')
+    seg = " ".join(f"{x(i):.1f},{y(v):.1f}" for i, v in enumerate(dev) if v is not None)
+    out.append(f'<polyline points="{seg}" fill="none" stroke="#1565c0" stroke-width="1.2"/>')
+    for i, point in enumerate(dev):
+        if point is None:
+            continue
+        rules = trend.rules[i]
+        tip = f"check {i + 1} ({labels[i]}): {_fmt(point)} {d.unit}" + (f" rules {','.join(map(str, rules))}"
+                                                                     if rules else "")
+        out.append(f'<circle class="{"signal" if rules else "point"}" cx="{x(i):.1f}" cy="{y(point):.1f}" '
+                   f'r="{3.2 if rules else 2.2}" fill="{"#c62828" if rules else "#1565c0"}">'
+                   f'<title>{escape(tip)}</title></circle>')
+    out += _x_labels(labels, x)
+    first = trend.first_signal
+    legend = ("±3σ dashed, allowed dotted; " + (f"first signal at check {first + 1}" if first is not None
+                                                 else "in control"))
+    out.append(f'<text x="{ML}" y="{H - 6}" {FONT} font-size="10" fill="#444">{escape(legend)}</text></svg>')
+    return "".join(out)
+
+
 #: the drawing helpers the other chart modules (e.g. :mod:`station.web.msa_charts`) share
 fmt_tick, frame, scale, yticks = _fmt, _frame, _scale, _yticks
 
@@ -168,8 +222,10 @@ __all__ = [
     "control_chart_svg",
     "fmt_tick",
     "frame",
+    "golden_chart_svg",
     "histogram_svg",
     "scale",
     "yield_trend_svg",
     "yticks",
 ]
+

@@ -17,14 +17,17 @@ from fastapi.responses import HTMLResponse, Response
 from sqlalchemy import select
 
 from station.kernel.display import display_of_check, limits_identity
+from station.kernel.golden import GoldenTrend, GoldenUnit, golden_trends
 from station.store import quality as q
+from station.store.golden_records import GoldenCheckRow, golden_checks, golden_units
 from station.store.models import QualityDaily, QualityYield, Run
 from station.store.models import Station as StationRow
-from station.store.spc import MIN_CAPABILITY_N, RULES, cpk_interval
+from station.store.spc import MIN_CAPABILITY_N, RULES, cpk_interval, run_rules
 from station.web import charts
 from station.web.context import Web
 from station.web.labels import parameter_label, unit_label
 from station.web.models.common import problem
+from station.web.models.golden import GoldenChart, GoldenCharts, GoldenCheckEntry, GoldenParameterChart
 from station.web.models.quality import (
     DEFINITIONS,
     CapabilityEntry,
@@ -154,6 +157,59 @@ def _displayed(c: CapabilityEntry) -> CapabilityEntry:
                                 "sigma_overall": d.spread(c.sigma_overall)})
 
 
+class _Golden:
+    """One registered golden unit's checks (of the selected station) and its parameters' individuals charts."""
+
+    def __init__(self, serial: str, version: int, unit: GoldenUnit, checks: list[GoldenCheckRow]) -> None:
+        self.serial, self.version, self.unit, self.checks = serial, version, unit, checks
+        self.trends: tuple[GoldenTrend, ...] = golden_trends(unit, [c.deviations for c in checks], run_rules)
+        self.labels = [f"{c.checked_at:%Y-%m-%d %H:%M}" for c in checks]
+
+    def svg(self, trend: GoldenTrend) -> str:
+        ref = self.unit.reference(trend.parameter)
+        assert ref is not None
+        return charts.golden_chart_svg(trend, ref, self.labels)
+
+    def rows(self) -> list[dict[str, object]]:
+        """Per parameter what the page shows, in the display convention; ``flagged``: a rule fired or the last
+        check failed on it."""
+        out: list[dict[str, object]] = []
+        last = self.checks[-1] if self.checks else None
+        for t in self.trends:
+            ref = self.unit.reference(t.parameter)
+            assert ref is not None
+            d = display_of_check(t.parameter, t.unit)
+            latest = t.deviations[-1] if t.deviations else None
+            failed = (last is not None and (latest is None or abs(latest) > ref.allowed))
+            fired = sorted({r for rs in t.rules for r in rs})
+            out.append({"name": t.parameter, "label": parameter_label(t.parameter), "unit": d.unit,
+                        "reference": d.value(ref.value), "allowed": d.spread(ref.allowed),
+                        "sigma": d.spread(ref.repeatability), "latest": d.spread(latest), "rules": fired,
+                        "first_signal": t.first_signal,
+                        "first_signal_at": self.labels[t.first_signal] if t.first_signal is not None else None,
+                        "failed": failed, "flagged": bool(fired) or failed})
+        return out
+
+
+def _goldens(web: Web, station: str | None) -> list[_Golden]:
+    return [_Golden(serial, version, unit, golden_checks(web.db, serial=serial, station=station))
+            for serial, (version, unit) in sorted(golden_units(web.db).items())]
+
+
+def _golden_entry(g: _Golden) -> GoldenChart:
+    params = []
+    for t in g.trends:
+        ref = g.unit.reference(t.parameter)
+        assert ref is not None
+        params.append(GoldenParameterChart(parameter=t.parameter, unit=t.unit, reference=ref.value,
+                                           allowed=ref.allowed, repeatability=ref.repeatability,
+                                           deviation=list(t.deviations), z=list(t.z),
+                                           rules=[list(r) for r in t.rules], first_signal=t.first_signal))
+    return GoldenChart(serial=g.serial, version=g.version, registered_at=g.unit.registered_at, parameters=params,
+                       checks=[GoldenCheckEntry(checked_at=c.checked_at, station=c.station, version=c.version,
+                                                passed=c.passed) for c in g.checks])
+
+
 @router.get("/quality", response_class=HTMLResponse, include_in_schema=False)
 def quality_page(request: Request, web: Web, query: Filters) -> HTMLResponse:
     cal = query.calendar(web.shifts)
@@ -168,6 +224,9 @@ def quality_page(request: Request, web: Web, query: Filters) -> HTMLResponse:
     trend = charts.yield_trend_svg([r.group for r in days], [r.first_pass_yield for r in days],
                                    [r.final_yield for r in days])
     choices = _choices(web)
+    goldens = [{"serial": g.serial, "version": g.version, "checks": g.checks, "rows": (rows := g.rows()),
+                "svgs": {t.parameter: g.svg(t) for t, r in zip(g.trends, rows, strict=True) if r["flagged"]}}
+               for g in _goldens(web, query.station)]
     params = request.query_params
     qs = "&".join(f"{k}={v}" for k, v in params.multi_items() if v)
     return templates.TemplateResponse(request, "quality.html", {
@@ -175,7 +234,7 @@ def quality_page(request: Request, web: Web, query: Filters) -> HTMLResponse:
         "trend": trend, "rules": RULES, "cpk_target": CPK_TARGET, "min_n": MIN_CAPABILITY_N, "shifts": cal.text(),
         "definitions": DEFINITIONS,
         "choices": choices, "limits_labels": _limits_labels(web, choices["limits"]), "unit_label": unit_label,
-        "flagged": flagged,
+        "flagged": flagged, "goldens": goldens,
     })
 
 
@@ -195,6 +254,15 @@ def quality_control_svg(web: Web, name: str, query: Filters) -> Response:
         raise HTTPException(404, f"no values of {name} in the selection")
     return Response(charts.control_chart_svg(_displayed_chart(found[0])), media_type="image/svg+xml",
                     headers={"Cache-Control": "max-age=30"})
+
+
+@router.get("/quality/golden/{serial}/{name}.svg", include_in_schema=False)
+def quality_golden_svg(web: Web, serial: str, name: str, query: Filters) -> Response:
+    found = [g for g in _goldens(web, query.station) if g.serial == serial]
+    trend = next((t for g in found for t in g.trends if t.parameter == name), None)
+    if trend is None:
+        raise HTTPException(404, f"{serial} is not a registered golden unit with a reference for {name}")
+    return Response(found[0].svg(trend), media_type="image/svg+xml", headers={"Cache-Control": "max-age=30"})
 
 
 def _csv(name: str, header: list[str], rows: list[list[object]]) -> Response:
@@ -241,6 +309,15 @@ def api_quality_control_charts(web: Web, query: Filters,
     """Daily X-bar/S charts with control limits and the run rules each day completes."""
     return ControlCharts(rules=[RuleEntry(number=k, text=v) for k, v in RULES.items()],
                          charts=[_chart_entry(c) for c in _charts(web, query, name)])
+
+
+@router.get("/api/quality/golden", tags=["quality"], response_model=GoldenCharts)
+def api_quality_golden(web: Web, query: Filters) -> GoldenCharts:
+    """Every registered golden unit: its checks (of the selected station; the date, lot and limits filters do
+    not apply: a chart's rules need its whole sequence) and per referenced parameter its individuals chart
+    (deviation from the reference, z over the registered repeatability, the Nelson rules per check)."""
+    return GoldenCharts(rules=[RuleEntry(number=k, text=v) for k, v in RULES.items()],
+                        units=[_golden_entry(g) for g in _goldens(web, query.station)])
 
 
 @router.get("/api/quality/histogram/{name}", tags=["quality"], response_model=HistogramEntry,
