@@ -10,8 +10,9 @@ recordings of the empirical model's held-out improvement (best located axis at t
 Nulls (``none``, ``ar1_noise``):
 ``named`` counts false findings; an ``unexplained`` on a null is listed with its covariate.
 
-Seeds: development used 0-999 (``--base 0``); report seeds start at 50000 and were drawn after the
-locator was settled.
+Seeds: development used 0-999 (``--base 0``) and, for the kinds added later (``gen_outside.OUTSIDE_NEW``),
+1000-1100; report seeds were drawn after the method was settled (90000 for the first round, 120000 for the second;
+the seed of a recording is ``base + i * len(KINDS) + index of its kind``, so adding kinds changed the mapping).
 
 Run: ``python benchmarks/bench_diagnose_outside.py [--base 50000] [--per 4] [--kinds telegraph,...]``
 """
@@ -94,6 +95,7 @@ def main() -> None:
             where = "; ".join(f"{u['sensor']} {''.join(u['axes'])} {'/'.join(u['segment_kinds'])}: "
                               f"{u['covariate'][:60]}" for u in un) or "-"
             flag = "RIGHT" if ok else ("" if kind in gen_outside.NULLS else "miss")
+            flag += f" held-out {max(emp):.2f}" if emp else ""
             print(f"  {kind:16s} seed {s}: {rec.plan.rate_hz:4.0f} Hz {rec.session.duration_s:4.0f} s "
                   f"axis {'xyz'[rec.axis]} named {named or '-'} | unexplained {where} {flag} ({dt:.1f} s)",
                   flush=True)

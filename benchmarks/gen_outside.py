@@ -30,6 +30,17 @@ that no candidate of ``station.diagnose.registry`` has (:data:`OUTSIDE`), or non
 ``cross_above``      gyro: a cross-axis term only above a rate: ``c (|w_k| - w0)+ sign(w_k)`` on axis j.
 ``vibration_rect``   accel: the spin's vibration rectified along the spin axis: ``c w_k^2`` on axis k.
 
+A second set (:data:`OUTSIDE_NEW`), written later and before the locator's second round was changed:
+
+``direction_bias``   gyro: one axis's bias is ``+-c`` by the direction of the last rotation about that axis
+                     (faster than 5 deg/s), kept through the following holds (0 before any rotation).
+``scale_settle``     gyro: the scale factor (every axis) is off by ``c exp(-(t - t_step)/tau)`` after each rate
+                     step (tau 4-15 s): a scale that settles with the time since the last rate step.
+``g2_sensitivity``   gyro: one axis's bias follows the square of one specific-force component, ``c (f_i/g)^2``
+                     (even in g: the library's g sensitivity is linear).
+``sample_hold``      both: sample-and-hold bursts of the shared converter; every 2-8 s (exponential) the
+                     output repeats one sample for 30-150 ms; visible only where the signal changes.
+
 Nulls: ``none`` (base model only) and ``ar1_noise`` (white + AR(1) coloured noise, no physics).
 
 :data:`LOCATION`: per kind the sensors and segment kinds where it acts (what a right ``unexplained`` names).
@@ -55,8 +66,10 @@ GRID_HZ = 2000.0
 
 OUTSIDE = ("telegraph", "clock_rate", "rate_norm_bias", "alpha_axial", "temp_hysteresis", "thermal_kick",
            "cross_above", "vibration_rect")
+#: Kinds added in the second round (same recordings for the first kinds: their random draws are unchanged).
+OUTSIDE_NEW = ("direction_bias", "scale_settle", "g2_sensitivity", "sample_hold")
 NULLS = ("none", "ar1_noise")
-KINDS = (*NULLS, *OUTSIDE)
+KINDS = (*NULLS, *OUTSIDE, *OUTSIDE_NEW)
 #: Where each outside kind acts: (sensors, segment kinds); a right ``unexplained`` names one of the sensors and
 #: at least one of the kinds.
 LOCATION: dict[str, tuple[frozenset[str], frozenset[str]]] = {
@@ -68,6 +81,10 @@ LOCATION: dict[str, tuple[frozenset[str], frozenset[str]]] = {
     "thermal_kick": (frozenset({"gyro"}), frozenset({"rate", "move"})),
     "cross_above": (frozenset({"gyro"}), frozenset({"rate"})),
     "vibration_rect": (frozenset({"accel"}), frozenset({"rate"})),
+    "direction_bias": (frozenset({"gyro"}), frozenset({"rest", "pose", "rate"})),
+    "scale_settle": (frozenset({"gyro"}), frozenset({"rate"})),
+    "g2_sensitivity": (frozenset({"gyro"}), frozenset({"rest", "pose", "rate"})),
+    "sample_hold": (frozenset({"accel", "gyro"}), frozenset({"move"})),
 }
 #: Words one of which a right ``unexplained`` entry's covariate text holds (the covariate the kind follows); for
 #: the nulls: what an ``unexplained`` on them may say (no covariate, the noise's colour).
@@ -75,6 +92,8 @@ COVARIATE: dict[str, tuple[str, ...]] = {
     "telegraph": ("two-level",), "clock_rate": ("clock", "delay growing"), "rate_norm_bias": ("|rate|",),
     "alpha_axial": ("angular acceleration",), "temp_hysteresis": ("temperature",),
     "thermal_kick": ("since the last rate step",), "cross_above": ("rate",), "vibration_rect": ("rate",),
+    "direction_bias": ("last rotation",), "scale_settle": ("since the last rate step",),
+    "g2_sensitivity": ("specific force",), "sample_hold": ("hold",),
     "none": ("none",), "ar1_noise": ("none", "colour"),
 }
 #: Size of each kind (engineering units), multiplied by a random 0.8-1.25 per recording.
@@ -87,6 +106,10 @@ SIZE = {
     "thermal_kick": 1.5e-4,  # deg/s per deg/s of rate step
     "cross_above": 6e-4,  # deg/s per deg/s above the threshold
     "vibration_rect": 2.5e-3,  # m/s^2 per (rad/s)^2
+    "direction_bias": 0.02,  # deg/s
+    "scale_settle": 1.5e-3,  # relative scale at the step
+    "g2_sensitivity": 0.03,  # deg/s per g^2
+    "sample_hold": 1.0,  # (unused: bursts of held samples)
 }
 
 
@@ -444,6 +467,26 @@ def generate(seed: int, kind: str) -> Outside:
             y += size * true["alpha"]
         if not gyro and kind == "vibration_rect":
             y += size * true["w"] ** 2
+        if gyro and kind == "direction_bias":
+            wk = w_dps[:, axis]
+            moving = np.abs(wk) > 5.0
+            idx = np.where(moving, np.arange(n), -1)
+            last = np.maximum.accumulate(idx)
+            y[:, axis] += size * DEG * np.where(last >= 0, np.sign(wk[np.maximum(last, 0)]), 0.0)
+        if gyro and kind == "scale_settle":
+            tau_s = rng.uniform(4.0, 15.0)
+            ends, t0 = [], 0.0
+            for st in rig.steps:
+                t1 = t0 + st.duration
+                if st.kind == Kind.MOVE and np.any(st.axis) and not st.tumble_angle and st.rate0 != st.rate1:
+                    ends.append(t1)
+                t0 = t1
+            j = np.searchsorted(np.asarray(ends), t, side="right") - 1
+            since = np.where(j >= 0, t - np.asarray([*ends, 0.0])[np.maximum(j, 0)], np.inf)
+            y += size * (true["w"] @ m.T) * np.exp(-since / tau_s)[:, None]
+        if gyro and kind == "g2_sensitivity":
+            src = int(rng.integers(3))
+            y[:, axis] += size * DEG * (true["up"][:, src] * plan.gravity / G_STD) ** 2
         if kind == "ar1_noise":
             tau_n = rng.uniform(0.03, 0.4)
             a1 = math.exp(-1.0 / (fs * tau_n))
@@ -454,6 +497,15 @@ def generate(seed: int, kind: str) -> Outside:
         else:
             y += rng.standard_normal((n, 3)) * sigma
         out[sensor] = np.round(y / lsb) * lsb
+    if kind == "sample_hold":  # the shared converter repeats one sample in bursts (both sensors)
+        held = np.arange(n)
+        tb = float(rng.exponential(5.0))
+        while tb < t[-1]:
+            i0 = int(tb * fs)
+            i1 = min(n, i0 + max(2, int(rng.uniform(0.03, 0.15) * fs)))
+            held[i0:i1] = i0
+            tb += float(rng.uniform(2.0, 8.0))
+        out = {k: v[held] for k, v in out.items()}
     temp_read = np.round((temp + rng.normal(0.0, 0.04, n)) * 32.0) / 32.0
     meta = {"serial": f"OUT-{seed:06d}", "sample_rate_hz": f"{fs:g}", "gravity_mps2": f"{plan.gravity:.5f}",
             "station": "gen_outside", "rig": "gen_outside"}

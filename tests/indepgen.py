@@ -289,7 +289,9 @@ class Recording:
     plan: Plan
     effects: dict[str, float]
     #: Drawn coefficients some benchmarks score against: per sensor the polynomial's k2, k3 on the physical input
-    #: (1/U, 1/U^2) and M; the time offset (s).
+    #: (1/U, 1/U^2) and M; the time offset (s). And, keyed ``"<effect> <sensor>"``, the drawn parameters of each
+    #: effect in the diagnosis's candidate forms (SI, per axis or per matrix element; the IEEE scale terms as
+    #: coefficients of the powers of ``M x``, the diagnosis's modelled input). The draws are the same as without.
     truth: dict[str, np.ndarray | float] = field(default_factory=dict)
 
     def write(self, path: str | Path) -> None:
@@ -336,9 +338,11 @@ def generate(seed: int, effects: dict[str, float] | None = None, plan: Plan | No
     tau = eff.get("time_offset", 0.0) * 1e-3
     r_true, w_true, al_true = motion.state(t - tau, true=True)
     f_true = plan.gravity * r_true[:, 2, :]
+    truth: dict[str, np.ndarray | float] = {"time_offset_s": tau}
     if eff.get("lever_arm"):
         arm = rng.normal(size=3)
         arm *= eff["lever_arm"] * 1e-3 / np.linalg.norm(arm)
+        truth["lever_arm accel"] = arm.copy()
         f_true = f_true + np.cross(w_true, np.cross(w_true, arm)) + np.cross(al_true, arm)
     w_in = w_true.copy()
     if eff.get("earth_rotation"):
@@ -355,7 +359,6 @@ def generate(seed: int, effects: dict[str, float] | None = None, plan: Plan | No
     temp_read = np.round((temp + rng.normal(0.0, 0.03, n)) * 16.0) / 16.0
 
     out = {}
-    truth: dict[str, np.ndarray | float] = {"time_offset_s": tau}
     for sensor in ("accel", "gyro"):
         gyro = sensor == "gyro"
         x = (w_in if gyro else f_true).copy()
@@ -365,11 +368,16 @@ def generate(seed: int, effects: dict[str, float] | None = None, plan: Plan | No
         k3 = eff.get("scale_nonlinearity_odd", 0.0) * rng.choice([-1.0, 1.0], 3) * rng.uniform(0.7, 1.0, 3)
         x = x + k2 * x**2 / ref_scale + k3 * x**3 / ref_scale**2
         truth[f"{sensor}_k2"], truth[f"{sensor}_k3"] = k2 / ref_scale, k3 / ref_scale**2
+        truth[f"scale_nonlinearity_even {sensor}"] = k2 / ref_scale
+        truth[f"scale_nonlinearity_odd {sensor}"] = k3 / ref_scale**2
         if eff.get("scale_asymmetry"):
             asym = eff["scale_asymmetry"] * rng.choice([-1.0, 1.0], 3)
+            truth[f"scale_asymmetry {sensor}"] = asym
             x = x * (1.0 + 0.5 * asym * np.sign(x))
         if eff.get("temperature_scale"):
-            x = x * (1.0 + eff["temperature_scale"] * 1e-6 * rng.choice([-1.0, 1.0], 3) * d_temp[:, None])
+            ts = eff["temperature_scale"] * 1e-6 * rng.choice([-1.0, 1.0], 3)
+            truth[f"temperature_scale {sensor}"] = ts
+            x = x * (1.0 + ts * d_temp[:, None])
         if gyro:
             m = _triad(rng, c.gyro_scale, c.gyro_cross_axis)
             b_stat = _uniform(rng, c.gyro_bias_static_dps) * DEG
@@ -386,6 +394,10 @@ def generate(seed: int, effects: dict[str, float] | None = None, plan: Plan | No
             lsb = 4.0 * G0 / 2**17
         truth[f"{sensor}_m"] = m
         y = x @ m.T + b_stat
+        # the diagnosis's scale terms are powers of u = M x (its modelled input through M): M (k2 x^2) = (k2 / M) u^2,
+        # M (k3 x^3) = (k3 / M^2) u^3 per axis (M's diagonal; the asymmetry and the temperature scale are as drawn)
+        for name, power in (("scale_nonlinearity_even", 1), ("scale_nonlinearity_odd", 2)):
+            truth[f"{name} {sensor}"] = truth[f"{name} {sensor}"] / np.diag(m) ** power
         # eq. 3 drift: warm-up plus a small stationary Gauss-Markov part (AR(1), exact discretization)
         phi = np.exp(-1.0 / (fs * tc))
         gm = np.stack([lfilter([math.sqrt(1 - phi[k] ** 2) * 0.01 * abs(b_drift[k])], [1.0, -phi[k]],
@@ -394,12 +406,16 @@ def generate(seed: int, effects: dict[str, float] | None = None, plan: Plan | No
         if gyro and eff.get("g_sensitivity"):
             gs = rng.normal(size=(3, 3))
             gs *= eff["g_sensitivity"] * DEG / G0 / np.abs(gs).max()
+            truth["g_sensitivity gyro"] = gs.copy()
             y = y + f_true @ gs.T
         if eff.get("temperature_bias"):
             coef = eff["temperature_bias"] * (1e-6 * G0 * 1e3 if not gyro else 1e-3 * DEG)
-            y = y + coef * rng.choice([-1.0, 1.0], 3) * d_temp[:, None]
+            tb = coef * rng.choice([-1.0, 1.0], 3)
+            truth[f"temperature_bias {sensor}"] = tb
+            y = y + tb * d_temp[:, None]
         if eff.get("bias_random_walk"):
             k = eff["bias_random_walk"] * (0.1 * DEG if gyro else 1.0)
+            truth[f"bias_random_walk {sensor}"] = np.array([k])
             y = y + np.cumsum(rng.standard_normal((n, 3)), axis=0) * k / math.sqrt(fs)
         y = y + rng.standard_normal((n, 3)) * sigma
         if eff.get("outliers") and not gyro:
@@ -415,6 +431,10 @@ def generate(seed: int, effects: dict[str, float] | None = None, plan: Plan | No
         metadata=meta, t_s=t, segment=seg, kind=kind, accel_mps2=out["accel"], gyro_radps=out["gyro"],
         temp_degc=temp_read, ref_accel_mps2=ref_f, ref_gyro_radps=w_ref,
     )
+    if eff.get("earth_rotation"):
+        truth["earth_rotation gyro"] = np.array([eff["earth_rotation"]])
+    if eff.get("time_offset"):
+        truth["time_offset accel"] = truth["time_offset gyro"] = np.array([tau])
     return Recording(session=session, plan=plan, effects=eff, truth=truth)
 
 

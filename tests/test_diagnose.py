@@ -183,7 +183,11 @@ def test_temperature_bias_found_with_the_sensor_class_tc_range() -> None:
     value, std = np.array(par["value"]), np.array(par["std"])  # deg/s/K
     truth = np.degrees(res.effect_truth.gyro_temp_bias)
     assert np.all(np.abs(value - truth) < 3 * std)
-    assert np.all(std < 0.1 * np.abs(truth))
+    # the fit's own standard error is the recording's information; the stated one is the larger of it and the
+    # bootstrap's spread over segments (here ~3.8x: the value depends on which segments are in), still a value
+    fit_std = np.array(par.get("std_fit", par["std"]))
+    assert np.all(fit_std < 0.1 * np.abs(truth))
+    assert np.all(std >= fit_std) and np.all(std < 0.25 * np.abs(truth))
     clean = simulate_session(14, plan=PLAN)
     assert diagnose(clean.session, warmup_tc_s=tc_range).to_json()["findings"] == []
 

@@ -81,7 +81,8 @@ def test_no_progress_without_a_terminal(lever: object, tmp_path: Path, monkeypat
 
     calls: list[object] = []
 
-    def fake(session: object, *, warmup_tc_s: object = None, progress: object = None) -> object:
+    def fake(session: object, *, warmup_tc_s: object = None, progress: object = None,
+             drift_class: object = None) -> object:
         calls.append(progress)
         raise command.StationError("stop here")
 

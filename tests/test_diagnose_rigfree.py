@@ -20,10 +20,12 @@ from typer.testing import CliRunner
 
 from station.cli import app
 from station.diagnose.effect_registry import REGISTRY, rig_free_testable
+from station.diagnose.locator import DriftClass
 from station.diagnose.report import diagnose
 from station.diagnose.results import load_report
 from station.diagnose.rigfree_diagnosis import rig_free_baseline, rig_free_candidates
 from station.fit.rigfree_fit import is_rig_free
+from station.kernel.limits_file import load_limits
 from station.physics.effects import GYRO_PER_ACCEL, Effects
 from station.session import write_session
 from station.session.model import Kind, Session
@@ -140,9 +142,28 @@ def test_cli_says_method_and_what_it_cannot_test(tmp_path: Path) -> None:
     assert "earth_rotation (gyro): needs the heading of every pose" in r.output
 
 
+def _openaxes_class(accel: str) -> DriftClass:
+    """The OpenAXES sensors' class (data sheets; fixtures/limits/openaxes-*.toml): the locator's drift-noise bound."""
+    return DriftClass.from_limits(load_limits(Path(__file__).resolve().parents[1] / "fixtures" / "limits"
+                                              / f"openaxes-{accel}.toml"))
+
+
 @pytest.fixture(scope="module")
 def openaxes() -> dict[str, dict]:
-    return {a: diagnose(import_openaxes(LOG, accel=a)).to_json() for a in ("adxl355", "bmi160")}
+    return {a: diagnose(import_openaxes(LOG, accel=a), drift_class=_openaxes_class(a)).to_json()
+            for a in ("adxl355", "bmi160")}
+
+
+@pytest.mark.real(OPENAXES_LOG)
+def test_openaxes_against_the_station_class_locates_its_drift_noise() -> None:
+    # judged against the station's Table 1 class, the hand-held BMI160's slow bias wander is far above the class's
+    # drift noise (the free fit stretches q 18-355 times its bound): the locator says so, where, and names nothing
+    report = diagnose(import_openaxes(LOG, accel="adxl355")).to_json()
+    assert report["unexplained"], report["unexplained"]
+    for u in report["unexplained"]:
+        assert max(u["locator"]["q_over_class"]) > 10.0
+        assert set(u["segment_kinds"]) <= {"pose", "rest"}
+    assert {f["effect"] for f in report["findings"]} <= {"outliers"}
 
 
 @pytest.mark.real(OPENAXES_LOG)

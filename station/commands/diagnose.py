@@ -171,8 +171,9 @@ def diagnose(
     plot: Annotated[Path | None, typer.Option("--plot", help="write a PNG of the residual before/after")] = None,
     limits: Annotated[Path | None, typer.Option(
         "--limits", help="limits file (e.g. fixtures/limits/default.toml) whose correlation_time_s ranges are the "
-        "sensor class's T_c: a warm-up outside them is not taken for eq. 3's drift. Default: the recording "
-        "alone decides T_c")] = None,
+        "sensor class's T_c: a warm-up outside them is not taken for eq. 3's drift; its bias_drift ranges (and "
+        "drift_noise where given) bound the drift noise in the locator. Default: the recording alone decides T_c, "
+        "the locator takes Table 1's class")] = None,
     resamples: Annotated[int | None, typer.Option(
         "--resamples", min=0, help="bootstrap resamples over segments for each finding's confidence (0: none; "
         "default: station.diagnose.bootstrap.RESAMPLES)")] = None,
@@ -192,16 +193,19 @@ def diagnose(
         if plot is not None:
             check_output(plot, inputs=[session_path], suffix=".png", what="--plot")
         check_session_file(session_path)  # a device, a huge or a foreign file: refused before the diagnosis's imports
+        from station.diagnose.locator import TABLE1_DRIFT, DriftClass
         from station.diagnose.report import diagnose as run_diagnosis
         from station.diagnose.report import save_figure
         from station.fit.boundary import numerics
 
-        warmup_tc = load_limits(limits).correlation_time_s if limits is not None else None
+        limits_file = load_limits(limits) if limits is not None else None
+        warmup_tc = limits_file.correlation_time_s if limits_file is not None else None
+        drift = DriftClass.from_limits(limits_file) if limits_file is not None else TABLE1_DRIFT
         session = read_session(session_path)
         with warnings.catch_warnings(), numerics(f"diagnosis of {session.serial!r}"):
             warnings.simplefilter("ignore", RuntimeWarning)
             result = run_diagnosis(session, warmup_tc_s=warmup_tc, progress=stderr_progress(progress),
-                                   **({} if resamples is None else {"resamples": resamples}))
+                                   drift_class=drift, **({} if resamples is None else {"resamples": resamples}))
         if plot is not None:
             save_figure(result, plot)
     except StationError as exc:

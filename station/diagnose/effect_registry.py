@@ -251,7 +251,7 @@ EFFECTS: tuple[Effect, ...] = (
             "is a ramp too)",
             profile_tc=True, base_twin="bias_drift (eq. 3 warm-up)", wander_like=True),
         simulate=_add("temp_bias"),  # + c dT
-        compensation="temperature_bias", consistency=("early_vs_late",),
+        compensation="temperature_bias", consistency=("early_vs_late", "heating_vs_cooling"),
     ),
     Effect(
         "temperature_scale", "mean", ("accel", "gyro"), "scale factor proportional to the temperature rise",

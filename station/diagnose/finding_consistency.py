@@ -16,7 +16,11 @@ Which splits an effect is checked on is part of its registry entry
   the recording, split where half of the effect's (whitened) signal energy is reached;
 * ``low_vs_high_input`` (scale terms, ``lever_arm``): low against high input magnitudes (rates, for
   the gyroscope and the lever arm), split at the signal energy's median magnitude;
-* ``negative_vs_positive_input`` (scale terms): negative against positive inputs.
+* ``negative_vs_positive_input`` (scale terms): negative against positive inputs;
+* ``heating_vs_cooling`` (``temperature_bias``): the blocks where the temperature rises (or stays) against those
+  where it falls (its slope over :data:`TEMP_SLOPE_WINDOW_S`). A bias that is a function of the temperature is the
+  same function both ways; one that lags or has a play (hysteresis) differs at equal temperature, and a
+  temperature bias fitted to it leaves part of it to the other part's coefficient.
 
 A check runs only where both parts hold at least :data:`REACH` of the finding's signal energy; where
 not (e.g. a recording without tumbles), it is reported ``not checked`` with the reason.
@@ -46,6 +50,7 @@ from typing import Any
 
 import numpy as np
 from scipy import linalg, stats
+from scipy.ndimage import uniform_filter1d
 
 from station.diagnose import robust
 from station.diagnose.effect_registry import REGISTRY, SHAPES, unit_factor
@@ -72,12 +77,16 @@ PARTS: dict[str, tuple[str, str]] = {
     "early_vs_late": ("early part", "late part"),
     "low_vs_high_input": ("low input magnitudes", "high input magnitudes"),
     "negative_vs_positive_input": ("negative inputs", "positive inputs"),
+    "heating_vs_cooling": ("heating (temperature rising or steady)", "cooling (temperature falling)"),
 }
 #: Short labels of the splits for the CLI table.
 SHORT: dict[str, str] = {
     "tumbles_vs_ramps": "tumbles/ramps", "poses_vs_rates": "poses/rates", "early_vs_late": "halves",
     "low_vs_high_input": "low/high input", "negative_vs_positive_input": "-/+ input",
+    "heating_vs_cooling": "heating/cooling",
 }
+#: The temperature's slope (heating or cooling) is taken over this window (s): the sensor's reading is quantized.
+TEMP_SLOPE_WINDOW_S = 30.0
 #: A part holding less than this share of the finding's whitened signal energy does not reach it.
 REACH = 0.02
 
@@ -165,6 +174,12 @@ def _block_masks(prob: SensorProblem, baseline: Baseline, split: str, name: str,
         return sd.block_mean(df) <= TUMBLE_MPS3
     if split == "poses_vs_rates":
         return np.isin(sd.kind, [int(Kind.RATE), int(Kind.MOVE)])
+    if split == "heating_vs_cooling":
+        fs = session.sample_rate_hz
+        w = max(3, int(TEMP_SLOPE_WINDOW_S * fs) | 1)
+        slope = np.gradient(uniform_filter1d(np.asarray(baseline.d_temp, dtype=float), w, mode="nearest"),
+                            session.t_s)
+        return sd.block_mean(slope) < 0.0
     if split == "early_vs_late":
         order = np.argsort(sd.t_s, kind="stable")
         cum = np.cumsum(energy[order])

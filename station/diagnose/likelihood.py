@@ -39,6 +39,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import linalg, optimize, stats
+from scipy.ndimage import uniform_filter1d
 
 from station.diagnose.effect_registry import EFFECTS
 from station.diagnose.residuals import Baseline, SensorData
@@ -132,6 +133,10 @@ class Test:
         return self.heldout_after - self.heldout_before <= HELDOUT_SE * self.heldout_change_se
 
 
+#: Alternating rounds (q per axis, then K^2) of an accepted random walk's size (:meth:`SensorProblem._walk_size`).
+WALK_SIZE_ROUNDS = 2
+
+
 @dataclass(frozen=True)
 class WalkConsistency:
     """:meth:`SensorProblem.walk_consistency`: whether the wander is the same throughout the record; ``z`` per
@@ -168,6 +173,25 @@ def base_drift(t_s: np.ndarray, sd: SensorData) -> np.ndarray:
     return sd.params.warmup_drift(t_s)
 
 
+#: The temperature's direction (heating or cooling) is its slope over this window (s): the reading is quantized.
+TEMP_SLOPE_WINDOW_S = 30.0
+#: The walk's test holds the temperature's direction as a nuisance term when at least this share of the blocks
+#: heats and as much cools.
+TEMP_DIRECTION_SHARE = 0.1
+
+
+def temperature_direction(baseline: Baseline, sd: SensorData) -> np.ndarray:
+    """Per block, whether the temperature rises (+1) or falls (-1): the sign of its slope over
+    :data:`TEMP_SLOPE_WINDOW_S`, block-averaged (m,); zeros without a temperature course."""
+    temp = np.asarray(baseline.d_temp, dtype=float)
+    if not np.ptp(temp) > 0:
+        return np.zeros(len(sd.t_s))
+    session = baseline.session
+    w = max(3, int(TEMP_SLOPE_WINDOW_S * session.sample_rate_hz) | 1)
+    slope = np.gradient(uniform_filter1d(temp, w, mode="nearest"), session.t_s)
+    return np.asarray(sd.block_mean(np.sign(slope)), dtype=float)
+
+
 class SensorProblem:
     """The stacked block problem of one sensor; see the module docstring."""
 
@@ -181,8 +205,14 @@ class SensorProblem:
             self.white = self.white + sd.extra_var
         span = float(t.max() + 0.5 * sd.width_s.max())
         self.dist = np.abs(t[:, None] - t[None, :])
+        # a random walk W (Var W(t) = K^2 t) averaged over blocks: Cov(mean_i, mean_j) = K^2 min(t_i, t_j) at the block
+        # centres for two blocks, Var(mean_i) = K^2 (t_i - w_i / 6) for one of width w_i (the mean of W over
+        # [a, a + w] has variance K^2 (a + w / 3)); without it, the walk's increments between adjacent blocks are
+        # modelled K^2 w_i / 3 too large and K comes out low
         self.tmin = np.minimum(t[:, None], t[None, :])
+        self.tmin[np.diag_indices(self.m)] -= sd.width_s / 6.0
         self.d_temp = sd.block_mean(baseline.d_temp)  # temperature rise per block (K)
+        self.temp_direction = temperature_direction(baseline, sd)  # heating +1 / cooling -1 per block
         # eq. 3's T_c inside the sensor class's range, where one is given (SensorData.tc_range_s)
         self.tc = np.maximum(sd.clip_tc(np.array([tc if np.isfinite(tc) and tc > 0 else span
                                                   for tc in sd.params.correlation_time_s])), TC_FLOOR_S)
@@ -198,6 +228,9 @@ class SensorProblem:
         self.k2 = 0.0
         self._eig_cache: dict[tuple[int, float], tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self._accepted: list[np.ndarray] = []  # block regressors (m, 3, p) of accepted mean effects, see accepted
+        #: the sensor class's largest drift-noise variance per axis (U^2), where the caller knows the class
+        #: (selection.py, from locator.class_drift_noise): bounds q when an accepted walk's size is fitted
+        self.q_class: np.ndarray | None = None
         self._fit_q()
         self.refit_drift()
 
@@ -667,10 +700,17 @@ class SensorProblem:
         """:meth:`test_random_walk` at the current T_c."""
         q_max = [self.drift_noise_max(k) for k in range(3)]
         extra = []
+        # the temperature course is a nuisance term of both hypotheses; where the temperature both rises and falls,
+        # so is an offset that depends on its direction (a bias with a play or lag in temperature, hysteresis: a
+        # wander that turns with the temperature is not a random walk)
+        nuisance = [self.d_temp] if np.any(self.d_temp) else []
+        both_ways = float(np.mean(self.temp_direction > 0.5)), float(np.mean(self.temp_direction < -0.5))
+        if min(both_ways) >= TEMP_DIRECTION_SHARE:
+            nuisance.append(self.temp_direction)
         for k in range(3):
             acc = self._accepted_axis(k)
-            if np.any(self.d_temp):  # the temperature course is a nuisance term of both hypotheses
-                acc = self.d_temp[:, None] if acc is None else np.column_stack([acc, self.d_temp])
+            if nuisance:
+                acc = np.column_stack(nuisance) if acc is None else np.column_stack([acc, *nuisance])
             extra.append(acc)
 
         def constrained_q() -> tuple[list[float], float]:
@@ -684,9 +724,34 @@ class SensorProblem:
         # K^2 >= 0 sits on the boundary: the null distribution is half chi^2_1
         crit = float(stats.chi2.isf(2.0 * ALPHA, 1))
         k_walk = math.sqrt(k2)
+        if gain > crit and gain > math.log(self.n_rows):
+            k_walk, k_std = self._walk_size(qs, extra, q_max, k2)
         return Test(effect="bias_random_walk", sensor=self.sd.sensor, gain=gain, params=1,
                     bic_gain=gain - math.log(self.n_rows), critical=crit, theta=np.array([k_walk]),
                     cov=np.array([[k_std**2]]))
+
+    def _walk_size(self, qs: list[float], extra: list[np.ndarray | None], q_max: list[float],
+                   k2: float) -> tuple[float, float]:
+        """(K, std of K) of an accepted random walk with eq. 3's drift noise profiled beside it (0 <= q <= q_max per
+        axis). The test keeps q at the null's value (conservative for the decision), where q has taken up part of
+        the wander: K from there is low and its curvature ignores the trade between the two. Here K^2 and q are
+        fitted together (alternating profiles from the test's point) and K's uncertainty is the curvature of the
+        profile likelihood in log K^2 with q re-fitted at every K^2; q bounded by the sensor class where it is known
+        (:attr:`q_class`): the drift noise of eq. 3 must not take up the wander."""
+        if self.q_class is not None:
+            q_max = [min(a, float(b)) for a, b in zip(q_max, self.q_class, strict=True)]
+            qs = [min(a, b) for a, b in zip(qs, q_max, strict=True)]
+        for _ in range(WALK_SIZE_ROUNDS):
+            qs = [self._profile_q(k, k2, extra[k], q_max=q_max[k])[0] for k in range(3)]
+            _, k2, _ = self._profile_k2(qs, extra)
+
+        def prof(v: float) -> float:
+            return sum(self._profile_q(k, v, extra[k], q_max=q_max[k])[1] for k in range(3))
+
+        h = 0.3
+        mid = prof(k2)
+        curv = (prof(k2 * math.exp(h)) - 2.0 * mid + prof(k2 * math.exp(-h))) / h**2
+        return math.sqrt(k2), math.sqrt(k2) * 0.5 / math.sqrt(curv) if curv > 0 else math.nan
 
     def _profile_k2(self, qs: list[float], extra: list[np.ndarray | None]) -> tuple[float, float, float]:
         """(nll, K^2, std of K) with a random walk ``K^2 min(t_i, t_j)`` shared by the three axes profiled at the
@@ -748,7 +813,8 @@ class SensorProblem:
         residual between consecutive settled blocks (rest, pose, rate; moves left out), ``d = r_j - r_i``, have
         ``E d^2 = w_i + w_j + K^2 dt`` (white block noise ``w``, :attr:`white`) for a random walk wherever they are
         taken. Moment estimates of K^2 (three axes pooled, ``sum(d^2 - w_i - w_j) / sum(dt)``) from four sets of
-        pairs: the first / second half of the record, pairs inside one segment / across a segment boundary; the
+        pairs: the first / second half of the record, pairs inside one segment / across a segment boundary, and where
+        the temperature both rises and falls, pairs while it rises / falls; the
         standard error of each from ``var d^2 = 2 (E d^2)^2`` at the pooled K^2. Consistent when both
         differences are within :data:`WALK_CONSISTENCY_Z` standard errors."""
         raw = self.quality().block_residual
@@ -771,7 +837,13 @@ class SensorProblem:
         mid = 0.5 * float(sd.t_s.max())
         z_of: dict[str, float] = {}
         consistent = True
-        for name, a in (("halves", sd.t_s[j] <= mid), ("inside_vs_across_segments", same)):
+        splits = [("halves", sd.t_s[j] <= mid), ("inside_vs_across_segments", same)]
+        td = self.temp_direction
+        if min(float(np.mean(td > 0.5)), float(np.mean(td < -0.5))) >= TEMP_DIRECTION_SHARE:
+            # a random walk wanders alike while the temperature rises and while it falls; a bias with a play or lag
+            # in temperature (hysteresis) moves where the temperature turns
+            splits.append(("heating_vs_cooling", td[i] + td[j] >= 0.0))
+        for name, a in splits:
             est: list[tuple[float, float]] = []
             for sel in (a, ~a):
                 if not sel.any():

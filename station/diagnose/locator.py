@@ -7,10 +7,11 @@ the exponential autocorrelation of eq. 3 (eq. 4), a bias that follows the rate o
 "drift noise"; after such a fit the dispersion of the rest and rate blocks is far *below* 1, which nothing
 else treats as a symptom. Here, per sensor, after the selection:
 
-1. **Stochastic terms frozen at the sensor class.** ``q`` is bounded by the class's drift noise
-   (:data:`station.kernel.sensor_class.TABLE1`: the stationary std of eq. 3's noise is ``drift_noise_rel``
-   of ``|b_drift|``, the unit's own warm-up between :data:`B_DRIFT_FLOOR` of the class's largest and the largest;
-   :data:`CLASS_MARGIN` times that), T_c stays
+1. **Stochastic terms frozen at the sensor class.** ``q`` is bounded by the drift noise of the class of the
+   recording's sensor (:class:`DriftClass`: from the limits file in use, :meth:`DriftClass.from_limits`, else the
+   station's :data:`station.kernel.sensor_class.TABLE1`): the class's stationary std of eq. 3's noise where it
+   gives one, else ``drift_noise_rel`` of ``|b_drift|``, the unit's own warm-up between :data:`B_DRIFT_FLOOR` of
+   the class's largest and the largest; :data:`CLASS_MARGIN` times that), T_c stays
    in the class range the selection kept it in, a bias random walk found by the selection stays. The final
    mean model (base terms and the accepted effects) is re-fitted by GLS under that covariance.
 2. **Located by segment kind.** Its innovations per block (whitened residual, 1 = noise) are grouped by
@@ -40,6 +41,8 @@ models (:class:`~station.diagnose.results.EmpiricalModel`: ``empirical``).
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -49,6 +52,7 @@ from scipy.signal import lfilter
 
 from station.diagnose import empirical, robust
 from station.diagnose.results import CovariateTest, EmpiricalModel, LocatorEvidence, Unexplained
+from station.kernel.limits_file import LimitsFile
 from station.kernel.sensor_class import TABLE1, SensorClass
 from station.session.model import Kind
 
@@ -77,14 +81,44 @@ AX = "xyz"
 KICK_TAU_S = (4.0, 10.0, 25.0, 60.0)
 
 
-def class_drift_noise(sensor: str, b_drift: np.ndarray | None = None, cls: SensorClass = TABLE1) -> np.ndarray:
+@dataclass(frozen=True)
+class DriftClass:
+    """The eq. 3 drift of the sensor class a recording is judged against: per sensor (``accel``, ``gyro``) the
+    range of ``b_drift`` (SI), the stationary std of the drift noise where the class states it (SI), else
+    ``drift_noise_rel`` of ``|b_drift|`` (Table 1's rule)."""
+
+    name: str
+    bias_drift: Mapping[str, tuple[float, float]]
+    drift_noise_rel: float = TABLE1.drift_noise_rel
+    drift_noise: Mapping[str, float] = field(default_factory=dict)
+
+    @classmethod
+    def of(cls, sc: SensorClass = TABLE1) -> DriftClass:
+        deg = math.pi / 180.0
+        lo, hi = sc.gyro_bias_drift_dps
+        return cls(sc.name, {"accel": sc.accel_bias_drift_mps2, "gyro": (lo * deg, hi * deg)}, sc.drift_noise_rel)
+
+    @classmethod
+    def from_limits(cls, lim: LimitsFile) -> DriftClass:
+        """The class of a limits file: its product ``bias_drift`` ranges and its ``drift_noise`` where given."""
+        p = lim.product
+        return cls(lim.name, {"accel": p.accel.bias_drift, "gyro": p.gyro.bias_drift}, TABLE1.drift_noise_rel,
+                   dict(lim.drift_noise))
+
+
+#: The station's own class (the paper's Table 1).
+TABLE1_DRIFT = DriftClass.of(TABLE1)
+
+
+def class_drift_noise(sensor: str, b_drift: np.ndarray | None = None, cls: DriftClass = TABLE1_DRIFT) -> np.ndarray:
     """Largest stationary variance of eq. 3's drift noise per axis (SI unit^2) the sensor class grants a unit
-    whose warm-up is ``b_drift`` (3,): :data:`CLASS_MARGIN` times ``drift_noise_rel`` of ``|b_drift|``, the
-    warm-up taken at least :data:`B_DRIFT_FLOOR` of the class's largest and at most that largest (None: the
-    largest)."""
-    lo, hi = cls.gyro_bias_drift_dps if sensor == "gyro" else cls.accel_bias_drift_mps2
-    scale = math.pi / 180.0 if sensor == "gyro" else 1.0
-    top = max(abs(lo), abs(hi)) * scale
+    whose warm-up is ``b_drift`` (3,): :data:`CLASS_MARGIN` times the class's drift-noise std where it states
+    one, else times ``drift_noise_rel`` of ``|b_drift|``, the warm-up taken at least :data:`B_DRIFT_FLOOR` of the
+    class's largest and at most that largest (None: the largest)."""
+    if sensor in cls.drift_noise:
+        return np.full(3, (CLASS_MARGIN * cls.drift_noise[sensor]) ** 2)
+    lo, hi = cls.bias_drift[sensor]
+    top = max(abs(lo), abs(hi))
     b = np.full(3, top) if b_drift is None else np.clip(np.abs(np.nan_to_num(b_drift, nan=top)),
                                                         B_DRIFT_FLOOR * top, top)
     return np.asarray((CLASS_MARGIN * cls.drift_noise_rel * b) ** 2, dtype=float)
@@ -198,14 +232,14 @@ def _jumps(session: Any, residual: np.ndarray, k: int) -> tuple[int, int]:
 
 
 def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[int, int]] | None = None,
-           fitted: np.ndarray | None = None) -> Unexplained | None:
+           fitted: np.ndarray | None = None, drift_class: DriftClass = TABLE1_DRIFT) -> Unexplained | None:
     """Run the module's steps on the final model of one sensor (``prob``, a
     :class:`station.diagnose.likelihood.SensorProblem` with the accepted effects ``names``). ``extra_cells``:
     (kind code, axis) cells located by other checks (e.g. :mod:`station.diagnose.robust`'s) to name the
     covariate of as well; ``fitted``: the accepted effects' signal per sample (n, 3), for the jump test (None:
-    not run). None when nothing is located."""
+    not run); ``drift_class``: the class whose drift noise bounds ``q``. None when nothing is located."""
     sd = prob.sd
-    q_cls = class_drift_noise(sd.sensor, sd.params.bias_drift)
+    q_cls = class_drift_noise(sd.sensor, sd.params.bias_drift, drift_class)
     q_fit = prob.q.copy()
     with prob.drift_noise_at_most(q_cls):
         chols, yw = prob.whitened()
@@ -327,4 +361,4 @@ def _text(name: str) -> str:
     return f"follows {name}"
 
 
-__all__ = ["ALPHA_LOCATED", "PHI_LOCATED", "class_drift_noise", "covariates", "locate"]
+__all__ = ["ALPHA_LOCATED", "PHI_LOCATED", "TABLE1_DRIFT", "DriftClass", "class_drift_noise", "covariates", "locate"]

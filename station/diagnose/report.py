@@ -49,6 +49,7 @@ from threadpoolctl import threadpool_limits
 from station.diagnose.bootstrap import RESAMPLES, SEED
 from station.diagnose.diagnosis_progress import DONE, STAGES, Progress, Stage
 from station.diagnose.finding_compensation import compensation
+from station.diagnose.locator import TABLE1_DRIFT, DriftClass
 from station.diagnose.outcome import Diagnosis, ResidualCurve
 from station.diagnose.rerun import FittedEffect, Rerun, rerun
 from station.diagnose.residuals import BaseFitNoise, fit_baseline, locate, warmup_ranges
@@ -61,7 +62,8 @@ from station.session.model import Session
 
 
 def diagnose(session: Session, *, warmup_tc_s: Mapping[str, tuple[float, float]] | None = None,
-             resamples: int = RESAMPLES, seed: int = SEED, progress: Progress | None = None) -> Diagnosis:
+             resamples: int = RESAMPLES, seed: int = SEED, progress: Progress | None = None,
+             drift_class: DriftClass = TABLE1_DRIFT) -> Diagnosis:
     """Diagnose ``session``: which physics the base model (eq. 1 + eq. 3) is missing.
 
     ``warmup_tc_s``: the sensor class's range of eq. 3's T_c (s) per sensor, e.g.
@@ -73,6 +75,9 @@ def diagnose(session: Session, *, warmup_tc_s: Mapping[str, tuple[float, float]]
 
     ``resamples``: the bootstrap over segments that states each finding's confidence
     (:mod:`station.diagnose.bootstrap`, seeded with ``seed``: same recording, same numbers); 0 leaves it out.
+
+    ``drift_class``: the class of the recording's sensor, whose drift noise bounds eq. 3's ``q`` in the locator
+    (:class:`station.diagnose.locator.DriftClass`, e.g. ``DriftClass.from_limits(limits)``; default: Table 1).
 
     ``progress``: called with a :class:`~station.diagnose.diagnosis_progress.Stage` as each stage starts and once
     more when done (see :mod:`station.diagnose.diagnosis_progress`; a rig-free recording's diagnosis tells only its
@@ -90,7 +95,8 @@ def diagnose(session: Session, *, warmup_tc_s: Mapping[str, tuple[float, float]]
 
     if is_rig_free(session):
         tell(0)
-        out = diagnose_rig_free(session, warmup_tc_s=warmup_tc_s, resamples=resamples, seed=seed)
+        out = diagnose_rig_free(session, warmup_tc_s=warmup_tc_s, resamples=resamples, seed=seed,
+                                drift_class=drift_class)
         tell(len(STAGES))
         return out
     # the linear algebra is on a few hundred blocks: BLAS threads only spin
@@ -98,7 +104,7 @@ def diagnose(session: Session, *, warmup_tc_s: Mapping[str, tuple[float, float]]
         tell(0)
         baseline = fit_baseline(session, warmup_tc_s=warmup_tc_s)
         tell(1)
-        decision = select(baseline, resamples=resamples, seed=seed)
+        decision = select(baseline, resamples=resamples, seed=seed, drift_class=drift_class)
         curves = [ResidualCurve(f"{f.sensor} {f.effect}", baseline.sensor(f.sensor).t_s, *f.block_residual)
                   for f in decision.findings if f.block_residual is not None]
         fitted = [FittedEffect(f.effect, f.sensor, np.zeros(0) if f.theta is None else f.theta)

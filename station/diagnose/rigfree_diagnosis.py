@@ -38,6 +38,7 @@ from scipy import stats
 from threadpoolctl import threadpool_limits
 
 from station.diagnose.effect_registry import REGISTRY, rig_free_testable
+from station.diagnose.locator import TABLE1_DRIFT, DriftClass
 from station.diagnose.outcome import Diagnosis, ResidualCurve
 from station.diagnose.residuals import SENSORS, BaseFitNoise, Baseline, baseline_from_params, locate, warmup_ranges
 from station.diagnose.results import (
@@ -220,7 +221,8 @@ def _earth_rate_rejection(f: Finding, vertical: float | None) -> Rejection | Non
 
 def diagnose_rig_free(session: Session, *,
                       warmup_tc_s: Mapping[str, tuple[float, float]] | None = None,
-                      resamples: int | None = None, seed: int | None = None) -> Diagnosis:
+                      resamples: int | None = None, seed: int | None = None,
+                      drift_class: DriftClass = TABLE1_DRIFT) -> Diagnosis:
     """Diagnose a rig-free recording (see the module docstring): a :class:`~station.diagnose.outcome.Diagnosis`
     whose report has the keys of ``station-diagnosis/1`` plus ``untestable`` and ``rig_free``.
     ``resamples``, ``seed``: the bootstrap's, as in :func:`station.diagnose.report.diagnose` (None: its defaults).
@@ -231,9 +233,9 @@ def diagnose_rig_free(session: Session, *,
         baseline = rig_free_baseline(session, warmup_tc_s=warmup_tc_s)
         candidates, untestable = rig_free_candidates(baseline)
         boot = {k: v for k, v in (("resamples", resamples), ("seed", seed)) if v is not None}
-        # the locator freezes the stochastic terms at the station's sensor class (Table 1); a hand-held recording is
-        # of some other sensor (OpenAXES's drift noise is 18-355x that class's), so it would locate its own noise
-        decision = select(baseline, candidates=candidates, locate=False, **boot)
+        # the locator bounds the drift noise by the class of the recording's sensor (``drift_class``: a hand-held
+        # recording is usually of another class than the station's Table 1; give its limits file)
+        decision = select(baseline, candidates=candidates, locate=True, drift_class=drift_class, **boot)
     findings, curves = [], []
     rejected = list(decision.rejected)
     vertical = earth_vertical_radps(session)

@@ -161,31 +161,33 @@ def _unique(prob: SensorProblem, best: Test, twin: Test, regs: Mapping[str, np.n
 
 def select(baseline: Baseline, *, max_effects: int = 4,
            candidates: Mapping[str, Collection[str]] | None = None, resamples: int = bootstrap.RESAMPLES,
-           seed: int = bootstrap.SEED, locate: bool = True) -> Decision:
+           seed: int = bootstrap.SEED, locate: bool = True,
+           drift_class: locator.DriftClass = locator.TABLE1_DRIFT) -> Decision:
     """Forward selection of candidate effects per sensor (see the module docstring).
 
     ``candidates``: per sensor, the mean candidates to test (None: every one of the library); a recording that
     cannot test some (e.g. a rig-free one, :mod:`station.diagnose.rigfree_diagnosis`) says so itself.
     ``bias_random_walk`` and ``outliers`` are always tested. ``resamples``: the bootstrap's over segments for each
     finding's confidence (:mod:`station.diagnose.bootstrap`, seeded with ``seed``; 0: none). ``locate``: run the
-    locator (its stochastic terms are frozen at the station's sensor class, Table 1: off for a recording of a
-    sensor that is not of that class, e.g. a hand-held one).
+    locator, its stochastic terms bounded by ``drift_class`` (the class of the recording's sensor).
     """
     return Decision.join(
         select_sensor(baseline, sensor, max_effects=max_effects,
                       candidates=None if candidates is None else candidates.get(sensor, ()),
-                      resamples=resamples, seed=seed, locate=locate)
+                      resamples=resamples, seed=seed, locate=locate, drift_class=drift_class)
         for sensor in SENSORS)
 
 
 def select_sensor(baseline: Baseline, sensor: str, *, max_effects: int = 4, candidates: Collection[str] | None = None,
-                  resamples: int = bootstrap.RESAMPLES, seed: int = bootstrap.SEED, locate: bool = True) -> Decision:
+                  resamples: int = bootstrap.RESAMPLES, seed: int = bootstrap.SEED, locate: bool = True,
+                  drift_class: locator.DriftClass = locator.TABLE1_DRIFT) -> Decision:
     """:func:`select` for one sensor, in its steps: the candidates' regressors; the forward selection; the checks
     that hold when the model is wrong (robust.py, consistency.py); the locator (locator.py) and the findings'
     sizes re-fitted under the final model (retest.py); the bootstrap's confidence; the candidates' rejections; the
     pairs the recording cannot tell apart; the outlier count under the final model."""
     sd = baseline.sensor(sensor)
     prob = SensorProblem(baseline, sd)
+    prob.q_class = locator.class_drift_noise(sensor, sd.params.bias_drift, drift_class)
     out = _Entries()
     regs = _regressors(baseline, sd, candidates, out)
     tau = 0.0
@@ -197,7 +199,7 @@ def select_sensor(baseline: Baseline, sensor: str, *, max_effects: int = 4, cand
             break
     confidence, checks = _audit(prob, baseline, fwd, out)
     if locate:
-        _locate(prob, baseline, fwd, out)
+        _locate(prob, baseline, fwd, out, drift_class)
     fitted_final = _fitted_samples(prob, baseline, fwd)
     sizes = retest.sizes(prob, fwd.names, {f.effect: (f.theta, f.theta_std) for f in fwd.found
                                            if f.theta is not None})
@@ -379,14 +381,15 @@ def _audit(prob: SensorProblem, baseline: Baseline, fwd: _Forward, out: _Entries
     return confidence, checks
 
 
-def _locate(prob: SensorProblem, baseline: Baseline, fwd: _Forward, out: _Entries) -> None:
+def _locate(prob: SensorProblem, baseline: Baseline, fwd: _Forward, out: _Entries,
+            drift_class: locator.DriftClass) -> None:
     """The locator (locator.py): the final model with the stochastic terms at the sensor class's values. Its entry
     replaces the sensor's unexplained entries (their cells are located with it); an effect standing in for what it
     locates is rejected, then the location is taken again without it."""
     for _round in range(LOCATOR_ROUNDS):
         cells = {(k, "xyz".index(a)) for u in out.unexplained for a in u.axes for k in _kind_codes(u.segment_kinds)}
         located = locator.locate(prob, baseline, fwd.names, extra_cells=cells,
-                                 fitted=_fitted_samples(prob, baseline, fwd))
+                                 fitted=_fitted_samples(prob, baseline, fwd), drift_class=drift_class)
         if located is None:
             return
         out.unexplained[:] = [located]
@@ -431,7 +434,28 @@ def _checked(f: Finding, confidence: Mapping[str, Confidence], boot: Mapping[str
     if b is not None:  # the level the report states is the bootstrap's (bootstrap.py)
         conf = conf.with_bootstrap(b)
     found = checks.get(f.effect) or finding_consistency.not_checked(f.effect, f.sensor)
-    return replace(f, confidence=conf, bootstrap=b, consistency=tuple(c.entry() for c in found))
+    return replace(_bootstrap_std(f, b), confidence=conf, bootstrap=b, consistency=tuple(c.entry() for c in found))
+
+
+def _bootstrap_std(f: Finding, b: Bootstrap | None) -> Finding:
+    """Finding ``f`` whose stated standard uncertainty is, per parameter, the larger of the fit's and the bootstrap's
+    spread over segments (bootstrap.py): where the value depends on which segments are in more than the fit's
+    noise model says (the model only approximates the physics, or the residual is correlated beyond it), the fit's
+    own standard error understates it. The fit's is kept as ``std_fit``; ``std_from`` says which one is stated."""
+    std = f.parameters.get("std")
+    if b is None or b.std is None or not isinstance(std, list) or len(std) != len(b.std) \
+            or any(isinstance(v, list) for v in std) or f.theta_std is None:
+        return f
+    fit = np.asarray(std, dtype=float)
+    boot = np.nan_to_num(np.asarray(b.std, dtype=float))
+    if not np.any(boot > fit):
+        return f
+    new = np.maximum(fit, boot)
+    params = dict(f.parameters)
+    params.update(std=[float(f"{v:.4g}") for v in new], std_fit=list(std),
+                  std_from=["bootstrap" if bb > ff else "fit" for ff, bb in zip(fit, boot, strict=True)])
+    scale = np.where(fit > 0, new / np.where(fit > 0, fit, 1.0), 1.0)
+    return replace(f, parameters=params, theta_std=np.asarray(f.theta_std, dtype=float) * scale)
 
 
 def _not_named(t: Test) -> Rejection:

@@ -109,6 +109,10 @@ class LimitsFile:
         correlation_time_s: the sensor class's range of eq. 3's T_c (s) per triad (``accel``, ``gyro``) as
             the file gives it, checked or not (``check_correlation_time``); the diagnosis keeps the warm-up
             drift inside it (:func:`station.diagnose.diagnose`). Empty when the file gives none.
+        drift_noise: the sensor class's stationary std of eq. 3's stochastic drift per triad (SI), where the file
+            gives it (optional ``drift_noise_mps2`` / ``drift_noise_dps``): the diagnosis's locator bounds the
+            drift noise by it (:mod:`station.diagnose.locator`). Where not given, the locator takes Table 1's
+            relative rule on the file's ``bias_drift`` range.
     """
 
     name: str
@@ -121,6 +125,7 @@ class LimitsFile:
     verification: VerificationLimits
     retest: RetestPolicy
     correlation_time_s: dict[str, tuple[float, float]] = field(default_factory=dict)
+    drift_noise: dict[str, float] = field(default_factory=dict)
 
 
 def _finite_number(v: Any) -> bool:
@@ -207,9 +212,11 @@ class _Table:
             raise LimitsFileError(f"{self.source}: unknown key(s) {', '.join(self._key(k) for k in extra)}")
 
 
-def _triad(t: _Table, gyro: bool, check_tc: bool) -> tuple[TriadLimits, tuple[float, float] | None]:
-    """The triad's product limits (T_c only if checked) and its T_c range (s) as given, or None."""
+def _triad(t: _Table, gyro: bool, check_tc: bool) -> tuple[TriadLimits, tuple[float, float] | None, float | None]:
+    """The triad's product limits (T_c only if checked), its T_c range (s) as given or None, and its class's
+    drift noise (SI) as given or None."""
     unit, scale = ("dps", _DEG) if gyro else ("mps2", 1.0)
+    drift_noise = t.number(f"drift_noise_{unit}", positive=True, required=False)
     out = TriadLimits(
         scale=t.range("scale"),
         cross_axis=t.range("cross_axis"),
@@ -224,7 +231,7 @@ def _triad(t: _Table, gyro: bool, check_tc: bool) -> tuple[TriadLimits, tuple[fl
     if not check_tc:
         out = replace(out, correlation_time_s=None)
     t.done()
-    return out, tc
+    return out, tc, None if drift_noise is None else drift_noise * scale
 
 
 def _thermal(t: _Table) -> ThermalLimits:
@@ -286,9 +293,10 @@ def parse_limits(text: str | bytes, source: str = "<limits>", path: Path | None 
     if k_sigma < 0:
         raise prod.fail(k_key, f"must be >= 0, got {k_sigma}")
     check_tc = prod.boolean("check_correlation_time")
-    accel, accel_tc = _triad(prod.table("accel"), False, check_tc)
-    gyro, gyro_tc = _triad(prod.table("gyro"), True, check_tc)
+    accel, accel_tc, accel_q = _triad(prod.table("accel"), False, check_tc)
+    gyro, gyro_tc, gyro_q = _triad(prod.table("gyro"), True, check_tc)
     tc_ranges = {name: r for name, r in (("accel", accel_tc), ("gyro", gyro_tc)) if r is not None}
+    drift_noise = {name: q for name, q in (("accel", accel_q), ("gyro", gyro_q)) if q is not None}
     prod.done()
 
     marg = top.table("marginal")
@@ -352,6 +360,7 @@ def parse_limits(text: str | bytes, source: str = "<limits>", path: Path | None 
         verification=verification,
         retest=RetestPolicy(n),
         correlation_time_s=tc_ranges,
+        drift_noise=drift_noise,
     )
 
 
