@@ -95,11 +95,18 @@ class SoakRack:
 
         # on a virtual clock each slot's logger is an actor and this thread waits for them through the clock
         # (a plain ``fut.result()`` would hold time while they wait on it: ClockStalled)
-        with ActorPool(self.clock, max_workers=max(1, len(slots)), thread_name_prefix="rack") as pool:
+        pool = ActorPool(self.clock, max_workers=max(1, len(slots)), thread_name_prefix="rack")
+        try:
             futures = [pool.submit(one, s) for s in slots]
             wait_futures(self.clock, futures)
-            for fut in futures:
-                fut.result()
+        except BaseException:
+            # interrupted (Ctrl-C, SIGTERM): the loggers may be waiting on the clock, and joining them here would
+            # hold time for good; they end on their own once this thread stops holding it (or their link closes)
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
+        pool.shutdown()
+        for fut in futures:
+            fut.result()
         board1 = self.board.state().power_on_count
         if board1 != board0:
             why = f"the relay board lost power during the soak (its power-on counter {board0} -> {board1})"
