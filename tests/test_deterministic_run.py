@@ -89,3 +89,50 @@ def test_virtual_clock_run_repeats_bit_for_bit_under_load(tmp_path: Path) -> Non
     for name in first:
         assert len(first[name]) > 1000
         assert first[name] == second[name], f"{name} differs between the quiet and the loaded run"
+
+
+# --- the line demo: rack (relay board, ptys), powered transfer, rig role, joint fit ------------------------
+
+LINE_SEED = 13
+
+
+def line_demo_once(tmp_path: Path, name: str, clock: Clock) -> dict[str, bytes]:
+    """One run of ``station demo`` (the line; 2 units, 120 s in the rack) on ``clock``: its parameter JSONs,
+    session CSVs without the run id line and the rack recordings stored in its database, by serial."""
+    import gzip
+    import io
+
+    from rich.console import Console
+    from sqlalchemy import select
+
+    from station.sim.demo import run_line_demo
+    from station.store.db import open_database
+    from station.store.models import RackRecording
+
+    db_url = f"sqlite:///{tmp_path / (name + '.sqlite')}"
+    result = run_line_demo(2, 120.0, LINE_SEED, console=Console(file=io.StringIO(), width=140),
+                           out_dir=tmp_path / name, db_url=db_url, clock=clock)
+    files: dict[str, bytes] = {}
+    for u in result.units:
+        # a unit out of limits (FAIL) is a result too; a station fault or an abort is not
+        assert u.outcome in (Outcome.PASS, Outcome.FAIL), (u.serial, u.outcome, u.message)
+        assert u.session_path is not None and u.params_path is not None, (u.serial, u.outcome, u.message)
+        lines = u.session_path.read_bytes().splitlines(keepends=True)
+        files[f"{u.serial}.csv"] = b"".join(line for line in lines if not line.startswith(b"# run_id:"))
+        files[f"{u.serial}.params.json"] = u.params_path.read_bytes()
+    with open_database(db_url) as db, db.transaction() as s:
+        for rec in s.scalars(select(RackRecording)).all():
+            files[f"{rec.serial}.rack.csv"] = gzip.decompress(rec.data)
+    return files
+
+
+def test_line_demo_repeats_bit_for_bit_under_load(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The line demo on the virtual clock: the second run under two busy processes gives the same bytes."""
+    monkeypatch.setenv("STATION_LOCK_DIR", str(tmp_path / "locks"))
+    first = line_demo_once(tmp_path, "quiet", VirtualClock())
+    with cpu_load():
+        second = line_demo_once(tmp_path, "loaded", VirtualClock())
+    assert sorted(first) == sorted(second) and len(first) == 6
+    for name in first:
+        assert len(first[name]) > 1000
+        assert first[name] == second[name], f"{name} differs between the quiet and the loaded run"

@@ -17,13 +17,13 @@ from __future__ import annotations
 import math
 import threading
 from collections.abc import Callable, Sequence
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 
 from station.kernel.clock import Clock
 from station.kernel.errors import HardwareError
+from station.kernel.virtual_clock import ActorPool, wait_futures
 from station.rack.board import RelayBoard
 from station.sensor.protocol import Sensor
 from station.session.model import Kind, Session
@@ -93,9 +93,20 @@ class SoakRack:
             with lock:
                 results.append(result)
 
-        with ThreadPoolExecutor(max_workers=max(1, len(slots)), thread_name_prefix="rack") as pool:
-            for fut in [pool.submit(one, s) for s in slots]:
-                fut.result()
+        # on a virtual clock each slot's logger is an actor and this thread waits for them through the clock
+        # (a plain ``fut.result()`` would hold time while they wait on it: ClockStalled)
+        pool = ActorPool(self.clock, max_workers=max(1, len(slots)), thread_name_prefix="rack")
+        try:
+            futures = [pool.submit(one, s) for s in slots]
+            wait_futures(self.clock, futures)
+        except BaseException:
+            # interrupted (Ctrl-C, SIGTERM): the loggers may be waiting on the clock, and joining them here would
+            # hold time for good; they end on their own once this thread stops holding it (or their link closes)
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
+        pool.shutdown()
+        for fut in futures:
+            fut.result()
         board1 = self.board.state().power_on_count
         if board1 != board0:
             why = f"the relay board lost power during the soak (its power-on counter {board0} -> {board1})"

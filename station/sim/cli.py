@@ -91,17 +91,18 @@ def demo(
     lot: Annotated[str | None, typer.Option("--lot", help="production lot of the units, recorded with the run "
                                                           "(quality page filter, certificate)")] = None,
     operator: Annotated[str | None, typer.Option(help="operator name for the records")] = None,
-    clock: Annotated[str, typer.Option("--clock", help="with --rig-only or --thermal: 'virtual' (default without "
-                                       "--scale): discrete-event time, the same seed gives the same bytes under "
-                                       "any load; 'scaled': simulated time runs --scale times the wall clock "
-                                       "(the line demo keeps its scaled clock)")] = "",
+    clock: Annotated[str, typer.Option("--clock", help="'virtual' (default without --scale): discrete-event "
+                                       "time, the same seed gives the same bytes under any load; 'scaled': "
+                                       "simulated time runs --scale times the wall clock (the line demo picks "
+                                       "its own scale, at most 30, without --scale)")] = "",
 ) -> None:
     """The calibration line, simulated end to end: rack, rig, fit, limits, EEPROM, summary.
 
     The units soak in a simulated rack (relay board on Modbus/TCP, sensors on ptys) from power-on, go powered to
     the simulated rig for the line plan's poses and rate steps, are fitted over both recordings, written and
     verified; both roles share the database (``--db``). It prints ``rig time per unit`` (simulated seconds).
-    ``--scale`` applies to ``--rig-only`` and ``--thermal``; the line picks its own (at most 30).
+    It runs on the virtual clock (the same seed gives the same bytes); ``--clock scaled`` runs it on a scaled
+    clock (``--scale``; the line picks its own, at most 30, without it).
 
     With ``--rig-only`` the single rig runs the whole default sequence (warm-up on the rig), as before the line.
 
@@ -126,8 +127,11 @@ def demo(
         raise fail(StationError("--scale sets the speed of the scaled clock: give --clock scaled (or no --scale)"))
     try:
         if not rig_only and not thermal:
+            # scaled without --scale: the line picks its scale from the sensors' frame rate (at most 30)
+            line_clock = VirtualClock() if mode == "virtual" else SimClock(scale) if scale is not None else None
             result = run_line_demo(units, rack_s, seed, limits_path=limits, out_dir=out, db_url=db, plan_path=plan,
-                                   lot=lot or "", operator=operator or "", prompter=AutoConfirm("the demo"))
+                                   lot=lot or "", operator=operator or "", prompter=AutoConfirm("the demo"),
+                                   clock=line_clock)
         elif thermal:
             thermal_clock = VirtualClock() if mode == "virtual" else SimClock(scale or THERMAL_SCALE)
             result, _ = run_thermal_demo(units, thermal_clock.scale, seed, out, db_url=db, record=True,

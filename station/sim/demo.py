@@ -169,6 +169,7 @@ def run_line_demo(
     lot: str = "",
     operator: str = "",
     prompter: Operator | None = None,
+    clock: Clock | None = None,
 ) -> RunResult:
     """The calibration line, simulated: ``units`` units soak ``rack_s`` in a rack (relay board on Modbus/TCP,
     sensors on ptys, each still in its slot's orientation), are carried powered to the rig (``transfer_s``), run
@@ -179,10 +180,15 @@ def run_line_demo(
     Both roles share the database at ``db_url`` (None: the default database): the rack stores its recordings
     (``rack_recordings``), the rig role is the composition root's (:class:`station.compose.Station` with
     ``line``: the rig lock, the run tables with the plan file's SHA-256, every PASS unit's EEPROM written,
-    read back and verified on the rig). The clock scale is chosen so the sensors send at most ``max_frames``
-    frames per wall second, and at most the plain demo's ``DEMO_SCALE``. The units of the slots in
+    read back and verified on the rig). On the default scaled clock the scale is chosen so the sensors send at
+    most ``max_frames`` frames per wall second, and at most the plain demo's ``DEMO_SCALE``. The units of the slots in
     ``interrupt`` lose power on the way to the rig: the rig role refuses them (they get the full plan or go
     back to the rack) and says why.
+
+    ``clock``: the line's clock (default ``SimClock`` at that scale); on a
+    :class:`~station.kernel.virtual_clock.VirtualClock` this thread is its actor from set-up to the end of the
+    rig role's run, and the same seed gives the same recordings and parameter sets under any load
+    (docs/simulation.md).
     """
     from station.kernel.line_plan import load_line_plan_file
     from station.line.recordings import DatabaseArchive
@@ -193,11 +199,16 @@ def run_line_demo(
     wall0 = time.monotonic()
     line = load_line_plan_file(plan_path)
     plan = line.rig_plan()
-    scale = max(1.0, min(DEMO_SCALE, max_frames / (units * plan.sample_rate_hz)))
+    if clock is None:
+        clock = SimClock(max(1.0, min(DEMO_SCALE, max_frames / (units * plan.sample_rate_hz))))
+    scale = clock.scale
     runners: list[SequenceRunner] = []
-    with abort_on_signals(lambda: runners[-1] if runners else None), SimLine(units, scale, seed, plan) as sim:
+    # on a virtual clock this thread owns time from the start: none passes while the line is set up, and the
+    # soak, the transfer and the rig role's run each let it pass only through the clock's waits
+    with abort_on_signals(lambda: runners[-1] if runners else None), acting(clock, name="demo"), \
+            SimLine(units, scale, seed, plan, clock=clock) as sim:
         console.print(f"soak rack: relay board at {sim.board_url}, {units} unit(s) on "
-                      f"{', '.join(u.sensor.device for u in sim.sim.units)}; clock x{scale:g}; "
+                      f"{', '.join(u.sensor.device for u in sim.sim.units)}; {clock_words(clock)}; "
                       f"{rack_s:g} s from power-on")
         with open_database(db_url) as database:
             soaked = sim.soak(range(units), rack_s, DatabaseArchive(database.sessions), station="demo-rack")

@@ -21,7 +21,7 @@ from typing import Any, Self
 import numpy as np
 
 from station.compose import StationConfig
-from station.kernel.clock import SimClock
+from station.kernel.clock import Clock
 from station.kernel.line_plan import LinePlanFile
 from station.kernel.plan import RigPlan
 from station.line.recordings import RackArchive
@@ -51,11 +51,17 @@ class SimLine:
         scale: clock scale.
         seed: the same seed gives the same units and slot orientations.
         plan: the rig plan the simulated rig is built for (its sample rate is the units' rate).
+        clock: the line's one clock (default ``SimClock(scale)``). On a
+            :class:`~station.kernel.virtual_clock.VirtualClock` (scale 1) the thread that enters, soaks, carries
+            and runs the rig role must be its actor (``acting(clock, name=...)``): then the line repeats bit for
+            bit (docs/simulation.md).
     """
 
-    def __init__(self, units: int, scale: float, seed: int, plan: RigPlan) -> None:
+    def __init__(self, units: int, scale: float, seed: int, plan: RigPlan, *, clock: Clock | None = None) -> None:
+        if clock is not None:
+            scale = clock.scale
         self.n, self.scale, self.seed, self.plan = units, scale, seed, plan
-        self.sim = SimStation(units, scale, seed, plan=plan, clock=SimClock(scale))
+        self.sim = SimStation(units, scale, seed, plan=plan, clock=clock)
         self.board_sim: SimulatedRelayBoard | None = None
 
     def __enter__(self) -> Self:
@@ -86,10 +92,8 @@ class SimLine:
             self.sim.__exit__(et, ev, tb)
 
     @property
-    def clock(self) -> SimClock:
-        clock = self.sim.clock
-        assert isinstance(clock, SimClock)
-        return clock
+    def clock(self) -> Clock:
+        return self.sim.clock
 
     @property
     def board_url(self) -> str:
