@@ -102,3 +102,20 @@ def test_msa_page_and_api(study: tuple[str, Path]) -> None:
             svg = client.get(f"/msa/plots/{kind}.svg", params={"lot": "before", "parameter": "gyro.M.xz"})
             assert svg.status_code == 200 and svg.text.startswith("<svg")
         assert client.get("/msa").status_code == 200
+
+
+def test_a_repeated_study_run_gives_the_same_bytes(tmp_path: Path) -> None:
+    """The study's runs are on the virtual clock: the same parts with the same noise give the same parameter
+    files, so the study's repeatability is the units' noise, not the host's thread scheduling."""
+    from station.sim.msa_study import SimRig
+
+    def one(tag: str) -> dict[str, bytes]:
+        out = tmp_path / tag
+        rig = SimRig("msa-repeat", f"sqlite:///{tmp_path / (tag + '.sqlite')}", 120.0, PLAN, ERRORS, None, out)
+        result = rig.run(5, [0, 1], 3, "repeat", nest_calibration=False)
+        assert len(result.units) == 2 and all(u.params is not None for u in result.units)
+        files = {p.name.split("_")[0]: p.read_bytes() for p in sorted(out.rglob("*.params.json"))}  # by serial
+        assert len(files) == 2
+        return files
+
+    assert one("a") == one("b")

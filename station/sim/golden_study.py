@@ -33,6 +33,7 @@ from station.kernel.golden import (
     register_golden,
 )
 from station.kernel.plan import RigPlan, default_plan
+from station.kernel.virtual_clock import VirtualClock, acting
 from station.physics.unit import UnitTruth
 from station.sequence.options import SequenceOptions
 from station.sim.fakes import FakeStation
@@ -138,8 +139,10 @@ def run_drifting_golden(
     base = datetime(2026, 1, 5, 6, 0, tzinfo=UTC)
 
     def one_run(noise: int, change: Callable[[int, UnitTruth], UnitTruth] | None) -> tuple[Station, str]:
-        with FakeStation(1, scale, seed, name=station_id, plan=plan, unit_keys=[30_000], noise_index=noise,
-                         truth_change=change) as sim:
+        clock = VirtualClock()  # the run repeats bit for bit: the study sees the unit's noise, not thread timing
+        with acting(clock, name="golden"), \
+                FakeStation(1, scale, seed, name=station_id, plan=plan, unit_keys=[30_000], noise_index=noise,
+                            truth_change=change, clock=clock) as sim:
             serial = sim.units[0].truth.serial
             config = StationConfig(sim.rig_url, tuple(sim.sensor_urls), station_id=station_id, db_url=db_url,
                                    record=True, out_dir=out_dir, clock_scale=scale, plan=plan, lot="golden")

@@ -20,6 +20,7 @@ from pathlib import Path
 from station.compose import Station, StationConfig
 from station.kernel.errors import StationError
 from station.kernel.plan import RigPlan, default_plan
+from station.kernel.virtual_clock import VirtualClock, acting
 from station.sequence.options import SequenceOptions
 from station.sequence.runner import RunResult
 from station.sim.fakes import FakeStation
@@ -64,8 +65,12 @@ class SimRig:
             on_start: Callable[[FakeStation], None] | None = None) -> RunResult:
         """One run of the station's sequence with units ``keys`` of ``seed`` in its nests (retest policy off:
         a study measures the same parts again on purpose)."""
-        with FakeStation(len(keys), self.scale, seed, name=self.station_id, plan=self.plan, unit_keys=keys,
-                         noise_index=noise_index, nest_errors_deg=self.nest_errors_deg) as sim:
+        # on the virtual clock a run repeats bit for bit (docs/simulation.md): a study measures the station, not the
+        # host's thread scheduling
+        clock = VirtualClock()
+        with acting(clock, name="msa"), \
+                FakeStation(len(keys), self.scale, seed, name=self.station_id, plan=self.plan, unit_keys=keys,
+                            noise_index=noise_index, nest_errors_deg=self.nest_errors_deg, clock=clock) as sim:
             if on_start is not None:
                 on_start(sim)
             config = StationConfig(
