@@ -147,7 +147,7 @@ def gains(
     """One :class:`CompensationGain` per ``(effect, sensor)`` finding; ``physics`` names each finding's physics
     effect (the registry's compensation mapping), ``options`` the calibration's fit options."""
     mask, counts, fitted = _held_out_fit(session, options)
-    if not mask.any():
+    if fitted is None:  # nothing held out
         return [CompensationGain(math.nan, math.nan, UNITS[s][1], counts, e in APPLIED,
                                  "no rate or move segments to hold out") for (_, s), e in zip(findings, physics,
                                                                                                strict=True)]
