@@ -81,9 +81,12 @@ def correct_session(session: Session, params: ParameterSet) -> Session:
     """
     _check_rate(session, params)
     temp = _temperature(session, params)
+    # two outputs that own their memory, made read-only below: the Session takes them without copying
     accel, gyro = correct_batch(session.accel_mps2, session.gyro_radps, params, start_index_of(session, params),
-                                temp_degc=temp)
+                                temp_degc=temp, out=(np.empty((len(session), 3)), np.empty((len(session), 3))))
     gyro = remove_g_sensitivity(accel, gyro, params)
+    for column in (accel, gyro):
+        column.flags.writeable = False
     metadata = {**session.metadata, "corrected": "algorithm1", "params_serial": params.serial}
     return session.replace(metadata=metadata, accel_mps2=accel, gyro_radps=gyro)
 

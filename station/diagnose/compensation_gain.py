@@ -89,9 +89,13 @@ def held_out_session(session: Session) -> tuple[Session, np.ndarray, tuple[int, 
         for seg in segs:
             mask[seg.start:seg.stop] = True
         counts.append(len(segs))
-    ref_a = np.where(mask[:, None], np.nan, session.ref_accel_mps2)
-    ref_w = np.where(mask[:, None], np.nan, session.ref_gyro_radps)
-    return session.replace(ref_accel_mps2=ref_a, ref_gyro_radps=ref_w), mask, (counts[0], counts[1])
+    refs = []
+    for ref in (session.ref_accel_mps2, session.ref_gyro_radps):
+        held = ref.copy()
+        held[mask] = np.nan
+        held.flags.writeable = False  # a read-only array of its own: the Session takes it without a copy
+        refs.append(held)
+    return session.replace(ref_accel_mps2=refs[0], ref_gyro_radps=refs[1]), mask, (counts[0], counts[1])
 
 
 def without(params: ParameterSet, effect: str) -> ParameterSet:
@@ -116,8 +120,25 @@ def held_out_error(session: Session, params: ParameterSet, mask: np.ndarray, sen
     # eq. 6's one-sided average of the reference: the window of n samples ending at each sample
     ma = uniform_filter1d(np.nan_to_num(ref), size=n, axis=0, origin=(n - 1) // 2, mode="nearest")
     got = out.gyro_radps if sensor == "gyro" else out.accel_mps2
-    err = (got - ma)[mask & np.all(np.isfinite(ref), axis=1)]
+    del out
+    rows = mask & np.all(np.isfinite(ref), axis=1)
+    err = got[rows] - ma[rows]  # only the held-out rows: no third (n, 3) array
+    del ma, got
     return float(np.sqrt(np.mean(np.sum(err**2, axis=1)))) if len(err) else math.nan
+
+
+def _held_out_fit(session: Session, options: FitOptions
+                  ) -> tuple[np.ndarray, tuple[int, int], ParameterSet | StationError | None]:
+    """The held-out mask and counts, and the calibration fitted without the held-out references (the fit's
+    refusal; None when nothing is held out). The held-out session's references are dropped on return, before
+    the corrections run."""
+    held, mask, counts = held_out_session(session)
+    if not mask.any():
+        return mask, counts, None
+    try:
+        return mask, counts, fit_session(held, options)
+    except StationError as exc:
+        return mask, counts, exc
 
 
 def gains(
@@ -125,17 +146,16 @@ def gains(
 ) -> list[CompensationGain]:
     """One :class:`CompensationGain` per ``(effect, sensor)`` finding; ``physics`` names each finding's physics
     effect (the registry's compensation mapping), ``options`` the calibration's fit options."""
-    held, mask, counts = held_out_session(session)
-    if not mask.any():
+    mask, counts, fitted = _held_out_fit(session, options)
+    if fitted is None:  # nothing held out
         return [CompensationGain(math.nan, math.nan, UNITS[s][1], counts, e in APPLIED,
                                  "no rate or move segments to hold out") for (_, s), e in zip(findings, physics,
                                                                                                strict=True)]
-    try:
-        params = fit_session(held, options)
-    except StationError as exc:
+    if isinstance(fitted, StationError):
         return [CompensationGain(math.nan, math.nan, UNITS[s][1], counts, e in APPLIED,
-                                 f"the fit without the held-out segments refused: {exc}")
+                                 f"the fit without the held-out segments refused: {fitted}")
                 for (_, s), e in zip(findings, physics, strict=True)]
+    params = fitted
     out = []
     for (_, sensor), effect in zip(findings, physics, strict=True):
         scale, unit = UNITS.get(sensor, UNITS["gyro"])
