@@ -40,6 +40,9 @@ def test_a_counter_reset_sends_the_unit_back_to_the_rack(tmp_path: Path, monkeyp
         result = Station(config, clock=sim.clock).run()
     interrupted, kept = result.units
     assert interrupted.outcome.value == "REFUSED" and "back to rack: power-on counter changed" in interrupted.message
+    # the line's decision refused it, not the retest policy (which was not asked)
+    assert interrupted.message.startswith("refused by the line's rack-to-rig decision")
+    assert "retest policy" not in interrupted.message
     # the other unit kept its power: not refused, fitted over both recordings (its EEPROM verification is
     # tests/test_line_demo.py's; on a scaled clock, under load, it failed once in five runs with the raw output)
     assert kept.outcome.value != "REFUSED" and kept.params is not None, kept.message
@@ -63,4 +66,5 @@ def test_a_transfer_longer_than_the_plan_allows_gets_the_full_plan(
         result = Station(sim.rig_config([0], line, db_url=db_url), clock=sim.clock).run()
     (unit,) = result.units
     assert unit.outcome.value == "REFUSED" and "full: transfer from rack to rig took" in unit.message
+    assert "retest policy" not in unit.message
     assert "full: transfer from rack to rig took" in _records(db_url)[0][1]

@@ -149,17 +149,17 @@ class LineRigRunner(SequenceRunner):
                                                  max_transfer_s=max_transfer_s, on_interruption=on_interruption,
                                                  clock_slack_s=clock_slack_s)
             wrapped.append(KeepPowered(s))
-        outer = kwargs.pop("admit", None)
+        super().__init__(rig, wrapped, clock, **kwargs)
 
-        def admit(serial: str, run_id: str) -> str | None:
-            d = self.decisions.get(serial)
-            if d is None:
-                return "not identified before the run"
-            if d.plan != LINE:
-                return f"{d.plan}: {d.reason}"
-            return outer(serial, run_id) if outer is not None else None
-
-        super().__init__(rig, wrapped, clock, admit=admit, **kwargs)
+    def refusal(self, serial: str) -> str | None:
+        """A unit whose plan is not ``line`` is refused by the line's decision (not by the retest policy, which
+        is asked only for the line's units)."""
+        d = self.decisions.get(serial)
+        if d is None:
+            return "refused by the line: not identified before the run"
+        if d.plan != LINE:
+            return f"refused by the line's rack-to-rig decision, {d.plan}: {d.reason}"
+        return super().refusal(serial)
 
     def metadata(self, unit: UnitChannel) -> dict[str, str]:
         meta = super().metadata(unit)

@@ -595,7 +595,7 @@ class SequenceRunner:
         sensor that does not answer is a station fault (ERROR) for its slot. With every unit refused
         the run ends without moving the rig.
         """
-        if self.admit is None and not self.expected_serials:
+        if self.admit is None and not self.expected_serials and type(self).refusal is SequenceRunner.refusal:
             return
         for unit in list(fx.active):
             v = verdicts[unit.slot]
@@ -611,10 +611,16 @@ class SequenceRunner:
                                f"nest {unit.slot + 1}: the scanned serial is {scanned} but the unit in the nest "
                                f"reports {ident.serial} (wrong unit, or the right unit in the wrong nest)")
                 continue
-            reason = self.admit(ident.serial, self.run_id) if self.admit is not None else None
-            if reason:
+            message = self.refusal(ident.serial)
+            if message:
                 unit.identity = ident
-                self._end_unit(fx, unit, v, Outcome.REFUSED, f"refused by the retest policy: {reason}")
+                self._end_unit(fx, unit, v, Outcome.REFUSED, message)
+
+    def refusal(self, serial: str) -> str | None:
+        """Why ``serial`` is not run, as the unit's REFUSED message (None: run it). Here the retest policy
+        (``admit``) decides; a runner that routes units itself (the line's rig role) adds its own reasons."""
+        reason = self.admit(serial, self.run_id) if self.admit is not None else None
+        return f"refused by the retest policy: {reason}" if reason else None
 
     def _end_unit(self, fx: Fixture, unit: UnitChannel, v: UnitVerdict, outcome: Outcome, message: str) -> None:
         unit.active = False
