@@ -29,7 +29,7 @@ reconciliation is reported. See docs/provisioning.md.
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from typing import TYPE_CHECKING, Protocol
@@ -229,6 +229,19 @@ class EepromProvisioner:
         """Phase 3: the verification of the corrected output (None without a verifier); raises a
         HardwareError on a station fault (then call :meth:`complete` with ``fault``)."""
         return self.verifier.verify(sensor, written.report.image) if self.verifier is not None else None
+
+    def verify_many(
+        self, items: Sequence[tuple[WrittenImage, Sensor]]
+    ) -> list[VerificationResult | StationError] | None:
+        """Phase 3 for every written unit at once, in the same holds of the rig (one pose, one rate step whatever
+        the number of units: :meth:`station.sequence.verify.RigVerifier.verify_many`); per unit its result or its
+        link's fault. None when the verifier checks one unit at a time (then call :meth:`verify` for each).
+        A rig fault raises (every unit's verification void)."""
+        many = getattr(self.verifier, "verify_many", None)
+        if many is None:
+            return None
+        results: list[VerificationResult | StationError] = many([(s, w.report.image) for w, s in items])
+        return results
 
     def complete(self, written: WrittenImage, result: VerificationResult | None,
                  fault: str = "") -> tuple[Measurement, ...] | None:

@@ -791,11 +791,17 @@ class SequenceRunner:
         assert p is not None
         t0 = self.clock.now()
         try:
-            if not self.sequence.batch_verification:
+            if not self.sequence.batch_verification and not self._shares_holds(p):
                 return self._provision_each(p, results)
             return self._provision_batch(p, results)
         finally:
             self.verify_s = self.clock.now() - t0
+
+    @staticmethod
+    def _shares_holds(p: Provisioner) -> bool:
+        """Whether the provisioner verifies every written unit in the same holds (``verify_many``)."""
+        many = getattr(p, "verify_many", None)
+        return bool(p.verifies and callable(many) and getattr(getattr(p, "verifier", None), "verify_many", None))
 
     def _refused_now(self, r: UnitResult) -> UnitResult | None:
         """The retest policy asked again right before writing (e.g. scrapped while it was measured): REFUSED,
@@ -869,6 +875,13 @@ class SequenceRunner:
             self._complete_unverified(p, out, written, Outcome.ABORTED if aborted else Outcome.ERROR,
                                       f"{what}: {why}")
             return out
+        if self._shares_holds(p):
+            for k, w in list(written.items()):
+                if out[k].slot in unfit:
+                    out[k] = self._complete(p, out[k], w, unfit[out[k].slot], Outcome.FAIL, unfit[out[k].slot])
+                    del written[k]
+            self._verify_together(p, out, written, what)
+            return out
         for k, w in written.items():
             r = out[k]
             if r.slot in unfit:
@@ -900,11 +913,33 @@ class SequenceRunner:
         for k, w in written.items():
             out[k] = self._complete(p, out[k], w, why, outcome, why)
 
-    def _verify_written(self, p: Provisioner, r: UnitResult, written: Any, what: str) -> tuple[UnitResult, bool]:
-        """Verify and complete one written unit; (its result, whether the operator aborted)."""
+    def _verify_together(self, p: Provisioner, out: list[UnitResult], written: dict[int, Any], what: str) -> None:
+        """Every written unit verified in the same holds (one pose, one rate step for the whole fixture), then
+        each completed as :meth:`_verify_written` does: a rig fault makes every unit ERROR, a unit's link fault
+        that unit."""
+        if not written:
+            return
+        keys = list(written)
+        try:
+            results = p.verify_many([(written[k], self.sensors[out[k].slot]) for k in keys])  # type: ignore[attr-defined]
+        except StationError as exc:
+            self._complete_unverified(p, out, written, Outcome.ERROR, f"{what} fault: {type(exc).__name__}: {exc}")
+            return
+        except KeyboardInterrupt:
+            self._complete_unverified(p, out, written, Outcome.ABORTED, f"{self.abort_reason} during {what}")
+            return
+        for k, result in zip(keys, results, strict=True):
+            out[k], _ = self._verify_written(p, out[k], written[k], what, result)
+
+    def _verify_written(self, p: Provisioner, r: UnitResult, written: Any, what: str,
+                        done: Any = None) -> tuple[UnitResult, bool]:
+        """Verify (unless ``done`` holds its result or its fault already) and complete one written unit; (its
+        result, whether the operator aborted)."""
         sensor = self.sensors[r.slot]
         try:
-            result = p.verify(written, sensor)
+            if isinstance(done, StationError):
+                raise done
+            result = p.verify(written, sensor) if done is None else done
         except StationError as exc:  # a rig or link fault during the verification: ERROR, the write recorded
             why = f"{what} fault: {type(exc).__name__}: {exc}"
             return self._complete(p, r, written, why, Outcome.ERROR, why), False

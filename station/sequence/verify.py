@@ -20,17 +20,19 @@ every unit. The rig is brought back to rest and the sensor back to RAW output af
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from station.eeprom.image import CalibrationImage
 from station.kernel.clock import Clock
+from station.kernel.errors import StationError
 from station.kernel.geometry import AXIS_INDEX, up_vector
 from station.kernel.limits_file import VerificationLimits
 from station.kernel.measurement import Measurement
 from station.kernel.nest_frames import NestCalibration
+from station.kernel.virtual_clock import ActorPool, wait_futures
 from station.rig.protocol import Rig
 from station.sensor.protocol import Sensor
 from station.sequence.options import SequenceOptions
@@ -99,11 +101,16 @@ class RigVerifier:
 
     def _capture(self, sensor: Sensor, step: Step) -> tuple[np.ndarray, np.ndarray, int, int]:
         """(mean accel m/s^2, mean gyro rad/s, samples, uncorrected samples) of a settled window."""
+        out = self._window(sensor)
+        check_rig_holding(self.rig.state(), step, self.options)
+        return out
+
+    def _window(self, sensor: Sensor) -> tuple[np.ndarray, np.ndarray, int, int]:
+        """:meth:`_capture` without the rig check (one sensor of a shared hold)."""
         lim = self.limits
         sensor.drain()
         sensor.read_samples(duration_s=lim.settle_s)  # moving-average window and settle guard
         block = sensor.read_samples(duration_s=lim.hold_s)
-        check_rig_holding(self.rig.state(), step, self.options)
         n = len(block)
         if n == 0:
             return np.full(3, np.nan), np.full(3, np.nan), 0, 0
@@ -116,16 +123,92 @@ class RigVerifier:
             return ref_nest
         return self.nests.to_sensor_frame(slot, ref_nest[None, :])[0]
 
-    def verify(self, sensor: Sensor, image: CalibrationImage) -> VerificationResult:
-        """Switch to corrected output, run the pose and rate checks, restore RAW and rest."""
-        lim, g = self.limits, self.gravity_mps2
+    def _steps(self) -> tuple[Step, Step]:
+        lim = self.limits
         axis = lim.rate_pose[1]
         sign = 1.0 if lim.rate_pose[0] == "+" else -1.0
         pose_step = Step(0, f"verify pose {lim.pose}", Kind.POSE, lim.pose, 0.0, lim.hold_s)
         rate_step = Step(1, f"verify rate {axis}", Kind.RATE, lim.rate_pose, sign * lim.rate_dps, lim.hold_s, axis,
                          lim.rate_dps)
+        return pose_step, rate_step
+
+    def _pose_checks(self, sensor: Sensor, a: np.ndarray, w: np.ndarray) -> list[Measurement]:
+        lim, check = self.limits, Measurement.at_most_abs
+        da = a - self._expected(sensor, self.gravity_mps2 * up_vector(lim.pose))
+        return [check("verify.pose.accel_error", float(np.max(np.abs(da))), lim.accel_mps2, "m/s^2"),
+                check("verify.pose.gyro_error", float(np.max(np.abs(w))), lim.gyro_static_radps, "rad/s")]
+
+    def _rate_checks(self, sensor: Sensor, a: np.ndarray, w: np.ndarray) -> list[Measurement]:
+        lim, check = self.limits, Measurement.at_most_abs
+        k = AXIS_INDEX[lim.rate_pose[1]]
+        sign = 1.0 if lim.rate_pose[0] == "+" else -1.0
+        rate = self._expected(sensor, sign * lim.rate_dps * _DEG * np.eye(3)[k])
+        da = a - self._expected(sensor, self.gravity_mps2 * up_vector(lim.rate_pose))
+        return [check("verify.rate.rate_error", float(w[k] - abs(rate[k])), lim.rate_radps, "rad/s"),
+                check("verify.rate.accel_error", float(np.max(np.abs(da))), lim.accel_mps2, "m/s^2")]
+
+    def verify_many(self, units: Sequence[tuple[Sensor, CalibrationImage]]) -> list[VerificationResult | StationError]:
+        """Every written unit of the fixture in the same two holds: one pose, one rate step, each unit's own
+        window of each hold read at once (one thread per unit); the rig time is one unit's, whatever N.
+
+        Per unit its result, or the :class:`StationError` its link raised (that unit is the station's fault,
+        the others are still judged). A rig fault (the rig did not reach or hold a step) raises: every unit's
+        verification is void then. The rig is brought back to rest and every sensor back to RAW output.
+        """
+        pose_step, rate_step = self._steps()
+        state: list[VerificationResult | StationError | None] = [None] * len(units)
+        checks: list[list[Measurement]] = [[] for _ in units]
+        counts = np.zeros((len(units), 2), dtype=int)
+        with ActorPool(self.clock, max_workers=max(1, len(units)), thread_name_prefix="verify") as pool:
+            def each(fn: Callable[[int], None], keys: Sequence[int] | None = None) -> None:
+                live = [k for k in range(len(units)) if state[k] is None] if keys is None else list(keys)
+                futures = [(k, pool.submit(fn, k)) for k in live]
+                wait_futures(self.clock, [f for _, f in futures])  # on a virtual clock time passes meanwhile
+                for k, fut in futures:
+                    err = fut.exception()
+                    if isinstance(err, StationError):
+                        state[k] = state[k] or err
+                    elif err is not None:
+                        raise err
+
+            def start(k: int) -> None:
+                units[k][0].set_output("corrected")
+                units[k][0].start_stream(self.sample_rate_hz)
+
+            def hold(step: Step) -> None:
+                def one(k: int) -> None:
+                    sensor = units[k][0]
+                    a, w, n, u = self._window(sensor)
+                    counts[k] += (n, u)
+                    checks[k].extend(self._pose_checks(sensor, a, w) if step is pose_step
+                                     else self._rate_checks(sensor, a, w))
+                drive_rig(self.rig, step, self.options)
+                each(one)
+                check_rig_holding(self.rig.state(), step, self.options)
+
+            def stop(k: int) -> None:
+                try:
+                    units[k][0].stop_stream()
+                finally:
+                    units[k][0].set_output("raw")
+
+            try:
+                each(start)
+                hold(pose_step)
+                hold(rate_step)
+            finally:
+                try:
+                    each(stop, range(len(units)))
+                finally:
+                    bring_to_rest(self.rig, self.options.rest_timeout_s)
+        return [s if s is not None else
+                VerificationResult(img.serial, tuple(checks[k]), int(counts[k, 0]), int(counts[k, 1]))
+                for k, ((_, img), s) in enumerate(zip(units, state, strict=True))]
+
+    def verify(self, sensor: Sensor, image: CalibrationImage) -> VerificationResult:
+        """Switch to corrected output, run the pose and rate checks, restore RAW and rest."""
+        pose_step, rate_step = self._steps()
         checks: list[Measurement] = []
-        check = Measurement.at_most_abs
         samples = uncorrected = 0
         sensor.set_output("corrected")
         try:
@@ -133,17 +216,11 @@ class RigVerifier:
             drive_rig(self.rig, pose_step, self.options)
             a, w, n, u = self._capture(sensor, pose_step)
             samples, uncorrected = samples + n, uncorrected + u
-            da = a - self._expected(sensor, g * up_vector(lim.pose))
-            checks.append(check("verify.pose.accel_error", float(np.max(np.abs(da))), lim.accel_mps2, "m/s^2"))
-            checks.append(check("verify.pose.gyro_error", float(np.max(np.abs(w))), lim.gyro_static_radps, "rad/s"))
+            checks.extend(self._pose_checks(sensor, a, w))
             drive_rig(self.rig, rate_step, self.options)
             a, w, n, u = self._capture(sensor, rate_step)
             samples, uncorrected = samples + n, uncorrected + u
-            k = AXIS_INDEX[axis]
-            rate = self._expected(sensor, sign * lim.rate_dps * _DEG * np.eye(3)[k])
-            checks.append(check("verify.rate.rate_error", float(w[k] - abs(rate[k])), lim.rate_radps, "rad/s"))
-            da = a - self._expected(sensor, g * up_vector(lim.rate_pose))
-            checks.append(check("verify.rate.accel_error", float(np.max(np.abs(da))), lim.accel_mps2, "m/s^2"))
+            checks.extend(self._rate_checks(sensor, a, w))
         finally:
             try:
                 sensor.stop_stream()
