@@ -389,3 +389,48 @@ def test_firmware_removes_g_sensitivity() -> None:
     # the drift decays by (1 - T_s/T_c)^i: a few 1e-6 over 1 s; the g-sensitivity term (~1e-3 rad/s) is gone
     np.testing.assert_allclose(out_a, np.tile(F_TRUE, (n, 1)), atol=2e-4)
     np.testing.assert_allclose(out_w, np.tile(W_TRUE, (n, 1)), atol=2e-5)
+
+
+def test_units_are_verified_together_in_the_same_two_holds(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Two written units, one with a wrong calibration: one pose and one rate step for both, each judged alone."""
+    import station.sequence.verify as verify_module
+
+    moves: list[str] = []
+    drive = verify_module.drive_rig
+
+    def counted(rig: object, step: object, options: object) -> None:
+        moves.append(step.name)  # type: ignore[attr-defined]
+        drive(rig, step, options)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(verify_module, "drive_rig", counted)
+    with FakeStation(2, 30.0, seed=4) as sim:
+        rig = open_rig(sim.rig_url, sim.clock, **sim.rig_client_options())
+        clients = [open_sensor(url, sim.clock) for url in sim.sensor_urls]
+        try:
+            verifier = RigVerifier(rig, sim.clock, VerificationLimits(hold_s=4.0), gravity_mps2=sim.plan.gravity_mps2,
+                                   sample_rate_hz=100)
+            prov = EepromProvisioner("ST-01", verifier=verifier, now=lambda: T0)
+            written = []
+            for k, su in enumerate(sim.units):
+                install_firmware(su.sensor, sim.clock)
+                params = su.truth.as_parameter_set(0.01)
+                if k == 1:  # a wrong calibration: the gyro bias not removed
+                    d = params.to_dict()
+                    d["gyro"]["bias_static"] = [0.0, 0.0, 0.0]
+                    params = ParameterSet.from_dict(d)
+                unit_result = UnitResult(k, su.sensor.url, su.truth.serial, Outcome.PASS, "", params=params)
+                written.append(prov.write(prov.intend(unit_result, clients[k]), clients[k]))
+            results = prov.verify_many(list(zip(written, clients, strict=True)))
+            assert results is not None and len(results) == 2
+            good, bad = results
+            assert not isinstance(good, Exception) and not isinstance(bad, Exception)
+            assert moves == ["verify pose +z", "verify rate z"], moves  # the holds are shared, not one pair per unit
+            assert good.passed and good.samples >= 790 and good.uncorrected_samples == 0
+            assert not bad.passed and {c.name: c.value for c in bad.checks}["verify.pose.gyro_error"] > 1e-3
+            assert good.serial == sim.units[0].truth.serial and bad.serial == sim.units[1].truth.serial
+            for c in clients:
+                assert not c.status().streaming and c.status().output == 0
+        finally:
+            for c in clients:
+                c.close()
+            rig.close()

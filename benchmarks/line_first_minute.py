@@ -1,0 +1,130 @@
+"""Why the line's first minute after power-on is worse than the full plan's: the fit's part of the error, taken apart.
+
+Per unit (``station.sim``, the seeds of ``bench_line.py``): the full plan's rig fit and the line's joint fit (1 h
+rack + rig part), and the fit's part of the first-minute error (``bench_line.minute_model_mm``: the corrected true
+mean output over the first 60 s after a power-on in the validation's orientation, +z up, without any recording's
+noise), also with parts of the line's estimate replaced by the truth, and with the rack's rest cut into 5 s runs
+for its first 300 s (finer blocks of the warm-up). Per axis: errors of b_stat and b_drift (estimate - truth)
+against their stated stds, their correlation, and the correlation of the bias error at 30 s with the error of
+``M g`` in the validation's orientation (how much the two cancel in the corrected output).
+
+    PYTHONPATH=. python benchmarks/line_first_minute.py --units 30 --seed0 3359000
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import bench_line as bl
+
+import station.fit.joint as joint
+from station.fit.calibrate import FitOptions, fit_session
+from station.kernel.limits_file import load_limits
+from station.kernel.line_plan import LinePlan
+from station.kernel.plan import default_plan
+from station.session.model import Kind, Session
+from station.sim.line_sim import simulate_line
+from station.sim.session_sim import simulate_session
+
+_NAMES = ("misalignment", "bias_static", "bias_drift", "correlation_time_s")
+
+
+class _Mixed:
+    """A triad's parameters, some taken from the truth."""
+
+    def __init__(self, fit: Any, truth: Any, from_truth: tuple[str, ...]) -> None:
+        for name in _NAMES:
+            setattr(self, name, np.asarray(getattr(truth if name in from_truth else fit, name), dtype=float))
+
+
+def fine_rack_runs(
+    rack: Session, offset: int, fine_s: float = 5.0, until_s: float = 300.0
+) -> list[tuple[int, int, int]]:
+    """The rack's rest in ``fine_s`` runs up to ``until_s``, then runs doubling in length (cf. ``joint._rack_runs``)."""
+    runs = []
+    for seg in rack.segments_of(Kind.REST, Kind.POSE):
+        t = rack.t_s[seg.start:seg.stop]
+        bounds = list(np.arange(t[0] + fine_s, min(until_s, t[-1]), fine_s))
+        b, length = (bounds[-1] if bounds else float(t[0])), 2.0 * fine_s
+        while b + length < t[-1]:
+            b += length
+            bounds.append(b)
+            length *= 2.0
+        edges = sorted({0, len(t), *(int(np.searchsorted(t, x)) for x in bounds)})
+        runs.extend((seg.index, offset + seg.start + a, offset + seg.start + c) for a, c in itertools.pairwise(edges))
+    return runs
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--units", type=int, default=30)
+    ap.add_argument("--seed0", type=int, default=3359000)
+    args = ap.parse_args()
+    limits = load_limits()
+    opts = FitOptions(tc_range_s=dict(limits.correlation_time_s))
+    fig: dict[str, list[float]] = {}
+    ax: dict[str, list[np.ndarray]] = {}
+    t30 = np.array([30.0])
+    for i in range(args.units):
+        seed = args.seed0 + 1000 * i
+        line = simulate_line(seed, plan=LinePlan(rack_s=3600.0, rig=bl.line_rig(0.0)))
+        truth = line.truth.accel
+        full_s = simulate_session(seed + 101, plan=default_plan(), unit=line.truth).session
+        val = simulate_session(seed + 202, plan=default_plan(), unit=line.truth).session
+        fits = {"full": fit_session(full_s, opts).accel, "line": joint.fit_joint(line.rack, line.rig, opts).accel}
+        original = joint._rack_runs
+        joint._rack_runs = fine_rack_runs  # type: ignore[assignment]
+        try:
+            fits["line, rack in 5 s runs for 300 s"] = joint.fit_joint(line.rack, line.rig, opts).accel
+        finally:
+            joint._rack_runs = original  # type: ignore[assignment]
+        rows: dict[str, Any] = dict(fits)
+        for label, names in (("line, b_drift and T_c true", ("bias_drift", "correlation_time_s")),
+                             ("line, M true", ("misalignment",)), ("line, b_stat true", ("bias_static",))):
+            rows[label] = _Mixed(fits["line"], truth, names)
+        for label, p in rows.items():
+            fig.setdefault(label, []).append(bl.minute_model_mm(p, truth, val))
+            fig.setdefault(label + " (any of six orientations)", []).append(
+                bl.minute_model_mm(p, truth, val, any_pose=True))
+        g = val.ref_accel_mps2[val.segments_of(Kind.REST)[0].start]
+        for label in ("full", "line"):
+            p = fits[label]
+            for key, v in (("b", p.bias_static - truth.bias_static), ("d", p.bias_drift - truth.bias_drift),
+                           ("sb", p.bias_static_std), ("sd", p.bias_drift_std),
+                           ("e30", (bl.bias_at(p, t30) - truth.bias_at(t30))[0]),
+                           ("mg", (p.misalignment - truth.misalignment) @ g),
+                           ("tc", (p.correlation_time_s - truth.correlation_time_s) / truth.correlation_time_s)):
+                ax.setdefault(f"{label}:{key}", []).append(np.asarray(v, dtype=float))
+        print(f"  unit {i + 1}/{args.units} (seed {seed})", flush=True)
+    print(f"\nthe fit's part of the first-minute error, {args.units} units (seeds {args.seed0} + 1000 i):\n")
+    print("| fit | validation's orientation (+z): median / RMS (mm/s^2) | any of six orientations: median / RMS |")
+    print("|---|---|---|")
+    for label in [k for k in fig if not k.endswith("orientations)")]:
+        a, b = np.array(fig[label]), np.array(fig[label + " (any of six orientations)"])
+        print(f"| {label} | {np.median(a):.3f} / {np.sqrt(np.mean(a**2)):.3f} | "
+              f"{np.median(b):.3f} / {np.sqrt(np.mean(b**2)):.3f} |")
+    print("\n| fit | b_stat error RMS / stated (mm/s^2) | b_drift error RMS / stated | corr(b_stat, b_drift errors) "
+          "| corr(bias error at 30 s, M g error) x / y / z | T_c relative error RMS (resolved axes) |")
+    print("|---|---|---|---|---|---|")
+    for label in ("full", "line"):
+        def arr(key: str, lab: str = label) -> np.ndarray:
+            return np.array(ax[f"{lab}:{key}"]) * (1e3 if key != "tc" else 1.0)
+
+        b, d, e30, mg, tc = arr("b"), arr("d"), arr("e30"), arr("mg"), arr("tc")
+        rms = lambda x: float(np.sqrt(np.nanmean(np.square(x))))  # noqa: E731
+        corr = [float(np.corrcoef(e30[:, k], mg[:, k])[0, 1]) for k in range(3)]
+        ok = np.isfinite(d.ravel())
+        print(f"| {label} | {rms(b):.3f} / {rms(arr('sb')):.3f} | {rms(d):.3f} / {rms(arr('sd')):.3f} | "
+              f"{np.corrcoef(b.ravel()[ok], d.ravel()[ok])[0, 1]:+.2f} | {' / '.join(f'{c:+.2f}' for c in corr)} | "
+              f"{rms(tc):.3f} ({int(np.isfinite(tc).sum())} of {tc.size}) |")
+
+
+if __name__ == "__main__":
+    main()
