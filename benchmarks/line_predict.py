@@ -2,7 +2,8 @@
 
 Predicted: what ``station plan`` uses to choose a plan (:mod:`station.sim.plan_design`): the joint fit's
 stated standard uncertainties (its likelihood's information) on the designer's own simulated units (seeds
-31, 32, 33) for the plan, per parameter element the RMS over those units. Measured: on ``n`` other units
+31, 32, 33, their noise and drift stratified over the class: ``plan_design.design_units``) for the plan, per
+parameter element the RMS over those units. Measured: on ``n`` other units
 (report seeds) simulated through the same plan and fitted the same way, per element the RMS over the units of
 the error (estimate - truth). Per parameter group (M, b_stat, b_drift, T_c of each triad) both are the RMS
 over the group's elements; the ratio measured / predicted is 1 where the prediction holds.
@@ -31,6 +32,7 @@ from station.kernel.line_plan import LinePlan
 from station.kernel.parameters import ParameterSet
 from station.physics.unit import UnitTruth
 from station.sim.line_sim import simulate_line
+from station.sim.plan_design import design_units
 
 #: (group label, triad, parameter name, display factor, display unit)
 GROUPS = (
@@ -92,14 +94,15 @@ def _tc_mask(p: ParameterSet, triad: str, name: str) -> np.ndarray:
     return np.ones(np.asarray(getattr(getattr(p, triad), name)).size, dtype=bool)
 
 
-def fit_unit(seed: int, plan: LinePlan, options: FitOptions) -> tuple[ParameterSet, UnitTruth]:
-    line = simulate_line(seed, plan=plan)
+def fit_unit(seed: int, plan: LinePlan, options: FitOptions,
+             unit: UnitTruth | None = None) -> tuple[ParameterSet, UnitTruth]:
+    line = simulate_line(seed, plan=plan, unit=unit)
     return fit_joint(line.rack, line.rig, options, max_transfer_s=plan.max_transfer_s), line.truth
 
 
 def compare(plan: LinePlan, options: FitOptions, seeds: Sequence[int],
             progress: bool = True) -> list[GroupRow]:
-    design = [fit_unit(s, plan, options)[0] for s in DESIGN_SEEDS]
+    design = [fit_unit(s, plan, options, u)[0] for s, u in zip(DESIGN_SEEDS, design_units(DESIGN_SEEDS), strict=True)]
     fits = []
     for i, s in enumerate(seeds):
         fits.append(fit_unit(s, plan, options))
