@@ -1,11 +1,11 @@
 """Are the plan designer's three units the sensor class? Stated stds of the line's joint fit per unit.
 
 The designer predicts the line's accuracy from the joint fit's stated standard uncertainties on three simulated
-units (``line_predict.DESIGN_SEEDS``, their noise and drift now stratified: ``plan_design.design_units``;
-both the units as drawn and as stratified are shown). Here the same figure (RMS over the elements of accel M's
-std and of gyro b_stat's std) on ``--units`` other units, its spread over random triples of them, and what
-drives it per unit (correlation with the unit's white-noise std, gyro T_c and gyro |b_drift|: the simulated stochastic drift is 1 %
-of |b_drift|).
+units (``line_predict.DESIGN_SEEDS``; their noise and drift now stratified: ``plan_design.design_units``; the
+units as drawn and as stratified are both shown). Here the same figure (RMS over the elements of accel M's std
+and of gyro b_stat's std) on ``--units`` other units, its spread over random triples of them, and what drives
+it per unit (correlation with the unit's white-noise std, gyro T_c and gyro |b_drift|: the simulated
+stochastic drift is 1 % of |b_drift|).
 
     PYTHONPATH=. python benchmarks/line_designer_units.py --units 30 --seed0 5000000
 """
