@@ -50,9 +50,10 @@ RIG_REST_S = 2.0
 
 def design_units(seeds: Sequence[int], sensor_class: SensorClass = TABLE1) -> list[UnitTruth]:
     """The designer's units: each drawn with its seed as :func:`~station.sim.line_sim.simulate_line` draws it, then
-    the four figures the line's stated stds follow set by a Latin hypercube over the units' axes instead of at
-    random: the white-noise std of each triad (accel M's std follows it) and b_drift of each triad (the simulated
-    stochastic drift is ``drift_noise_rel |b_drift|``; the gyro's b_stat and b_drift stds follow it). With n units
+    the figures the line's stated stds follow set by a Latin hypercube over the units' axes instead of at
+    random: the white-noise std of each triad (accel M's std follows it), b_drift of each triad (the simulated
+    stochastic drift is ``drift_noise_rel |b_drift|``; the gyro's b_stat and b_drift stds follow it) and T_c of
+    each triad (how long that drift stays correlated). With n units
     the 3n axis values of a figure are the centres of 3n equal strata of its Table 1 range, in an order drawn from
     the seeds: a few units then span the class, where three random draws can all fall low (measured:
     ``benchmarks/line_designer_units.py``). The other parameters stay as drawn."""
@@ -67,15 +68,17 @@ def design_units(seeds: Sequence[int], sensor_class: SensorClass = TABLE1) -> li
 
     deg = np.pi / 180.0
     a_noise, a_drift = strata(*c.accel_noise_std_mps2), strata(*c.accel_bias_drift_mps2)
+    a_tc = strata(*c.accel_correlation_time_s)
     w_noise = strata(*c.gyro_noise_std_dps) * deg
     w_drift = strata(*c.gyro_bias_drift_dps) * deg
+    w_tc = strata(*c.gyro_correlation_time_s)
     units = []
     for k, seed in enumerate(seeds):
         u = draw_unit(c, np.random.default_rng(np.random.SeedSequence(seed).spawn(2)[0]))
         accel = replace(u.accel, noise_std=a_noise[k], outlier_size=c.outlier_sigma * a_noise[k], bias_drift=a_drift[k],
-                        drift_noise=c.drift_noise_rel * np.abs(a_drift[k]))
+                        drift_noise=c.drift_noise_rel * np.abs(a_drift[k]), correlation_time_s=a_tc[k])
         gyro = replace(u.gyro, noise_std=w_noise[k], outlier_size=c.outlier_sigma * w_noise[k], bias_drift=w_drift[k],
-                       drift_noise=c.drift_noise_rel * np.abs(w_drift[k]))
+                       drift_noise=c.drift_noise_rel * np.abs(w_drift[k]), correlation_time_s=w_tc[k])
         units.append(replace(u, accel=accel, gyro=gyro))
     return units
 
