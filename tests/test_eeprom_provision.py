@@ -434,3 +434,37 @@ def test_units_are_verified_together_in_the_same_two_holds(monkeypatch: pytest.M
             for c in clients:
                 c.close()
             rig.close()
+
+
+def test_a_link_fault_in_shared_holds_is_that_units_alone() -> None:
+    """One unit's link fails during the shared verification: it gets its fault, the other unit is still judged."""
+    from station.sensor.protocol import SensorTimeout
+
+    with FakeStation(2, 30.0, seed=5) as sim:
+        rig = open_rig(sim.rig_url, sim.clock, **sim.rig_client_options())
+        clients = [open_sensor(url, sim.clock) for url in sim.sensor_urls]
+        try:
+            verifier = RigVerifier(rig, sim.clock, VerificationLimits(hold_s=4.0), gravity_mps2=sim.plan.gravity_mps2,
+                                   sample_rate_hz=100)
+            prov = EepromProvisioner("ST-01", verifier=verifier, now=lambda: T0)
+            written = []
+            for k, su in enumerate(sim.units):
+                install_firmware(su.sensor, sim.clock)
+                unit_result = UnitResult(k, su.sensor.url, su.truth.serial, Outcome.PASS, "",
+                                         params=su.truth.as_parameter_set(0.01))
+                written.append(prov.write(prov.intend(unit_result, clients[k]), clients[k]))
+
+            def broken(*_: object, **__: object) -> None:
+                raise SensorTimeout("unit 1 stopped answering")
+
+            clients[1].read_samples = broken  # type: ignore[method-assign]
+            results = prov.verify_many(list(zip(written, clients, strict=True)))
+            assert results is not None
+            good, bad = results
+            assert isinstance(bad, SensorTimeout)
+            assert not isinstance(good, Exception) and good.passed and good.samples >= 790
+            assert not clients[0].status().streaming and clients[0].status().output == 0
+        finally:
+            for c in clients:
+                c.close()
+            rig.close()
