@@ -5,7 +5,8 @@ rack + rig part), and the fit's part of the first-minute error (``bench_line.min
 mean output over the first 60 s after a power-on in the validation's orientation, +z up, without any recording's
 noise), also with parts of the line's estimate replaced by the truth, with the rack's rest cut into 5 s runs
 for its first 300 s (finer blocks of the warm-up), and with the rack's orientation known (its true gravity vector
-as the rest's reference, both recordings through the rig fit: what a rack of known slot orientation could give). Per axis: errors of b_stat and b_drift (estimate - truth)
+as the rest's reference, both recordings through the rig fit: what a rack of known slot orientation could
+give). Per axis: errors of b_stat and b_drift (estimate - truth)
 against their stated stds, their correlation, and the correlation of the bias error at 30 s with the error of
 ``M g`` in the validation's orientation (how much the two cancel in the corrected output).
 
