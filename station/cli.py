@@ -577,13 +577,18 @@ def serve(
         raise fail(exc) from None
 
 
-_add_plugins()
+if __name__ != "__main__":
+    _add_plugins()
 
 
 def main() -> None:  # pragma: no cover - console entry
     app()
 
 
-if __name__ == "__main__":  # pragma: no cover
-    main()
+if __name__ == "__main__":  # pragma: no cover - ``python -m station.cli``
+    # The plugins import ``station.cli`` by name: run that module, not this ``__main__`` copy of it,
+    # or each would load the other half-initialised.
+    from station.cli import main as _main
+
+    _main()
 
