@@ -28,6 +28,7 @@ development used seed 5.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import statistics
 import sys
@@ -40,20 +41,19 @@ import numpy as np
 
 from station.compose import Station, StationConfig
 from station.eeprom.image import run_image
+from station.kernel.errors import UnitRejected
+from station.kernel.parameters import ParameterSet
 from station.kernel.virtual_clock import VirtualClock, acting
 from station.physics.effects import Effects
 from station.physics.imu import ImuModel
-from station.sequence.provision import ProvisionRecord
-from station.sim.fakes import FakeStation
-from station.sim.firmware import install_firmware
-from station.kernel.errors import UnitRejected
-from station.kernel.parameters import ParameterSet
 from station.rig import open_rig
 from station.sensor import open_sensor
-from station.sequence.provision import EepromProvisioner
+from station.sequence.provision import EepromProvisioner, ProvisionRecord
 from station.sequence.records import Outcome
 from station.sequence.runner import UnitResult
 from station.sequence.verify import RigVerifier
+from station.sim.fakes import FakeStation
+from station.sim.firmware import install_firmware
 from station.sim.physics_source import PhysicsSource
 
 W200 = math.radians(200.0)
@@ -96,10 +96,8 @@ def reverify_without_found(sim: FakeStation, station: Station, unit: UnitResult)
                                sample_rate_hz=int(plan.sample_rate_hz), options=station.options)
         prov = EepromProvisioner("bench", verifier=verifier)
         less = UnitResult(unit.slot, unit.url, unit.serial, Outcome.PASS, "", params=without_found(unit.params))
-        try:
+        with contextlib.suppress(UnitRejected):  # a failed verification: the residuals are in the record
             prov.provision(less, client)
-        except UnitRejected:
-            pass  # the residuals are in the record
         res = prov.records[unit.serial].verification
         assert res is not None
         return {c.name: c.value for c in res.checks}
@@ -195,13 +193,15 @@ def main() -> int:
             rows = run_row(args.seed, args.units, effects, k2, found)
             d = describe(rows)
             print(f"| {name} | {'found terms auto' if found else 'off (before)'} | {d['outcome']} | {d['layout']} "
-                  f"| {d['k2 kept']} | {d['tau']} | {d['rate err']} | {d['rate less']} | {d['static err']} |", flush=True)
+                  f"| {d['k2 kept']} | {d['tau']} | {d['rate err']} | {d['rate less']} | {d['static err']} |",
+                  flush=True)
             for r in rows:
                 v = r.get("verify", {})
                 print(f"    {r['serial']}: k2 true {np.array2string(np.asarray(r['k2_true']) * W200, precision=5)} "
                       f"fit {np.array2string(np.asarray(r.get('k2', np.zeros(3))) * W200, precision=5)} (x w200); "
                       f"rate err {v.get('verify.rate.rate_error', math.nan) * DEG:+.5f} deg/s, less found terms "
-                  f"{r.get('verify_less', {}).get('verify.rate.rate_error', math.nan) * DEG:+.5f}; {r['outcome']} {r['message']}",
+                  f"{r.get('verify_less', {}).get('verify.rate.rate_error', math.nan) * DEG:+.5f}; "
+                  f"{r['outcome']} {r['message']}",
                       file=sys.stderr)
         reasons = {r.get("tau_reason") for r in rows if r.get("tau_reason")}
         for reason in sorted(reasons):
