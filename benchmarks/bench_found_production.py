@@ -45,7 +45,6 @@ from station.kernel.errors import UnitRejected
 from station.kernel.parameters import ParameterSet
 from station.kernel.virtual_clock import VirtualClock, acting
 from station.physics.effects import Effects
-from station.physics.imu import ImuModel
 from station.rig import open_rig
 from station.sensor import open_sensor
 from station.sequence.provision import EepromProvisioner, ProvisionRecord
@@ -54,26 +53,9 @@ from station.sequence.runner import UnitResult
 from station.sequence.verify import RigVerifier
 from station.sim.fakes import FakeStation
 from station.sim.firmware import install_firmware
-from station.sim.physics_source import PhysicsSource
 
 W200 = math.radians(200.0)
 DEG = math.degrees(1.0)
-
-
-def plant_k2(source: PhysicsSource, k2: np.ndarray) -> None:
-    """Give the unit's physics the gyro polynomial's k2 (now and after every power cycle)."""
-    original = source._new_model
-
-    def with_k2() -> ImuModel:
-        m = original()
-        return ImuModel(source.truth, source.sensor_class, source.effects,
-                        np.random.SeedSequence(source.seed, spawn_key=(source.boots,)),
-                        latitude_deg=source.latitude_deg, heading_deg=source.heading_deg,
-                        environment=source.environment, effect_truth=replace(m.effect_truth, gyro_quadratic=k2))
-
-    source._new_model = with_k2  # type: ignore[method-assign]
-    if source.model is not None:
-        source.model = with_k2()
 
 
 def without_found(p: ParameterSet) -> ParameterSet:
@@ -111,15 +93,14 @@ def run_row(seed: int, units: int, effects: Effects | None, k2_rel: float, found
     clock = VirtualClock()
     records: dict[str, ProvisionRecord] = {}
     truths: dict[str, np.ndarray] = {}
-    with acting(clock, name="bench"), FakeStation(units, 30.0, seed, effects=effects, clock=clock) as sim:
-        rng = np.random.default_rng(seed + 17)
+    rng = np.random.default_rng(seed + 17)
+    planted = [k2_rel / W200 * rng.uniform(0.5, 1.0, 3) * rng.choice([-1.0, 1.0], 3) for _ in range(units)]
+    with acting(clock, name="bench"), FakeStation(
+            units, 30.0, seed, effects=effects, clock=clock,
+            effect_change=lambda slot, et: replace(et, gyro_quadratic=planted[slot])) as sim:
         for u in sim.units:
             install_firmware(u.sensor, sim.clock)
-            k2 = np.zeros(3)
-            if k2_rel:
-                k2 = k2_rel / W200 * rng.uniform(0.5, 1.0, 3) * rng.choice([-1.0, 1.0], 3)
-                plant_k2(u.source, k2)
-            truths[u.truth.serial] = k2
+            truths[u.truth.serial] = planted[u.slot]
         config = StationConfig(sim.rig_url, tuple(sim.sensor_urls), station_id="bench", record=False, out_dir=None,
                                plan=sim.plan, rig_options=sim.rig_client_options(), provision=True)
         station = Station(config, clock=sim.clock, on_provision=lambda r: records.__setitem__(r.serial, r))
