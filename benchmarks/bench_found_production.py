@@ -1,6 +1,6 @@
 """The found terms (gyro IEEE 952 polynomial, time offset) in a production run: fitted, stored, written, verified.
 
-    python benchmarks/bench_found_production.py [--units 4] [--seed 71000] [--k2 1e-3] [--tau-ms 3]
+    python benchmarks/bench_found_production.py [--units 4] [--seed 72000] [--k2 1e-3] [--tau-ms 3]
 
 Runs the composition root's production run (:class:`station.compose.Station`, the code of ``station run`` and
 ``station demo``) on a simulated station in this process (:class:`station.sim.fakes.FakeStation`, the simulated
