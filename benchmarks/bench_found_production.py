@@ -123,6 +123,7 @@ def run_row(seed: int, units: int, effects: Effects | None, k2_rel: float, found
         p = r.params
         if p is not None:
             row["k2"], row["k2_std"] = p.gyro.scale_quadratic, p.gyro.scale_quadratic_std
+            row["k3"] = p.gyro.scale_cubic
             row["tau_ms"], row["tau_std_ms"] = 1e3 * p.time_offset_s, 1e3 * p.time_offset_std_s
             note = p.quality.time_offset
             row["tau_status"] = note.status if note is not None else "off"
@@ -153,7 +154,8 @@ def describe(rows: list[dict[str, Any]]) -> dict[str, str]:
     return {
         "outcome": outcomes,
         "layout": ", ".join(str(r["layout"]) for r in rows if "layout" in r),
-        "k2 kept": f"{k2_kept}/{3 * len(rows)} axes" + (f", |z| max {max(z):.2f}" if z else ""),
+        "k2 kept": f"{k2_kept}/{3 * len(rows)} axes" + (f", |z| max {max(z):.2f}" if z else "")
+                   + f"; k3 kept {sum(int(np.count_nonzero(r.get('k3', np.zeros(3)))) for r in rows)}",
         "tau": taus,
         "rate err": (f"{statistics.median(rate):.4f} ({min(rate):.4f}-{max(rate):.4f})" if rate else "-"),
         "static err": (f"{statistics.median(static):.4f}" if static else "-"),
@@ -173,7 +175,7 @@ def main() -> int:
     plans = {"null": (None, 0.0), "k2": (None, args.k2), "tau": (Effects(time_offset=args.tau_ms), 0.0),
              "both": (Effects(time_offset=args.tau_ms), args.k2)}
     print(f"{args.units} units per run, seed {args.seed}; k2 {args.k2:g} at 200 deg/s, tau {args.tau_ms:g} ms")
-    print("| row | fit | outcome | image layout | k2 kept | tau | verify rate error, median (min-max), deg/s "
+    print("| row | fit | outcome | image layout | k2 kept (|z| of its error), k3 kept | tau | verify rate error, median (min-max), deg/s "
           "| after the run, paired: the image again | the same image less k2, k3, tau "
           "| verify static gyro error, median, deg/s |")
     print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
