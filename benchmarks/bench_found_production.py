@@ -154,7 +154,7 @@ def describe(rows: list[dict[str, Any]]) -> dict[str, str]:
     return {
         "outcome": outcomes,
         "layout": ", ".join(str(r["layout"]) for r in rows if "layout" in r),
-        "k2 kept": f"{k2_kept}/{3 * len(rows)} axes" + (f", |z| max {max(z):.2f}" if z else "")
+        "k2 kept": f"{k2_kept}/{3 * len(rows)} axes" + (f", z max {max(z):.2f}" if z else "")
                    + f"; k3 kept {sum(int(np.count_nonzero(r.get('k3', np.zeros(3)))) for r in rows)}",
         "tau": taus,
         "rate err": (f"{statistics.median(rate):.4f} ({min(rate):.4f}-{max(rate):.4f})" if rate else "-"),
@@ -175,7 +175,8 @@ def main() -> int:
     plans = {"null": (None, 0.0), "k2": (None, args.k2), "tau": (Effects(time_offset=args.tau_ms), 0.0),
              "both": (Effects(time_offset=args.tau_ms), args.k2)}
     print(f"{args.units} units per run, seed {args.seed}; k2 {args.k2:g} at 200 deg/s, tau {args.tau_ms:g} ms")
-    print("| row | fit | outcome | image layout | k2 kept (|z| of its error), k3 kept | tau | verify rate error, median (min-max), deg/s "
+    print("| row | fit | outcome | image layout | k2 kept (largest z of its error), k3 kept | tau "
+          "| verify rate error, median (min-max), deg/s "
           "| after the run, paired: the image again | the same image less k2, k3, tau "
           "| verify static gyro error, median, deg/s |")
     print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
