@@ -15,6 +15,7 @@ from fastapi.testclient import TestClient
 from station.compose import Station, StationConfig
 from station.eeprom.image import read_all_slots, select_image
 from station.fit.calibrate import FitOptions, fit_session
+from station.fit.export import left_out_notes
 from station.kernel.found_terms import found_terms
 from station.kernel.limits_file import load_limits
 from station.kernel.parameters import ParameterSet
@@ -76,6 +77,8 @@ def test_found_terms_fitted_with_their_uncertainty(planted: tuple[Session, np.nd
         assert f.value == params.gyro.scale_quadratic[k]
         assert by_name[f"gyro.k3.{a}"].status == "not_significant"  # none planted: estimated, not kept
         assert math.isnan(by_name[f"gyro.k3.{a}"].value) and "not kept" in by_name[f"gyro.k3.{a}"].shown()
+    notes = left_out_notes(params)  # an imu_tk / OpenAXES export says what it cannot carry
+    assert any("k2, k3" in n for n in notes) and any("time offset" in n for n in notes)
     d = found.to_dict()
     assert d["time_offset"]["status"] == "fitted" and d["polynomial"][3]["value"] is None
 
