@@ -1,6 +1,6 @@
 """The found terms (gyro IEEE 952 polynomial, time offset) in a production run: fitted, stored, written, verified.
 
-    python benchmarks/bench_found_production.py [--units 4] [--seed 72000] [--k2 1e-3] [--tau-ms 3]
+    python benchmarks/bench_found_production.py [--units 4] [--seed 72000] [--k2 1e-3] [--tau-ms 3] [--speed]
 
 Runs the composition root's production run (:class:`station.compose.Station`, the code of ``station run`` and
 ``station demo``) on a simulated station in this process (:class:`station.sim.fakes.FakeStation`, the simulated
@@ -164,6 +164,31 @@ def describe(rows: list[dict[str, Any]]) -> dict[str, str]:
     }
 
 
+def speed() -> None:
+    """CPU time of the production fit before and now, on a default-plan recording as the station's capture records
+    it (no reference in the moves), median of 5."""
+    from station.fit.calibrate import FitOptions, fit_session
+    from station.kernel.limits_file import load_limits
+    from station.session.model import Kind
+    from station.sim.session_sim import simulate_session
+
+    s = simulate_session(9).session
+    move = s.kind == Kind.MOVE
+    f, w = s.ref_accel_mps2.copy(), s.ref_gyro_radps.copy()
+    f[move], w[move] = np.nan, np.nan
+    s = replace(s, ref_accel_mps2=f, ref_gyro_radps=w)
+    prior = dict(load_limits().correlation_time_s)
+    for name, opts in (("off (before)", FitOptions(tc_range_s=prior)),
+                       ("found terms auto (now)", FitOptions(tc_range_s=prior, scale_nonlinearity="auto",
+                                                             time_offset="auto"))):
+        times = []
+        for _ in range(5):
+            t0 = time.process_time()
+            fit_session(s, opts)
+            times.append(time.process_time() - t0)
+        print(f"production fit, {name}: median CPU {statistics.median(times):.3f} s ({len(s)} samples)")
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--units", type=int, default=4)
@@ -171,7 +196,11 @@ def main() -> int:
     ap.add_argument("--k2", type=float, default=1e-3, help="planted k2 as relative scale error at 200 deg/s")
     ap.add_argument("--tau-ms", type=float, default=3.0)
     ap.add_argument("--rows", default="null,k2,tau,both")
+    ap.add_argument("--speed", action="store_true", help="only the production fit's CPU time, before and now")
     args = ap.parse_args()
+    if args.speed:
+        speed()
+        return 0
     plans = {"null": (None, 0.0), "k2": (None, args.k2), "tau": (Effects(time_offset=args.tau_ms), 0.0),
              "both": (Effects(time_offset=args.tau_ms), args.k2)}
     print(f"{args.units} units per run, seed {args.seed}; k2 {args.k2:g} at 200 deg/s, tau {args.tau_ms:g} ms")
