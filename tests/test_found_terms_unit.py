@@ -90,8 +90,11 @@ def test_not_determined_and_not_fitted_are_flagged_not_numbers(
     t = found_terms(params).time_offset
     assert t.status == "not_determined" and math.isnan(t.value) and t.shown() == "not determined"
     assert "transitions" in t.reason and params.time_offset_s == 0.0
-    off = found_terms(fit_session(session, replace(AUTO, time_offset="off", scale_nonlinearity="off")))
-    assert {f.status for f in off.terms} == {"not_fitted"}
+    off_set = fit_session(session, replace(AUTO, time_offset="off", scale_nonlinearity="off"))
+    off = found_terms(off_set)
+    assert {f.status for f in off.terms} == {"not_fitted"} and "switched off" in off.time_offset.reason
+    off_set.source["line"] = {"transfer_s": 30.0}  # what the line's rig role marks its joint fits with
+    assert all("joint fit" in f.reason for f in found_terms(off_set).terms)
     # a rig plan without negative rates cannot separate k2 from the bias: not determined, with the rig step
     one_sign = replace(session, ref_gyro_radps=np.where(session.ref_gyro_radps < 0, np.nan, session.ref_gyro_radps))
     poly = found_terms(fit_session(one_sign, AUTO)).polynomial

@@ -81,13 +81,21 @@ class FoundTerms:
         return {"time_offset": self.time_offset.to_dict(), "polynomial": [t.to_dict() for t in self.polynomial]}
 
 
+def _not_fitted(params: ParameterSet) -> str:
+    """Why the fit did not try: the line's joint fit never does; otherwise the term was switched off (or the set
+    predates it)."""
+    if "line" in params.source:
+        return "the line's joint fit (rack rest and rig) does not estimate it"
+    return "the fit did not estimate it (switched off, or a set written before these terms)"
+
+
 def _time_offset(params: ParameterSet) -> FoundTerm:
     note = params.quality.time_offset
     if note is None:
         if params.time_offset_s:  # a set given its offset by hand (no fit note)
             return FoundTerm("time_offset", "fitted", float(params.time_offset_s),
                              float(params.time_offset_std_s) or math.nan, "s", reason="stored without a fit note")
-        return FoundTerm("time_offset", "not_fitted", unit="s", reason="the fit did not estimate it")
+        return FoundTerm("time_offset", "not_fitted", unit="s", reason=_not_fitted(params))
     if note.status == "fitted":
         return FoundTerm("time_offset", "fitted", float(params.time_offset_s), float(params.time_offset_std_s), "s",
                          estimate=note.estimate_s, z=note.estimate_s / note.std_s if note.std_s > 0 else math.nan,
@@ -117,7 +125,7 @@ def _polynomial(params: ParameterSet) -> tuple[FoundTerm, ...]:
                 # no note, or the note of the older u|u| term: the polynomial was not fitted
                 why = note.reason if note is not None and note.status == "not_identifiable" else ""
                 status = "not_determined" if why else "not_fitted"
-                out.append(FoundTerm(name, status, unit=unit, reason=why or "the fit did not estimate it"))
+                out.append(FoundTerm(name, status, unit=unit, reason=why or _not_fitted(params)))
             elif a not in identifiable:
                 why = next((m for m in missing if isinstance(m, str) and m.startswith(f"{a}:")), note.reason)
                 out.append(FoundTerm(name, "not_determined", unit=unit, reason=why))
