@@ -178,15 +178,18 @@ def speed() -> None:
     f[move], w[move] = np.nan, np.nan
     s = replace(s, ref_accel_mps2=f, ref_gyro_radps=w)
     prior = dict(load_limits().correlation_time_s)
-    for name, opts in (("off (before)", FitOptions(tc_range_s=prior)),
-                       ("found terms auto (now)", FitOptions(tc_range_s=prior, scale_nonlinearity="auto",
-                                                             time_offset="auto"))):
-        times = []
-        for _ in range(5):
-            t0 = time.process_time()
-            fit_session(s, opts)
-            times.append(time.process_time() - t0)
-        print(f"production fit, {name}: median CPU {statistics.median(times):.3f} s ({len(s)} samples)")
+    before = FitOptions(tc_range_s=prior)
+    now = replace(before, scale_nonlinearity="auto", time_offset="auto")
+
+    def cpu(opts: FitOptions) -> float:
+        t0 = time.process_time()
+        fit_session(s, opts)
+        return time.process_time() - t0
+
+    medians = {name: statistics.median(cpu(o) for _ in range(5)) for name, o in (("off (before)", before),
+                                                                                ("found terms auto (now)", now))}
+    for name, t in medians.items():
+        print(f"production fit, {name}: median CPU {t:.3f} s ({len(s)} samples)")
 
 
 def main() -> int:
