@@ -18,6 +18,7 @@ power cycle.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, Self
@@ -28,7 +29,7 @@ from station.kernel.clock import Clock, SimClock
 from station.kernel.plan import RigPlan, default_plan
 from station.kernel.sensor_class import TABLE1, SensorClass
 from station.kernel.virtual_clock import is_virtual
-from station.physics.effects import Effects
+from station.physics.effects import Effects, EffectTruth
 from station.physics.unit import UnitTruth, draw_unit
 from station.rig import rig_client_options
 from station.sim.chamber_server import SimulatedChamber
@@ -83,6 +84,8 @@ class SimulatedStation:
         nest_errors_deg: the rig's configuration: per nest, its mounting error as a small rotation vector
             (deg, about the nest's x, y, z) from the sensor frame to the nest frame; None: perfect nests.
         truth_change: ``(slot, truth) -> truth`` applied to every drawn unit, e.g. a unit that has aged.
+        effect_change: ``(slot, effect truth) -> effect truth`` applied to every unit's realized effects, e.g. a
+            planted gyro k2 (:class:`~station.sim.physics_source.PhysicsSource`'s ``effect_change``).
     """
 
     def __init__(
@@ -103,6 +106,7 @@ class SimulatedStation:
         noise_index: int = 0,
         nest_errors_deg: Sequence[Sequence[float]] | None = None,
         truth_change: Callable[[int, UnitTruth], UnitTruth] | None = None,
+        effect_change: Callable[[int, EffectTruth], EffectTruth] | None = None,
     ) -> None:
         if units < 1:
             raise ValueError("a simulated station needs at least one unit")
@@ -124,6 +128,7 @@ class SimulatedStation:
             raise ValueError(f"unit_keys names {len(self.unit_keys)} units for {self.n_units} slots")
         self.noise_index = int(noise_index)
         self.truth_change = truth_change
+        self.effect_change = effect_change
         self.nest_errors_deg = [tuple(float(v) for v in e) for e in nest_errors_deg] if nest_errors_deg else []
 
     @property
@@ -179,6 +184,8 @@ class SimulatedStation:
                     temperature_degc=self.chamber.load_temperature if self.chamber is not None else None,
                     reference_degc=self.reference_degc,
                     mount=self.nest_mount(k),
+                    effect_change=(None if self.effect_change is None
+                                   else functools.partial(self.effect_change, k)),
                 )
                 sensor = self._start_sensor(source, truth, rate, int(fault_ss.generate_state(1)[0]))
                 self.units.append(SimUnit(k, truth, source, sensor))
