@@ -105,7 +105,7 @@ class SimLine:
 
     def soak(self, slots: Sequence[int], rack_s: float, archive: RackArchive, station: str = "sim-rack") -> SoakReport:
         """The rack role: power ``slots`` on and log each unit's rest for ``rack_s``; store each recording."""
-        sensors = [open_sensor(url, self.clock) for url in self.sim.sensor_urls]
+        sensors = [open_sensor(url, self.clock, **self.sim.sensor_client_options()) for url in self.sim.sensor_urls]
         t0 = self.clock.now()
         try:
             with RelayBoard(self.board_url) as board:
@@ -136,7 +136,8 @@ class SimLine:
         """The rig role's station for ``slots``' units (the line plan's rig part, recorded at ``db_url``)."""
         urls = tuple(self.sim.sensor_urls[k] for k in slots)
         return StationConfig(self.sim.rig_url, urls, db_url=db_url, out_dir=out_dir, clock_scale=self.scale,
-                             provision=True, rig_options=self.sim.rig_client_options(), line=line, **kwargs)
+                             provision=True, rig_options=self.sim.rig_client_options(),
+                             sensor_options=self.sim.sensor_client_options(), line=line, **kwargs)
 
 
 __all__ = ["SimLine", "SoakReport"]

@@ -58,6 +58,10 @@ class SimUnit:
     sensor: Any
 
 
+#: Wall seconds the station waits for each answer of a simulated sensor (see ``sensor_client_options``).
+SIM_COMMAND_TIMEOUT_S = 5.0
+
+
 class SimulatedStation:
     """A simulated rig + ``units`` simulated sensors on one clock; subclasses say how they are reached.
 
@@ -242,6 +246,17 @@ class SimulatedStation:
     def rig_client_options(self) -> dict[str, Any]:
         """:func:`station.rig.open_rig` keyword arguments suited to this station's clock scale."""
         return rig_client_options(self.scale)
+
+    def sensor_client_options(self) -> dict[str, Any]:
+        """:func:`station.sensor.open_sensor` keyword arguments for these simulated sensors.
+
+        A real sensor answers a command within milliseconds, so the station waits 0.5 wall seconds per attempt.
+        A simulated sensor is a thread of a process that also fits units and serves a rig: on a loaded machine
+        its answer can wait behind them for seconds (a line demo at load 28 on 2 cores lost IDENTIFY three times
+        in 0.5 s), which would make a run's verdict depend on the machine's load. It gets 5 s per attempt: a dead
+        link is still found, in 15 s.
+        """
+        return {"command_timeout_s": SIM_COMMAND_TIMEOUT_S}
 
 
 class SimStation(SimulatedStation):
