@@ -12,6 +12,7 @@ throughput part use it.
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -103,9 +104,23 @@ class SimLine:
     def serial(self, slot: int) -> str:
         return str(self.sim.units[slot].truth.serial)
 
+    def sensor_client_options(self) -> dict[str, Any]:
+        """:func:`~station.sensor.open_sensor` keyword arguments for this line's simulated sensors.
+
+        A real sensor answers a command in milliseconds on its own processor; these answer from threads of this
+        process, two per unit (its peer and the station's reader) besides the loggers, which take the
+        interpreter in turns of ``sys.getswitchinterval()`` (5 ms): with 64 units one round of them alone is
+        0.64 s, more than the client's 0.5 s per attempt, and a loaded host stretches it further. Then the
+        soak lost recordings on "did not answer IDENTIFY / GET_STATUS / STOP_STREAM" (15 and 32 of 64 in two runs on a
+        starved host, the first on a scaled clock, the second on the virtual clock). The wall timeout per
+        attempt is ten such rounds (at least the client's 0.5 s): a peer that died is still found, and on the
+        virtual clock the wait costs no simulated time.
+        """
+        return {"command_timeout_s": max(0.5, 10.0 * 2 * self.n * sys.getswitchinterval())}
+
     def soak(self, slots: Sequence[int], rack_s: float, archive: RackArchive, station: str = "sim-rack") -> SoakReport:
         """The rack role: power ``slots`` on and log each unit's rest for ``rack_s``; store each recording."""
-        sensors = [open_sensor(url, self.clock) for url in self.sim.sensor_urls]
+        sensors = [open_sensor(url, self.clock, **self.sensor_client_options()) for url in self.sim.sensor_urls]
         t0 = self.clock.now()
         try:
             with RelayBoard(self.board_url) as board:
@@ -135,6 +150,7 @@ class SimLine:
                    out_dir: Path | None = None, **kwargs: Any) -> StationConfig:
         """The rig role's station for ``slots``' units (the line plan's rig part, recorded at ``db_url``)."""
         urls = tuple(self.sim.sensor_urls[k] for k in slots)
+        kwargs.setdefault("sensor_options", self.sensor_client_options())
         return StationConfig(self.sim.rig_url, urls, db_url=db_url, out_dir=out_dir, clock_scale=self.scale,
                              provision=True, rig_options=self.sim.rig_client_options(), line=line, **kwargs)
 
