@@ -116,7 +116,10 @@ class SimLine:
         attempt is ten such rounds (at least the client's 0.5 s): a peer that died is still found, and on the
         virtual clock the wait costs no simulated time.
         """
-        return {"command_timeout_s": max(0.5, 10.0 * 2 * self.n * sys.getswitchinterval())}
+        timeout = max(0.5, 10.0 * 2 * self.n * sys.getswitchinterval())
+        # pyserial's write timeout also counts the writer's wait for the interpreter after its bytes went out: a
+        # command to a unit of batch 1 of 64 failed so ("Write timeout") on a host at a load average of 35
+        return {"command_timeout_s": timeout, "write_timeout_s": max(2.0, 3 * timeout)}
 
     def soak(self, slots: Sequence[int], rack_s: float, archive: RackArchive, station: str = "sim-rack") -> SoakReport:
         """The rack role: power ``slots`` on and log each unit's rest for ``rack_s``; store each recording."""
