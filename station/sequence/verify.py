@@ -10,7 +10,9 @@ CORRECTED output and repeats a short check on the rig:
 * a constant table rate about the vertical sensor axis: the mean corrected rate about
   that axis must equal the commanded rate (rad/s).
 
-Each residual (the largest per-axis error of the window mean) is checked against
+Each window starts after the rig confirmed the step and the firmware's moving average (eq. 6, n samples) has
+filled with samples taken after it (:func:`settle_before_window`: n / f, 4 s at 10 Hz, at least the limits file's
+``settle_s``). Each residual (the largest per-axis error of the window mean) is checked against
 :class:`~station.kernel.limits_file.VerificationLimits` (the ``[verification]`` table
 of the limits file); every sample must carry the CORRECTED flag. This is the
 paper's online (on-sensor, Algorithm 1) versus post-processed comparison, run on
@@ -63,6 +65,17 @@ class VerificationResult:
         return "; ".join(bad) if bad else "all residuals within limits"
 
 
+def settle_before_window(limits: VerificationLimits, *, moving_average_length: int, sample_rate_hz: float) -> float:
+    """Sensor seconds to skip after the rig confirmed a step, before the capture window (s).
+
+    The firmware's output is the one-sided moving average of the last n samples (eq. 6), so a sample of the window
+    is the specific force or rate of the step only when all n lie after the confirmation: at least n samples, n / f
+    seconds (0.4 s for the paper's n = 40 at 100 Hz, 4 s at 10 Hz), and never less than the limits file's
+    ``settle_s`` (which covers it at 100 Hz).
+    """
+    return max(float(limits.settle_s), int(moving_average_length) / float(sample_rate_hz))
+
+
 class RigVerifier:
     """Runs the verification of one unit on the rig (implements ``provision.Verifier``).
 
@@ -97,11 +110,11 @@ class RigVerifier:
         self.sample_rate_hz = int(sample_rate_hz)
         self.options = options if options is not None else SequenceOptions()
 
-    def _capture(self, sensor: Sensor, step: Step) -> tuple[np.ndarray, np.ndarray, int, int]:
+    def _capture(self, sensor: Sensor, step: Step, settle_s: float) -> tuple[np.ndarray, np.ndarray, int, int]:
         """(mean accel m/s^2, mean gyro rad/s, samples, uncorrected samples) of a settled window."""
         lim = self.limits
         sensor.drain()
-        sensor.read_samples(duration_s=lim.settle_s)  # moving-average window and settle guard
+        sensor.read_samples(duration_s=settle_s)  # moving-average window and settle guard
         block = sensor.read_samples(duration_s=lim.hold_s)
         check_rig_holding(self.rig.state(), step, self.options)
         n = len(block)
@@ -127,17 +140,18 @@ class RigVerifier:
         checks: list[Measurement] = []
         check = Measurement.at_most_abs
         samples = uncorrected = 0
+        settle = settle_before_window(lim, moving_average_length=image.ma_length, sample_rate_hz=self.sample_rate_hz)
         sensor.set_output("corrected")
         try:
             sensor.start_stream(self.sample_rate_hz)
             drive_rig(self.rig, pose_step, self.options)
-            a, w, n, u = self._capture(sensor, pose_step)
+            a, w, n, u = self._capture(sensor, pose_step, settle)
             samples, uncorrected = samples + n, uncorrected + u
             da = a - self._expected(sensor, g * up_vector(lim.pose))
             checks.append(check("verify.pose.accel_error", float(np.max(np.abs(da))), lim.accel_mps2, "m/s^2"))
             checks.append(check("verify.pose.gyro_error", float(np.max(np.abs(w))), lim.gyro_static_radps, "rad/s"))
             drive_rig(self.rig, rate_step, self.options)
-            a, w, n, u = self._capture(sensor, rate_step)
+            a, w, n, u = self._capture(sensor, rate_step, settle)
             samples, uncorrected = samples + n, uncorrected + u
             k = AXIS_INDEX[axis]
             rate = self._expected(sensor, sign * lim.rate_dps * _DEG * np.eye(3)[k])
