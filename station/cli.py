@@ -218,6 +218,10 @@ def fit(
     time_offset: Annotated[str, typer.Option(
         help="the sensor's time offset behind the rig, estimated on the moves and rate ramps and applied by "
              "Algorithm 1: auto (kept where significant), off")] = "auto",
+    accel_drift: Annotated[bool, typer.Option(
+        "--accel-drift/--no-accel-drift",
+        help="rig-free fit: the accelerometer's eq. 3 warm-up drift (default); --no-accel-drift fits imu_tk's model "
+             "(no drift), whose constant bias is what imu_tk and OpenAXES files can hold")] = True,
 ) -> None:
     """Fit the parameter set of eq. (1) to a session and print it.
 
@@ -249,7 +253,9 @@ def fit(
             raise StationError("--g-sensitivity needs rig references; the rig-free fit does not fit it")
         if free and thermal == "require":
             raise StationError("--thermal require needs rig references; the rig-free fit has no temperature terms")
-        params = (fit_rig_free(session, RigFreeOptions(tc_range_s=tc_range)) if free
+        if not accel_drift and not free:
+            raise StationError("--no-accel-drift is for the rig-free fit (the rig fit decides the drift by its test)")
+        params = (fit_rig_free(session, RigFreeOptions(tc_range_s=tc_range, accel_drift=accel_drift)) if free
                   else fit_session(session, FitOptions(g_sensitivity=g_sensitivity, tc_range_s=tc_range,
                                                        thermal=thermal, scale_nonlinearity=scale_nonlinearity,
                                                        time_offset=time_offset)))
@@ -577,13 +583,18 @@ def serve(
         raise fail(exc) from None
 
 
-_add_plugins()
+if __name__ != "__main__":
+    _add_plugins()
 
 
 def main() -> None:  # pragma: no cover - console entry
     app()
 
 
-if __name__ == "__main__":  # pragma: no cover
-    main()
+if __name__ == "__main__":  # pragma: no cover - ``python -m station.cli``
+    # The plugins import ``station.cli`` by name: run that module, not this ``__main__`` copy of it,
+    # or each would load the other half-initialised.
+    from station.cli import main as _main
+
+    _main()
 

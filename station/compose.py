@@ -458,9 +458,13 @@ class Station:
         self.options = (options if options is not None else SequenceOptions()).for_scale(self.clock.scale)
         # the sensor class's T_c range (the limits file's correlation_time_s) is the fit's prior on T_c
         # a thermal plan moves the temperature on purpose: the fit adds the temperature polynomials where the
-        # recording separates them from the eq. 3 warm-up ("auto"); a plain plan holds it constant ("off")
+        # recording separates them from the eq. 3 warm-up ("auto"); a plain plan holds it constant ("off").
+        # The found terms (docs/found-terms.md) are fitted as `station fit` fits them: the gyro's IEEE 952
+        # polynomial where the rate steps determine it and the time offset where the transitions do, each kept
+        # where significant; one the plan cannot determine is flagged in the set's quality, not stored.
         self.fit_options = FitOptions(
-            tc_range_s=dict(self.limits.correlation_time_s), thermal="auto" if config.thermal is not None else "off"
+            tc_range_s=dict(self.limits.correlation_time_s), thermal="auto" if config.thermal is not None else "off",
+            scale_nonlinearity="auto", time_offset="auto",
         )
         self.subscribers: list[Subscriber] = list(subscribers)
         self.recorder: Recorder | None = None

@@ -57,6 +57,7 @@ ALLOWED: dict[str, set[str]] = {
                             "line"},
     "cli": NUMERICS | {"rig", "chamber", "sensor", "eeprom", "sequence", "store", "terminal", "web", "compose",
                        "commands", "rig_lock"},
+    "__main__": {"cli"},  # ``python -m station``: the command line, nothing else
     # simulated peers: the kernel, the physics and the wire formats they speak; never the station above
     "sim": NUMERICS | {"rig", "chamber", "rack", "sensor", "eeprom"},
     "__init__": set(),

@@ -211,3 +211,25 @@ def test_the_sequence_retests_a_recording_that_contradicts_its_fit(good: Session
     assert unit_verdict(check_limits(bad, lim), lim)[0] == Outcome.PASS  # the limits alone would pass it
     verdict = recording_verdict(bad)
     assert verdict is not None and verdict[0] == Outcome.RETEST and "accel pose" in verdict[1]
+
+
+def test_a_gap_the_station_captured_is_its_own_fault_and_any_other_refusal_the_units(good: Session) -> None:
+    """A gap inside a segment is a TimeBaseError; in a run that captured it the unit ends ERROR (the link or the
+    station did not keep up, and the retest policy does not count it), while a refusal of what the unit measured
+    is the unit's FAIL."""
+    from station.kernel.errors import TimeBaseError
+    from station.sequence import Outcome
+    from station.sequence.runner import refusal_outcome
+
+    t = good.t_s.copy()
+    t[40000:] += 34.8
+    with pytest.raises(TimeBaseError) as gap:
+        fit_session(good.replace(t_s=t))
+    assert refusal_outcome(gap.value)[0] == Outcome.ERROR
+    assert "capture fault (station, not the unit)" in refusal_outcome(gap.value)[1]
+    acc = good.accel_mps2.copy()
+    acc[3000, 0] = 1e30
+    with pytest.raises(FitError) as range_error:
+        fit_session(good.replace(accel_mps2=acc))
+    assert not isinstance(range_error.value, TimeBaseError)
+    assert refusal_outcome(range_error.value) == (Outcome.FAIL, f"fit refused the recording: {range_error.value}")

@@ -34,3 +34,16 @@ def test_help_has_no_flag_type_and_no_literal_backticks(path: tuple[str, ...]) -
     assert "``" not in r.output
     if path == ("fit",):  # a flag without a type, an option with one, the docstring's code as text
         assert "--json" in r.output and "<path>" in r.output and "quality.goodness_of_fit" in r.output
+
+
+@pytest.mark.parametrize("module", ["station", "station.cli"])
+def test_python_dash_m_runs_the_same_command_line(module: str) -> None:
+    """``python -m station.cli`` once failed: the simulator's commands imported ``station.cli`` by name while it ran as
+    ``__main__``, so each half-loaded the other."""
+    import subprocess
+    import sys
+
+    r = subprocess.run([sys.executable, "-m", module, "demo", "--help"], capture_output=True, text=True,
+                       env={"COLUMNS": "120", "PATH": "/usr/bin:/bin"}, timeout=120)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert "Usage:" in r.stdout and "demo" in r.stdout

@@ -88,11 +88,11 @@ def test_recount_outliers_under_the_final_model() -> None:
     sd = b.gyro
     # a signal the base model lacks, 20 noise sigmas in one still segment: outliers against the base model ...
     seg = next(s for s in rec.session.segments() if s.kind == Kind.POSE)
-    extra = np.zeros_like(sd.residual)
+    extra = np.zeros_like(sd.residual[:])
     extra[seg.start + (seg.stop - seg.start) // 2:seg.stop, 0] = 20.0 * sd.sigma[0]
     from dataclasses import replace
 
-    bad = replace(sd, residual=sd.residual + extra)
+    bad = replace(sd, residual=sd.residual[:] + extra)
     assert recount_outliers(rec.session, bad, np.zeros_like(extra)).outlier_count[0] > 0
     # ... none once the accepted effects' fitted signal (here: exactly that signal) is taken out
     assert recount_outliers(rec.session, bad, extra).outlier_count[0] == sd.outlier_count[0]

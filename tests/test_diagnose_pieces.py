@@ -19,6 +19,7 @@ from station.diagnose import diagnose, residuals
 from station.diagnose.candidates import delay_regressor, delay_rows
 from station.diagnose.effect_registry import LIBRARY
 from station.diagnose.residuals import Baseline, SensorData, fit_baseline
+from station.fit.calibrate import mean_model
 from station.kernel.plan import RigPlan
 from station.physics.effects import Effects
 from station.sim.session_sim import simulate_session
@@ -60,8 +61,25 @@ def test_pieces_cover_the_samples_and_cut_no_block(baseline: Baseline) -> None:
 
 def test_block_means_by_pieces_are_the_sparse_products_bit_for_bit(baseline: Baseline) -> None:
     for sd in (baseline.accel, baseline.gyro):
-        for values in (sd.ref, sd.u, sd.residual, baseline.d_temp):
-            assert np.array_equal(sd.block_mean(values), _block_mean_sparse(sd, values))
+        for values in (sd.ref, sd.u, sd.residual, baseline.d_temp):  # the residual: rows made when asked
+            assert np.array_equal(sd.block_mean(values), _block_mean_sparse(sd, values[:]))
+
+
+def test_residual_rows_are_the_whole_residual_bit_for_bit(baseline: Baseline) -> None:
+    """The residual made a piece (or a segment) at a time is the measurement minus the mean model of the whole
+    recording, as it was computed and kept before; its block means are the one-pass sums of that array."""
+    session = baseline.session
+    for sd, data in ((baseline.accel, session.accel_mps2), (baseline.gyro, session.gyro_radps)):
+        whole = data - mean_model(residuals._triad_dict(sd.params), session.t_s, sd.ref, session.ref_accel_mps2)
+        assert np.array_equal(sd.residual[:], whole)
+        assert np.array_equal(np.concatenate([sd.residual[lo:hi] for lo, hi in sd.pieces]), whole)
+        segs = [s for s in session.segments() if len(s)]
+        assert np.array_equal(np.concatenate([sd.residual[s.start:s.stop] for s in segs]),
+                              whole[segs[0].start:segs[-1].stop])
+        sel = sd.label >= 0
+        one_pass = np.stack([np.bincount(sd.label[sel], weights=whole[sel, j], minlength=len(sd.t_s))
+                             for j in range(3)], axis=1) / sd.count[:, None]
+        assert np.array_equal(sd.y, one_pass)
 
 
 @pytest.mark.parametrize("name", sorted(LIBRARY))

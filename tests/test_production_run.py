@@ -30,7 +30,6 @@ from station.web.app import create_app
 pytestmark = pytest.mark.integration
 
 STATION = str(Path(sys.executable).with_name("station"))
-SCALE = 60.0
 
 
 @dataclass
@@ -38,9 +37,10 @@ class Sim:
     proc: subprocess.Popen[str]
     rig: str
     sensors: list[str]
+    clock: str
 
     def run_args(self, tmp: Path, db: str, *extra: str) -> list[str]:
-        args = [STATION, "run", "--rig", self.rig, "--scale", f"{SCALE:g}", "--db", db, "--out", str(tmp / "runs"),
+        args = [STATION, "run", "--rig", self.rig, "--clock", self.clock, "--db", db, "--out", str(tmp / "runs"),
                 "--station", "line1", "--operator", "ci", "--yes"]
         for s in self.sensors:
             args += ["--sensor", s]
@@ -48,32 +48,56 @@ class Sim:
 
 
 @pytest.fixture
-def sim(tmp_path: Path) -> Iterator[Sim]:
+def sim(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[Sim]:
     env = {**os.environ, "STATION_LOCK_DIR": str(tmp_path / "locks")}
-    proc = subprocess.Popen([STATION, "sim", "--units", "2", "--scale", f"{SCALE:g}", "--seed", "3"],
+    # the simulator serves its virtual clock and the runs join it: no machine load can make a sensor skip samples
+    proc = subprocess.Popen([STATION, "sim", "--units", "2", "--seed", "3", "--clock", "virtual"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
-    rig, sensors = "", []
+    rig, clock, sensors = "", "", []
     assert proc.stdout is not None
     deadline = time.monotonic() + 30
     while time.monotonic() < deadline:
         line = proc.stdout.readline()
         if line.startswith("rig: "):
             rig = line.split()[1]
+        elif line.startswith("clock: "):
+            clock = line.split()[1]
         elif m := re.match(r"sensor \d+: (\S+)", line):
             sensors.append(m.group(1))
         elif line.startswith("Ctrl-C") or not line:
             break
-    assert rig and len(sensors) == 2, proc.stderr.read() if proc.poll() is not None else "no URLs"
-    os.environ["STATION_LOCK_DIR"] = str(tmp_path / "locks")
+    assert rig and clock and len(sensors) == 2, proc.stderr.read() if proc.poll() is not None else "no URLs"
+    monkeypatch.setenv("STATION_LOCK_DIR", str(tmp_path / "locks"))  # restored after the test
     try:
-        yield Sim(proc, rig, sensors)
+        yield Sim(proc, rig, sensors, clock)
     finally:
-        os.environ.pop("STATION_LOCK_DIR", None)
         proc.send_signal(signal.SIGTERM)
         try:
             proc.wait(15)
         except subprocess.TimeoutExpired:
             proc.kill()
+
+
+def _wait_until_the_rig_is_held(proc: subprocess.Popen[str], locks: Path, timeout: float = 240.0) -> None:
+    """Until some process holds a rig lock file in ``locks`` (a non-blocking flock on it fails): the run has begun.
+
+    Waiting for the event rather than a fixed time keeps the test right on a loaded machine."""
+    import fcntl
+
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        assert proc.poll() is None, "the run ended before it held the rig"
+        for path in locks.glob("rig-*.lock"):
+            fd = os.open(path, os.O_RDWR)
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                fcntl.flock(fd, fcntl.LOCK_UN)
+            except BlockingIOError:
+                return
+            finally:
+                os.close(fd)
+        time.sleep(0.05)
+    raise AssertionError(f"no rig lock held in {locks} after {timeout} s")
 
 
 def _run(args: list[str], **kw: object) -> subprocess.CompletedProcess[str]:
@@ -111,7 +135,7 @@ def test_a_second_run_on_a_held_rig_is_refused_and_the_first_passes(sim: Sim, tm
     first = subprocess.Popen(sim.run_args(tmp_path, db_url), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                              text=True, env=os.environ.copy())
     try:
-        time.sleep(4.0)  # the first run holds the rig
+        _wait_until_the_rig_is_held(first, tmp_path / "locks")
         second = _run(sim.run_args(tmp_path / "second", f"sqlite:///{tmp_path / 'other.sqlite'}"))
         assert second.returncode == 2
         assert "in use by station line1" in second.stderr and "since" in second.stderr
@@ -130,7 +154,8 @@ def test_sigterm_aborts_with_the_rig_at_rest(sim: Sim, tmp_path: Path) -> None:
     proc = subprocess.Popen(sim.run_args(tmp_path, db_url), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, env=os.environ.copy())
     try:
-        time.sleep(6.0)  # mid-run: the power-on rest (300 s of rig time) takes 5 s at this scale
+        _wait_until_the_rig_is_held(proc, tmp_path / "locks")
+        time.sleep(1.0)  # mid-run: the rig is held, and the whole run takes tens of seconds of wall time
         proc.send_signal(signal.SIGTERM)
         out, err = proc.communicate(timeout=120)
     finally:
@@ -145,7 +170,8 @@ def test_sigterm_aborts_with_the_rig_at_rest(sim: Sim, tmp_path: Path) -> None:
         assert s.scalars(select(EepromWrite)).all() == []  # nothing written to an aborted unit
 
 
-def test_a_run_started_through_the_api_provisions_and_serves_the_same_image(tmp_path: Path) -> None:
+def test_a_run_started_through_the_api_provisions_and_serves_the_same_image(tmp_path: Path,
+                                                                            monkeypatch: pytest.MonkeyPatch) -> None:
     """`POST /api/runs` on the station `station serve` builds: written, read back, verified, one image."""
     from dataclasses import replace
 
@@ -166,26 +192,23 @@ def test_a_run_started_through_the_api_provisions_and_serves_the_same_image(tmp_
     plan = RigPlan(sample_rate_hz=50.0, rest_s=60.0, pose_hold_s=4.0,
                    rate_steps=(("x", 100.0), ("y", 100.0), ("z", 100.0)), rate_hold_s=3.0)
     db_url = f"sqlite:///{tmp_path / 'api.sqlite'}"
-    os.environ["STATION_LOCK_DIR"] = str(tmp_path / "locks")
-    try:
-        with SimStation(1, 1.0, 8, plan=plan, clock=VirtualClock()) as sim:  # discrete events: no load can hurry it
-            for unit in sim.units:
-                install_firmware(unit.sensor, sim.clock)
-            config = StationConfig(sim.rig_url, tuple(sim.sensor_urls), station_id="api", db_url=db_url,
-                                   out_dir=None, plan=plan, provision=True, rig_options=sim.rig_client_options())
-            station = Station(config, clock=sim.clock, limits=replace(load_limits(), product=table1_limits()))
-            assert station.recorder is not None
-            live = LiveStatus(station.recorder.db)
-            station.subscribe(live)
-            control = StationControl(station.run, on_error=live.set_fault)
-            live.on_start, live.on_abort = control.start, control.abort
-            client = TestClient(create_app(database=station.recorder.db, token="t0k", live=live))
-            r = client.post("/api/runs", headers={"Authorization": "Bearer t0k"}, json={"operator": "eve"})
-            assert r.status_code == 202, r.text
-            result = control.wait(180)
-            serial = sim.units[0].truth.serial
-    finally:
-        os.environ.pop("STATION_LOCK_DIR", None)
+    monkeypatch.setenv("STATION_LOCK_DIR", str(tmp_path / "locks"))
+    with SimStation(1, 1.0, 8, plan=plan, clock=VirtualClock()) as sim:  # discrete events: no load can hurry it
+        for unit in sim.units:
+            install_firmware(unit.sensor, sim.clock)
+        config = StationConfig(sim.rig_url, tuple(sim.sensor_urls), station_id="api", db_url=db_url,
+                               out_dir=None, plan=plan, provision=True, rig_options=sim.rig_client_options())
+        station = Station(config, clock=sim.clock, limits=replace(load_limits(), product=table1_limits()))
+        assert station.recorder is not None
+        live = LiveStatus(station.recorder.db)
+        station.subscribe(live)
+        control = StationControl(station.run, on_error=live.set_fault)
+        live.on_start, live.on_abort = control.start, control.abort
+        client = TestClient(create_app(database=station.recorder.db, token="t0k", live=live))
+        r = client.post("/api/runs", headers={"Authorization": "Bearer t0k"}, json={"operator": "eve"})
+        assert r.status_code == 202, r.text
+        result = control.wait(180)
+        serial = sim.units[0].truth.serial
     assert result is not None and result.outcome == Outcome.PASS, result and result.units[0].message
     with open_database(db_url) as db, db.transaction() as s:
         write = s.scalars(select(EepromWrite)).one()

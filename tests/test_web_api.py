@@ -21,6 +21,7 @@ from fastapi.testclient import TestClient
 
 from station.eeprom.image import decode_image
 from station.fit.calibrate import fit_session
+from station.kernel.found_terms import found_terms
 from station.kernel.limits import table1_limits
 from station.kernel.limits_file import load_limits
 from station.kernel.measurement import Measurement, Verdict
@@ -324,6 +325,14 @@ def test_typed_answers_lose_nothing(client: TestClient, store: dict[str, Any]) -
         detail = show_unit(store["db"], serial)
         assert detail is not None
         expected = {**detail.to_dict(), "checks": [c.model_dump() for c in latest_checks(store["db"], serial)]}
+        params = detail.latest_params()
+        if params is not None:  # what the API adds: the found terms' summary, and a /2 set's /3 fields at 0
+            lp = expected["latest_params"]
+            lp["found_terms"] = found_terms(params).to_dict()
+            lp.setdefault("time_offset_std_s", 0.0)
+            for tri in ("accel", "gyro"):
+                for name in ("scale_quadratic", "scale_quadratic_std", "scale_cubic", "scale_cubic_std"):
+                    lp[tri].setdefault(name, [0.0, 0.0, 0.0])
         assert client.get(f"/api/units/{serial}").json() == json.loads(json.dumps(expected))
     check = client.get("/api/units/BAD-1").json()["checks"][0]
     assert check == {"name": "accel.bias_static.x", "value": 0.5, "std": 0.01, "low": -0.1, "high": 0.1,

@@ -192,7 +192,14 @@ def export_command(
     alias of ``--format kalibr`` that will go.
     """
     from station.commands.output import check_output
-    from station.fit.export import export_notes, imu_tk_calib_files, imu_tk_document, kalibr_imu_yaml, openaxes_text
+    from station.fit.export import (
+        export_notes,
+        imu_tk_calib_files,
+        imu_tk_document,
+        kalibr_imu_yaml,
+        left_out_notes,
+        openaxes_text,
+    )
     from station.kernel.parameters import ParameterSet
 
     written: list[Path] = []
@@ -212,6 +219,9 @@ def export_command(
             raise StationError(f"--format {fmt} exports one parameter set")
         for note in (n for p in sets for n in export_notes(p)):
             typer.echo(f"note: {note}", err=True)
+        if fmt != "kalibr":  # the noise model has no place for these: only the calibrations leave them out
+            for note in (n for p in sets for n in left_out_notes(p)):
+                typer.echo(f"note: {note}", err=True)
         if fmt == "imu-tk":
             assert output is not None
             files = imu_tk_calib_files(sets[0])

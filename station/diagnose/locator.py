@@ -52,6 +52,7 @@ from scipy.signal import lfilter
 
 from station.diagnose import empirical, robust
 from station.diagnose.results import CovariateTest, EmpiricalModel, LocatorEvidence, Unexplained
+from station.fit.goodness import Rows
 from station.kernel.limits_file import LimitsFile
 from station.kernel.sensor_class import TABLE1, SensorClass
 from station.session.model import Kind
@@ -173,7 +174,7 @@ def covariates(baseline: Any, sd: Any, k: int, *, extended: bool = False) -> dic
     return {name: sd.block_mean(v) for name, v in out.items() if np.ptp(v) > 0}
 
 
-def _spin_periodic(session: Any, sd: Any, residual: np.ndarray, k: int) -> tuple[float, int, float, float]:
+def _spin_periodic(session: Any, sd: Any, residual: Rows | np.ndarray, k: int) -> tuple[float, int, float, float]:
     """Axis ``k``'s ``residual`` (n, 3) in the rate-table holds against the table's angle (integrated from the
     rate reference): per hold of at least one turn, the least-squares cos/sin part beside a mean and a trend.
     Returns (its chi^2 in white-noise units, dof, its share of the holds' structure above the white noise, its
@@ -207,7 +208,7 @@ def _spin_periodic(session: Any, sd: Any, residual: np.ndarray, k: int) -> tuple
     return chi, dof, (chi / excess if excess > 0 else 0.0), math.sqrt(amp2 / max(n_all, 1))
 
 
-def _jumps(session: Any, residual: np.ndarray, k: int) -> tuple[int, int]:
+def _jumps(session: Any, residual: Rows | np.ndarray, k: int) -> tuple[int, int]:
     """Jumps of axis ``k``'s ``residual`` (n, 3) inside the still and rate-hold segments: (number of increments
     between adjacent :data:`JUMP_WINDOW_S` window means further than :data:`JUMP_SIGMAS` robust sigmas, number
     of increments). Eq. 3's drift, a random walk and short-correlated noise have Gaussian increments; a bias
@@ -292,12 +293,12 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
                 if share >= COVARIATE_SHARE and stats.chi2.sf(gain, 1) < ALPHA_LOCATED and gain > best[1]:
                     best = (name, gain, share)
             if best[0] == "none" and fitted is not None:
-                chi, dof, share, _amp = _spin_periodic(baseline.session, sd, sd.residual - fitted, k)
+                chi, dof, share, _amp = _spin_periodic(baseline.session, sd, sd.residual_less(fitted), k)
                 tests.append(CovariateTest(AX[k], "periodic at the spin frequency", chi, share))
                 if dof and share >= COVARIATE_SHARE and stats.chi2.sf(chi, dof) < ALPHA_LOCATED:
                     best = ("periodic", chi, share)
             if best[0] == "none" and fitted is not None:
-                count, total = _jumps(baseline.session, sd.residual - fitted, k)
+                count, total = _jumps(baseline.session, sd.residual_less(fitted), k)
                 tests.append(CovariateTest(AX[k], "jumps (two-level)", float(count), count / max(total, 1)))
                 if count >= JUMP_MIN and count >= JUMP_MIN_SHARE * total:
                     best = ("two-level", float(count), 0.0)
@@ -317,7 +318,7 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
             excess_all += float(np.sum(z[sel, k] ** 2)) - float(sel.sum())
         periodic = None
         if fitted is not None and any(c == "periodic" for _, c in chosen):
-            per = [_spin_periodic(baseline.session, sd, sd.residual - fitted, k) for k in range(3)]
+            per = [_spin_periodic(baseline.session, sd, sd.residual_less(fitted), k) for k in range(3)]
             factor, unit = (180.0 / math.pi, "deg/s") if sd.sensor == "gyro" else (1.0, "m/s^2")
             periodic = {"axes": [a for a, c in chosen if c == "periodic"], "chi2": [round(p[0], 1) for p in per],
                         "dof": per[0][1], "amplitude": [round(p[3] * factor, 6) for p in per], "unit": unit}

@@ -25,6 +25,7 @@ import numpy as np
 from scipy.ndimage import uniform_filter1d
 
 from station.fit.calibrate import fit_session, mean_model
+from station.fit.goodness import Rows
 from station.kernel.parameters import ParameterSet, TriadParams
 from station.session.model import Kind, Session
 
@@ -45,7 +46,11 @@ class SensorData:
         ref: rig reference used by the base model (m/s^2 or rad/s), NaN -> 0, (n, 3).
         u: ``M ref``, the modelled true input through the misalignment (n, 3): made when asked (a property),
             :meth:`u_rows` for some rows.
-        residual: measurement minus base mean model, (n, 3).
+        residual: measurement minus base mean model, (n, 3): a :class:`station.fit.goodness.Rows` that makes the
+            rows asked (``residual[a:b]``, ``residual[a:b, k]``; ``residual[:]`` the whole) from the measurement and
+            the model, the same numbers as the whole array's rows (not kept: two (n, 3) arrays held through the
+            whole diagnosis were the largest part of its memory after the session's); an array where a caller
+            gives one.
         sigma: white-noise std per sample, (3,).
         keep: samples that are not outliers (n,).
         outlier_count: outliers per axis among the settled samples, (3,); settled_samples: their number.
@@ -63,7 +68,7 @@ class SensorData:
     sensor: str
     params: TriadParams
     ref: np.ndarray
-    residual: np.ndarray
+    residual: Rows | np.ndarray
     sigma: np.ndarray
     keep: np.ndarray
     outlier_count: np.ndarray
@@ -87,6 +92,11 @@ class SensorData:
     def u_rows(self, lo: int, hi: int) -> np.ndarray:
         """Rows lo:hi of :attr:`u` (each row ``M ref_i``: the same numbers as the whole)."""
         return self.ref[lo:hi] @ np.nan_to_num(self.params.misalignment).T
+
+    def residual_less(self, fitted: np.ndarray) -> Rows:
+        """``residual - fitted`` (``fitted``: a per-sample signal, (n, 3)) as :class:`Rows`, made for the rows asked:
+        no (n, 3) difference is held."""
+        return Rows(len(self.label), lambda lo, hi: self.residual[lo:hi] - fitted[lo:hi])
 
     def clip_tc(self, tc_s: np.ndarray | float) -> np.ndarray:
         """``tc_s`` (s) clipped into :attr:`tc_range_s` (unchanged without a range)."""
@@ -203,11 +213,20 @@ def _blocks(session: Session, ref: np.ndarray, keep: np.ndarray, max_settled_blo
     return label
 
 
+def residual_rows(session: Session, p: TriadParams, data: np.ndarray, ref0: np.ndarray) -> Rows:
+    """``data - mean model`` (eq. 1 + eq. 3 at ``p``) as :class:`Rows`: rows lo:hi are made from rows lo:hi of the
+    measurement, the reference ``ref0`` (NaN-free) and the time, each row as the whole-recording computation makes
+    it (the model is per sample)."""
+    triad = _triad_dict(p)
+    t, force = session.t_s, session.ref_accel_mps2
+    return Rows(len(data), lambda lo, hi: data[lo:hi] - mean_model(triad, t[lo:hi], ref0[lo:hi], force[lo:hi]))
+
+
 def _sensor_data(
     session: Session, name: str, p: TriadParams, data: np.ndarray, ref: np.ndarray, max_settled_blocks: int
 ) -> SensorData:
     ref0 = np.nan_to_num(ref) if np.isnan(ref).any() else ref  # a reference without NaN is not copied
-    residual = data - mean_model(_triad_dict(p), session.t_s, ref0, session.ref_accel_mps2)
+    residual = residual_rows(session, p, data, ref0)
     sigma = np.maximum(np.asarray(p.noise_std, dtype=float), 1e-12)
     keep = np.ones(len(session), dtype=bool)
     outliers = np.zeros(3, dtype=int)
@@ -237,12 +256,13 @@ def _sensor_data(
     kind_of = np.zeros(m, dtype=np.int64)
     seg_of[lab] = session.segment[sel]
     kind_of[lab] = session.kind[sel]
-    y = np.stack([np.bincount(lab, weights=residual[sel, j], minlength=m) for j in range(3)], axis=1) / count[:, None]
-    return SensorData(
+    sd = SensorData(
         sensor=name, params=p, ref=ref0, residual=residual, sigma=sigma, keep=keep, outlier_count=outliers,
         settled_samples=settled_n, label=label, t_s=0.5 * (first + last), width_s=last - first + ts, count=count,
-        y=y, segment=seg_of, kind=kind_of,
+        y=np.zeros((m, 3)), segment=seg_of, kind=kind_of,
     )
+    # each block's residual summed in sample order from zero, a piece of samples at a time (as one pass sums it)
+    return replace(sd, y=sd.block_mean_of(lambda lo, hi: residual[lo:hi]))
 
 
 def fit_baseline(
@@ -369,8 +389,7 @@ def locate(baseline: Baseline) -> dict[str, SensorLocation]:
     rate sign, specific force and time.
     """
     out: dict[str, SensorLocation] = {}
-    force = np.nan_to_num(baseline.session.ref_accel_mps2)
-    rate = np.nan_to_num(baseline.session.ref_gyro_radps)
+    force, rate = baseline.session.ref_accel_mps2, baseline.session.ref_gyro_radps  # NaN -> 0 a piece at a time
     for name in SENSORS:
         sd = baseline.sensor(name)
         z = sd.y * np.sqrt(sd.count)[:, None] / sd.sigma  # block residual in block-noise sigmas
@@ -388,8 +407,8 @@ def locate(baseline: Baseline) -> dict[str, SensorLocation]:
             "temperature": sd.block_mean(baseline.d_temp),
             "time": sd.t_s,
         }
-        r_b = sd.block_mean(rate)
-        f_b = sd.block_mean(force)
+        r_b = sd.block_mean_of(lambda lo, hi: np.nan_to_num(rate[lo:hi]))
+        f_b = sd.block_mean_of(lambda lo, hi: np.nan_to_num(force[lo:hi]))
         corr: dict[str, list[float]] = {}
         w = sd.count
         for k in range(3):

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from station.kernel.errors import FitError
+from station.kernel.errors import FitError, TimeBaseError
 from station.session.model import Kind, Segment, Session
 
 AXES = "xyz"
@@ -79,7 +79,7 @@ def check_sample_rate(session: Session) -> None:
     dt = np.diff(session.t_s)
     median = float(np.median(dt))
     if abs(median * rate - 1.0) > RATE_MISMATCH:
-        raise FitError(
+        raise TimeBaseError(
             f"metadata sample_rate_hz {rate:g} Hz contradicts the time column: its median sample interval "
             f"is {median:.6g} s ({1.0 / median:.6g} Hz)"
         )
@@ -88,7 +88,7 @@ def check_sample_rate(session: Session) -> None:
     gaps = np.flatnonzero((dt > limit) & same)
     if gaps.size:
         i = int(gaps[0]) + 1
-        raise FitError(
+        raise TimeBaseError(
             f"time jumps by {dt[i - 1]:.6g} s at sample {i} (t={session.t_s[i]:.6g} s) inside segment "
             f"{int(session.segment[i])}; a segment's samples may not have gaps longer than {limit:g} s"
         )

@@ -44,7 +44,7 @@ from station.kernel.errors import FormatError
 from station.kernel.parameters import ParameterSet, TriadParams
 
 __all__ = ["IMU_TK_FORMAT", "export_notes", "imu_tk_calib_files", "imu_tk_document", "imu_tk_terms",
-           "kalibr_imu_yaml", "openaxes_coefficients", "openaxes_text"]
+           "kalibr_imu_yaml", "left_out_notes", "openaxes_coefficients", "openaxes_text"]
 
 IMU_TK_FORMAT = "station-imutk/1"
 
@@ -137,6 +137,32 @@ def export_notes(params: ParameterSet) -> tuple[str, ...]:
     """What an export writes differently from the set's own numbers: one line per axis whose b_stat the recording
     cannot determine (the bias at the end of the recording is exported instead); empty when none."""
     return params.constant_bias_values()[1]
+
+
+def left_out_notes(params: ParameterSet) -> tuple[str, ...]:
+    """What the set holds that imu_tk's and OpenAXES's models cannot (their files carry ``T K`` and one constant
+    bias): one line per kind that is left out of those exports; empty when none. The drift of eq. 3 is named when
+    it is large against the bias's own uncertainty, since then the exported constant bias (b_stat, the settled one)
+    does not describe the recording's warm-up (docs/exports.md)."""
+    out: list[str] = []
+    for name, tri in (("accel", params.accel), ("gyro", params.gyro)):
+        drift = np.abs(np.nan_to_num(np.asarray(tri.bias_drift, dtype=float)))
+        std = np.nan_to_num(np.asarray(tri.bias_drift_std, dtype=float), nan=np.inf)
+        big = ["xyz"[k] for k in range(3) if drift[k] > 3 * std[k] and drift[k] > 0]
+        if big:
+            unit = "m/s^2" if name == "accel" else "rad/s"
+            size = max(drift["xyz".index(a)] for a in big)
+            hint = ("; for a bias of the recording itself fit without the drift (station fit --no-accel-drift, "
+                    "rig-free)" if name == "accel" else "")
+            out.append(f"{name} {', '.join(big)}: the eq. 3 warm-up drift (b_drift up to {size:.3g} {unit}) is left "
+                       f"out: the files hold the settled bias, not the bias during the warm-up{hint}")
+    if params.compensates_temperature:
+        out.append("the temperature terms are left out (no temperature model in these files)")
+    if params.has_nonlinearity:
+        out.append("the scale nonlinearity (u|u|, IEEE 952 k2, k3) is left out (no polynomial in these files)")
+    if params.time_offset_s:
+        out.append(f"the time offset ({1e3 * params.time_offset_s:.3g} ms) is left out: apply it to the time stamps")
+    return tuple(out)
 
 
 def openaxes_coefficients(param_sets: Sequence[ParameterSet]) -> tuple[np.ndarray, np.ndarray]:

@@ -21,6 +21,8 @@ fractions (samples received, dropped)       %               * 100
 gravity ratio (|f| / g)                     %               * 100
 gyro g-sensitivity                          (deg/s)/g       rad/s per m/s^2 * 180/pi * 9.80665
 gyro scale nonlinearity k of u + k u|u|     ppm/(deg/s)     1/(rad/s) * pi/180 * 1e6
+gyro IEEE 952 polynomial k2 (u^2)           ppm/(deg/s)     1/(rad/s) * pi/180 * 1e6
+gyro IEEE 952 polynomial k3 (u^3)           ppm/(deg/s)^2   1/(rad/s)^2 * (pi/180)^2 * 1e6
 temperature                                 degC            1
 ==========================================  ==============  =========================================
 
@@ -110,6 +112,8 @@ DISPLAYS: dict[str, Display] = {d.quantity: d for d in (
     Display("fraction", "%", 100.0, "1", label="fraction"),
     Display("g_sensitivity", "(deg/s)/g", _DEG_PER_RAD * G0_MPS2, "rad/s/(m/s^2)", label="g-sensitivity"),
     Display("nonlinearity", "ppm/(deg/s)", 1e6 / _DEG_PER_RAD, "1/(rad/s)", label="scale nonlinearity"),
+    Display("nonlinearity_cubic", "ppm/(deg/s)^2", 1e6 / _DEG_PER_RAD**2, "1/(rad/s)^2",
+            label="cubic scale nonlinearity"),
     Display("temperature", "degC", 1.0, "degC", label="temperature"),
     Display("count", "", 1.0, "1", label="count"),
     Display("ratio", "", 1.0, "1", label="ratio"),
@@ -117,7 +121,8 @@ DISPLAYS: dict[str, Display] = {d.quantity: d for d in (
 
 #: SI unit -> the quantity of a value in it, where the unit alone decides.
 _BY_SI_UNIT = {"m/s^2": "acceleration", "rad/s": "angular_rate", "s": "time_constant", "m/s^2/K": "accel_tempco",
-               "rad/s/K": "gyro_tempco", "1/K": "scale_tempco", "degC": "temperature"}
+               "rad/s/K": "gyro_tempco", "1/K": "scale_tempco", "degC": "temperature", "1/(rad/s)": "nonlinearity",
+               "1/(rad/s)^2": "nonlinearity_cubic"}
 
 
 def display_for(quantity: str) -> Display:

@@ -49,6 +49,14 @@ class FitError(StationError):
     """A recording cannot be fitted; the message says which part and why, in one line."""
 
 
+class TimeBaseError(FitError):
+    """The recording's time column contradicts itself (a gap inside a segment, a stated rate it does not have).
+
+    In a file someone hands to ``station fit`` it is a bad input; in a recording the station captured itself it
+    is a capture fault of the station (the link or the station did not keep up): the unit ends ERROR, not FAIL.
+    """
+
+
 class HardwareError(StationError):
     """A station fault (rig, serial link, EEPROM): the run's outcome is ERROR, not FAIL."""
 

@@ -66,7 +66,8 @@ class VerificationLimits:
         rate_radps: largest allowed |mean corrected rate - commanded| about the rate axis (rad/s).
         pose: static pose ('+z', ...); rate_pose: pose of the rate check (its up axis is turned about).
         rate_dps: table rate of the rate check (deg/s).
-        settle_s: corrected samples discarded after the rig confirmed (s; >= the moving-average span).
+        settle_s: corrected samples discarded after the rig confirmed (s; at least: the verifier also waits for the
+            moving average to fill, n / f, `station.sequence.verify.settle_before_window`).
         hold_s: captured window per check (s).
     """
 

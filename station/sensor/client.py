@@ -293,15 +293,19 @@ def open_sensor(
     crc_window_frames: int = 500,
     crc_error_threshold: float = 0.1,
     max_buffered_samples: int = 1_000_000,
+    write_timeout_s: float = 2.0,
 ) -> SerialSensor:
     """Open the sensor at ``url`` (``serial:///dev/ttyUSB0?baud=921600``, ``serial:///dev/pts/N``).
+
+    ``write_timeout_s``: wall seconds a write may take (pyserial's ``write_timeout``, which also counts the time
+    the writing thread waited for the CPU).
 
     Input already waiting on the port is discarded. Raises :class:`~station.sensor.serial_url.SensorUrlError`
     for a bad URL and :class:`SensorLinkError` when the port cannot be opened.
     """
     where = parse_sensor_url(url)
     try:
-        port = serial.Serial(where.path, baudrate=where.baudrate, timeout=0.1, write_timeout=2.0)
+        port = serial.Serial(where.path, baudrate=where.baudrate, timeout=0.1, write_timeout=write_timeout_s)
     except (serial.SerialException, OSError, ValueError) as exc:
         raise SensorLinkError(f"cannot open sensor port {where.path}: {exc}") from exc
     port.reset_input_buffer()

@@ -41,7 +41,7 @@ from station.fit.calibrate import FitOptions, fit_session
 from station.fit.determinability import assess
 from station.fit.goodness import summary as goodness_summary
 from station.kernel.clock import Clock
-from station.kernel.errors import FitError, HardwareError, StationError, UnitRejected
+from station.kernel.errors import FitError, HardwareError, StationError, TimeBaseError, UnitRejected
 from station.kernel.limits import ProductLimits, table1_limits
 from station.kernel.measurement import Measurement, Verdict
 from station.kernel.nest_frames import NestCalibration
@@ -78,6 +78,17 @@ log = logging.getLogger(__name__)
 
 Subscriber = Callable[[Record], None]
 
+
+def refusal_outcome(err: FitError) -> tuple[Outcome, str]:
+    """The verdict for a recording the station captured and the fit refused.
+
+    A time column that contradicts itself (:class:`TimeBaseError`: a gap inside a segment) means the station's
+    link or clock did not keep up: a station fault, ERROR, which the retest policy does not count. Any other
+    refusal is about what the unit measured: FAIL.
+    """
+    if isinstance(err, TimeBaseError):
+        return Outcome.ERROR, f"capture fault (station, not the unit): {err}"
+    return Outcome.FAIL, f"fit refused the recording: {err}"
 
 class RigLinkError(HardwareError):
     """The rig link dropped and had to be re-established during the run."""
@@ -722,7 +733,7 @@ class SequenceRunner:
                     continue
                 err = fut.exception()
                 if isinstance(err, FitError):
-                    v.outcome, v.message = Outcome.FAIL, f"fit refused the recording: {err}"
+                    v.outcome, v.message = refusal_outcome(err)
                 elif err is not None:
                     raise err
                 else:

@@ -10,7 +10,9 @@ CORRECTED output and repeats a short check on the rig:
 * a constant table rate about the vertical sensor axis: the mean corrected rate about
   that axis must equal the commanded rate (rad/s).
 
-Each residual (the largest per-axis error of the window mean) is checked against
+Each window starts after the rig confirmed the step and the firmware's moving average (eq. 6, n samples) has
+filled with samples taken after it (:func:`settle_before_window`: n / f, 4 s at 10 Hz, at least the limits file's
+``settle_s``). Each residual (the largest per-axis error of the window mean) is checked against
 :class:`~station.kernel.limits_file.VerificationLimits` (the ``[verification]`` table
 of the limits file); every sample must carry the CORRECTED flag. This is the
 paper's online (on-sensor, Algorithm 1) versus post-processed comparison, run on
@@ -65,6 +67,17 @@ class VerificationResult:
         return "; ".join(bad) if bad else "all residuals within limits"
 
 
+def settle_before_window(limits: VerificationLimits, *, moving_average_length: int, sample_rate_hz: float) -> float:
+    """Sensor seconds to skip after the rig confirmed a step, before the capture window (s).
+
+    The firmware's output is the one-sided moving average of the last n samples (eq. 6), so a sample of the window
+    is the specific force or rate of the step only when all n lie after the confirmation: at least n samples, n / f
+    seconds (0.4 s for the paper's n = 40 at 100 Hz, 4 s at 10 Hz), and never less than the limits file's
+    ``settle_s`` (which covers it at 100 Hz).
+    """
+    return max(float(limits.settle_s), int(moving_average_length) / float(sample_rate_hz))
+
+
 class RigVerifier:
     """Runs the verification of one unit on the rig (implements ``provision.Verifier``).
 
@@ -99,17 +112,17 @@ class RigVerifier:
         self.sample_rate_hz = int(sample_rate_hz)
         self.options = options if options is not None else SequenceOptions()
 
-    def _capture(self, sensor: Sensor, step: Step) -> tuple[np.ndarray, np.ndarray, int, int]:
+    def _capture(self, sensor: Sensor, step: Step, settle_s: float) -> tuple[np.ndarray, np.ndarray, int, int]:
         """(mean accel m/s^2, mean gyro rad/s, samples, uncorrected samples) of a settled window."""
-        out = self._window(sensor)
+        out = self._window(sensor, settle_s)
         check_rig_holding(self.rig.state(), step, self.options)
         return out
 
-    def _window(self, sensor: Sensor) -> tuple[np.ndarray, np.ndarray, int, int]:
+    def _window(self, sensor: Sensor, settle_s: float) -> tuple[np.ndarray, np.ndarray, int, int]:
         """:meth:`_capture` without the rig check (one sensor of a shared hold)."""
         lim = self.limits
         sensor.drain()
-        sensor.read_samples(duration_s=lim.settle_s)  # moving-average window and settle guard
+        sensor.read_samples(duration_s=settle_s)  # moving-average window and settle guard
         block = sensor.read_samples(duration_s=lim.hold_s)
         n = len(block)
         if n == 0:
@@ -156,6 +169,8 @@ class RigVerifier:
         verification is void then. The rig is brought back to rest and every sensor back to RAW output.
         """
         pose_step, rate_step = self._steps()
+        settles = [settle_before_window(self.limits, moving_average_length=image.ma_length,
+                                        sample_rate_hz=self.sample_rate_hz) for _, image in units]
         state: list[VerificationResult | StationError | None] = [None] * len(units)
         checks: list[list[Measurement]] = [[] for _ in units]
         counts = np.zeros((len(units), 2), dtype=int)
@@ -178,7 +193,7 @@ class RigVerifier:
             def hold(step: Step) -> None:
                 def one(k: int) -> None:
                     sensor = units[k][0]
-                    a, w, n, u = self._window(sensor)
+                    a, w, n, u = self._window(sensor, settles[k])
                     counts[k] += (n, u)
                     checks[k].extend(self._pose_checks(sensor, a, w) if step is pose_step
                                      else self._rate_checks(sensor, a, w))
@@ -210,15 +225,17 @@ class RigVerifier:
         pose_step, rate_step = self._steps()
         checks: list[Measurement] = []
         samples = uncorrected = 0
+        settle = settle_before_window(self.limits, moving_average_length=image.ma_length,
+                                      sample_rate_hz=self.sample_rate_hz)
         sensor.set_output("corrected")
         try:
             sensor.start_stream(self.sample_rate_hz)
             drive_rig(self.rig, pose_step, self.options)
-            a, w, n, u = self._capture(sensor, pose_step)
+            a, w, n, u = self._capture(sensor, pose_step, settle)
             samples, uncorrected = samples + n, uncorrected + u
             checks.extend(self._pose_checks(sensor, a, w))
             drive_rig(self.rig, rate_step, self.options)
-            a, w, n, u = self._capture(sensor, rate_step)
+            a, w, n, u = self._capture(sensor, rate_step, settle)
             samples, uncorrected = samples + n, uncorrected + u
             checks.extend(self._rate_checks(sensor, a, w))
         finally:

@@ -31,6 +31,7 @@ from pymodbus.server import ModbusTcpServer
 from station.chamber import registers as reg
 from station.chamber.registers import HR, IR, AlarmCode, Mode, Status
 from station.kernel.clock import Clock
+from station.sim.device_heartbeat import DeviceHeartbeat
 from station.sim.modbus_server import ThreadedModbusServer
 
 
@@ -118,16 +119,13 @@ class ChamberModel:
         self.ramp_k_per_min = 0.0
         self.mode = Mode.STOP
         self.alarm_code = 0
-        self.watchdog_armed = False
-        self.last_heartbeat_t = t0
-        self.heartbeat_echo = 0
+        self.heartbeat = DeviceHeartbeat(t0, reg.ALIVE_PERIOD_S)
         self._wsp = self.ambient_degc
         self._in_band_s = 0.0
         # integrated history: times, air, load (grown per step)
         self._t = [t0]
         self._air = [self.ambient_degc]
         self._load = [self.ambient_degc]
-        self._alive_frozen: int | None = None
         self.log: list[tuple[float, str]] = []  # (time, event) for tests and reports
 
     # ------------------------------------------------------------------ the plant
@@ -183,8 +181,8 @@ class ChamberModel:
         """Integrate up to now, applying the watchdog and injected alarms on the way; returns now."""
         with self._lock:
             now = self.clock.now()
-            deadline = self.last_heartbeat_t + self.holding[HR.WATCHDOG_S]
-            if self.watchdog_armed and not self.alarm_code and now > deadline:
+            deadline = self.heartbeat.deadline(self.holding[HR.WATCHDOG_S])
+            if deadline is not None and not self.alarm_code and now > deadline:
                 self._advance(deadline)
                 self._trip(AlarmCode.WATCHDOG, "heartbeat not refreshed")
             if self.faults.alarm_code:
@@ -242,16 +240,14 @@ class ChamberModel:
                 if self.mode == Mode.RUN:
                     self._wsp = self._air[-1] if self.ramp_k_per_min > 0 else self.setpoint_degc
                 self.log.append((now, f"mode {self.mode.name}"))
-            if HR.HEARTBEAT in written and (not self.watchdog_armed or image[HR.HEARTBEAT] != self.heartbeat_echo):
-                self.watchdog_armed = True
-                self.heartbeat_echo = image[HR.HEARTBEAT]
-                self.last_heartbeat_t = now
+            if HR.HEARTBEAT in written:
+                self.heartbeat.written(image[HR.HEARTBEAT], now)
             if HR.ALARM_ACK in written and image[HR.ALARM_ACK] == 1:
                 self.holding[HR.ALARM_ACK] = 0
                 if self.alarm_code and not self.faults.alarm_code:
                     self.log.append((now, f"alarm {self.alarm_code} acknowledged"))
                     self.alarm_code = 0
-                    self.last_heartbeat_t = now
+                    self.heartbeat.refreshed(now)
                     self.mode = Mode.STOP  # after an alarm the operator (or station) restarts explicitly
                     self.holding[HR.MODE] = int(Mode.STOP)
             return None
@@ -266,18 +262,9 @@ class ChamberModel:
                 status |= Status.AT_SETPOINT
         if self.alarm_code:
             status |= Status.ALARM
-        if self.watchdog_armed:
+        if self.heartbeat.armed:
             status |= Status.WATCHDOG_ARMED
         return status
-
-    def _alive(self, now: float) -> int:
-        count = int((now - self.t_boot) / reg.ALIVE_PERIOD_S) & 0xFFFF
-        if self.faults.alive_stalled:
-            if self._alive_frozen is None:
-                self._alive_frozen = count
-            return self._alive_frozen
-        self._alive_frozen = None
-        return count
 
     def input_registers(self) -> dict[int, int]:
         """Every defined input register (address -> value) as of now."""
@@ -286,8 +273,8 @@ class ChamberModel:
             out: dict[int, int] = {
                 IR.STATUS: int(self._status()),
                 IR.ALARM_CODE: self.alarm_code,
-                IR.ALIVE: self._alive(now),
-                IR.HEARTBEAT_ECHO: self.heartbeat_echo,
+                IR.ALIVE: self.heartbeat.alive(now, self.faults.alive_stalled),
+                IR.HEARTBEAT_ECHO: self.heartbeat.echo,
                 IR.MAP_VERSION: reg.MAP_VERSION,
                 IR.FIRMWARE_VERSION: self.firmware_version,
             }

@@ -119,7 +119,8 @@ def run_demo(
         config = StationConfig(
             sim.rig_url, tuple(sim.sensor_urls), station_id="demo", db_url=db_url, record=record,
             limits_path=limits_path, out_dir=out_dir, clock_scale=sim.scale, plan=plan, provision=provision,
-            rig_options=sim.rig_client_options(), lot=lot, operator=operator,
+            rig_options=sim.rig_client_options(), sensor_options=sim.sensor_client_options(), lot=lot,
+            operator=operator,
         )
         display = ProgressDisplay(console, [u.truth.serial for u in sim.units], sim.scale)
         station = Station(config, clock=sim.clock, options=options, subscribers=[display, *subscribers],
@@ -386,8 +387,8 @@ def run_thermal_demo(
         config = StationConfig(
             sim.rig_url, tuple(sim.sensor_urls), station_id="demo-thermal", db_url=db_url, record=record,
             limits_path=limits_path, out_dir=out_dir, clock_scale=sim.scale, provision=True,
-            rig_options=sim.rig_client_options(), chamber_url=sim.chamber_url, thermal=thermal, lot=lot,
-            operator=operator,
+            rig_options=sim.rig_client_options(), sensor_options=sim.sensor_client_options(),
+            chamber_url=sim.chamber_url, thermal=thermal, lot=lot, operator=operator,
         )
         display = ProgressDisplay(console, [u.truth.serial for u in sim.units], sim.scale)
         station = Station(config, clock=sim.clock, subscribers=[display])

@@ -12,6 +12,7 @@ throughput part use it.
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -103,9 +104,28 @@ class SimLine:
     def serial(self, slot: int) -> str:
         return str(self.sim.units[slot].truth.serial)
 
+    def sensor_client_options(self) -> dict[str, Any]:
+        """:func:`~station.sensor.open_sensor` keyword arguments for this line's simulated sensors.
+
+        The simulated station's (:meth:`~station.sim.station_sim.SimulatedStation.sensor_client_options`: 5 s per
+        attempt), grown with the rack: these sensors answer from threads of this process, two per unit (its peer
+        and the station's reader) besides the loggers, which take the interpreter in turns of
+        ``sys.getswitchinterval()`` (5 ms): with 64 units one round of them alone is 0.64 s, more than the
+        client's 0.5 s default per attempt, and a loaded host stretches it further. With 0.5 s the soak lost
+        recordings on "did not answer IDENTIFY / GET_STATUS / STOP_STREAM" (15 and 32 of 64 in two runs on a
+        starved host, the first on a scaled clock, the second on the virtual clock). The wall timeout per
+        attempt is ten such rounds, at least the station's: a peer that died is still found, and on the
+        virtual clock the wait costs no simulated time.
+        """
+        base = self.sim.sensor_client_options()
+        timeout = max(float(base.get("command_timeout_s", 0.5)), 10.0 * 2 * self.n * sys.getswitchinterval())
+        # pyserial's write timeout also counts the writer's wait for the interpreter after its bytes went out: a
+        # command to a unit of batch 1 of 64 failed so ("Write timeout") on a host at a load average of 35
+        return {**base, "command_timeout_s": timeout, "write_timeout_s": max(2.0, 3 * timeout)}
+
     def soak(self, slots: Sequence[int], rack_s: float, archive: RackArchive, station: str = "sim-rack") -> SoakReport:
         """The rack role: power ``slots`` on and log each unit's rest for ``rack_s``; store each recording."""
-        sensors = [open_sensor(url, self.clock) for url in self.sim.sensor_urls]
+        sensors = [open_sensor(url, self.clock, **self.sensor_client_options()) for url in self.sim.sensor_urls]
         t0 = self.clock.now()
         try:
             with RelayBoard(self.board_url) as board:
@@ -135,6 +155,7 @@ class SimLine:
                    out_dir: Path | None = None, **kwargs: Any) -> StationConfig:
         """The rig role's station for ``slots``' units (the line plan's rig part, recorded at ``db_url``)."""
         urls = tuple(self.sim.sensor_urls[k] for k in slots)
+        kwargs.setdefault("sensor_options", self.sensor_client_options())
         return StationConfig(self.sim.rig_url, urls, db_url=db_url, out_dir=out_dir, clock_scale=self.scale,
                              provision=True, rig_options=self.sim.rig_client_options(), line=line, **kwargs)
 

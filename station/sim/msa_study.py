@@ -76,7 +76,8 @@ class SimRig:
             config = StationConfig(
                 sim.rig_url, tuple(sim.sensor_urls), station_id=self.station_id, db_url=self.db_url, record=True,
                 limits_path=self.limits_path, out_dir=self.out_dir, clock_scale=self.scale, plan=self.plan, lot=lot,
-                rig_options=sim.rig_client_options(), nest_calibration=nest_calibration,
+                rig_options=sim.rig_client_options(), sensor_options=sim.sensor_client_options(),
+                nest_calibration=nest_calibration,
             )
             return Station(config, clock=sim.clock, options=SequenceOptions(), admit=lambda *_: None).run()
 

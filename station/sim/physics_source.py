@@ -29,7 +29,7 @@ import numpy as np
 from station.kernel.clock import Clock
 from station.kernel.geometry import Kinematics
 from station.kernel.sensor_class import TABLE1, SensorClass
-from station.physics.effects import Effects
+from station.physics.effects import Effects, EffectTruth
 from station.physics.imu import Environment, ImuModel
 from station.physics.unit import UnitTruth
 
@@ -60,6 +60,8 @@ class PhysicsSource:
         reference_degc: the temperature at which the unit's temperature effects are zero (degC).
         mount: the rotation from the sensor frame to its nest's frame (3x3; None: mounted exactly), e.g. a
             nest's mounting error: what the rig moves is the nest, what the sensor measures is in its own frame.
+        effect_change: applied to the SI coefficients ``effects`` realize for the unit, e.g. to give it physics no
+            :class:`Effects` magnitude has (the IEEE 952 polynomial's ``gyro_quadratic``); None: as realized.
     """
 
     def __init__(
@@ -78,8 +80,10 @@ class PhysicsSource:
         temperature_degc: Callable[[np.ndarray], np.ndarray] | None = None,
         reference_degc: float = 25.0,
         mount: np.ndarray | None = None,
+        effect_change: Callable[[EffectTruth], EffectTruth] | None = None,
     ) -> None:
         self.rig = rig
+        self.effect_change = effect_change
         self.mount = None if mount is None else np.asarray(mount, dtype=float).reshape(3, 3)
         self.clock = clock
         self.truth = truth
@@ -111,12 +115,16 @@ class PhysicsSource:
 
     def _new_model(self) -> ImuModel:
         ss = np.random.SeedSequence(self.seed, spawn_key=(self.boots,))
+        effect_truth = None
+        if self.effect_change is not None:
+            effect_truth = self.effect_change(self.effects.realize(
+                self.truth.shapes, latitude_deg=self.latitude_deg, heading_deg=self.heading_deg))
         if self.temperature_degc is not None:
             t_on = self.t_power_on_s
             env = Environment(ambient_degc=self.reference_degc)
             return ImuModel(
                 self.truth, self.sensor_class, self.effects, ss, latitude_deg=self.latitude_deg,
-                heading_deg=self.heading_deg, environment=env,
+                heading_deg=self.heading_deg, environment=env, effect_truth=effect_truth,
                 temperature_degc=lambda t: self.unit_temperature(t_on + np.asarray(t, dtype=float)),
             )
         return ImuModel(
@@ -127,6 +135,7 @@ class PhysicsSource:
             latitude_deg=self.latitude_deg,
             heading_deg=self.heading_deg,
             environment=self.environment,
+            effect_truth=effect_truth,
         )
 
     def power_on(self) -> None:

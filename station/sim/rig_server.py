@@ -35,6 +35,7 @@ from station.kernel.geometry import Kinematics, kinematics_from_angles
 from station.physics.motion import AxisTrajectory
 from station.rig import registers as reg
 from station.rig.registers import HR, IR, AckResult, Command, FaultCode, Status
+from station.sim.device_heartbeat import DeviceHeartbeat
 from station.sim.modbus_server import ThreadedModbusServer
 
 _EPS_RATE = 1e-9  # rad/s: below this an axis is still
@@ -137,13 +138,10 @@ class RigModel:
         self.fault_time: float | None = None
         self.ack_seq = 0
         self.ack_result = int(AckResult.OK)
-        self.watchdog_armed = False
-        self.last_heartbeat_t = t0
-        self.heartbeat_echo = 0
+        self.heartbeat = DeviceHeartbeat(t0, reg.ALIVE_PERIOD_S)
         self.commands: list[tuple[float, int, int]] = []  # (time, command, ack result) log
         self._drop_at: float | None = None
         self._drop_pending = False
-        self._alive_frozen: int | None = None
 
     # ------------------------------------------------------------------ time evolution
 
@@ -166,8 +164,8 @@ class RigModel:
         """Apply everything that happened up to now (watchdog, injected faults); returns now."""
         with self._lock:
             now = self.clock.now()
-            deadline = self.last_heartbeat_t + self.watchdog_s
-            if self.watchdog_armed and not self.fault_code and now > deadline:
+            deadline = self.heartbeat.deadline(self.watchdog_s)
+            if deadline is not None and not self.fault_code and now > deadline:
                 self._trip(FaultCode.WATCHDOG, deadline)
             if self.faults.estop:
                 self._trip(FaultCode.ESTOP, now)
@@ -233,7 +231,7 @@ class RigModel:
                 return AckResult.FAULTED
             self.fault_code = 0
             self.fault_time = None
-            self.last_heartbeat_t = max(self.last_heartbeat_t, now)
+            self.heartbeat.refreshed(now)
             return AckResult.OK
         if self.faults.local_mode:
             return AckResult.NOT_REMOTE
@@ -289,10 +287,8 @@ class RigModel:
             if HR.WATCHDOG_MS in written and not lo <= image[HR.WATCHDOG_MS] <= hi:
                 return ExcCodes.ILLEGAL_VALUE
             self.holding = image
-            if HR.HEARTBEAT in written and (not self.watchdog_armed or image[HR.HEARTBEAT] != self.heartbeat_echo):
-                self.watchdog_armed = True
-                self.heartbeat_echo = image[HR.HEARTBEAT]
-                self.last_heartbeat_t = now
+            if HR.HEARTBEAT in written:
+                self.heartbeat.written(image[HR.HEARTBEAT], now)
             if HR.COMMAND_SEQ in written and image[HR.COMMAND_SEQ] != self.ack_seq:
                 result = self._execute(image[HR.COMMAND], now)
                 self.ack_seq = image[HR.COMMAND_SEQ]
@@ -328,18 +324,9 @@ class RigModel:
             status |= Status.REMOTE
         if not (self.fault_code or self.faults.estop or self.faults.local_mode):
             status |= Status.READY
-        if self.watchdog_armed:
+        if self.heartbeat.armed:
             status |= Status.WATCHDOG_ARMED
         return status
-
-    def _alive(self, now: float) -> int:
-        count = int((now - self.t_boot) / reg.ALIVE_PERIOD_S) & 0xFFFF
-        if self.faults.alive_stalled:
-            if self._alive_frozen is None:
-                self._alive_frozen = count
-            return self._alive_frozen
-        self._alive_frozen = None
-        return count
 
     def readback(self) -> tuple[float, float, float, float, Status]:
         """(roll_deg, pitch_deg, yaw_deg wrapped to [-180, 180), table rate deg/s, status) now."""
@@ -367,8 +354,8 @@ class RigModel:
                 IR.FAULT_CODE: self.fault_code,
                 IR.ACK_SEQ: self.ack_seq,
                 IR.ACK_RESULT: self.ack_result,
-                IR.ALIVE: self._alive(now),
-                IR.HEARTBEAT_ECHO: self.heartbeat_echo,
+                IR.ALIVE: self.heartbeat.alive(now, self.faults.alive_stalled),
+                IR.HEARTBEAT_ECHO: self.heartbeat.echo,
                 IR.MAP_VERSION: reg.MAP_VERSION,
                 IR.FIRMWARE_VERSION: self.firmware_version,
             }

@@ -18,6 +18,7 @@ power cycle.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, Self
@@ -28,7 +29,7 @@ from station.kernel.clock import Clock, SimClock
 from station.kernel.plan import RigPlan, default_plan
 from station.kernel.sensor_class import TABLE1, SensorClass
 from station.kernel.virtual_clock import is_virtual
-from station.physics.effects import Effects
+from station.physics.effects import Effects, EffectTruth
 from station.physics.unit import UnitTruth, draw_unit
 from station.rig import rig_client_options
 from station.sim.chamber_server import SimulatedChamber
@@ -57,6 +58,10 @@ class SimUnit:
     sensor: Any
 
 
+#: Wall seconds the station waits for each answer of a simulated sensor (see ``sensor_client_options``).
+SIM_COMMAND_TIMEOUT_S = 5.0
+
+
 class SimulatedStation:
     """A simulated rig + ``units`` simulated sensors on one clock; subclasses say how they are reached.
 
@@ -83,6 +88,8 @@ class SimulatedStation:
         nest_errors_deg: the rig's configuration: per nest, its mounting error as a small rotation vector
             (deg, about the nest's x, y, z) from the sensor frame to the nest frame; None: perfect nests.
         truth_change: ``(slot, truth) -> truth`` applied to every drawn unit, e.g. a unit that has aged.
+        effect_change: ``(slot, effect truth) -> effect truth`` applied to every unit's realized effects, e.g. a
+            planted gyro k2 (:class:`~station.sim.physics_source.PhysicsSource`'s ``effect_change``).
     """
 
     def __init__(
@@ -103,6 +110,7 @@ class SimulatedStation:
         noise_index: int = 0,
         nest_errors_deg: Sequence[Sequence[float]] | None = None,
         truth_change: Callable[[int, UnitTruth], UnitTruth] | None = None,
+        effect_change: Callable[[int, EffectTruth], EffectTruth] | None = None,
     ) -> None:
         if units < 1:
             raise ValueError("a simulated station needs at least one unit")
@@ -124,6 +132,7 @@ class SimulatedStation:
             raise ValueError(f"unit_keys names {len(self.unit_keys)} units for {self.n_units} slots")
         self.noise_index = int(noise_index)
         self.truth_change = truth_change
+        self.effect_change = effect_change
         self.nest_errors_deg = [tuple(float(v) for v in e) for e in nest_errors_deg] if nest_errors_deg else []
 
     @property
@@ -179,6 +188,8 @@ class SimulatedStation:
                     temperature_degc=self.chamber.load_temperature if self.chamber is not None else None,
                     reference_degc=self.reference_degc,
                     mount=self.nest_mount(k),
+                    effect_change=(None if self.effect_change is None
+                                   else functools.partial(self.effect_change, k)),
                 )
                 sensor = self._start_sensor(source, truth, rate, int(fault_ss.generate_state(1)[0]))
                 self.units.append(SimUnit(k, truth, source, sensor))
@@ -235,6 +246,17 @@ class SimulatedStation:
     def rig_client_options(self) -> dict[str, Any]:
         """:func:`station.rig.open_rig` keyword arguments suited to this station's clock scale."""
         return rig_client_options(self.scale)
+
+    def sensor_client_options(self) -> dict[str, Any]:
+        """:func:`station.sensor.open_sensor` keyword arguments for these simulated sensors.
+
+        A real sensor answers a command within milliseconds, so the station waits 0.5 wall seconds per attempt.
+        A simulated sensor is a thread of a process that also fits units and serves a rig: on a loaded machine
+        its answer can wait behind them for seconds (a line demo at load 28 on 2 cores lost IDENTIFY three times
+        in 0.5 s), which would make a run's verdict depend on the machine's load. It gets 5 s per attempt: a dead
+        link is still found, in 15 s.
+        """
+        return {"command_timeout_s": SIM_COMMAND_TIMEOUT_S}
 
 
 class SimStation(SimulatedStation):

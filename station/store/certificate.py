@@ -23,6 +23,7 @@ from sqlalchemy import select
 
 from station.kernel.display import Display, display_for, display_of_check, format_number
 from station.kernel.errors import StationError
+from station.kernel.found_terms import found_terms
 from station.kernel.limits import GUARD_BAND
 from station.kernel.limits_file import LimitsFile, load_limits
 from station.kernel.parameters import ParameterSet, TriadParams
@@ -226,10 +227,19 @@ def _parameters(params: ParameterSet, checks: dict[str, LimitCheck]) -> list[Cer
             out.append(CertificateParameter(
                 name, group, label, value, std if math.isfinite(std) and std > 0 else math.nan, unit,
                 c.low if c is not None else None, c.high if c is not None else None, verdict, _display(name, unit)))
-    if params.time_offset_s:
-        out.append(CertificateParameter("time_offset_s", "timing", "time offset (unit minus rig)",
-                                        float(params.time_offset_s), math.nan, "s", None, None, "",
-                                        _display("time_offset_s", "s")))
+    # the found terms: a kept one with its value, one the fit estimated but the recording did not determine as "—"
+    # (not determined: no number); a term the fit did not try, or estimated and not kept, has no row
+    labels = {"k2": "scale polynomial k2 {a} (IEEE 952, u²)", "k3": "scale polynomial k3 {a} (IEEE 952, u³)"}
+    found = found_terms(params)
+    for t in found.polynomial:
+        if t.status in ("fitted", "not_determined"):
+            _, term, a = t.name.split(".")
+            out.append(CertificateParameter(t.name, "gyroscope", labels[term].format(a=a), t.value, t.std, t.unit,
+                                            None, None, "", _display(t.name, t.unit)))
+    t = found.time_offset
+    if t.status in ("fitted", "not_determined"):
+        out.append(CertificateParameter("time_offset_s", "timing", "time offset (unit minus rig)", t.value,
+                                        t.std, "s", None, None, "", _display("time_offset_s", "s")))
     return out
 
 

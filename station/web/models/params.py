@@ -1,4 +1,5 @@
-"""A fitted parameter set (``station-params/2``, see :mod:`station.kernel.parameters`) in the JSON API.
+"""A fitted parameter set (``station-params/3``; /1 and /2 read alike, see :mod:`station.kernel.parameters`) in
+the JSON API.
 
 SI units: accelerometer quantities in m/s^2, gyroscope quantities in rad/s, times in s. An
 estimate the recording could not resolve is null. Vectors are per axis (x, y, z); matrices
@@ -63,6 +64,16 @@ class TriadCalibration(BaseModel):
     temp_scale_coeff_std: Matrix3 = _std("temp_scale_coeff")
     scale_nonlinearity: Vector3 = Field(description="k of u + k u|u| per axis (1/unit); zeros where not fitted")
     scale_nonlinearity_std: Vector3 = _std("scale_nonlinearity")
+    scale_quadratic: Vector3 = Field(default=[0.0, 0.0, 0.0],
+                                     description="k2 of the IEEE 952 scale polynomial u + k2 u^2 + k3 u^3 per axis "
+                                                 "(1/unit); zeros where not kept (see found_terms for why)")
+    scale_quadratic_std: Vector3 = Field(default=[0.0, 0.0, 0.0], description="standard uncertainty of "
+                                                                              "scale_quadratic, same unit")
+    scale_cubic: Vector3 = Field(default=[0.0, 0.0, 0.0],
+                                 description="k3 of the IEEE 952 scale polynomial per axis (1/unit^2); zeros where "
+                                             "not kept (see found_terms for why)")
+    scale_cubic_std: Vector3 = Field(default=[0.0, 0.0, 0.0], description="standard uncertainty of scale_cubic, "
+                                                                          "same unit")
 
 
 class ThermalNote(BaseModel):
@@ -77,21 +88,53 @@ class ThermalNote(BaseModel):
     rule: str = Field(description="how the orders were chosen")
 
 
-class CalibrationParameters(BaseModel):
-    """Everything Algorithm 1 and the station need about one calibrated unit (format ``station-params/2``)."""
+class FoundTermEntry(BaseModel):
+    """One found term (:mod:`station.kernel.found_terms`) and whether the recording determined it."""
 
-    format: str = Field(description="the parameter set's format, 'station-params/2'")
+    name: str = Field(description="'time_offset', or 'gyro.k2.x' ... 'gyro.k3.z' (the IEEE 952 polynomial's terms)")
+    status: str = Field(description="fitted (kept, applied by Algorithm 1), not_significant (estimated, below the "
+                                    "Wald threshold: the set holds 0), not_determined (the recording cannot determine "
+                                    "it: no number), beyond_range (time offset beyond what Algorithm 1 applies), "
+                                    "not_fitted (the fit did not try)")
+    value: float | None = Field(description="the value the set holds and Algorithm 1 applies (SI, see unit); null "
+                                            "unless fitted")
+    std: float | None = Field(description="standard uncertainty of the value or of the estimate, same unit; null: "
+                                          "none")
+    unit: str = Field(description="SI unit of value and std: s, 1/(rad/s), 1/(rad/s)^2")
+    estimate: float | None = Field(description="the fit's estimate (also when not kept); null: none")
+    z: float | None = Field(description="estimate / its standard uncertainty (the Wald statistic's root); null: none")
+    reason: str = Field(description="for people: why not kept or not determined, and the rig step that would "
+                                    "determine it")
+
+
+class FoundTermsSummary(BaseModel):
+    """The time offset and the gyro's IEEE 952 polynomial terms with their determinability."""
+
+    time_offset: FoundTermEntry = Field(description="the unit's time offset behind the rig (s)")
+    polynomial: list[FoundTermEntry] = Field(description="gyro k2 x, y, z then k3 x, y, z")
+
+
+class CalibrationParameters(BaseModel):
+    """Everything Algorithm 1 and the station need about one calibrated unit (format ``station-params/3``)."""
+
+    format: str = Field(description="the parameter set's format, 'station-params/1', '/2' or '/3'")
     serial: str = Field(description="the unit's serial number")
     sample_period_s: float = Field(description="T_sampl of Algorithm 1 (s)")
     moving_average_length: int = Field(description="n of the one-sided moving average, eq. (6) (samples)")
     reference_temperature_degc: float | None = Field(description="T_ref of the temperature terms (degC); null: none")
-    time_offset_s: float = Field(description="the unit's sample time minus the rig's (s); 0 when not fitted")
+    time_offset_s: float = Field(description="the unit's sample time minus the rig's (s), applied by Algorithm 1; 0 "
+                                             "when not kept (see found_terms for why)")
+    time_offset_std_s: float = Field(default=0.0, description="standard uncertainty of time_offset_s (s)")
     thermal: ThermalNote = Field(description="whether the temperature terms were fitted, and why not")
     accel: TriadCalibration = Field(description="accelerometer triad (m/s^2)")
     gyro: TriadCalibration = Field(description="gyroscope triad (rad/s)")
     quality: dict[str, Any] = Field(description="fit-quality figures (residual RMS per axis and per segment, ...); "
                                                 "which ones depends on how the set was made")
     source: dict[str, Any] = Field(description="where the parameters came from (software version, samples, ...)")
+    found_terms: FoundTermsSummary | None = Field(
+        default=None, description="the time offset and the gyro polynomial with what the fit could say about each "
+                                  "(derived from the set and its notes)")
 
 
-__all__ = ["AllanNoise", "CalibrationParameters", "Matrix3", "ThermalNote", "TriadCalibration", "Vector3"]
+__all__ = ["AllanNoise", "CalibrationParameters", "FoundTermEntry", "FoundTermsSummary", "Matrix3", "ThermalNote",
+           "TriadCalibration", "Vector3"]

@@ -6,6 +6,7 @@ from datetime import date
 
 from pydantic import BaseModel, Field
 
+from station.kernel.found_terms import found_terms
 from station.store.queries import UnitDetail
 from station.web.models.common import Message, Outcome, OutcomeText, RunId, Serial, StationName, Timestamp
 from station.web.models.params import CalibrationParameters
@@ -120,7 +121,11 @@ class UnitRecord(BaseModel):
     @classmethod
     def of(cls, detail: UnitDetail, checks: list[LimitCheckResult]) -> UnitRecord:
         """The store's account of the unit (:func:`station.store.queries.show_unit`) with its limit checks."""
-        return cls.model_validate({**detail.to_dict(), "checks": checks})
+        d = detail.to_dict()
+        params = detail.latest_params()
+        if params is not None:  # the found terms with their determinability, read from the set and its notes
+            d["latest_params"]["found_terms"] = found_terms(params).to_dict()
+        return cls.model_validate({**d, "checks": checks})
 
 
 __all__ = ["DispositionEntry", "EepromWriteEntry", "LimitCheckResult", "UnitFilter", "UnitOverview", "UnitRecord",

@@ -15,6 +15,7 @@ from fastapi.responses import HTMLResponse, Response
 
 from station.eeprom.image import ImageError
 from station.kernel.errors import StationError
+from station.kernel.found_terms import found_terms
 from station.session.csv_v1 import read_session
 from station.store.quality_index import TESTED
 from station.store.queries import show_unit, unit_image
@@ -77,9 +78,11 @@ def unit_page(request: Request, web: Web, serial: str) -> HTMLResponse:
     recorded = {rec.run_id for rec in recordings(detail)}
     verdict = next((r for r in detail.runs if r.outcome in TESTED and r.run_outcome != "UNFINISHED"), None)
     newest = detail.runs[0] if detail.runs else None
+    params = detail.latest_params()
     return templates.TemplateResponse(request, "unit.html", {
         "d": detail, "checks": checks, "plots": PLOT_NAMES if plot_source(detail) is not None else (),
-        "params": detail.latest_params(), "marginal_fraction": web.marginal_fraction,
+        "params": params, "found": found_terms(params) if params is not None else None,
+        "marginal_fraction": web.marginal_fraction,
         "diag_runs": [r for r in detail.runs if r.run_id in recorded],
         "verdict": verdict, "newest": newest, "checks_run": checks_run,
         "disposition": detail.dispositions[-1] if detail.dispositions else None,
