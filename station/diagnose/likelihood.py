@@ -33,6 +33,7 @@ misspecification :mod:`station.diagnose.robust`; the findings' report entries :m
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import math
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -63,6 +64,11 @@ WARMUP_SIGMAS = 2.0
 REFIT_ROUNDS = 8
 #: Drift-noise correlation matrices kept per T_c (each (m, m) for m blocks).
 GM_CACHE = 48
+#: Cholesky factors of the block covariance kept (each (m, m), the most recently used): the T_c re-fit of a nested
+#: test factors the same covariances for the null and the alternative (the candidate changes the mean, not C).
+CHOL_CACHE = 24
+#: Outcomes of the drift's T_c re-fit kept (:meth:`SensorProblem.refit_drift`).
+REFIT_CACHE = 4
 #: Whether the drift noise q of eq. 3 is bounded in every fit (off: the base model as before):
 #: its wander over the record at most ``Q_BOUND`` times the random-walk test's bound
 #: (:meth:`SensorProblem.drift_noise_max`), i.e. at most the warm-up's own change over the record. Unbounded,
@@ -161,6 +167,11 @@ class ModelQuality:
     block_residual: np.ndarray
 
 
+def _digest(a: np.ndarray) -> bytes:
+    """A digest of an array's bytes: the key of a cached factorization that depends on it."""
+    return hashlib.blake2b(np.ascontiguousarray(a).tobytes(), digest_size=16).digest()
+
+
 def base_drift(t_s: np.ndarray, sd: SensorData) -> np.ndarray:
     """The base fit's warm-up ``b_drift exp(-t/T_c)`` (eq. 3) at the sample times ``t_s`` (s), (n, 3), in the
     sensor's unit (m/s^2 or rad/s); zero on axes where the base fit left it unresolved.
@@ -227,6 +238,11 @@ class SensorProblem:
         self.q = np.zeros(3)
         self.k2 = 0.0
         self._eig_cache: dict[tuple[int, float], tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        #: Cholesky factors by (axis, T_c, q, K^2, white variance's digest), see :meth:`chol`
+        self._chol_cache: dict[tuple[int, float, float, float, bytes], np.ndarray] = {}
+        self._white_key = _digest(self.white)
+        #: outcomes of :meth:`refit_drift` by the state it started from
+        self._refit_cache: dict[tuple[bytes, bytes, float, bytes, tuple[bytes, ...]], _State] = {}
         self._accepted: list[np.ndarray] = []  # block regressors (m, 3, p) of accepted mean effects, see accepted
         #: the sensor class's largest drift-noise variance per axis (U^2), where the caller knows the class
         #: (selection.py, from locator.class_drift_noise): bounds q when an accepted walk's size is fitted
@@ -293,13 +309,14 @@ class SensorProblem:
     def inflated_noise(self, phi: np.ndarray) -> Iterator[None]:
         """Inside: the white block noise variance multiplied by ``phi`` (m, 3), e.g. the final model's dispersion
         (:func:`station.diagnose.robust.dispersion`); afterwards as before."""
-        white, cache = self.white, dict(self._eig_cache)
+        white, key, cache = self.white, self._white_key, dict(self._eig_cache)
         self.white = self.white * phi
+        self._white_key = _digest(self.white)
         self._eig_cache.clear()
         try:
             yield
         finally:
-            self.white = white
+            self.white, self._white_key = white, key
             self._eig_cache.clear()
             self._eig_cache.update(cache)
 
@@ -351,7 +368,25 @@ class SensorProblem:
         Rounds of a grid search around the current T_c (q held), then q, until no T_c moves (at most
         ``REFIT_ROUNDS``): a nested test re-fits the null and the alternative this way, and both must reach
         their optimum, or the alternative's extra round counts as the candidate's gain.
+
+        The re-fit is a function of the state it starts from (T_c, q, K^2, the white variance, the accepted
+        effects): the last :data:`REFIT_CACHE` outcomes are kept by that state (every candidate whose test
+        re-fits the drift starts its null from the same state), and a repeat takes the kept outcome.
         """
+        key = (self.tc.tobytes(), self.q.tobytes(), self.k2, self._white_key,
+               tuple(_digest(a) for a in self._accepted))
+        hit = self._refit_cache.pop(key, None)
+        if hit is None:
+            self._refit_drift()
+            hit = self._snapshot()
+            if len(self._refit_cache) >= REFIT_CACHE:
+                self._refit_cache.pop(next(iter(self._refit_cache)))
+        else:
+            self._restore(hit)
+        self._refit_cache[key] = hit
+
+    def _refit_drift(self) -> None:
+        """:meth:`refit_drift` without its cache."""
         for _ in range(REFIT_ROUNDS):
             moved = False
             for k in range(3):
@@ -377,6 +412,20 @@ class SensorProblem:
              white: np.ndarray | None = None) -> np.ndarray:
         """Cholesky factor of axis ``k``'s block covariance; ``rows``: only those blocks (default all),
         ``white``: the white block variance (m, 3) to use instead of :attr:`white`."""
+        if rows is None and white is None:
+            # the factor depends on T_c (through the GM correlation), q, K^2 and the white variance only: kept for
+            # the most recent CHOL_CACHE of them (the same bytes as a new factorization)
+            key = (k, float(self.tc[k]), float(q), float(k2), self._white_key)
+            hit = self._chol_cache.pop(key, None)
+            if hit is None:
+                c = q * self.gm[k] + k2 * self.tmin
+                c[np.diag_indices_from(c)] += self.white[:, k]
+                hit = linalg.cholesky(c, lower=True, check_finite=False)
+                hit.flags.writeable = False
+                if len(self._chol_cache) >= CHOL_CACHE:
+                    self._chol_cache.pop(next(iter(self._chol_cache)))
+            self._chol_cache[key] = hit
+            return hit
         white = self.white if white is None else white
         if rows is None:
             c = q * self.gm[k] + k2 * self.tmin
