@@ -435,7 +435,10 @@ class SensorProblem:
             c[np.diag_indices_from(c)] += white[rows, k]
         return linalg.cholesky(c, lower=True, check_finite=False)
 
-    def _axis_nll(self, k: int, q: float, k2: float, extra: np.ndarray | None) -> float:
+    def _axis_nll(self, k: int, q: float, k2: float, extra: np.ndarray | None, *, reml: bool = False) -> float:
+        """Negative log-likelihood of axis k with the mean columns profiled out; ``reml``: the restricted
+        likelihood (+ 1/2 log det X^T C^-1 X over the design's identifiable directions), whose variance
+        components are not biased low by the mean terms' share of the data (Patterson & Thompson 1971)."""
         try:
             ch = self.chol(k, q, k2)
         except linalg.LinAlgError:
@@ -445,7 +448,11 @@ class SensorProblem:
         yw = linalg.solve_triangular(ch, self.y[:, k], lower=True, check_finite=False)
         beta, *_ = linalg.lstsq(xw, yw, check_finite=False)
         r = yw - xw @ beta
-        return 0.5 * float(r @ r) + float(np.log(np.diag(ch)).sum())
+        nll = 0.5 * float(r @ r) + float(np.log(np.diag(ch)).sum())
+        if reml:
+            sv = np.linalg.svd(xw, compute_uv=False)
+            nll += float(np.log(sv[sv > RCOND ** 0.5 * sv[0]]).sum())
+        return nll
 
     def _eigen(self, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(1/sqrt(d), lambda, V) with ``D^-1/2 GM D^-1/2 = V diag(lambda) V^T`` for axis k at its current T_c,
@@ -459,7 +466,8 @@ class SensorProblem:
             self._eig_cache[key] = hit
         return hit
 
-    def _profile_q(self, k: int, k2: float, extra: np.ndarray | None, q_max: float = math.inf) -> tuple[float, float]:
+    def _profile_q(self, k: int, k2: float, extra: np.ndarray | None, q_max: float = math.inf, *,
+                   reml: bool = False) -> tuple[float, float]:
         """(q, nll) maximizing the likelihood of axis k over 0 <= q <= ``q_max`` at fixed K^2.
 
         Without a random walk (K^2 = 0) the covariance is diagonalized once per T_c (:meth:`_eigen`) and
@@ -467,7 +475,7 @@ class SensorProblem:
         """
         q0 = float(np.median(self.white[:, k]))
         hi = 10.0 if not math.isfinite(q_max) else min(10.0, math.log(max(q_max, 1e-300) / q0))
-        if k2 == 0.0:
+        if k2 == 0.0 and not reml:
             s, lam, vec = self._eigen(k)
             x = self.base[k] if extra is None else np.column_stack([self.base[k], extra])
             xt = vec.T @ (s[:, None] * x)
@@ -482,7 +490,7 @@ class SensorProblem:
                 return 0.5 * float(np.sum(w * r * r)) + 0.5 * float(np.log1p(q * lam).sum()) + const
         else:
             def nll(q: float) -> float:
-                return self._axis_nll(k, q, k2, extra)
+                return self._axis_nll(k, q, k2, extra, reml=reml)
         nll0 = nll(0.0)
         if q_max <= 0.0 or hi <= -12.0:
             return 0.0, nll0
@@ -786,30 +794,34 @@ class SensorProblem:
         the wander: K from there is low and its curvature ignores the trade between the two. Here K^2 and q are
         fitted together (alternating profiles from the test's point) and K's uncertainty is the curvature of the
         profile likelihood in log K^2 with q re-fitted at every K^2; q bounded by the sensor class where it is known
-        (:attr:`q_class`): the drift noise of eq. 3 must not take up the wander."""
+        (:attr:`q_class`): the drift noise of eq. 3 must not take up the wander. Both on the restricted likelihood
+        (REML, :meth:`_axis_nll`): the mean terms (b_stat, the warm-up, the row of M, accepted effects) take up the
+        walk's slowest part, and maximum likelihood then states K low (by about 0.4 of its own uncertainty on the
+        independent generator's development seeds)."""
         if self.q_class is not None:
             q_max = [min(a, float(b)) for a, b in zip(q_max, self.q_class, strict=True)]
             qs = [min(a, b) for a, b in zip(qs, q_max, strict=True)]
         for _ in range(WALK_SIZE_ROUNDS):
-            qs = [self._profile_q(k, k2, extra[k], q_max=q_max[k])[0] for k in range(3)]
-            _, k2, _ = self._profile_k2(qs, extra)
+            qs = [self._profile_q(k, k2, extra[k], q_max=q_max[k], reml=True)[0] for k in range(3)]
+            _, k2, _ = self._profile_k2(qs, extra, reml=True)
 
         def prof(v: float) -> float:
-            return sum(self._profile_q(k, v, extra[k], q_max=q_max[k])[1] for k in range(3))
+            return sum(self._profile_q(k, v, extra[k], q_max=q_max[k], reml=True)[1] for k in range(3))
 
         h = 0.3
         mid = prof(k2)
         curv = (prof(k2 * math.exp(h)) - 2.0 * mid + prof(k2 * math.exp(-h))) / h**2
         return math.sqrt(k2), math.sqrt(k2) * 0.5 / math.sqrt(curv) if curv > 0 else math.nan
 
-    def _profile_k2(self, qs: list[float], extra: list[np.ndarray | None]) -> tuple[float, float, float]:
+    def _profile_k2(self, qs: list[float], extra: list[np.ndarray | None], *,
+                    reml: bool = False) -> tuple[float, float, float]:
         """(nll, K^2, std of K) with a random walk ``K^2 min(t_i, t_j)`` shared by the three axes profiled at the
         current T_c and the drift noise ``qs``; ``extra``: per axis the mean columns besides the base terms."""
         k2_0 = float(np.median(self.white)) / max(float(self.sd.t_s.max()), 1.0)
         grid = [k2_0 * 10.0 ** e for e in np.arange(-2.0, 3.01, 1.0)]
 
         def total(k2: float) -> float:
-            return sum(self._axis_nll(k, qs[k], k2, extra[k]) for k in range(3))
+            return sum(self._axis_nll(k, qs[k], k2, extra[k], reml=reml) for k in range(3))
 
         vals = [total(g) for g in grid]
         i = int(np.argmin(vals))
