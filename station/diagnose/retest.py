@@ -82,7 +82,7 @@ class SizeCheck:
             engineering(self.effect, self.sensor, self.final_class_q, cov),
             round(self.change_over_std, 2),
             ("the value differs between the selection step, the final model and the final model with eq. 3's drift "
-             "noise bounded by the sensor class by more than its uncertainty: the spread is part of the uncertainty")
+             "noise bounded by the sensor class by more than its uncertainty: the spread is the uncertainty")
             if self.change_over_std > SPREAD_STD else "stable")
 
 
