@@ -241,6 +241,9 @@ class SensorProblem:
         #: Cholesky factors by (axis, T_c, q, K^2, white variance's digest), see :meth:`chol`
         self._chol_cache: dict[tuple[int, float, float, float, bytes], np.ndarray] = {}
         self._white_key = _digest(self.white)
+        #: the held-out folds of the last covariance state (:meth:`_heldout_folds`)
+        self._folds: tuple[tuple[bytes, bytes, float, bytes], list[tuple[np.ndarray, np.ndarray,
+                                                                         list[_FoldAxis]]]] | None = None
         #: outcomes of :meth:`refit_drift` by the state it started from
         self._refit_cache: dict[tuple[bytes, bytes, float, bytes, tuple[bytes, ...]], _State] = {}
         self._accepted: list[np.ndarray] = []  # block regressors (m, 3, p) of accepted mean effects, see accepted
@@ -642,7 +645,18 @@ class SensorProblem:
     def _heldout_folds(self) -> list[tuple[np.ndarray, np.ndarray, list[_FoldAxis]]]:
         """Per fold (held-out mask, training mask, per axis): the block covariance's factorizations, which
         do not depend on the mean model: Cholesky of the training part, kriging weights of the held-out
-        blocks on the training blocks, Cholesky of the conditional covariance (None when not positive)."""
+        blocks on the training blocks, Cholesky of the conditional covariance (None when not positive). Kept for the
+        last covariance state (T_c, q, K^2, white variance): every candidate of a selection step that passes asks for
+        the same folds."""
+        key = (self.tc.tobytes(), self.q.tobytes(), self.k2, self._white_key)
+        if self._folds is not None and self._folds[0] == key:
+            return self._folds[1]
+        out = self._new_heldout_folds()
+        self._folds = (key, out)
+        return out
+
+    def _new_heldout_folds(self) -> list[tuple[np.ndarray, np.ndarray, list[_FoldAxis]]]:
+        """:meth:`_heldout_folds` without the kept folds."""
         seg = self.sd.segment % FOLDS
         seg[self.sd.segment == self.sd.segment.min()] = -1
         covs = []
