@@ -412,8 +412,15 @@ def _retested(f: Finding, size: retest.SizeCheck | None) -> Finding:
     f = replace(f, evidence=replace(f.evidence, retest=size.result()), confidence=conf)
     if f.theta is None or f.theta_std is None or REGISTRY[f.effect].engineering is not None:
         return f  # (pose_tilt: its entry per pose pair is made from the full covariance, left as fitted)
+    spread = size.spread
+    if not np.any(spread > 0):
+        return f
     std = size.stated_std(f.theta_std)
-    return replace(f, parameters=engineering(f.effect, f.sensor, f.theta, np.diag(std**2)), theta_std=std)
+    params = dict(f.parameters)
+    params.setdefault("std_fit", params.get("std"))  # the fit's own (the bootstrap's step keeps it where it widened)
+    params["std"] = engineering(f.effect, f.sensor, f.theta, np.diag(std**2))["std"]
+    params["std_spread"] = engineering(f.effect, f.sensor, f.theta, np.diag(spread**2))["std"]
+    return replace(f, parameters=params, theta_std=std)
 
 
 def _kind_codes(labels: Collection[str]) -> list[int]:
