@@ -8,7 +8,9 @@ finding is *covered* when every parameter is within 3 of its stated uncertaintie
 share for the value re-fitted under the final model (``evidence.retest``). Not covered here: ``outliers`` (a rate,
 not a drawn parameter) and ``pose_tilt`` (per pose, drawn per visit's axis).
 
-Seeds: development used 0-999; report seeds start at ``--base``.
+Seeds: development used 0-999 (and 200000-203999 for the walk's restricted likelihood and the spread in the stated
+std); report seeds start at ``--base`` (140000+, then 210000-212999). Per finding the line shows z per parameter
+and, for a scalar effect, the value, stated std and truth (SI).
 
 Run: ``python benchmarks/bench_diagnose_magnitudes.py [--base 10000] [--per 10] [--effects lever_arm,...]``
 """
@@ -35,8 +37,10 @@ from station.diagnose.effect_registry import unit_factor
 EFFECTS = {**{k: v for k, v in SINGLE.items() if k not in ("outliers", "pose_tilt")}, "time_offset": 5.0}
 
 
-def zscores(rec: indepgen.Recording, findings: list) -> list[tuple[str, np.ndarray, np.ndarray | None]]:
-    """Per finding with a recorded truth: (sensor, z of the stated value, z of the final model's value or None)."""
+def zscores(rec: indepgen.Recording, findings: list
+            ) -> list[tuple[str, np.ndarray, np.ndarray | None, np.ndarray, np.ndarray, np.ndarray]]:
+    """Per finding with a recorded truth: (sensor, z of the stated value, z of the final model's value or None,
+    value, stated std, truth (SI))."""
     out = []
     for f in findings:
         truth = rec.truth.get(f"{f.effect} {f.sensor}")
@@ -54,7 +58,7 @@ def zscores(rec: indepgen.Recording, findings: list) -> list[tuple[str, np.ndarr
             vf = np.asarray(rt.final_model["value"], dtype=float).ravel() / unit_factor(f.effect, f.sensor)[0]
             if vf.shape == t.shape:
                 zf = (vf - t) / np.where(s > 0, s, np.nan)
-        out.append((f.sensor, z, zf))
+        out.append((f.sensor, z, zf, v, s, t))
     return out
 
 
@@ -79,12 +83,13 @@ def main() -> None:
             times.append(time.process_time() - t0)
             mine = [f for f in rep.findings if f.effect == name]
             named[name] = named.get(name, 0) + bool(mine)
-            for sensor, z, zf in zscores(rec, mine):
+            for sensor, z, zf, v, s, t in zscores(rec, mine):
                 zmax = float(np.nanmax(np.abs(z)))
                 zfmax = None if zf is None else float(np.nanmax(np.abs(zf)))
                 rows.setdefault(name, []).append((zmax, zfmax))
                 print(f"  {name:24s} seed {seed} {sensor}: max |z| stated {zmax:6.2f}"
-                      f"{'' if zfmax is None else f', final model {zfmax:6.2f}'}  z {np.round(z, 2).tolist()}",
+                      f"{'' if zfmax is None else f', final model {zfmax:6.2f}'}  z {np.round(z, 2).tolist()}"
+                      + (f"  value {v[0]:.4g} std {s[0]:.3g} truth {t[0]:.4g}" if len(t) == 1 else ""),
                       flush=True)
     print()
     print(f"magnitudes on the independent generator, seeds {args.base}-{args.base + args.per * len(names) - 1}, "

@@ -1,10 +1,17 @@
 """Diagnosis time and peak memory against the number of samples (issue 16, "Speed").
 
-One recording per size from the station's simulator (``simulate_session``, seed 3, a 30 mm lever arm so
-the whole chain runs: base fit, selection, simulator re-run, compensation check). The first row is the
-issue's 15-minute 100 Hz case (target < 5 s); the others keep the same 15-minute plan and raise the sample
-rate until the recording holds the wanted number of rows (up to the issue's 4.9 M rows), so the rows
-show how the per-sample parts grow (the block problem has the same blocks at every rate).
+One recording per size and case from the station's simulator (``simulate_session``, seed 3). A case is the
+effect planted (``--cases``): by default a 30 mm lever arm (the whole chain runs: base fit, selection, simulator
+re-run, compensation check) and a 3 ms time offset (its findings on both sensors also run the compensation's two
+calibration fits with the time offset estimated, and the delay's refinement); ``--cases library`` plants each
+library effect of the station's simulator alone at 4x its concealed magnitude (``bench_diagnose.CONCEALED``), to
+find the slowest. The 9e4 rows are the 15-minute 100 Hz case (target < 5 s); the other sizes keep the same
+15-minute plan and raise the sample rate until the recording holds the wanted number of rows (up to 4.9 M rows),
+so the rows show how the per-sample parts grow (the block problem has the same blocks at every rate).
+
+``--code DIR[,DIR...]``: the checkouts to time (each child runs with that directory first on ``PYTHONPATH``), in
+turn on the same recording (before/after comparisons on a shared machine: the runs alternate, so load drifts hit
+both alike); one CPU column per checkout.
 
 Every measurement runs ``station.diagnose.diagnose`` in a fresh subprocess (``--repeats`` of them per
 size, median shown), which loads the recording from an ``.npz`` and reports:
@@ -15,8 +22,10 @@ size, median shown), which loads the recording from an ``.npz`` and reports:
 - ``tracemalloc MB`` (with ``--tracemalloc``): the peak of memory allocated during ``diagnose`` (numpy
   arrays included), from one more run with ``tracemalloc`` on (its time is not used).
 
-Run: ``python benchmarks/bench_diagnose_scale.py [--sizes 9e4,1e6,4.9e6] [--repeats 3] [--tracemalloc]``
-(``nice`` it on a shared machine; about 20 min with the defaults on the shared 2-core machine at load 6-8).
+Run: ``python benchmarks/bench_diagnose_scale.py [--sizes 9e4,1e6,4.9e6] [--repeats 3] [--tracemalloc]
+[--cases lever_arm=30,time_offset=3 | library] [--code DIR,DIR]``
+(``nice`` it on a shared machine; about 40 min with the defaults on the shared 2-core machine at load 6-8;
+``--sizes 9e4`` alone takes about a minute).
 """
 
 from __future__ import annotations
@@ -38,8 +47,9 @@ BASE_RATE_HZ = 100.0
 PLAN_S = 900.0
 
 
-def _make(rows: float, path: Path) -> tuple[int, float, float]:
-    """Simulate the recording with about ``rows`` samples into ``path``: (rows, rate Hz, duration s)."""
+def _make(rows: float, path: Path, case: str = "lever_arm=30") -> tuple[int, float, float]:
+    """Simulate the recording with about ``rows`` samples and the effect ``case`` (``NAME=VALUE``) into ``path``:
+    (rows, rate Hz, duration s)."""
     from station.physics.effects import Effects
     from station.sim.session_sim import default_plan, simulate_session
 
@@ -49,7 +59,7 @@ def _make(rows: float, path: Path) -> tuple[int, float, float]:
     plan = dataclasses.replace(plan, rest_s=PLAN_S - (short.t_s[-1] - short.t_s[0]))
     rate = rows / PLAN_S if rows > 1.05 * PLAN_S * BASE_RATE_HZ else BASE_RATE_HZ
     plan = dataclasses.replace(plan, sample_rate_hz=float(np.round(rate, 1)))
-    s = simulate_session(3, plan=plan, effects=Effects(lever_arm=30.0)).session
+    s = simulate_session(3, plan=plan, effects=Effects.parse([case])).session
     np.savez(path, **{f: getattr(s, f) for f in FIELDS},
              metadata=json.dumps(dict(s.metadata)), angles=json.dumps({str(k): v for k, v in s.angles_deg.items()}))
     return len(s), plan.sample_rate_hz, float(s.t_s[-1] - s.t_s[0])
@@ -84,10 +94,23 @@ def _rss_now_mb() -> float:
         return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
 
 
-def _child(path: Path, trace: bool) -> dict:
+def _child(path: Path, trace: bool, code: str | None = None) -> dict:
+    env = dict(os.environ)
+    if code:
+        env["PYTHONPATH"] = os.pathsep.join([code, *filter(None, [env.get("PYTHONPATH")])])
     out = subprocess.run([sys.executable, __file__, "--child", str(path)] + (["--trace"] if trace else []),
-                         capture_output=True, text=True, check=True)
+                         capture_output=True, text=True, check=True, env=env)
     return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def _cases(spec: str) -> list[str]:
+    """The ``--cases`` items: ``NAME=VALUE`` effects, or ``library`` for each simulated library effect."""
+    if spec != "library":
+        return [c for c in spec.split(",") if c]
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from bench_diagnose import CONCEALED
+
+    return [f"{name}={4.0 * value:g}" for name, value in CONCEALED.items()]
 
 
 def main() -> None:
@@ -96,6 +119,9 @@ def main() -> None:
                     help="comma-separated sample counts (90 000 and fewer: the 15-min plan at 100 Hz)")
     ap.add_argument("--repeats", type=int, default=3, help="timed subprocesses per size (median)")
     ap.add_argument("--tracemalloc", action="store_true", help="one more run per size with tracemalloc on")
+    ap.add_argument("--cases", default="lever_arm=30,time_offset=3",
+                    help="effects planted, one recording each (NAME=VALUE, comma-separated), or 'library'")
+    ap.add_argument("--code", default="", help="checkouts to time, comma-separated (default: this one)")
     ap.add_argument("--child", help=argparse.SUPPRESS)
     ap.add_argument("--trace", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
@@ -103,24 +129,33 @@ def main() -> None:
         _measure(args.child, args.trace)
         return
     sizes = [float(x) for x in args.sizes.split(",")]
-    print(f"{'rows':>9s} {'rate Hz':>8s} {'min':>5s} {'time s':>8s} {'CPU s':>8s} {'RSS loaded MB':>14s} "
-          f"{'peak RSS MB':>12s} "
-          f"{'tracemalloc MB':>15s}  findings")
+    codes: list[str | None] = [c for c in args.code.split(",") if c] or [None]
+    cpu_heads = " ".join(f"{'CPU s' if c is None else 'CPU s ' + Path(c).name:>14s}" for c in codes)
+    print(f"{'case':24s} {'rows':>9s} {'rate Hz':>8s} {'min':>5s} {'time s':>8s} {cpu_heads} {'RSS loaded MB':>14s} "
+          f"{'peak RSS MB':>12s} {'tracemalloc MB':>15s}  findings")
     with tempfile.TemporaryDirectory() as tmp:
         for k, rows in enumerate(sizes):
-            path = Path(tmp) / f"rec{k}.npz"
-            n, rate, dur = _make(rows, path)
-            runs = [_child(path, False) for _ in range(args.repeats)]
-            traced = None if not args.tracemalloc else _child(path, True)["traced_mb"]
-            med = {key: float(np.median([r[key] for r in runs]))
-                   for key in ("time_s", "cpu_s", "rss_loaded_mb", "maxrss_mb")}
-            tm = "-" if traced is None else f"{traced:.0f}"
-            print(f"{n:9d} {rate:8.1f} {dur / 60:5.1f} {med['time_s']:8.2f} {med['cpu_s']:8.2f} "
-                  f"{med['rss_loaded_mb']:14.0f} "
-                  f"{med['maxrss_mb']:12.0f} {tm:>15s}  {','.join(runs[0]['findings']) or '-'}", flush=True)
-            path.unlink()
-    print(f"median of {args.repeats} subprocess(es) per size" + ("; tracemalloc: one more run per size"
-                                                                 if args.tracemalloc else ""))
+            for case in _cases(args.cases):
+                path = Path(tmp) / f"rec{k}.npz"
+                n, rate, dur = _make(rows, path, case)
+                runs: dict[str | None, list[dict]] = {c: [] for c in codes}
+                for _ in range(args.repeats):  # alternating between the checkouts
+                    for c in codes:
+                        runs[c].append(_child(path, False, c))
+                first = runs[codes[0]]
+                traced = None if not args.tracemalloc else _child(path, True, codes[0])["traced_mb"]
+                med = {key: float(np.median([r[key] for r in first]))
+                       for key in ("time_s", "rss_loaded_mb", "maxrss_mb")}
+                cpus = " ".join(f"{float(np.median([r['cpu_s'] for r in runs[c]])):14.2f}" for c in codes)
+                tm = "-" if traced is None else f"{traced:.0f}"
+                print(f"{case:24s} {n:9d} {rate:8.1f} {dur / 60:5.1f} {med['time_s']:8.2f} {cpus} "
+                      f"{med['rss_loaded_mb']:14.0f} "
+                      f"{med['maxrss_mb']:12.0f} {tm:>15s}  {','.join(first[0]['findings']) or '-'}", flush=True)
+                path.unlink()
+    print(f"median of {args.repeats} subprocess(es) per size and case"
+          + (", alternating between the checkouts" if len(codes) > 1 else "")
+          + ("; tracemalloc: one more run per size" if args.tracemalloc else "")
+          + f"; time s, RSS: the first checkout; load average at the end {os.getloadavg()[0]:.1f}")
 
 
 if __name__ == "__main__":

@@ -33,6 +33,7 @@ misspecification :mod:`station.diagnose.robust`; the findings' report entries :m
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import math
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -63,6 +64,11 @@ WARMUP_SIGMAS = 2.0
 REFIT_ROUNDS = 8
 #: Drift-noise correlation matrices kept per T_c (each (m, m) for m blocks).
 GM_CACHE = 48
+#: Cholesky factors of the block covariance kept (each (m, m), the most recently used): the T_c re-fit of a nested
+#: test factors the same covariances for the null and the alternative (the candidate changes the mean, not C).
+CHOL_CACHE = 24
+#: Outcomes of the drift's T_c re-fit kept (:meth:`SensorProblem.refit_drift`).
+REFIT_CACHE = 4
 #: Whether the drift noise q of eq. 3 is bounded in every fit (off: the base model as before):
 #: its wander over the record at most ``Q_BOUND`` times the random-walk test's bound
 #: (:meth:`SensorProblem.drift_noise_max`), i.e. at most the warm-up's own change over the record. Unbounded,
@@ -161,6 +167,11 @@ class ModelQuality:
     block_residual: np.ndarray
 
 
+def _digest(a: np.ndarray) -> bytes:
+    """A digest of an array's bytes: the key of a cached factorization that depends on it."""
+    return hashlib.blake2b(np.ascontiguousarray(a).tobytes(), digest_size=16).digest()
+
+
 def base_drift(t_s: np.ndarray, sd: SensorData) -> np.ndarray:
     """The base fit's warm-up ``b_drift exp(-t/T_c)`` (eq. 3) at the sample times ``t_s`` (s), (n, 3), in the
     sensor's unit (m/s^2 or rad/s); zero on axes where the base fit left it unresolved.
@@ -227,6 +238,14 @@ class SensorProblem:
         self.q = np.zeros(3)
         self.k2 = 0.0
         self._eig_cache: dict[tuple[int, float], tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        #: Cholesky factors by (axis, T_c, q, K^2, white variance's digest), see :meth:`chol`
+        self._chol_cache: dict[tuple[int, float, float, float, bytes], np.ndarray] = {}
+        self._white_key = _digest(self.white)
+        #: the held-out folds of the last covariance state (:meth:`_heldout_folds`)
+        self._folds: tuple[tuple[bytes, bytes, float, bytes], list[tuple[np.ndarray, np.ndarray,
+                                                                         list[_FoldAxis]]]] | None = None
+        #: outcomes of :meth:`refit_drift` by the state it started from
+        self._refit_cache: dict[tuple[bytes, bytes, float, bytes, tuple[bytes, ...]], _State] = {}
         self._accepted: list[np.ndarray] = []  # block regressors (m, 3, p) of accepted mean effects, see accepted
         #: the sensor class's largest drift-noise variance per axis (U^2), where the caller knows the class
         #: (selection.py, from locator.class_drift_noise): bounds q when an accepted walk's size is fitted
@@ -293,13 +312,14 @@ class SensorProblem:
     def inflated_noise(self, phi: np.ndarray) -> Iterator[None]:
         """Inside: the white block noise variance multiplied by ``phi`` (m, 3), e.g. the final model's dispersion
         (:func:`station.diagnose.robust.dispersion`); afterwards as before."""
-        white, cache = self.white, dict(self._eig_cache)
+        white, key, cache = self.white, self._white_key, dict(self._eig_cache)
         self.white = self.white * phi
+        self._white_key = _digest(self.white)
         self._eig_cache.clear()
         try:
             yield
         finally:
-            self.white = white
+            self.white, self._white_key = white, key
             self._eig_cache.clear()
             self._eig_cache.update(cache)
 
@@ -351,7 +371,25 @@ class SensorProblem:
         Rounds of a grid search around the current T_c (q held), then q, until no T_c moves (at most
         ``REFIT_ROUNDS``): a nested test re-fits the null and the alternative this way, and both must reach
         their optimum, or the alternative's extra round counts as the candidate's gain.
+
+        The re-fit is a function of the state it starts from (T_c, q, K^2, the white variance, the accepted
+        effects): the last :data:`REFIT_CACHE` outcomes are kept by that state (every candidate whose test
+        re-fits the drift starts its null from the same state), and a repeat takes the kept outcome.
         """
+        key = (self.tc.tobytes(), self.q.tobytes(), self.k2, self._white_key,
+               tuple(_digest(a) for a in self._accepted))
+        hit = self._refit_cache.pop(key, None)
+        if hit is None:
+            self._refit_drift()
+            hit = self._snapshot()
+            if len(self._refit_cache) >= REFIT_CACHE:
+                self._refit_cache.pop(next(iter(self._refit_cache)))
+        else:
+            self._restore(hit)
+        self._refit_cache[key] = hit
+
+    def _refit_drift(self) -> None:
+        """:meth:`refit_drift` without its cache."""
         for _ in range(REFIT_ROUNDS):
             moved = False
             for k in range(3):
@@ -377,6 +415,20 @@ class SensorProblem:
              white: np.ndarray | None = None) -> np.ndarray:
         """Cholesky factor of axis ``k``'s block covariance; ``rows``: only those blocks (default all),
         ``white``: the white block variance (m, 3) to use instead of :attr:`white`."""
+        if rows is None and white is None:
+            # the factor depends on T_c (through the GM correlation), q, K^2 and the white variance only: kept for
+            # the most recent CHOL_CACHE of them (the same bytes as a new factorization)
+            key = (k, float(self.tc[k]), float(q), float(k2), self._white_key)
+            hit = self._chol_cache.pop(key, None)
+            if hit is None:
+                c = q * self.gm[k] + k2 * self.tmin
+                c[np.diag_indices_from(c)] += self.white[:, k]
+                hit = linalg.cholesky(c, lower=True, check_finite=False)
+                hit.flags.writeable = False
+                if len(self._chol_cache) >= CHOL_CACHE:
+                    self._chol_cache.pop(next(iter(self._chol_cache)))
+            self._chol_cache[key] = hit
+            return hit
         white = self.white if white is None else white
         if rows is None:
             c = q * self.gm[k] + k2 * self.tmin
@@ -386,7 +438,10 @@ class SensorProblem:
             c[np.diag_indices_from(c)] += white[rows, k]
         return linalg.cholesky(c, lower=True, check_finite=False)
 
-    def _axis_nll(self, k: int, q: float, k2: float, extra: np.ndarray | None) -> float:
+    def _axis_nll(self, k: int, q: float, k2: float, extra: np.ndarray | None, *, reml: bool = False) -> float:
+        """Negative log-likelihood of axis k with the mean columns profiled out; ``reml``: the restricted
+        likelihood (+ 1/2 log det X^T C^-1 X over the design's identifiable directions), whose variance
+        components are not biased low by the mean terms' share of the data (Patterson & Thompson 1971)."""
         try:
             ch = self.chol(k, q, k2)
         except linalg.LinAlgError:
@@ -396,7 +451,11 @@ class SensorProblem:
         yw = linalg.solve_triangular(ch, self.y[:, k], lower=True, check_finite=False)
         beta, *_ = linalg.lstsq(xw, yw, check_finite=False)
         r = yw - xw @ beta
-        return 0.5 * float(r @ r) + float(np.log(np.diag(ch)).sum())
+        nll = 0.5 * float(r @ r) + float(np.log(np.diag(ch)).sum())
+        if reml:
+            sv = np.linalg.svd(xw, compute_uv=False)
+            nll += float(np.log(sv[sv > RCOND ** 0.5 * sv[0]]).sum())
+        return nll
 
     def _eigen(self, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(1/sqrt(d), lambda, V) with ``D^-1/2 GM D^-1/2 = V diag(lambda) V^T`` for axis k at its current T_c,
@@ -410,7 +469,8 @@ class SensorProblem:
             self._eig_cache[key] = hit
         return hit
 
-    def _profile_q(self, k: int, k2: float, extra: np.ndarray | None, q_max: float = math.inf) -> tuple[float, float]:
+    def _profile_q(self, k: int, k2: float, extra: np.ndarray | None, q_max: float = math.inf, *,
+                   reml: bool = False) -> tuple[float, float]:
         """(q, nll) maximizing the likelihood of axis k over 0 <= q <= ``q_max`` at fixed K^2.
 
         Without a random walk (K^2 = 0) the covariance is diagonalized once per T_c (:meth:`_eigen`) and
@@ -418,7 +478,7 @@ class SensorProblem:
         """
         q0 = float(np.median(self.white[:, k]))
         hi = 10.0 if not math.isfinite(q_max) else min(10.0, math.log(max(q_max, 1e-300) / q0))
-        if k2 == 0.0:
+        if k2 == 0.0 and not reml:
             s, lam, vec = self._eigen(k)
             x = self.base[k] if extra is None else np.column_stack([self.base[k], extra])
             xt = vec.T @ (s[:, None] * x)
@@ -433,7 +493,7 @@ class SensorProblem:
                 return 0.5 * float(np.sum(w * r * r)) + 0.5 * float(np.log1p(q * lam).sum()) + const
         else:
             def nll(q: float) -> float:
-                return self._axis_nll(k, q, k2, extra)
+                return self._axis_nll(k, q, k2, extra, reml=reml)
         nll0 = nll(0.0)
         if q_max <= 0.0 or hi <= -12.0:
             return 0.0, nll0
@@ -585,7 +645,18 @@ class SensorProblem:
     def _heldout_folds(self) -> list[tuple[np.ndarray, np.ndarray, list[_FoldAxis]]]:
         """Per fold (held-out mask, training mask, per axis): the block covariance's factorizations, which
         do not depend on the mean model: Cholesky of the training part, kriging weights of the held-out
-        blocks on the training blocks, Cholesky of the conditional covariance (None when not positive)."""
+        blocks on the training blocks, Cholesky of the conditional covariance (None when not positive). Kept for the
+        last covariance state (T_c, q, K^2, white variance): every candidate of a selection step that passes asks for
+        the same folds."""
+        key = (self.tc.tobytes(), self.q.tobytes(), self.k2, self._white_key)
+        if self._folds is not None and self._folds[0] == key:
+            return self._folds[1]
+        out = self._new_heldout_folds()
+        self._folds = (key, out)
+        return out
+
+    def _new_heldout_folds(self) -> list[tuple[np.ndarray, np.ndarray, list[_FoldAxis]]]:
+        """:meth:`_heldout_folds` without the kept folds."""
         seg = self.sd.segment % FOLDS
         seg[self.sd.segment == self.sd.segment.min()] = -1
         covs = []
@@ -737,30 +808,34 @@ class SensorProblem:
         the wander: K from there is low and its curvature ignores the trade between the two. Here K^2 and q are
         fitted together (alternating profiles from the test's point) and K's uncertainty is the curvature of the
         profile likelihood in log K^2 with q re-fitted at every K^2; q bounded by the sensor class where it is known
-        (:attr:`q_class`): the drift noise of eq. 3 must not take up the wander."""
+        (:attr:`q_class`): the drift noise of eq. 3 must not take up the wander. Both on the restricted likelihood
+        (REML, :meth:`_axis_nll`): the mean terms (b_stat, the warm-up, the row of M, accepted effects) take up the
+        walk's slowest part, and maximum likelihood then states K low (by about 0.4 of its own uncertainty on the
+        independent generator's development seeds)."""
         if self.q_class is not None:
             q_max = [min(a, float(b)) for a, b in zip(q_max, self.q_class, strict=True)]
             qs = [min(a, b) for a, b in zip(qs, q_max, strict=True)]
         for _ in range(WALK_SIZE_ROUNDS):
-            qs = [self._profile_q(k, k2, extra[k], q_max=q_max[k])[0] for k in range(3)]
-            _, k2, _ = self._profile_k2(qs, extra)
+            qs = [self._profile_q(k, k2, extra[k], q_max=q_max[k], reml=True)[0] for k in range(3)]
+            _, k2, _ = self._profile_k2(qs, extra, reml=True)
 
         def prof(v: float) -> float:
-            return sum(self._profile_q(k, v, extra[k], q_max=q_max[k])[1] for k in range(3))
+            return sum(self._profile_q(k, v, extra[k], q_max=q_max[k], reml=True)[1] for k in range(3))
 
         h = 0.3
         mid = prof(k2)
         curv = (prof(k2 * math.exp(h)) - 2.0 * mid + prof(k2 * math.exp(-h))) / h**2
         return math.sqrt(k2), math.sqrt(k2) * 0.5 / math.sqrt(curv) if curv > 0 else math.nan
 
-    def _profile_k2(self, qs: list[float], extra: list[np.ndarray | None]) -> tuple[float, float, float]:
+    def _profile_k2(self, qs: list[float], extra: list[np.ndarray | None], *,
+                    reml: bool = False) -> tuple[float, float, float]:
         """(nll, K^2, std of K) with a random walk ``K^2 min(t_i, t_j)`` shared by the three axes profiled at the
         current T_c and the drift noise ``qs``; ``extra``: per axis the mean columns besides the base terms."""
         k2_0 = float(np.median(self.white)) / max(float(self.sd.t_s.max()), 1.0)
         grid = [k2_0 * 10.0 ** e for e in np.arange(-2.0, 3.01, 1.0)]
 
         def total(k2: float) -> float:
-            return sum(self._axis_nll(k, qs[k], k2, extra[k]) for k in range(3))
+            return sum(self._axis_nll(k, qs[k], k2, extra[k], reml=reml) for k in range(3))
 
         vals = [total(g) for g in grid]
         i = int(np.argmin(vals))

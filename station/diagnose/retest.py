@@ -8,9 +8,10 @@
 * **Sizes re-fitted.** A finding's reported value is the one of the forward-selection step that accepted it,
   before the later effects came in, and with eq. 3's drift noise fitted freely. Its size is fitted again in
   the final model (all accepted effects together) with the drift noise free and with it bounded by the
-  sensor class (:func:`station.diagnose.locator.class_drift_noise`). When the three values differ by more
-  than the finding's uncertainty, the finding carries that spread (``evidence.retest``) and is not stated at
-  ``high`` confidence.
+  sensor class (:func:`station.diagnose.locator.class_drift_noise`). The range of the three values (the spread)
+  is added in quadrature to the finding's stated standard deviation (its ``parameters``' ``std``): how much the
+  value depends on the model around it is part of its uncertainty. When the three values differ by more than the
+  finding's uncertainty, the finding is also not stated at ``high`` confidence (``evidence.retest`` holds them).
 """
 
 from __future__ import annotations
@@ -59,10 +60,19 @@ class SizeCheck:
     std: np.ndarray
 
     @property
+    def spread(self) -> np.ndarray:
+        """Per parameter, the range of the three values (SI): how much the value depends on the model around it."""
+        return np.ptp(np.stack([self.reported, self.final, self.final_class_q]), axis=0)
+
+    @property
     def change_over_std(self) -> float:
-        vals = np.stack([self.reported, self.final, self.final_class_q])
-        spread = np.ptp(vals, axis=0)
-        return float(np.max(spread / np.maximum(self.std, 1e-300)))
+        return float(np.max(self.spread / np.maximum(self.std, 1e-300)))
+
+    def stated_std(self, stated: np.ndarray) -> np.ndarray:
+        """The finding's stated standard deviations ``stated`` (SI) with the spread added in quadrature: the
+        statistical uncertainty of one model's value and the value's dependence on the model (which effects are in
+        beside it, how free eq. 3's drift noise is), a type B component in the sense of the GUM (JCGM 100, 4.3)."""
+        return np.sqrt(np.asarray(stated, dtype=float) ** 2 + self.spread**2)
 
     def result(self) -> SizeRetest:
         """The re-test as the finding's evidence carries it (engineering units)."""

@@ -38,7 +38,7 @@ from scipy import linalg
 from station.diagnose import bootstrap, finding_consistency, locator, retest, robust
 from station.diagnose.bootstrap import Bootstrap
 from station.diagnose.candidates import MAX_DELAY_S, Rows, delay_rows
-from station.diagnose.effect_registry import LIBRARY, REGISTRY, RIG_STEPS
+from station.diagnose.effect_registry import LIBRARY, REGISTRY, RIG_STEPS, engineering
 from station.diagnose.likelihood import RCOND, WANDER_LIKE, SensorProblem, Test
 from station.diagnose.reporting import detectable_from, finding, outlier_test
 from station.diagnose.residuals import SENSORS, Baseline, SensorData
@@ -401,14 +401,26 @@ def _locate(prob: SensorProblem, baseline: Baseline, fwd: _Forward, out: _Entrie
 
 
 def _retested(f: Finding, size: retest.SizeCheck | None) -> Finding:
-    """Finding ``f`` with its size under the final model (retest.py) in its evidence; a spread beyond its standard
-    deviation caps a high confidence at medium."""
+    """Finding ``f`` with its size under the final model (retest.py) in its evidence and the spread of the sizes in
+    its stated standard deviation (:meth:`retest.SizeCheck.stated_std`); a spread beyond its standard deviation
+    caps a high confidence at medium."""
     if size is None or not isinstance(f.evidence, Evidence):
         return f
     conf = f.confidence
     if size.change_over_std > retest.SPREAD_STD and conf is not None and conf.level == "high":
         conf = conf.capped("medium", RETEST_CAP)
-    return replace(f, evidence=replace(f.evidence, retest=size.result()), confidence=conf)
+    f = replace(f, evidence=replace(f.evidence, retest=size.result()), confidence=conf)
+    if f.theta is None or f.theta_std is None or REGISTRY[f.effect].engineering is not None:
+        return f  # (pose_tilt: its entry per pose pair is made from the full covariance, left as fitted)
+    spread = size.spread
+    if not np.any(spread > 0):
+        return f
+    std = size.stated_std(f.theta_std)
+    params = dict(f.parameters)
+    params.setdefault("std_fit", params.get("std"))  # the fit's own (the bootstrap's step keeps it where it widened)
+    params["std"] = engineering(f.effect, f.sensor, f.theta, np.diag(std**2))["std"]
+    params["std_spread"] = engineering(f.effect, f.sensor, f.theta, np.diag(spread**2))["std"]
+    return replace(f, parameters=params, theta_std=std)
 
 
 def _kind_codes(labels: Collection[str]) -> list[int]:
