@@ -1,4 +1,4 @@
-"""The diagnosis study on recordings of the independent generator (``tests/indepgen.py``, issue 16).
+"""The diagnosis study on recordings of the independent generator (``tests/indepgen.py``).
 
 Recordings with no missing physics (nulls), one effect (each library effect, the IEEE even and odd
 scale terms, delays of 1-20 ms), two effects (pairs), and physics outside the library (``wobble``,

@@ -1,4 +1,4 @@
-"""Diagnosis time and peak memory against the number of samples (issue 16, "Speed").
+"""Diagnosis time and peak memory against the number of samples.
 
 One recording per size and case from the station's simulator (``simulate_session``, seed 3). A case is the
 effect planted (``--cases``): by default a 30 mm lever arm (the whole chain runs: base fit, selection, simulator

@@ -1,4 +1,4 @@
-"""The goodness-of-fit verdict (issue 15): false alarms on good simulated recordings, and detection.
+"""The goodness-of-fit verdict: false alarms on good simulated recordings, and detection.
 
     python benchmarks/bench_goodness.py --seeds 300:380 [--random-plan]      # false alarms
     python benchmarks/bench_goodness.py --seeds 500:510 --power               # detection of contradictions

@@ -1,4 +1,4 @@
-"""Issue 18 (model half): the thermal terms of the fit, on simulated units at climate-chamber temperature plateaus.
+"""The thermal terms of the fit, on simulated units at climate-chamber temperature plateaus.
 
 Every unit runs the default plan (rest, six poses, +-50/100/200 deg/s about each axis) at four chamber plateaus,
 25 -> 45 -> 5 -> 25 degC (a 600 s soak before each later plateau, the unit lagging the chamber by 150 s, its own

@@ -1,4 +1,4 @@
-"""An independent recording generator for tests and benchmarks of ``station.diagnose`` (issue 16).
+"""An independent recording generator for tests and benchmarks of ``station.diagnose``.
 
 Written apart from ``station/sim`` and ``station/physics``: the rig's motion is a chain of
 ``scipy.spatial.transform`` rotations (``Slerp`` between poses with a cosine speed profile, a

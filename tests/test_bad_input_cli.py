@@ -1,4 +1,4 @@
-"""Issue 15: every command refuses bad input with one line and exit 1 or 2; hypothesis for every loader."""
+"""Every command refuses bad input with one line and exit 1 or 2; hypothesis for every loader."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Issue 15: inputs checked against physics before the fit, and the goodness-of-fit verdict after it."""
+"""Inputs checked against physics before the fit, and the goodness-of-fit verdict after it."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The diagnosis says which of its findings the station's calibration compensates (issue 18, item 4)."""
+"""The diagnosis says which of its findings the station's calibration compensates."""
 
 from __future__ import annotations
 

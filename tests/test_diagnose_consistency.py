@@ -1,4 +1,4 @@
-"""Effect-specific consistency checks and the segment bootstrap of the diagnosis (issue 16, item 1).
+"""Effect-specific consistency checks and the segment bootstrap of the diagnosis.
 
 Recordings of the independent generator (tests/indepgen.py), development seeds (0-999) only.
 """

@@ -1,4 +1,4 @@
-"""The diagnosis on recordings of the independent generator (tests/indepgen.py, issue 16).
+"""The diagnosis on recordings of the independent generator (tests/indepgen.py).
 
 Seeds here are development seeds (0-999); the benchmark reports seeds from 10000
 (benchmarks/bench_diagnose_indep.py).

@@ -1,4 +1,4 @@
-"""``station diagnose`` on rig-free (hand-held multi-position) recordings (issue 17, item 5).
+"""``station diagnose`` on rig-free (hand-held multi-position) recordings.
 
 Simulated recordings from :func:`station.sim.handheld.simulate_handheld` (random orientations, hand moves, no
 references; segments from the still detector, as :mod:`tests.test_rigfree_bad_input` builds them), and the real
@@ -171,7 +171,7 @@ def test_openaxes_against_the_station_class_locates_its_drift_noise() -> None:
 def test_openaxes(openaxes: dict[str, dict], accel: str) -> None:
     report = openaxes[accel]
     assert report["method"] == "rig-free"
-    # every number of the findings and of the rejections is finite (issue 16: a held-out error of nan -> nan)
+    # every number of the findings and of the rejections is finite (a held-out error was once nan -> nan)
     for entry in [*report["findings"], *report["rejected"]]:
         for key in ("heldout_before", "heldout_after", "likelihood_gain_chi2", "bic_gain"):
             value = entry.get("evidence", {}).get(key, entry.get(key))

@@ -1,6 +1,6 @@
 """Fit, then correct with Algorithm 1: accuracy against the rig, and the paper's validation.
 
-Targets (issue 2): corrected pose means match the gravity reference to 0.1 mg RMS
+Targets: corrected pose means match the gravity reference to 0.1 mg RMS
 (0.001 m/s^2); rate-step means match the commanded rate to 0.02 % of the rate; at 100 Hz
 and 200 Hz with different pose orders and rate lists. The paper's figures: standard
 deviation reduced >= 5.7x, remaining mean error <= 6.9 % of the raw error, online vs

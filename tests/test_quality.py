@@ -1,4 +1,4 @@
-"""Quality statistics (issue 19): yield, capability and control charts aggregated by the database, checked
+"""Quality statistics: yield, capability and control charts aggregated by the database, checked
 against an independent numpy computation on the same rows; what counts as tested and first pass when runs are
 ABORTED, ERROR or UNFINISHED; the incremental index (recorder) against the rebuild (migration); run rules on
 known sequences; the API's filters and 422s; the planted drift and lot shift of the synthetic history found.

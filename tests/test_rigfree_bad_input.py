@@ -1,4 +1,4 @@
-"""Rig-free recordings the fit must refuse with one line (issue 17): too few poses, all poses about one axis, a
+"""Rig-free recordings the fit must refuse with one line: too few poses, all poses about one axis, a
 move during a "still" segment, rates in deg/s given as rad/s, moves too fast for the sample rate."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The rig-free fit on the real OpenAXES hand-held recording (shared/real/openaxes, read-only), issue 17.
+"""The rig-free fit on the real OpenAXES hand-held recording (shared/real/openaxes, read-only).
 
 Published reference (shared/real/README.md): OpenAXES's imu_tk-based script's 36 coefficients, accel
 ``calibrated = T K raw - b`` fitted to 9.81744 m/s^2, gyro ``calibrated = M (raw - b)`` integrated with a fixed
@@ -61,7 +61,7 @@ def test_import_finds_the_initial_still_and_the_faces(sessions: dict[str, Sessio
 
 
 def test_gravity_norm_at_least_as_good_as_published(fits: dict[str, ParameterSet]) -> None:
-    # issue 17 targets: ADXL355 <= 3.0 mm/s^2, BMI160 <= 8.0 mm/s^2 on the poses fitted
+    # targets: ADXL355 <= 3.0 mm/s^2, BMI160 <= 8.0 mm/s^2 on the poses fitted
     assert fits["adxl355"].quality.rig_free["accel_norm_rms_mps2"] <= 3.0e-3
     assert fits["bmi160"].quality.rig_free["accel_norm_rms_mps2"] <= 8.0e-3
 
@@ -95,7 +95,7 @@ def test_gyro_direction_error_as_published_on_the_same_moves(sessions: dict[str,
     still = s.segments_of(Kind.REST, Kind.POSE)
     published = float(np.sqrt(np.mean(_published_direction_errors(s, still) ** 2)))
     ours = fits["bmi160"].quality.rig_free["gyro_direction_rms_deg"]
-    assert published == pytest.approx(0.96, abs=0.005)  # issue 17's independent re-computation: 0.96 deg
+    assert published == pytest.approx(0.96, abs=0.005)  # a review's independent re-computation: 0.96 deg
     assert ours <= 0.1  # issue target 0.96 deg: the moves integrated on the gyro's own samples (stale reads out)
     tk = fits["bmi160 tk"].quality.rig_free["gyro_direction_rms_deg"]
     assert tk <= 1.02 * published  # imu_tk's model on the reads as they come: the published figure

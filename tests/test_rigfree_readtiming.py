@@ -1,4 +1,4 @@
-"""Stale per-axis gyro reads (station.fit.readtiming) in the rig-free fit, issue 17.
+"""Stale per-axis gyro reads (station.fit.readtiming) in the rig-free fit.
 
 A simulated hand-held recording read by a logger whose clock beats against the gyro's ODR: each axis
 repeats a sample once per ``P`` reads, the axes a read or two apart (the OpenAXES logger's pattern). The

@@ -1,4 +1,4 @@
-"""Rig-free fit on simulated hand-held multi-position recordings (issue 17): recovery, importer, still
+"""Rig-free fit on simulated hand-held multi-position recordings: recovery, importer, still
 detector, exports, the RK4 integrator.
 
 Seeds: these tests use 300.. (the development seeds were 100..139, the benchmark's report seeds 5000..).

@@ -61,7 +61,7 @@ MARKER = b"PROVISIONED:"
 
 
 class MarkerProvisioner:
-    """Writes a marker page into the EEPROM of each PASS unit (stands in for issue 4's image writer)."""
+    """Writes a marker page into the EEPROM of each PASS unit (stands in for the image writer)."""
 
     def __init__(self) -> None:
         self.calls: list[str] = []

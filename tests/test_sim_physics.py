@@ -295,7 +295,7 @@ def test_effects_parse_describe_and_errors() -> None:
     assert Effects.parse("none") == Effects() and Effects().describe() == "none"
     assert Effects.parse("time_offset=-5, outliers=1e-3").time_offset == -5.0
     assert set(e.as_dict()) == set(Effects.names())
-    assert len(Effects.names()) == 11  # the ten of issue 6 plus pose_tilt
+    assert len(Effects.names()) == 11  # the ten original effects plus pose_tilt
     for bad in ("warp=1", "lever_arm", "lever_arm=abc", "lever_arm=-1", "outliers=1.5", "g_sensitivity=nan"):
         with pytest.raises(StationError):
             Effects.parse(bad)

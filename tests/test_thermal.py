@@ -1,4 +1,4 @@
-"""Issue 18, model half: the thermal terms from the fit through the parameter set, Algorithm 1, the EEPROM
+"""The thermal terms from the fit through the parameter set, Algorithm 1, the EEPROM
 (layout 2) and the simulated firmware; and the simulated temperature plateaus they are fitted on."""
 
 from __future__ import annotations
