@@ -198,7 +198,10 @@ def select_sensor(baseline: Baseline, sensor: str, *, max_effects: int = 4, cand
         if not _forward_step(prob, fwd, out):
             break
     confidence, checks = _audit(prob, baseline, fwd, out)
-    if locate:
+    if locate and _locate(prob, baseline, fwd, out, drift_class) and _offer_walk(prob, fwd):
+        # a stand-in had taken the place of a wander: with the walk in, the checks and the location once more
+        out.unexplained.clear()
+        confidence, checks = _audit(prob, baseline, fwd, out)
         _locate(prob, baseline, fwd, out, drift_class)
     fitted_final = _fitted_samples(prob, baseline, fwd)
     sizes = retest.sizes(prob, fwd.names, {f.effect: (f.theta, f.theta_std) for f in fwd.found
@@ -382,22 +385,43 @@ def _audit(prob: SensorProblem, baseline: Baseline, fwd: _Forward, out: _Entries
 
 
 def _locate(prob: SensorProblem, baseline: Baseline, fwd: _Forward, out: _Entries,
-            drift_class: locator.DriftClass) -> None:
+            drift_class: locator.DriftClass) -> bool:
     """The locator (locator.py): the final model with the stochastic terms at the sensor class's values. Its entry
     replaces the sensor's unexplained entries (their cells are located with it); an effect standing in for what it
-    locates is rejected, then the location is taken again without it."""
+    locates is rejected, then the location is taken again without it. True when it rejected stand-ins."""
+    rejected = False
     for _round in range(LOCATOR_ROUNDS):
         cells = {(k, "xyz".index(a)) for u in out.unexplained for a in u.axes for k in _kind_codes(u.segment_kinds)}
         located = locator.locate(prob, baseline, fwd.names, extra_cells=cells,
                                  fitted=_fitted_samples(prob, baseline, fwd), drift_class=drift_class)
         if located is None:
-            return
+            return rejected
         out.unexplained[:] = [located]
         gone = set(located.locator.stand_ins) if located.locator is not None else set()
         if not gone:
-            return
+            return rejected
         out.rejected.extend(Rejection(name, fwd.sensor, STAND_IN) for name in sorted(gone))
         _drop(prob, fwd, gone)
+        rejected = True
+    return rejected
+
+
+def _offer_walk(prob: SensorProblem, fwd: _Forward) -> bool:
+    """After the locator rejected stand-ins: the bias random walk, if it was not accepted, tested once more on the
+    model without them (a mean effect accepted before the walk's turn, e.g. a temperature bias, takes up a wander's
+    slow course and then stands in for it). True when it passes and is taken in (its checks follow)."""
+    if WALK not in fwd.pool or fwd.walk is not None:
+        return False
+    before = prob.quality()
+    t = prob.test_random_walk()
+    fwd.last[WALK] = t
+    if not t.passes:
+        return False
+    _accept_walk(prob, t)
+    fwd.walk = t
+    fwd.retire(WALK)
+    fwd.found.append(finding(prob.sd, t, before, prob.quality()))
+    return True
 
 
 def _retested(f: Finding, size: retest.SizeCheck | None) -> Finding:
