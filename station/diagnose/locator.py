@@ -400,8 +400,11 @@ def _mean_fit(prob: Any, beta: np.ndarray, nbase: int, k: int) -> np.ndarray:
 
 def _samples_text(count: int, total: int, held: int, allowance: float) -> str:
     """The covariate text of an axis located only by its far samples in the moves (:func:`_move_sample_cells`)."""
+    # with noise above the LSB a reading equal to the one before on all three axes does not happen by chance: a few
+    # such repeats among the far samples are a converter that holds (the rest are their neighbours: the local mean
+    # of the library's rule is pulled by the held samples)
     what = (f"{held} of them repeat the sample before on every axis (held samples: the converter repeats a reading)"
-            if held >= 0.5 * count else "not repeats of the sample before (glitches or sharp structure)")
+            if held >= JUMP_MIN else "no repeats of the sample before among them (glitches or sharp structure)")
     return (f"{MOVE_SAMPLES}: {count} of {total} samples beyond {OUTLIER_SIGMA:g} noise sigmas of their local mean "
             f"(the library's allowance {allowance:g} a sample); {what}; "
             "a sample-level fault the block means do not see")
