@@ -699,10 +699,6 @@ class SensorProblem:
     def _random_walk_at_current_tc(self) -> Test:
         """:meth:`test_random_walk` at the current T_c."""
         q_max = [self.drift_noise_max(k) for k in range(3)]
-        if self.q_class is not None:
-            # the null's drift noise at most the sensor class's as well: a q stretched beyond the class takes up the
-            # wander the test is for (the bound of the walk's size, :meth:`_walk_size`, and of the locator)
-            q_max = [min(a, float(b)) for a, b in zip(q_max, self.q_class, strict=True)]
         extra = []
         # the temperature course is a nuisance term of both hypotheses; where the temperature both rises and falls,
         # so is an offset that depends on its direction (a bias with a play or lag in temperature, hysteresis: a

@@ -243,29 +243,44 @@ def _move_samples(session: Any, sd: Any, residual: np.ndarray) -> tuple[np.ndarr
     their local mean, the moves' samples, those far samples whose raw reading repeats the one before on every axis:
     a converter that holds a sample). The rule of the library's outlier count (:mod:`station.diagnose.residuals`),
     applied where that count does not look."""
+    count, total, held, _, _ = _far_samples(session, sd, residual)
+    return count, total, held
+
+
+def _far_samples(session: Any, sd: Any, residual: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
+    """:func:`_move_samples` and, with the same rule, the far samples per axis in the settled segments and their
+    number of samples."""
     data = session.accel_mps2 if sd.sensor == "accel" else session.gyro_radps
     count = np.zeros(3, dtype=int)
     held = np.zeros(3, dtype=int)
-    total = 0
+    settled = np.zeros(3, dtype=int)
+    total = settled_n = 0
     for s in session.segments():
-        if len(s) < 10 or s.kind != Kind.MOVE:
+        if len(s) < 10:
             continue
         x = residual[s.start:s.stop]
         local = uniform_filter1d(x, size=max(3, min(len(s), 101)), axis=0, mode="nearest")
         bad = np.abs(x - local) > OUTLIER_SIGMA * sd.sigma
+        if s.kind != Kind.MOVE:
+            settled += bad.sum(axis=0)
+            settled_n += len(s)
+            continue
         raw = data[s.start:s.stop]
         same = np.concatenate([[False], np.all(raw[1:] == raw[:-1], axis=1)])
         count += bad.sum(axis=0)
         held += (bad & same[:, None]).sum(axis=0)
         total += len(s)
-    return count, np.full(3, total), held
+    return count, np.full(3, total), held, settled, settled_n
 
 
 def _move_sample_cells(session: Any, sd: Any, residual: np.ndarray) -> dict[int, tuple[int, int, int]]:
-    """Axes whose far samples in the moves (:func:`_move_samples`) exceed the library's outlier allowance with a
-    Poisson tail below :data:`ALPHA_LOCATED`: axis -> (count, samples, held)."""
-    count, total, held = _move_samples(session, sd, residual)
-    lam = OUTLIER_ALLOWANCE[sd.sensor] * total
+    """Axes whose far samples in the moves (:func:`_move_samples`) exceed, with a Poisson tail below
+    :data:`ALPHA_LOCATED`, the library's outlier allowance or, where more, the rate of far samples the settled
+    segments show (spikes everywhere are the library's ``outliers``, not something of the moves): axis -> (count,
+    samples, held)."""
+    count, total, held, settled, settled_n = _far_samples(session, sd, residual)
+    lam = np.maximum(OUTLIER_ALLOWANCE[sd.sensor], settled / max(settled_n, 1)) * total
     return {k: (int(count[k]), int(total[k]), int(held[k])) for k in range(3)
             if count[k] > 0 and stats.poisson.sf(count[k] - 1, lam[k]) < ALPHA_LOCATED}
 
