@@ -286,7 +286,8 @@ def _move_sample_cells(session: Any, sd: Any, residual: np.ndarray) -> dict[int,
 
 
 def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[int, int]] | None = None,
-           fitted: np.ndarray | None = None, drift_class: DriftClass = TABLE1_DRIFT) -> Unexplained | None:
+           fitted: np.ndarray | None = None, drift_class: DriftClass = TABLE1_DRIFT,
+           move_samples: bool = True) -> Unexplained | None:
     """Run the module's steps on the final model of one sensor (``prob``, a
     :class:`station.diagnose.likelihood.SensorProblem` with the accepted effects ``names``). ``extra_cells``:
     (kind code, axis) cells located by other checks (e.g. :mod:`station.diagnose.robust`'s) to name the
@@ -315,7 +316,9 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
                 if chi / sel.sum() > PHI_LOCATED and stats.chi2.sf(chi, int(sel.sum())) < ALPHA_LOCATED:
                     cells.add((int(kind), k))
         cells |= set(extra_cells or ())
-        samples = _move_sample_cells(baseline.session, sd, sd.residual - fitted) if fitted is not None else {}
+        # the far samples in the moves (only where a rig's reference is there: not on a rig-free recording)
+        samples = (_move_sample_cells(baseline.session, sd, sd.residual - fitted)
+                   if fitted is not None and move_samples else {})
         block_cells = set(cells)
         cells |= {(int(Kind.MOVE), k) for k in samples}
         if not cells:
