@@ -161,7 +161,7 @@ def main() -> None:
     print(f"\nfalse findings: {false_total} over {n_lib} recordings (nulls, singles, pairs)")
     print(f"single effects named exactly: {sum(st['found'] for st in singles)}/{sum(st['n'] for st in singles)}")
     print(f"pairs both named: {stats.get('pair', {}).get('found', 0)}/{stats.get('pair', {}).get('n', 0)}")
-    for label in OUTSIDE:
+    for label in (lab for lab in OUTSIDE if lab in stats):
         print(f"outside library {label}: reported unexplained at the right place with no findings "
               f"{outside_ok[label]}/{stats[label]['n']}")
     print(f"diagnosis time: median {np.median(times):.2f} s, max {max(times):.2f} s over {len(times)} recordings")

@@ -41,6 +41,19 @@ A second set (:data:`OUTSIDE_NEW`), written later and before the locator's secon
 ``sample_hold``      both: sample-and-hold bursts of the shared converter; every 2-8 s (exponential) the
                      output repeats one sample for 30-150 ms; visible only where the signal changes.
 
+A third set (:data:`UNANTICIPATED`), written before the locator's third round was changed and kept out of its
+development: run only at the end, as the check on physics nobody anticipated (own random streams: Philox key
+``[seed, 2729]``; not in :data:`KINDS`, so the first two sets' seed mapping is unchanged):
+
+``alpha_sign_bias``  gyro: one axis's bias is ``+-c`` by the sign of the angular acceleration about it (while
+                     ``|alpha_k|`` > 2 deg/s^2): a bias that exists only while the rate ramps, sign by direction.
+``g_scale``          gyro: one axis's scale depends on the specific force along it, ``w_k (1 + c f_k/g)`` (a spin
+                     with the axis up is read differently from one with it down).
+``temp_misalign``    gyro: one cross-axis coupling changes with temperature, ``c (T - T_0) w_j`` on axis k
+                     (climate program on).
+``rate_deadband``    gyro: a soft dead band of the sensing element on one axis, ``w_k - c tanh(w_k / w0)``
+                     (w0 2-5 deg/s): near zero the output is compressed, above it offset by ``-c sign(w_k)``.
+
 Nulls: ``none`` (base model only) and ``ar1_noise`` (white + AR(1) coloured noise, no physics).
 
 :data:`LOCATION`: per kind the sensors and segment kinds where it acts (what a right ``unexplained`` names).
@@ -70,6 +83,8 @@ OUTSIDE = ("telegraph", "clock_rate", "rate_norm_bias", "alpha_axial", "temp_hys
 OUTSIDE_NEW = ("direction_bias", "scale_settle", "g2_sensitivity", "sample_hold")
 NULLS = ("none", "ar1_noise")
 KINDS = (*NULLS, *OUTSIDE, *OUTSIDE_NEW)
+#: Kinds added in the third round, kept out of the locator's development (run only as the final check).
+UNANTICIPATED = ("alpha_sign_bias", "g_scale", "temp_misalign", "rate_deadband")
 #: Where each outside kind acts: (sensors, segment kinds); a right ``unexplained`` names one of the sensors and
 #: at least one of the kinds.
 LOCATION: dict[str, tuple[frozenset[str], frozenset[str]]] = {
@@ -85,6 +100,10 @@ LOCATION: dict[str, tuple[frozenset[str], frozenset[str]]] = {
     "scale_settle": (frozenset({"gyro"}), frozenset({"rate"})),
     "g2_sensitivity": (frozenset({"gyro"}), frozenset({"rest", "pose", "rate"})),
     "sample_hold": (frozenset({"accel", "gyro"}), frozenset({"move"})),
+    "alpha_sign_bias": (frozenset({"gyro"}), frozenset({"move"})),
+    "g_scale": (frozenset({"gyro"}), frozenset({"rate"})),
+    "temp_misalign": (frozenset({"gyro"}), frozenset({"rate"})),
+    "rate_deadband": (frozenset({"gyro"}), frozenset({"rate", "move"})),
 }
 #: Words one of which a right ``unexplained`` entry's covariate text holds (the covariate the kind follows); for
 #: the nulls: what an ``unexplained`` on them may say (no covariate, the noise's colour).
@@ -94,6 +113,8 @@ COVARIATE: dict[str, tuple[str, ...]] = {
     "thermal_kick": ("since the last rate step",), "cross_above": ("rate",), "vibration_rect": ("rate",),
     "direction_bias": ("last rotation",), "scale_settle": ("since the last rate step",),
     "g2_sensitivity": ("specific force",), "sample_hold": ("hold",),
+    "alpha_sign_bias": ("angular acceleration",), "g_scale": ("specific force", "rate"),
+    "temp_misalign": ("temperature", "rate"), "rate_deadband": ("rate",),
     "none": ("none",), "ar1_noise": ("none", "colour"),
 }
 #: Size of each kind (engineering units), multiplied by a random 0.8-1.25 per recording.
@@ -110,6 +131,10 @@ SIZE = {
     "scale_settle": 1.5e-3,  # relative scale at the step
     "g2_sensitivity": 0.03,  # deg/s per g^2
     "sample_hold": 1.0,  # (unused: bursts of held samples)
+    "alpha_sign_bias": 0.03,  # deg/s while the rate ramps
+    "g_scale": 2e-4,  # relative scale per g along the axis
+    "temp_misalign": 5e-5,  # cross-axis coupling per K
+    "rate_deadband": 0.03,  # deg/s (offset above the band)
 }
 
 
@@ -384,6 +409,25 @@ def _play(x: np.ndarray, width: float) -> np.ndarray:
     return out
 
 
+def _unanticipated(kind: str, size: float, axis: int, true: dict[str, np.ndarray], temp: np.ndarray, plan: RigPlan,
+                   rng: np.random.Generator) -> np.ndarray:
+    """The gyro's added output (rad/s, n x 3) of one :data:`UNANTICIPATED` kind on ``axis``."""
+    w = true["w"]
+    add = np.zeros_like(w)
+    if kind == "alpha_sign_bias":
+        a_dps2 = true["alpha"][:, axis] / DEG
+        add[:, axis] = size * DEG * np.where(np.abs(a_dps2) > 2.0, np.sign(a_dps2), 0.0)
+    elif kind == "g_scale":
+        add[:, axis] = size * w[:, axis] * plan.gravity * true["up"][:, axis] / G_STD
+    elif kind == "temp_misalign":
+        src = (axis + 1 + int(rng.integers(2))) % 3
+        add[:, axis] = size * (temp - temp[0]) * w[:, src]
+    elif kind == "rate_deadband":
+        w0 = float(rng.uniform(2.0, 5.0)) * DEG
+        add[:, axis] = -size * DEG * np.tanh(w[:, axis] / w0)
+    return add
+
+
 @dataclass(frozen=True)
 class Outside:
     session: Session
@@ -395,10 +439,10 @@ class Outside:
 
 def generate(seed: int, kind: str) -> Outside:
     """One recording of ``kind`` (:data:`KINDS`): seed in, same session out."""
-    if kind not in KINDS:
-        raise ValueError(f"unknown kind {kind!r} (one of {', '.join(KINDS)})")
-    rng = np.random.Generator(np.random.Philox(key=[seed, 2727]))
-    plan = draw_plan(rng, climate=True if kind == "temp_hysteresis" else None)
+    if kind not in KINDS and kind not in UNANTICIPATED:
+        raise ValueError(f"unknown kind {kind!r} (one of {', '.join((*KINDS, *UNANTICIPATED))})")
+    rng = np.random.Generator(np.random.Philox(key=[seed, 2729 if kind in UNANTICIPATED else 2727]))
+    plan = draw_plan(rng, climate=True if kind in ("temp_hysteresis", "temp_misalign") else None)
     rig = Rig(plan, rng)
     fs = plan.rate_hz
     n = int(rig.end * fs)
@@ -408,7 +452,7 @@ def generate(seed: int, kind: str) -> Outside:
     ref = rig.at(t)
     ppm = size * 1e-6 if kind == "clock_rate" else 0.0
     true = rig.at(t / (1.0 + ppm)) if ppm else ref  # a fast clock samples earlier than its stamps say
-    temp = _temperature(t, plan, rng, kind == "temp_hysteresis")
+    temp = _temperature(t, plan, rng, kind in ("temp_hysteresis", "temp_misalign"))
     d_temp = temp - temp[0]
     c = TABLE1
     out: dict[str, np.ndarray] = {}
@@ -487,6 +531,8 @@ def generate(seed: int, kind: str) -> Outside:
         if gyro and kind == "g2_sensitivity":
             src = int(rng.integers(3))
             y[:, axis] += size * DEG * (true["up"][:, src] * plan.gravity / G_STD) ** 2
+        if gyro and kind in UNANTICIPATED:
+            y += _unanticipated(kind, size, axis, true, temp, plan, rng)
         if kind == "ar1_noise":
             tau_n = rng.uniform(0.03, 0.4)
             a1 = math.exp(-1.0 / (fs * tau_n))

@@ -109,12 +109,12 @@ def test_cli_prints_the_unexplained_location(tmp_path: Path) -> None:
 
 def test_a_random_walk_is_the_same_wander_throughout_and_named() -> None:
     """Development seed 22 (the study's bias_random_walk row): the walk is named, and its K^2 agrees between the
-    record's halves and between increments inside and across segments."""
+    record's halves, between increments inside and across segments and between the axes."""
     report = diagnose(indepgen.generate(22, {"bias_random_walk": 3e-4}).session, warmup_tc_s=TC).to_json()
     assert {e for e, _ in _named(report)} == {"bias_random_walk"}
     for f in report["findings"]:
         z = f["confidence"]["consistency"]
-        assert set(z) == {"halves", "inside_vs_across_segments"}
+        assert set(z) == {"halves", "inside_vs_across_segments", "axes"}
         assert all(abs(v) <= 4.0 for v in z.values())
 
 

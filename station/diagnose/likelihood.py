@@ -890,8 +890,9 @@ class SensorProblem:
         taken. Moment estimates of K^2 (three axes pooled, ``sum(d^2 - w_i - w_j) / sum(dt)``) from four sets of
         pairs: the first / second half of the record, pairs inside one segment / across a segment boundary, and where
         the temperature both rises and falls, pairs while it rises / falls; the
-        standard error of each from ``var d^2 = 2 (E d^2)^2`` at the pooled K^2. Consistent when both
-        differences are within :data:`WALK_CONSISTENCY_Z` standard errors."""
+        standard error of each from ``var d^2 = 2 (E d^2)^2`` at the pooled K^2. And between the axes (``axes``,
+        :meth:`_walk_axes_z`: the walk is one K^2 for the triad). Consistent when every difference is within
+        :data:`WALK_CONSISTENCY_Z` standard errors."""
         raw = self.quality().block_residual
         sd = self.sd
         settled = np.flatnonzero(sd.kind != int(Kind.MOVE))
@@ -911,13 +912,19 @@ class SensorProblem:
         var = (2.0 * (w + k2_all * dt[:, None]) ** 2).sum(axis=1)
         mid = 0.5 * float(sd.t_s.max())
         z_of: dict[str, float] = {}
-        consistent = True
         splits = [("halves", sd.t_s[j] <= mid), ("inside_vs_across_segments", same)]
         td = self.temp_direction
         if min(float(np.mean(td > 0.5)), float(np.mean(td < -0.5))) >= TEMP_DIRECTION_SHARE:
             # a random walk wanders alike while the temperature rises and while it falls; a bias with a play or lag
             # in temperature (hysteresis) moves where the temperature turns
             splits.append(("heating_vs_cooling", td[i] + td[j] >= 0.0))
+        # the library's walk is one K^2 shared by the three axes: it wanders alike on each; structure on one axis
+        # that the walk takes up there (a bias with a play in temperature on that axis) is not it
+        consistent = True
+        if sd.extra_var is None:  # a rig-free gyro's per-pose Earth rate (extra_var) differs by axis: not compared
+            z_axes = self._walk_axes_z()
+            z_of["axes"] = round(z_axes, 2)
+            consistent = abs(z_axes) <= WALK_CONSISTENCY_Z
         for name, a in splits:
             est: list[tuple[float, float]] = []
             for sel in (a, ~a):
@@ -932,6 +939,31 @@ class SensorProblem:
             z_of[name] = round(z, 2)
             consistent = consistent and abs(z) <= WALK_CONSISTENCY_Z
         return WalkConsistency(consistent, z_of, k2_all)
+
+    def _walk_axes_z(self) -> float:
+        """Whether one K^2 serves the three axes: the likelihood ratio of a walk ``K_k^2`` per axis against the shared
+        one (the current model's mean terms; drift noise q per axis, at most the sensor class's where it is known,
+        :attr:`q_class`), 2 degrees of freedom, as the z-score of
+        the same tail probability (two-sided: comparable with the other splits' z)."""
+        extra = [self._accepted_axis(k) for k in range(3)]
+        qs = [float(q) for q in self.q]
+        if self.q_class is not None:  # eq. 3's drift noise at most the class's: it must not take up one axis's part
+            qs = [min(a, float(b)) for a, b in zip(qs, self.q_class, strict=True)]
+        shared, _, _ = self._profile_k2(qs, extra)
+        k2_0 = float(np.median(self.white)) / max(float(self.sd.t_s.max()), 1.0)
+        separate = 0.0
+        for k in range(3):
+            def nll(u: float, k: int = k) -> float:
+                return self._axis_nll(k, qs[k], math.exp(u), extra[k])
+
+            grid = [math.log(k2_0) + e * math.log(10.0) for e in np.arange(-2.0, 4.01, 1.0)]
+            vals = [nll(g) for g in grid]
+            i = int(np.argmin(vals))
+            res = optimize.minimize_scalar(nll, bounds=(grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]),
+                                           method="bounded", options={"xatol": 0.2, "maxiter": 12})
+            separate += min(float(res.fun), vals[i], self._axis_nll(k, qs[k], 0.0, extra[k]))
+        lr = max(0.0, 2.0 * (shared - separate))
+        return min(float(stats.norm.isf(0.5 * float(stats.chi2.sf(lr, 2)))), 99.0)
 
     def _temperature_vs_warmup(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(T grid s, R^2 (T, axis), energy (axis,)) of the block temperature course against eq. 3's warm-up.

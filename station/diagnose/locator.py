@@ -51,6 +51,8 @@ from scipy.ndimage import uniform_filter1d
 from scipy.signal import lfilter
 
 from station.diagnose import empirical, robust
+from station.diagnose.reporting import OUTLIER_ALLOWANCE
+from station.diagnose.residuals import OUTLIER_SIGMA
 from station.diagnose.results import CovariateTest, EmpiricalModel, LocatorEvidence, Unexplained
 from station.fit.goodness import Rows
 from station.kernel.limits_file import LimitsFile
@@ -78,6 +80,11 @@ JUMP_MIN_SHARE = 0.004
 #: stand-in for the located structure (the robust checks' rule, :func:`station.diagnose.robust.stand_ins`).
 STAND_IN_SHARE = robust.STAND_IN_SHARE
 AX = "xyz"
+#: Sample-level faults in the moves: the library's outlier rule (a sample further than ``OUTLIER_SIGMA`` noise sigmas
+#: from its local mean, :mod:`station.diagnose.residuals`) counts only settled segments; the block means of a move
+#: do not see a few bad samples either (they are left out of the blocks). Counted here on the final model's
+#: residual in the moves, against the library's allowance (:data:`station.diagnose.reporting.OUTLIER_ALLOWANCE`).
+MOVE_SAMPLES = "isolated samples far from the model in the moves"
 #: Time constants (s) of the decay after a rate step that the ``since the last rate step`` covariate tries.
 KICK_TAU_S = (4.0, 10.0, 25.0, 60.0)
 
@@ -232,8 +239,56 @@ def _jumps(session: Any, residual: Rows | np.ndarray, k: int) -> tuple[int, int]
     return int(np.sum(np.abs(d) > JUMP_SIGMAS * scale)), len(d)
 
 
+def _move_samples(session: Any, sd: Any, residual: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per axis, in the rig's moves: (samples of ``residual`` (n, 3) further than ``OUTLIER_SIGMA`` noise sigmas from
+    their local mean, the moves' samples, those far samples whose raw reading repeats the one before on every axis:
+    a converter that holds a sample). The rule of the library's outlier count (:mod:`station.diagnose.residuals`),
+    applied where that count does not look."""
+    count, total, held, _, _ = _far_samples(session, sd, residual)
+    return count, total, held
+
+
+def _far_samples(session: Any, sd: Any, residual: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
+    """:func:`_move_samples` and, with the same rule, the far samples per axis in the settled segments and their
+    number of samples."""
+    data = session.accel_mps2 if sd.sensor == "accel" else session.gyro_radps
+    count = np.zeros(3, dtype=int)
+    held = np.zeros(3, dtype=int)
+    settled = np.zeros(3, dtype=int)
+    total = settled_n = 0
+    for s in session.segments():
+        if len(s) < 10:
+            continue
+        x = residual[s.start:s.stop]
+        local = uniform_filter1d(x, size=max(3, min(len(s), 101)), axis=0, mode="nearest")
+        bad = np.abs(x - local) > OUTLIER_SIGMA * sd.sigma
+        if s.kind != Kind.MOVE:
+            settled += bad.sum(axis=0)
+            settled_n += len(s)
+            continue
+        raw = data[s.start:s.stop]
+        same = np.concatenate([[False], np.all(raw[1:] == raw[:-1], axis=1)])
+        count += bad.sum(axis=0)
+        held += (bad & same[:, None]).sum(axis=0)
+        total += len(s)
+    return count, np.full(3, total), held, settled, settled_n
+
+
+def _move_sample_cells(session: Any, sd: Any, residual: np.ndarray) -> dict[int, tuple[int, int, int]]:
+    """Axes whose far samples in the moves (:func:`_move_samples`) exceed, with a Poisson tail below
+    :data:`ALPHA_LOCATED`, the library's outlier allowance or, where more, the rate of far samples the settled
+    segments show (spikes everywhere are the library's ``outliers``, not something of the moves): axis -> (count,
+    samples, held)."""
+    count, total, held, settled, settled_n = _far_samples(session, sd, residual)
+    lam = np.maximum(OUTLIER_ALLOWANCE[sd.sensor], settled / max(settled_n, 1)) * total
+    return {k: (int(count[k]), int(total[k]), int(held[k])) for k in range(3)
+            if count[k] > 0 and stats.poisson.sf(count[k] - 1, lam[k]) < ALPHA_LOCATED}
+
+
 def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[int, int]] | None = None,
-           fitted: np.ndarray | None = None, drift_class: DriftClass = TABLE1_DRIFT) -> Unexplained | None:
+           fitted: np.ndarray | None = None, drift_class: DriftClass = TABLE1_DRIFT,
+           move_samples: bool = True) -> Unexplained | None:
     """Run the module's steps on the final model of one sensor (``prob``, a
     :class:`station.diagnose.likelihood.SensorProblem` with the accepted effects ``names``). ``extra_cells``:
     (kind code, axis) cells located by other checks (e.g. :mod:`station.diagnose.robust`'s) to name the
@@ -262,6 +317,11 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
                 if chi / sel.sum() > PHI_LOCATED and stats.chi2.sf(chi, int(sel.sum())) < ALPHA_LOCATED:
                     cells.add((int(kind), k))
         cells |= set(extra_cells or ())
+        # the far samples in the moves (only where a rig's reference is there: not on a rig-free recording)
+        samples = (_move_sample_cells(baseline.session, sd, sd.residual - fitted)
+                   if fitted is not None and move_samples else {})
+        block_cells = set(cells)
+        cells |= {(int(Kind.MOVE), k) for k in samples}
         if not cells:
             return None
         axes = sorted({k for _, k in cells})
@@ -274,6 +334,14 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
             xk = x[rows]
             xk = xk[:, np.any(xk != 0, axis=0)]
             rk = res[rows]
+            if k in samples and not any(kk == k for _, kk in block_cells):  # seen only at the sample level
+                count, total, held = samples[k]
+                tests.append(CovariateTest(AX[k], MOVE_SAMPLES, float(count), count / max(total, 1)))
+                chosen.append((AX[k], _samples_text(count, total, held, OUTLIER_ALLOWANCE[sd.sensor])))
+                models.append(empirical.fit(sd.sensor, AX[k], prob.y[:, k] - _mean_fit(prob, beta, nbase, k),
+                                            1.0 / prob.white[:, k], sd.segment,
+                                            covariates(baseline, sd, k, extended=True)))
+                continue
             kinds_k = [c for c, kk in cells if kk == k]
             in_cells = np.isin(sd.kind, kinds_k)
             excess = max(float(np.sum(rk[in_cells] ** 2)) - float(in_cells.sum()), 1e-9)
@@ -310,10 +378,11 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
         # --- stand-ins among the accepted effects ---
         stand: list[str] = []
         if names:
-            cell_rows = np.concatenate([[(int(sd.kind[i]), k) in cells for i in range(m)] for k in range(3)])
+            # a block-level notion: the cells seen only at the sample level hold no block structure to stand in for
+            cell_rows = np.concatenate([[(int(sd.kind[i]), k) in block_cells for i in range(m)] for k in range(3)])
             stand = robust.stand_ins(names, prob.accepted, x, beta, nbase, cell_rows)
         excess_all = 0.0
-        for c, k in cells:
+        for c, k in block_cells:
             sel = sd.kind == c
             excess_all += float(np.sum(z[sel, k] ** 2)) - float(sel.sum())
         periodic = None
@@ -348,6 +417,18 @@ def _mean_fit(prob: Any, beta: np.ndarray, nbase: int, k: int) -> np.ndarray:
     return np.asarray(out)
 
 
+def _samples_text(count: int, total: int, held: int, allowance: float) -> str:
+    """The covariate text of an axis located only by its far samples in the moves (:func:`_move_sample_cells`)."""
+    # with noise above the LSB a reading equal to the one before on all three axes does not happen by chance: a few
+    # such repeats among the far samples are a converter that holds (the rest are their neighbours: the local mean
+    # of the library's rule is pulled by the held samples)
+    what = (f"{held} of them repeat the sample before on every axis (held samples: the converter repeats a reading)"
+            if held >= JUMP_MIN else "no repeats of the sample before among them (glitches or sharp structure)")
+    return (f"{MOVE_SAMPLES}: {count} of {total} samples beyond {OUTLIER_SIGMA:g} noise sigmas of their local mean "
+            f"(the library's allowance {allowance:g} a sample); {what}; "
+            "a sample-level fault the block means do not see")
+
+
 def _text(name: str) -> str:
     if name == "none":
         return ("none: no covariate of the dictionary (rate, |rate|, rate^2, rate^3, angular acceleration, specific "
@@ -359,6 +440,8 @@ def _text(name: str) -> str:
     if name == "two-level":
         return ("two-level: the bias jumps between levels inside still segments (increments far from Gaussian), not "
                 "eq. 3's Gaussian drift, and follows no covariate")
+    if name.startswith(MOVE_SAMPLES):
+        return name
     return f"follows {name}"
 
 

@@ -235,7 +235,8 @@ def diagnose_rig_free(session: Session, *,
         boot = {k: v for k, v in (("resamples", resamples), ("seed", seed)) if v is not None}
         # the locator bounds the drift noise by the class of the recording's sensor (``drift_class``: a hand-held
         # recording is usually of another class than the station's Table 1; give its limits file)
-        decision = select(baseline, candidates=candidates, locate=True, drift_class=drift_class, **boot)
+        decision = select(baseline, candidates=candidates, locate=True, drift_class=drift_class, rig_moves=False,
+                          **boot)
     findings, curves = [], []
     rejected = list(decision.rejected)
     vertical = earth_vertical_radps(session)

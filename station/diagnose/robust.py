@@ -236,8 +236,8 @@ def audit(prob: SensorProblem, baseline: Baseline, names: list[str], regs: dict[
             elif t.passes and not bad_cells:
                 out.rejected.append(Rejection(
                     "bias_random_walk", sd.sensor, "not the same wander throughout the record (its K^2 differs "
-                    "between the halves, between increments inside and across segments, or while the temperature "
-                    "rises and falls): structure of a mean effect, not a random walk",
+                    "between the halves, between increments inside and across segments, while the temperature "
+                    "rises and falls, or between the axes): structure of a mean effect, not a random walk",
                     {"gain": round(t.gain, 3), "consistency": _walk_summary(cons)}))
             else:
                 out.rejected.append(Rejection(

@@ -162,25 +162,26 @@ def _unique(prob: SensorProblem, best: Test, twin: Test, regs: Mapping[str, np.n
 def select(baseline: Baseline, *, max_effects: int = 4,
            candidates: Mapping[str, Collection[str]] | None = None, resamples: int = bootstrap.RESAMPLES,
            seed: int = bootstrap.SEED, locate: bool = True,
-           drift_class: locator.DriftClass = locator.TABLE1_DRIFT) -> Decision:
+           drift_class: locator.DriftClass = locator.TABLE1_DRIFT, rig_moves: bool = True) -> Decision:
     """Forward selection of candidate effects per sensor (see the module docstring).
 
     ``candidates``: per sensor, the mean candidates to test (None: every one of the library); a recording that
     cannot test some (e.g. a rig-free one, :mod:`station.diagnose.rigfree_diagnosis`) says so itself.
     ``bias_random_walk`` and ``outliers`` are always tested. ``resamples``: the bootstrap's over segments for each
     finding's confidence (:mod:`station.diagnose.bootstrap`, seeded with ``seed``; 0: none). ``locate``: run the
-    locator, its stochastic terms bounded by ``drift_class`` (the class of the recording's sensor).
+    locator, its stochastic terms bounded by ``drift_class`` (the class of the recording's sensor); ``rig_moves``:
+    the moves carry a rig's reference (False for a rig-free recording: no far-sample test in the moves).
     """
     return Decision.join(
         select_sensor(baseline, sensor, max_effects=max_effects,
                       candidates=None if candidates is None else candidates.get(sensor, ()),
-                      resamples=resamples, seed=seed, locate=locate, drift_class=drift_class)
+                      resamples=resamples, seed=seed, locate=locate, drift_class=drift_class, rig_moves=rig_moves)
         for sensor in SENSORS)
 
 
 def select_sensor(baseline: Baseline, sensor: str, *, max_effects: int = 4, candidates: Collection[str] | None = None,
                   resamples: int = bootstrap.RESAMPLES, seed: int = bootstrap.SEED, locate: bool = True,
-                  drift_class: locator.DriftClass = locator.TABLE1_DRIFT) -> Decision:
+                  drift_class: locator.DriftClass = locator.TABLE1_DRIFT, rig_moves: bool = True) -> Decision:
     """:func:`select` for one sensor, in its steps: the candidates' regressors; the forward selection; the checks
     that hold when the model is wrong (robust.py, consistency.py); the locator (locator.py) and the findings'
     sizes re-fitted under the final model (retest.py); the bootstrap's confidence; the candidates' rejections; the
@@ -198,8 +199,11 @@ def select_sensor(baseline: Baseline, sensor: str, *, max_effects: int = 4, cand
         if not _forward_step(prob, fwd, out):
             break
     confidence, checks = _audit(prob, baseline, fwd, out)
-    if locate:
-        _locate(prob, baseline, fwd, out, drift_class)
+    if locate and _locate(prob, baseline, fwd, out, drift_class, rig_moves) and _offer_walk(prob, fwd):
+        # a stand-in had taken the place of a wander: with the walk in, the checks and the location once more
+        out.unexplained.clear()
+        confidence, checks = _audit(prob, baseline, fwd, out)
+        _locate(prob, baseline, fwd, out, drift_class, rig_moves)
     fitted_final = _fitted_samples(prob, baseline, fwd)
     sizes = retest.sizes(prob, fwd.names, {f.effect: (f.theta, f.theta_std) for f in fwd.found
                                            if f.theta is not None})
@@ -382,22 +386,44 @@ def _audit(prob: SensorProblem, baseline: Baseline, fwd: _Forward, out: _Entries
 
 
 def _locate(prob: SensorProblem, baseline: Baseline, fwd: _Forward, out: _Entries,
-            drift_class: locator.DriftClass) -> None:
+            drift_class: locator.DriftClass, rig_moves: bool = True) -> bool:
     """The locator (locator.py): the final model with the stochastic terms at the sensor class's values. Its entry
     replaces the sensor's unexplained entries (their cells are located with it); an effect standing in for what it
-    locates is rejected, then the location is taken again without it."""
+    locates is rejected, then the location is taken again without it. True when it rejected stand-ins."""
+    rejected = False
     for _round in range(LOCATOR_ROUNDS):
         cells = {(k, "xyz".index(a)) for u in out.unexplained for a in u.axes for k in _kind_codes(u.segment_kinds)}
         located = locator.locate(prob, baseline, fwd.names, extra_cells=cells,
-                                 fitted=_fitted_samples(prob, baseline, fwd), drift_class=drift_class)
+                                 fitted=_fitted_samples(prob, baseline, fwd), drift_class=drift_class,
+                                 move_samples=rig_moves)
         if located is None:
-            return
+            return rejected
         out.unexplained[:] = [located]
         gone = set(located.locator.stand_ins) if located.locator is not None else set()
         if not gone:
-            return
+            return rejected
         out.rejected.extend(Rejection(name, fwd.sensor, STAND_IN) for name in sorted(gone))
         _drop(prob, fwd, gone)
+        rejected = True
+    return rejected
+
+
+def _offer_walk(prob: SensorProblem, fwd: _Forward) -> bool:
+    """After the locator rejected stand-ins: the bias random walk, if it was not accepted, tested once more on the
+    model without them (a mean effect accepted before the walk's turn, e.g. a temperature bias, takes up a wander's
+    slow course and then stands in for it). True when it passes and is taken in (its checks follow)."""
+    if WALK not in fwd.pool or fwd.walk is not None:
+        return False
+    before = prob.quality()
+    t = prob.test_random_walk()
+    fwd.last[WALK] = t
+    if not t.passes:
+        return False
+    _accept_walk(prob, t)
+    fwd.walk = t
+    fwd.retire(WALK)
+    fwd.found.append(finding(prob.sd, t, before, prob.quality()))
+    return True
 
 
 def _retested(f: Finding, size: retest.SizeCheck | None) -> Finding:
