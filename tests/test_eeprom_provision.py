@@ -7,10 +7,12 @@ the device contract (tests/test_device_contract.py), which runs both.
 
 from __future__ import annotations
 
+import contextlib
 import json
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -391,6 +393,32 @@ def test_firmware_removes_g_sensitivity() -> None:
     np.testing.assert_allclose(out_w, np.tile(W_TRUE, (n, 1)), atol=2e-5)
 
 
+@contextlib.contextmanager
+def _two_written_units(
+    seed: int, params_for: Callable[[int, ParameterSet], ParameterSet] = lambda _k, p: p,
+) -> Iterator[tuple[FakeStation, EepromProvisioner, list[Any], list[Any]]]:
+    """Two simulated units running the firmware, each image written (``params_for`` may spoil one), ready to verify
+    together: (station, provisioner, written images, sensor clients); the clients and the rig closed after."""
+    with FakeStation(2, 30.0, seed=seed) as sim:
+        rig = open_rig(sim.rig_url, sim.clock, **sim.rig_client_options())
+        clients = [open_sensor(url, sim.clock) for url in sim.sensor_urls]
+        try:
+            verifier = RigVerifier(rig, sim.clock, VerificationLimits(hold_s=4.0), gravity_mps2=sim.plan.gravity_mps2,
+                                   sample_rate_hz=100)
+            prov = EepromProvisioner("ST-01", verifier=verifier, now=lambda: T0)
+            written = []
+            for k, su in enumerate(sim.units):
+                install_firmware(su.sensor, sim.clock)
+                params = params_for(k, su.truth.as_parameter_set(0.01))
+                unit_result = UnitResult(k, su.sensor.url, su.truth.serial, Outcome.PASS, "", params=params)
+                written.append(prov.write(prov.intend(unit_result, clients[k]), clients[k]))
+            yield sim, prov, written, clients
+        finally:
+            for c in clients:
+                c.close()
+            rig.close()
+
+
 def test_units_are_verified_together_in_the_same_two_holds(monkeypatch: pytest.MonkeyPatch) -> None:
     """Two written units, one with a wrong calibration: one pose and one rate step for both, each judged alone."""
     import station.sequence.verify as verify_module
@@ -402,69 +430,39 @@ def test_units_are_verified_together_in_the_same_two_holds(monkeypatch: pytest.M
         moves.append(step.name)  # type: ignore[attr-defined]
         drive(rig, step, options)  # type: ignore[arg-type]
 
+    def wrong_gyro_bias(k: int, params: ParameterSet) -> ParameterSet:
+        if k != 1:
+            return params
+        d = params.to_dict()  # a wrong calibration: the gyro bias not removed
+        d["gyro"]["bias_static"] = [0.0, 0.0, 0.0]
+        return ParameterSet.from_dict(d)
+
     monkeypatch.setattr(verify_module, "drive_rig", counted)
-    with FakeStation(2, 30.0, seed=4) as sim:
-        rig = open_rig(sim.rig_url, sim.clock, **sim.rig_client_options())
-        clients = [open_sensor(url, sim.clock) for url in sim.sensor_urls]
-        try:
-            verifier = RigVerifier(rig, sim.clock, VerificationLimits(hold_s=4.0), gravity_mps2=sim.plan.gravity_mps2,
-                                   sample_rate_hz=100)
-            prov = EepromProvisioner("ST-01", verifier=verifier, now=lambda: T0)
-            written = []
-            for k, su in enumerate(sim.units):
-                install_firmware(su.sensor, sim.clock)
-                params = su.truth.as_parameter_set(0.01)
-                if k == 1:  # a wrong calibration: the gyro bias not removed
-                    d = params.to_dict()
-                    d["gyro"]["bias_static"] = [0.0, 0.0, 0.0]
-                    params = ParameterSet.from_dict(d)
-                unit_result = UnitResult(k, su.sensor.url, su.truth.serial, Outcome.PASS, "", params=params)
-                written.append(prov.write(prov.intend(unit_result, clients[k]), clients[k]))
-            results = prov.verify_many(list(zip(written, clients, strict=True)))
-            assert results is not None and len(results) == 2
-            good, bad = results
-            assert not isinstance(good, Exception) and not isinstance(bad, Exception)
-            assert moves == ["verify pose +z", "verify rate z"], moves  # the holds are shared, not one pair per unit
-            assert good.passed and good.samples >= 790 and good.uncorrected_samples == 0
-            assert not bad.passed and {c.name: c.value for c in bad.checks}["verify.pose.gyro_error"] > 1e-3
-            assert good.serial == sim.units[0].truth.serial and bad.serial == sim.units[1].truth.serial
-            for c in clients:
-                assert not c.status().streaming and c.status().output == 0
-        finally:
-            for c in clients:
-                c.close()
-            rig.close()
+    with _two_written_units(4, wrong_gyro_bias) as (sim, prov, written, clients):
+        results = prov.verify_many(list(zip(written, clients, strict=True)))
+        assert results is not None and len(results) == 2
+        good, bad = results
+        assert not isinstance(good, Exception) and not isinstance(bad, Exception)
+        assert moves == ["verify pose +z", "verify rate z"], moves  # the holds are shared, not one pair per unit
+        assert good.passed and good.samples >= 790 and good.uncorrected_samples == 0
+        assert not bad.passed and {c.name: c.value for c in bad.checks}["verify.pose.gyro_error"] > 1e-3
+        assert good.serial == sim.units[0].truth.serial and bad.serial == sim.units[1].truth.serial
+        for c in clients:
+            assert not c.status().streaming and c.status().output == 0
 
 
 def test_a_link_fault_in_shared_holds_is_that_units_alone() -> None:
     """One unit's link fails during the shared verification: it gets its fault, the other unit is still judged."""
     from station.sensor.protocol import SensorTimeout
 
-    with FakeStation(2, 30.0, seed=5) as sim:
-        rig = open_rig(sim.rig_url, sim.clock, **sim.rig_client_options())
-        clients = [open_sensor(url, sim.clock) for url in sim.sensor_urls]
-        try:
-            verifier = RigVerifier(rig, sim.clock, VerificationLimits(hold_s=4.0), gravity_mps2=sim.plan.gravity_mps2,
-                                   sample_rate_hz=100)
-            prov = EepromProvisioner("ST-01", verifier=verifier, now=lambda: T0)
-            written = []
-            for k, su in enumerate(sim.units):
-                install_firmware(su.sensor, sim.clock)
-                unit_result = UnitResult(k, su.sensor.url, su.truth.serial, Outcome.PASS, "",
-                                         params=su.truth.as_parameter_set(0.01))
-                written.append(prov.write(prov.intend(unit_result, clients[k]), clients[k]))
+    with _two_written_units(5) as (_, prov, written, clients):
+        def broken(*_: object, **__: object) -> None:
+            raise SensorTimeout("unit 1 stopped answering")
 
-            def broken(*_: object, **__: object) -> None:
-                raise SensorTimeout("unit 1 stopped answering")
-
-            clients[1].read_samples = broken  # type: ignore[method-assign]
-            results = prov.verify_many(list(zip(written, clients, strict=True)))
-            assert results is not None
-            good, bad = results
-            assert isinstance(bad, SensorTimeout)
-            assert not isinstance(good, Exception) and good.passed and good.samples >= 790
-            assert not clients[0].status().streaming and clients[0].status().output == 0
-        finally:
-            for c in clients:
-                c.close()
-            rig.close()
+        clients[1].read_samples = broken  # type: ignore[method-assign]
+        results = prov.verify_many(list(zip(written, clients, strict=True)))
+        assert results is not None
+        good, bad = results
+        assert isinstance(bad, SensorTimeout)
+        assert not isinstance(good, Exception) and good.passed and good.samples >= 790
+        assert not clients[0].status().streaming and clients[0].status().output == 0
