@@ -230,6 +230,11 @@ class EepromProvisioner:
         HardwareError on a station fault (then call :meth:`complete` with ``fault``)."""
         return self.verifier.verify(sensor, written.report.image) if self.verifier is not None else None
 
+    @property
+    def shares_holds(self) -> bool:
+        """Whether :meth:`verify_many` verifies the written units together (the verifier can)."""
+        return callable(getattr(self.verifier, "verify_many", None))
+
     def verify_many(
         self, items: Sequence[tuple[WrittenImage, Sensor]]
     ) -> list[VerificationResult | StationError] | None:

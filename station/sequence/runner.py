@@ -33,7 +33,7 @@ from concurrent.futures import Future, wait
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any, Protocol, runtime_checkable
 
 from threadpoolctl import threadpool_limits
 
@@ -89,6 +89,7 @@ def refusal_outcome(err: FitError) -> tuple[Outcome, str]:
     if isinstance(err, TimeBaseError):
         return Outcome.ERROR, f"capture fault (station, not the unit): {err}"
     return Outcome.FAIL, f"fit refused the recording: {err}"
+
 
 class RigLinkError(HardwareError):
     """The rig link dropped and had to be re-established during the run."""
@@ -178,6 +179,21 @@ class Provisioner(Protocol):
     def verify(self, written: Any, sensor: Sensor) -> Any: ...
 
     def complete(self, written: Any, result: Any, fault: str = "") -> Sequence[Measurement] | None: ...
+
+
+@runtime_checkable
+class HoldSharingProvisioner(Provisioner, Protocol):
+    """A provisioner that can verify every written unit of a batch in the same holds of the rig (one pose, one
+    rate step whatever the number of units), phase 3 for all at once.
+
+    ``shares_holds``: whether it does so now (its verifier can); ``verify_many``: per unit its result or its
+    link's fault (a rig fault raises). See :meth:`station.sequence.provision.EepromProvisioner.verify_many`.
+    """
+
+    @property
+    def shares_holds(self) -> bool: ...
+
+    def verify_many(self, items: Sequence[tuple[Any, Sensor]]) -> Sequence[Any] | None: ...
 
 
 class NamedStep(Protocol):
@@ -810,9 +826,8 @@ class SequenceRunner:
 
     @staticmethod
     def _shares_holds(p: Provisioner) -> bool:
-        """Whether the provisioner verifies every written unit in the same holds (``verify_many``)."""
-        many = getattr(p, "verify_many", None)
-        return bool(p.verifies and callable(many) and getattr(getattr(p, "verifier", None), "verify_many", None))
+        """Whether the provisioner verifies every written unit in the same holds (:class:`HoldSharingProvisioner`)."""
+        return p.verifies and isinstance(p, HoldSharingProvisioner) and p.shares_holds
 
     def _refused_now(self, r: UnitResult) -> UnitResult | None:
         """The retest policy asked again right before writing (e.g. scrapped while it was measured): REFUSED,
@@ -931,14 +946,16 @@ class SequenceRunner:
         if not written:
             return
         keys = list(written)
+        assert isinstance(p, HoldSharingProvisioner)
         try:
-            results = p.verify_many([(written[k], self.sensors[out[k].slot]) for k in keys])  # type: ignore[attr-defined]
+            results = p.verify_many([(written[k], self.sensors[out[k].slot]) for k in keys])
         except StationError as exc:
             self._complete_unverified(p, out, written, Outcome.ERROR, f"{what} fault: {type(exc).__name__}: {exc}")
             return
         except KeyboardInterrupt:
             self._complete_unverified(p, out, written, Outcome.ABORTED, f"{self.abort_reason} during {what}")
             return
+        assert results is not None  # shares_holds: the verifier verifies together
         for k, result in zip(keys, results, strict=True):
             out[k], _ = self._verify_written(p, out[k], written[k], what, result)
 
