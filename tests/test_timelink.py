@@ -8,9 +8,11 @@ processes, the second time under CPU load, give the same recording and parameter
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import signal
+import socket
 import subprocess
 import sys
 import threading
@@ -86,6 +88,39 @@ def test_a_stall_of_the_served_clock_reaches_the_remote_waiter(served: tuple[Vir
     finally:
         never.set()
         t.join(10.0)
+
+
+def test_a_wake_that_arrives_before_its_wait_is_kept() -> None:
+    """The station sets an actor's event right after the actor sent its wait, and the wake (control connection)
+    reaches the server before the wait (actor connection): the wait must start set. Dropped, the actor waited
+    for an event set long ago while the simulator's other actors moved time on (a stall no guard could see)."""
+    clock = VirtualClock(stall_wall_s=2.0)
+    with ClockServer(clock) as server:
+        host, port = server.url.removeprefix("virtual://").split(":")
+        with socket.create_connection((host, int(port)), timeout=10) as actor_sock, \
+                socket.create_connection((host, int(port)), timeout=10) as control_sock:
+            actor, control = actor_sock.makefile("rwb"), control_sock.makefile("rwb")
+
+            def call(f: object, msg: dict[str, object]) -> dict[str, object]:
+                f.write(json.dumps(msg).encode() + b"\n")  # type: ignore[attr-defined]
+                f.flush()  # type: ignore[attr-defined]
+                return json.loads(f.readline())  # type: ignore[attr-defined, no-any-return]
+
+            ident = call(actor, {"op": "enroll", "name": "early"})["id"]
+            assert call(control, {"op": "control"}) == {"ok": True}
+            assert call(control, {"op": "wake", "id": ident, "seq": 1}) == {"ok": True}  # before wait 1
+            assert call(actor, {"op": "wait", "seconds": None, "event": True, "seq": 1}) == {"t": 0.0, "set": True}
+            # the kept wake is for wait 1 only: wait 2 waits for its own (here: its time limit)
+            assert call(actor, {"op": "wait", "seconds": 3.0, "event": True, "seq": 2}) == {"t": 3.0, "set": False}
+            # and a wake that comes while its wait runs still wakes it
+            reply: list[dict[str, object]] = []
+            waiter = threading.Thread(target=lambda: reply.append(
+                call(actor, {"op": "wait", "seconds": None, "event": True, "seq": 3})))
+            waiter.start()
+            time.sleep(0.2)
+            assert call(control, {"op": "wake", "id": ident, "seq": 3}) == {"ok": True}
+            waiter.join(10.0)
+            assert reply == [{"t": 3.0, "set": True}]
 
 
 def test_a_bad_clock_url_is_refused() -> None:

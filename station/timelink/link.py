@@ -14,7 +14,8 @@ then ``{"op": "wait", "seconds": S|null, "event": bool, "seq": K}`` -> ``{"t": T
 ``{"error": text}`` when the served clock stalled), and ``{"op": "leave"}`` (or the connection closing). On the
 control connection: ``{"op": "control"}`` -> ``{"ok": true}``, then ``now`` -> ``{"t": T}``, ``{"op": "wake",
 "id": I, "seq": K}`` -> ``{"ok": true}`` (an event the station set for actor I's wait K: sent before the setter's
-own next request, so the served clock sees it before it could advance), ``{"op": "busy", "n": +-1}``.
+own next request, so the served clock sees it before it could advance; kept when it arrives before wait K
+itself), ``{"op": "busy", "n": +-1}``.
 """
 
 from __future__ import annotations
@@ -60,9 +61,36 @@ def _recv(f: Any, where: str) -> dict[str, Any]:
 
 
 class _Served:
+    """One remote actor's wait as the server sees it: its event, the wait it belongs to, and the latest wait a
+    ``wake`` was sent for.
+
+    The wake comes on the control connection, the wait on the actor's own: a wake can arrive before the wait it
+    is for (the event was set in the station right after the actor sent its request, and the control connection
+    was read first). It is kept (``woken``) and the wait then starts set, instead of being dropped, which would
+    leave the actor waiting for an event that was set long ago.
+    """
+
     def __init__(self) -> None:
         self.event = threading.Event()
         self.seq = -1
+        self.woken = -1
+        self.lock = threading.Lock()
+
+    def begin(self, seq: int) -> None:
+        """The actor's wait ``seq`` starts: set at once if its wake already came."""
+        with self.lock:
+            self.seq = seq
+            if self.woken >= seq:
+                self.event.set()
+            else:
+                self.event.clear()
+
+    def wake(self, seq: int) -> None:
+        """An event the station set for the actor's wait ``seq`` (before or after that wait reached here)."""
+        with self.lock:
+            self.woken = max(self.woken, seq)
+            if self.seq == seq:
+                self.event.set()
 
 
 class ClockServer:
@@ -133,8 +161,7 @@ class ClockServer:
                     msg = _recv(f, "station")
                     if msg.get("op") != "wait":
                         return
-                    served.event.clear()
-                    served.seq = int(msg["seq"])
+                    served.begin(int(msg["seq"]))
                     seconds = msg.get("seconds")
                     try:
                         was_set = self.clock.wait(served.event if msg.get("event") else None,
@@ -156,8 +183,8 @@ class ClockServer:
             elif op == "wake":
                 with self._lock:
                     served = self._served.get(int(msg["id"]))
-                if served is not None and served.seq == int(msg["seq"]):
-                    served.event.set()
+                if served is not None:
+                    served.wake(int(msg["seq"]))
                 _send(f, {"ok": True})
             elif op == "busy":
                 self.clock.add_busy(int(msg["n"]))
