@@ -4,6 +4,7 @@ ptys, recordings in the database found by serial, and the rig role's plan choice
 from __future__ import annotations
 
 from collections.abc import Iterator
+from typing import Any
 
 import numpy as np
 import pytest
@@ -12,11 +13,13 @@ from sqlalchemy.orm import Session as DbSession
 from sqlalchemy.pool import StaticPool
 
 from station.fit.calibrate import FitOptions
+from station.kernel.errors import HardwareError
 from station.line.recordings import DatabaseArchive, RackRecordingError, latest_rack_recording, save_rack_recording
 from station.line.rigrole import FULL, LINE, choose_plan, fit_line_unit
 from station.line.soak import SoakRack
 from station.rack.board import RelayBoard, RelayBoardError
 from station.sensor import open_sensor
+from station.sensor.protocol import Sensor
 from station.sim.line_sim import simulate_line
 from station.sim.rack_sim import SimRack
 from station.sim.relay_server import SimulatedRelayBoard
@@ -142,3 +145,36 @@ def test_the_joint_fit_from_the_database_matches_the_fit_from_memory(db: DbSessi
         np.testing.assert_allclose(ta.correlation_time_s, tb.correlation_time_s,
                                    atol=np.nanmax(tb.correlation_time_s_std) * 1e-1)
     assert a.source["line"]["transfer_s"] == pytest.approx(60.0, abs=0.02)
+
+
+class _StopFails:
+    """A sensor client whose stream cannot be stopped once the rest was read (the link died at the end)."""
+
+    def __init__(self, inner: Sensor) -> None:
+        self.inner = inner
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.inner, name)
+
+    def stop_stream(self) -> None:
+        raise HardwareError("STOP_STREAM: no reply after 3 attempts")
+
+
+def test_a_soak_whose_stream_cannot_be_stopped_keeps_its_recording() -> None:
+    """Nothing lost: the rest is logged whole before the stop fails; the slot keeps it, with the fault noted."""
+    with SimRack(2, scale=30.0, seed=12) as rack:
+        board = RelayBoard(rack.board_url)
+        sensors = [open_sensor(u, rack.clock) for u in rack.sensor_urls]
+        try:
+            flaky = [sensors[0], _StopFails(sensors[1])]
+            soaked = SoakRack(board, flaky, rack.clock, station="rack-1").soak([0, 1], 30.0)  # type: ignore[arg-type]
+            assert [u.error for u in soaked] == ["", ""]
+            assert soaked[0].note == ""
+            assert "STOP_STREAM: no reply" in soaked[1].note and "recording kept" in soaked[1].note
+            for u in soaked:
+                assert u.session is not None and 29.9 <= u.session.duration_s <= 30.0
+            assert soaked[1].serial == rack.truths[1].serial
+        finally:
+            for s in sensors:
+                s.close()
+            board.close()

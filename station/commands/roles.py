@@ -62,7 +62,8 @@ def rack_command(
                     typer.echo(f"slot {r.slot}: {r.serial or '?'}: no recording: {r.error}")
                 else:
                     sha = archive.save(r.session, station=station, slot=r.slot)
-                    typer.echo(f"slot {r.slot}: {r.serial}: {len(r.session)} samples, sha256 {sha}")
+                    typer.echo(f"slot {r.slot}: {r.serial}: {len(r.session)} samples, sha256 {sha}"
+                               + (f"; {r.note}" if r.note else ""))
         finally:
             for s in sensors:
                 s.close()

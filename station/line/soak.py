@@ -38,12 +38,17 @@ class SoakedUnit:
         serial: the unit's serial ('' when it never answered).
         session: its rest from power-on, references NaN; None after a fault.
         error: why the slot has no recording ('' when it has one).
+        note: what could not be done after the rest was logged ('' when nothing): the stream's stop or the
+            status after the soak failed. The recording is kept; a reboot during the soak it could not rule
+            out is caught later, by the sample counter's time base (a jump back) and the rig role's
+            power-on check.
     """
 
     slot: int
     serial: str
     session: Session | None
     error: str = ""
+    note: str = ""
 
 
 def _number(x: float) -> str:
@@ -129,11 +134,18 @@ class SoakRack:
             power_on_clock = 0.5 * (t_a + t_b) - before.uptime_s  # station clock at the unit's power-on
             sensor.start_stream(self.sample_rate_hz)
             block = sensor.read_samples(duration_s=rack_s, timeout_s=rack_s + 30.0)
+        except HardwareError as exc:
+            return SoakedUnit(slot, serial, None, f"station fault: {exc}")
+        # the rest is logged: a fault from here on is noted, and the recording is not thrown away with it
+        note = ""
+        after = None
+        try:
             sensor.stop_stream()
             after = sensor.status()
         except HardwareError as exc:
-            return SoakedUnit(slot, serial, None, f"station fault: {exc}")
-        if after.boot_count != before.boot_count:
+            note = (f"after the soak: {exc} (recording kept; its boot count after the soak not read, a reboot is "
+                    "caught by the time base and the rig's power-on check)")
+        if after is not None and after.boot_count != before.boot_count:
             return SoakedUnit(slot, serial, None, f"the unit rebooted during the soak (boot count "
                                                   f"{before.boot_count} -> {after.boot_count})")
         if len(block) < 2:
@@ -159,7 +171,7 @@ class SoakRack:
             ref_accel_mps2=nan,
             ref_gyro_radps=nan,
         )
-        return SoakedUnit(slot, serial, session)
+        return SoakedUnit(slot, serial, session, note=note)
 
 
 __all__ = ["SoakRack", "SoakedUnit"]

@@ -215,7 +215,8 @@ def run_line_demo(
             soaked = sim.soak(range(units), rack_s, DatabaseArchive(database.sessions), station="demo-rack")
         for r in soaked.units:
             if r.session is not None:
-                console.print(f"  slot {r.slot}: {r.serial} {len(r.session)} samples")
+                console.print(f"  slot {r.slot}: {r.serial} {len(r.session)} samples"
+                              + (f"; {r.note}" if r.note else ""))
             else:
                 console.print(f"  slot {r.slot}: {r.serial or '?'} no recording: {r.error}")
         # carried to the rig, still powered (the relay stays on: the unit's supply travels with it)
