@@ -540,6 +540,9 @@ def serve(
     name: Annotated[str | None, typer.Option("--station", help="station id for the records and images")] = None,
     operator: Annotated[str | None, typer.Option(help="the operator recorded on runs started with the bearer token "
                                                  "(API, automation); a signed-in operator's own name wins")] = None,
+    tls_cert: Annotated[Path | None, typer.Option(help="TLS certificate (PEM): serve HTTPS; the operator's "
+                                                       "session cookie is then sent over HTTPS only")] = None,
+    tls_key: Annotated[Path | None, typer.Option(help="the TLS certificate's private key (PEM)")] = None,
 ) -> None:
     """Operator console, status page and JSON API.
 
@@ -551,8 +554,12 @@ def serve(
     """
     import os
 
+    from station.web.serve import Tls
     from station.web.serve import serve as run_server
 
+    if (tls_cert is None) != (tls_key is None):
+        raise fail(StationError("--tls-cert and --tls-key go together (the certificate and its private key)"))
+    tls = Tls(tls_cert, tls_key) if tls_cert is not None and tls_key is not None else None
     token = os.environ.get("STATION_TOKEN") or None
     live, on_exit, prompter = None, None, None
     if config is not None or (rig is not None and sensor):
@@ -578,7 +585,7 @@ def serve(
         live.on_abort = control.abort
         on_exit = control.stop
     try:
-        run_server(host, port, db, token, live, on_exit, prompter)
+        run_server(host, port, db, token, live, on_exit, prompter, tls)
     except StationError as exc:  # e.g. a database that cannot be opened
         raise fail(exc) from None
 

@@ -85,7 +85,7 @@ def create_app(db_url: str | None = None, *, token: str | None = None, live: Liv
                limits_path: Path | None = None, database: Database | None = None,
                diagnosis: DiagnosisService | None = None, shifts: ShiftCalendar | str | None = None,
                console: ConsoleSettings | None = None, prompter: ConsoleOperator | None = None,
-               session_key: str | None = None) -> FastAPI:
+               session_key: str | None = None, https_only: bool = False) -> FastAPI:
     """The web application on the station database at ``db_url`` (see :func:`station.store.open_database`).
 
     Args:
@@ -105,6 +105,9 @@ def create_app(db_url: str | None = None, *, token: str | None = None, live: Liv
         prompter: the console as the station's prompt answerer (None: ``POST /api/prompts/...`` answers 503).
         session_key: the key that signs the console's session cookie (None: ``$STATION_SESSION_KEY`` or a random
             key for this application: a restart signs everyone out).
+        https_only: mark the session cookie ``Secure`` (the browser sends it over HTTPS only): set when the
+            server is served with TLS (``station serve --tls-cert/--tls-key``). Plain HTTP on a line's own
+            network cannot use it (the browser would drop the cookie), so it is off by default.
     """
     db = database if database is not None else open_database(db_url)
     live = live if live is not None else LiveStatus(db)
@@ -128,7 +131,7 @@ def create_app(db_url: str | None = None, *, token: str | None = None, live: Liv
     app.state.prompter = prompter
     key = session_key or os.environ.get("STATION_SESSION_KEY") or secrets.token_urlsafe(32)
     app.add_middleware(SessionMiddleware, secret_key=key, session_cookie="station_operator",
-                       max_age=app.state.console.session_max_age_s, same_site="strict")
+                       max_age=app.state.console.session_max_age_s, same_site="strict", https_only=https_only)
     app.state.db, app.state.live, app.state.diagnosis = db, live, diagnoses
     for router in ROUTERS:
         app.include_router(router)

@@ -9,9 +9,12 @@ from __future__ import annotations
 import asyncio
 import signal
 import socket
+import ssl
 import threading
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
 from types import FrameType
 
 import uvicorn
@@ -41,9 +44,32 @@ class _Server(uvicorn.Server):
         await super().shutdown(sockets)
 
 
+@dataclass(frozen=True)
+class Tls:
+    """The server's certificate and private key (PEM files): the page and API over HTTPS only."""
+
+    cert: Path
+    key: Path
+
+    def check(self) -> None:
+        """Refuse files that are missing or cannot be read (before the server starts)."""
+        for what, path in (("certificate", self.cert), ("private key", self.key)):
+            if not path.is_file():
+                raise TlsError(f"TLS {what} {str(path)!r} is not a file")
+        try:
+            ssl.create_default_context(ssl.Purpose.CLIENT_AUTH).load_cert_chain(self.cert, self.key)
+        except (ssl.SSLError, OSError) as exc:
+            raise TlsError(f"TLS certificate {str(self.cert)!r} and key {str(self.key)!r} cannot be used: "
+                           f"{exc}") from None
+
+
+class TlsError(StationError):
+    """The TLS certificate or key given to ``station serve`` cannot be used."""
+
+
 def serve(host: str = "127.0.0.1", port: int = 8000, db_url: str | None = None, token: str | None = None,
           live: LiveStatus | None = None, on_exit: Callable[[str], None] | None = None,
-          prompter: ConsoleOperator | None = None) -> None:
+          prompter: ConsoleOperator | None = None, tls: Tls | None = None) -> None:
     """Serve the web application on ``host``:``port`` until SIGINT, SIGTERM or SIGHUP.
 
     Args:
@@ -55,9 +81,15 @@ def serve(host: str = "127.0.0.1", port: int = 8000, db_url: str | None = None, 
         on_exit: called with the reason (``'aborted by SIGTERM'``) before the server shuts down: the
             station aborts a run in progress there and waits until the rig is at rest.
         prompter: the operator console answering the station's prompts (None: the station runs without them).
+        tls: serve HTTPS with this certificate and key (the console's session cookie is then ``Secure``);
+            None: plain HTTP.
     """
-    app = create_app(db_url, token=token, live=live, prompter=prompter)
-    server = _Server(uvicorn.Config(app, host=host, port=port, log_level="info"), on_exit)
+    if tls is not None:
+        tls.check()
+    app = create_app(db_url, token=token, live=live, prompter=prompter, https_only=tls is not None)
+    server = _Server(uvicorn.Config(app, host=host, port=port, log_level="info",
+                                    ssl_certfile=None if tls is None else str(tls.cert),
+                                    ssl_keyfile=None if tls is None else str(tls.key)), on_exit)
     previous = signal.signal(signal.SIGHUP, server.handle_exit)
     try:
         server.run()
