@@ -16,7 +16,9 @@ from station.kernel.limits import table1_limits
 from station.kernel.limits_file import LimitsFile, RetestPolicy, load_limits
 from station.kernel.plan import RigPlan
 from station.kernel.virtual_clock import VirtualClock, acting
-from station.sequence import Outcome, RigReading, StepStarted
+from station.rig import open_rig
+from station.sensor import open_sensor
+from station.sequence import Outcome, RigReading, SequenceRunner, StepStarted
 from station.sim.fakes import FakeStation
 from station.store.queries import attempt_count
 from station.store.recorder import record_disposition
@@ -61,3 +63,33 @@ def test_failures_count_and_the_refusal_comes_before_any_motion(tmp_path: Path) 
     assert fourth.units[0].outcome == Outcome.FAIL  # admitted again after the disposition
     assert attempt_count(db, serial) == 1  # the failed run after the disposition
     assert attempt_count(db, serial, since_disposition=False) == 3  # the refusal is no attempt
+
+
+class _RoutingRunner(SequenceRunner):
+    """A runner that decides per unit itself (as the line's rig role does), with no retest policy at all."""
+
+    routes_units = True
+
+    def refusal(self, serial: str) -> str | None:
+        return f"refused by the router: {serial} belongs elsewhere" if serial == self.refuse else None
+
+    refuse = ""
+
+
+def test_a_runner_that_routes_units_refuses_them_before_any_motion_without_a_retest_policy() -> None:
+    clock = VirtualClock()
+    with acting(clock, name="test"), FakeStation(2, clock.scale, 6, plan=PLAN, clock=clock) as sim:
+        rig = open_rig(sim.rig_url, sim.clock, **sim.rig_client_options())
+        sensors = [open_sensor(url, sim.clock) for url in sim.sensor_urls]
+        try:
+            runner = _RoutingRunner(rig, sensors, sim.clock, plan=PLAN, limits=table1_limits())
+            runner.refuse = other = sim.units[1].truth.serial
+            result = runner.run()
+        finally:
+            for s in sensors:
+                s.close()
+            rig.close()
+    kept, refused = result.units
+    assert refused.outcome == Outcome.REFUSED and "belongs elsewhere" in refused.message
+    assert refused.serial == other and refused.session is None
+    assert kept.outcome != Outcome.REFUSED and kept.session is not None

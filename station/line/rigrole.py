@@ -151,6 +151,8 @@ class LineRigRunner(SequenceRunner):
             wrapped.append(KeepPowered(s))
         super().__init__(rig, wrapped, clock, **kwargs)
 
+    routes_units = True
+
     def refusal(self, serial: str) -> str | None:
         """A unit whose plan is not ``line`` is refused by the line's decision (not by the retest policy, which
         is asked only for the line's units)."""

@@ -622,7 +622,7 @@ class SequenceRunner:
         sensor that does not answer is a station fault (ERROR) for its slot. With every unit refused
         the run ends without moving the rig.
         """
-        if self.admit is None and not self.expected_serials and type(self).refusal is SequenceRunner.refusal:
+        if self.admit is None and not self.expected_serials and not self.routes_units:
             return
         for unit in list(fx.active):
             v = verdicts[unit.slot]
@@ -643,9 +643,14 @@ class SequenceRunner:
                 unit.identity = ident
                 self._end_unit(fx, unit, v, Outcome.REFUSED, message)
 
+    #: Whether this runner decides per unit itself whether it runs (:meth:`refusal` adds its own reasons, as the
+    #: line's rig role does): every unit is then identified before anything moves, even without a retest policy.
+    routes_units: bool = False
+
     def refusal(self, serial: str) -> str | None:
         """Why ``serial`` is not run, as the unit's REFUSED message (None: run it). Here the retest policy
-        (``admit``) decides; a runner that routes units itself (the line's rig role) adds its own reasons."""
+        (``admit``) decides; a runner that routes units itself (the line's rig role) adds its own reasons and
+        sets :attr:`routes_units`."""
         reason = self.admit(serial, self.run_id) if self.admit is not None else None
         return f"refused by the retest policy: {reason}" if reason else None
 
