@@ -35,7 +35,8 @@ The kinds (:data:`SEALED`, one axis per recording chosen by the seed, sizes rand
                        through a resonance (Q 3-6) of that frequency; the gyro's axis ``k`` rectifies it, a bias
                        ``kappa A^2 / 2`` following the accelerometer's vibration energy (largest at a mid rate).
 ``code_inl``           gyro: a periodic integral nonlinearity of a segmented converter on one axis,
-                       ``y_k + c sin(2 pi y_k / P)`` (P 40-90 deg/s): an error periodic in the output level.
+                       ``y_k + c sin(2 pi y_k / P)`` (P 40-90 deg/s, redrawn until the axis's table-hold levels span
+                       at least 0.6 of the sine's range): an error periodic in the output level.
 ``drive_limit_cycle``  gyro: a slow triangle (relay) limit cycle of the drive-amplitude loop, a bias
                        ``c tri(t / P + phase)`` on one axis with a period of 1.5-5 min; the temperature does not show it.
 ``heading_bias``       gyro: a magnetic-like bias from a field fixed in the world (horizontal), seen by one axis
@@ -43,8 +44,8 @@ The kinds (:data:`SEALED`, one axis per recording chosen by the seed, sizes rand
                        heading in poses and the spin phase in table spins.
 ``accel_ratchet``      accel: the bias of one axis shifts by ``c`` (same sign, persistent, cumulative) at the end of
                        every table hold at 250 deg/s or more (the die attach slips under the centripetal load).
-``rate_clip``          gyro: one axis saturates at ``+-R`` with ``R`` 88-96 % of the plan's top rate (a range
-                       below what the rig turns).
+``rate_clip``          gyro: one axis saturates at ``+-R`` with ``R`` 88-96 % of its output at the plan's top rate
+                       (a range below what the rig turns).
 ``axis_skew``          gyro: one axis is converted ``delta`` later than the other two (a multiplexed converter:
                        ``delta = m / (3 f_s)``, m 1 or 2, plus 0.55-0.9 ms of filter): a delay on one axis only.
 ``accel_creep``        accel: anelastic creep of one axis, ``(1 - c) f_k + c L[f_k]`` with ``L`` a first-order lag of
@@ -130,9 +131,9 @@ COVARIATE: dict[str, tuple[str, ...]] = {
 #: s has SNR sqrt(sum s^2) / sigma), is at least 20 for every kind on the smallest plan (50 Hz); the per-hold
 #: figures in the comments use sigma_a <= 0.028 m/s^2, sigma_g <= 0.013 deg/s and holds of >= 4 s at 50 Hz.
 SIZE = {
-    # 1 / (K/s): at 1.5-3 K/min a scale change of 7e-4-2.5e-3, 7-25 mm/s^2 on +-g; per pose 6-18 s the mean's
-    # noise is <= 1.6 mm/s^2 (>= 4 sigma per hold, several holds carry it)
-    "dtdt_scale": 0.05,
+    # 1 / (K/s): at 1.5-3 K/min a scale change of 1.6e-3-5e-3, 16-50 mm/s^2 on +-g; per pose 6-18 s the mean's
+    # noise is <= 1.6 mm/s^2 (>= 10 sigma per hold, several holds carry it)
+    "dtdt_scale": 0.08,
     # deg/s at the resonance's peak (bias kappa A^2 / 2; A = 0.4-1.2 m/s^2 there); per 4-10 s hold noise of the
     # mean <= 0.9 mdeg/s: >= 30 sigma in the resonant hold
     "vibration_bias": 0.04,
@@ -152,9 +153,9 @@ SIZE = {
     # ms of added filter delay (plus m / (3 f_s)); at the tumbles' and ramps' 80-600 deg/s^2 an error of
     # >= 0.1 deg/s, >= 8 sigma per sample at the peaks
     "axis_skew": 0.7,
-    # creep fraction c: after a tumble changing f_k by up to 2 g, an error c df of up to 0.1 m/s^2 decaying in
+    # creep fraction c: after a tumble changing f_k by g or 2 g, an error c df of 0.04-0.12 m/s^2 decaying in
     # 2-8 s (>= 100 samples at 50 Hz)
-    "accel_creep": 3.5e-3,
+    "accel_creep": 5e-3,
 }
 
 _UP = np.array([0.0, 0.0, 1.0])
@@ -569,13 +570,19 @@ def generate(seed: int, kind: str, *, rate_hz: float | None = None) -> Sealed:
     for sensor in ("accel", "gyro"):
         y = clean[sensor] + noise[sensor] + add[sensor]
         if sensor == "gyro" and kind == "code_inl":
-            period = float(kr.uniform(40.0, 90.0)) * DEG
+            tr = triads["gyro"]  # the axis's output levels in the table holds (all blocks: 0 in the others')
+            levels = np.unique(np.round(mo.w[mo.kind == int(Kind.RATE), axis], 9)) * tr.m[axis, axis]
+            levels += tr.b_stat[axis] + tr.b_drift[axis]
+            for _ in range(50):  # a period that the plan's rates resolve: the INL spans >= 0.6 c over the holds
+                period = float(kr.uniform(40.0, 90.0)) * DEG
+                if np.ptp(np.sin(2 * math.pi * levels / period)) >= 1.2:
+                    break
             inl = sgn * size * DEG * np.sin(2 * math.pi * y[:, axis] / period)
             y[:, axis] += inl
             add[sensor][:, axis] = inl
             params.update(period_dps=period / DEG)
         if sensor == "gyro" and kind == "rate_clip":
-            rail = size * plan.top_dps * DEG
+            rail = size * plan.top_dps * DEG * triads["gyro"].m[axis, axis]  # a fraction of the axis's top output
             clipped = np.clip(y[:, axis], -rail, rail)
             add[sensor][:, axis] = clipped - y[:, axis]
             y[:, axis] = clipped
