@@ -32,8 +32,8 @@ import argparse
 import sys
 import time
 from collections import Counter
-from typing import Any
 from pathlib import Path
+from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
@@ -91,6 +91,7 @@ def main() -> None:
     seed = args.base
     for i in range(args.per):
         for kind in kinds:
+            order: tuple[str, ...]
             if GEN is gen_sealed:
                 order = gen_sealed.KINDS
             else:

@@ -38,7 +38,7 @@ The kinds (:data:`SEALED`, one axis per recording chosen by the seed, sizes rand
                        ``y_k + c sin(2 pi y_k / P)`` (P 40-90 deg/s, redrawn until the axis's table-hold levels span
                        at least 0.6 of the sine's range): an error periodic in the output level.
 ``drive_limit_cycle``  gyro: a slow triangle (relay) limit cycle of the drive-amplitude loop, a bias
-                       ``c tri(t / P + phase)`` on one axis with a period of 1.5-5 min; the temperature does not show it.
+                       ``c tri(t / P + phase)`` on one axis, a period of 1.5-5 min; the temperature does not show it.
 ``heading_bias``       gyro: a magnetic-like bias from a field fixed in the world (horizontal), seen by one axis
                        through its cross sensitivity to another axis: ``c (R^T m)_j`` on axis ``k``; it follows the
                        heading in poses and the spin phase in table spins.
@@ -57,7 +57,8 @@ flicker-like part: five first-order processes, time constants 0.02-5 s log-space
 :data:`LOCATION` (sensors, segment kinds) and :data:`COVARIATE` (words one of which a right ``unexplained``
 entry's covariate names) were written with the kinds, before anything was run on them.
 
-``python benchmarks/gen_sealed.py SEED KIND OUT.csv`` writes one recording.
+``python benchmarks/gen_sealed.py SEED KIND OUT.csv`` writes one recording; ``--snr FIRST COUNT`` prints every
+kind's design SNR (:func:`design_snr`, no diagnosis) over COUNT seeds at 50 Hz.
 """
 
 from __future__ import annotations
@@ -422,12 +423,14 @@ def draw_triad(rng: np.random.Generator, c: SensorClass, gyro: bool) -> Triad:
     u = DEG if gyro else 1.0
     pre = "gyro" if gyro else "accel"
     unit_bias = "dps" if gyro else "mps2"
-    m = np.diag(rng.uniform(*getattr(c, f"{pre}_scale"), 3))
-    m += (1 - np.eye(3)) * rng.uniform(*getattr(c, f"{pre}_cross_axis"), (3, 3))
-    return Triad(m=m, b_stat=rng.uniform(*getattr(c, f"{pre}_bias_static_{unit_bias}"), 3) * u,
-                 b_drift=rng.uniform(*getattr(c, f"{pre}_bias_drift_{unit_bias}"), 3) * u,
-                 tc=rng.uniform(*getattr(c, f"{pre}_correlation_time_s"), 3),
-                 sigma=rng.uniform(*getattr(c, f"{pre}_noise_std_{unit_bias}"), 3) * u)
+
+    def draw(name: str, size: int | tuple[int, int]) -> np.ndarray:
+        lo, hi = getattr(c, f"{pre}_{name}")
+        return rng.uniform(float(lo), float(hi), size)
+
+    m = np.diag(draw("scale", 3)) + (1 - np.eye(3)) * draw("cross_axis", (3, 3))
+    return Triad(m=m, b_stat=draw(f"bias_static_{unit_bias}", 3) * u, b_drift=draw(f"bias_drift_{unit_bias}", 3) * u,
+                 tc=draw("correlation_time_s", 3), sigma=draw(f"noise_std_{unit_bias}", 3) * u)
 
 
 def drift(t: np.ndarray, tr: Triad, rel: float, rng: np.random.Generator) -> np.ndarray:
@@ -609,12 +612,25 @@ def design_snr(rec: Sealed) -> float:
     return best
 
 
+def snr_table(first: int, count: int, rate_hz: float | None = 50.0) -> list[tuple[str, float, float]]:
+    """(kind, min, median) of :func:`design_snr` over seeds ``first .. first + count - 1`` (no diagnosis run)."""
+    rows = []
+    for kind in SEALED:
+        v = sorted(design_snr(generate(s, kind, rate_hz=rate_hz)) for s in range(first, first + count))
+        rows.append((kind, v[0], v[len(v) // 2]))
+    return rows
+
+
 if __name__ == "__main__":
     from station.session.csv_v1 import write_session
 
     a = sys.argv[1:]
+    if len(a) == 3 and a[0] == "--snr":
+        for kind, lo, med in snr_table(int(a[1]), int(a[2])):
+            print(f"{kind:18s} design SNR at 50 Hz: min {lo:9.1f}  median {med:9.1f}")
+        sys.exit(0)
     if len(a) != 3:
-        sys.exit("usage: python benchmarks/gen_sealed.py SEED KIND OUT.csv")
+        sys.exit("usage: python benchmarks/gen_sealed.py SEED KIND OUT.csv  |  --snr FIRST_SEED COUNT")
     rec = generate(int(a[0]), a[1])
     write_session(rec.session, a[2])
     print(f"{a[2]}: {rec.kind} {len(rec.session)} samples at {rec.plan.rate_hz:g} Hz, {rec.session.duration_s:.0f} s, "
