@@ -186,7 +186,7 @@ def _rotate(q: np.ndarray, v: np.ndarray, *, inverse: bool = False) -> np.ndarra
 
 # --- the plan --------------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
-class Step:
+class SealedStep:
     """One rig step: a turn about the fixed world ``axis`` (or none), then a settle at its final rate."""
 
     kind: Kind
@@ -225,12 +225,12 @@ class Step:
 
 
 @dataclass(frozen=True)
-class Plan:
+class SealedPlan:
     rate_hz: float
     sensor_class: str
     gravity: float
     magnitudes_dps: tuple[float, ...]
-    steps: tuple[Step, ...]
+    steps: tuple[SealedStep, ...]
 
     @property
     def end_s(self) -> float:
@@ -253,7 +253,7 @@ def _face_quat(k: int, s: int) -> np.ndarray:
     return _axis_angle(ax / np.linalg.norm(ax), math.acos(c))
 
 
-def draw_plan(rng: np.random.Generator, rate_hz: float | None = None) -> Plan:
+def draw_plan(rng: np.random.Generator, rate_hz: float | None = None) -> SealedPlan:
     """The plan of one recording (see the module docstring); ``rate_hz`` overrides the drawn sample rate."""
     fs = float(rng.choice([50.0, 100.0, 125.0, 200.0, 250.0, 400.0, 500.0, 800.0]))
     cls = "table1_lower" if rng.random() < 0.5 else "table1_upper"
@@ -268,12 +268,12 @@ def draw_plan(rng: np.random.Generator, rate_hz: float | None = None) -> Plan:
     faces = [(k, s) for k in range(3) for s in (1, -1)]
     k0, s0 = faces[int(rng.integers(6))]
     q = _qmul(_axis_angle(_UP, rng.uniform(0.0, 2 * math.pi)), _face_quat(k0, s0))
-    steps: list[Step] = []
+    steps: list[SealedStep] = []
     t = 0.0
 
     def add(kind: Kind, duration: float, shape: str, axis: np.ndarray, **kw: float | bool) -> None:
         nonlocal t, q
-        st = Step(kind, t, duration, shape, (float(axis[0]), float(axis[1]), float(axis[2])),
+        st = SealedStep(kind, t, duration, shape, (float(axis[0]), float(axis[1]), float(axis[2])),
                   (float(q[0]), float(q[1]), float(q[2]), float(q[3])), **kw)  # type: ignore[arg-type]
         steps.append(st)
         theta, _, _ = st.theta_rate_acc(np.array([duration]))
@@ -330,12 +330,12 @@ def draw_plan(rng: np.random.Generator, rate_hz: float | None = None) -> Plan:
     hold(Kind.POSE, float(rng.uniform(6.0, 18.0)))
     tumble_to(k0, s0)
     hold(Kind.POSE, float(rng.uniform(6.0, 18.0)))
-    return Plan(rate_hz=float(rate_hz) if rate_hz else fs, sensor_class=cls, gravity=gravity,
+    return SealedPlan(rate_hz=float(rate_hz) if rate_hz else fs, sensor_class=cls, gravity=gravity,
                 magnitudes_dps=tuple(mags), steps=tuple(steps))
 
 
 @dataclass(frozen=True)
-class Motion:
+class SealedMotion:
     """The rig at sample times: attitude (body -> world), body rate, body angular acceleration, labels."""
 
     q: np.ndarray  # (n, 4)
@@ -347,7 +347,7 @@ class Motion:
     table_rate: np.ndarray  # (n,) rad/s, 0 off the table
 
 
-def motion(plan: Plan, t: np.ndarray) -> Motion:
+def motion(plan: SealedPlan, t: np.ndarray) -> SealedMotion:
     """The rig's state at any times ``t`` (closed form per step)."""
     starts = np.array([st.t0 for st in plan.steps])
     idx = np.clip(np.searchsorted(starts, t, side="right") - 1, 0, len(plan.steps) - 1)
@@ -373,7 +373,8 @@ def motion(plan: Plan, t: np.ndarray) -> Motion:
         if st.table:
             tab_a[sel] = theta
             tab_w[sel] = rate
-    return Motion(q=q, w=w, alpha=al, segment=idx.astype(np.int64), kind=kind, table_angle=tab_a, table_rate=tab_w)
+    return SealedMotion(q=q, w=w, alpha=al, segment=idx.astype(np.int64), kind=kind, table_angle=tab_a,
+                        table_rate=tab_w)
 
 
 # --- temperature ---------------------------------------------------------------------------------------------
@@ -411,7 +412,7 @@ def sensor_class(name: str) -> SensorClass:
 
 
 @dataclass(frozen=True)
-class Triad:
+class SealedTriad:
     m: np.ndarray
     b_stat: np.ndarray
     b_drift: np.ndarray
@@ -419,7 +420,7 @@ class Triad:
     sigma: np.ndarray
 
 
-def draw_triad(rng: np.random.Generator, c: SensorClass, gyro: bool) -> Triad:
+def draw_triad(rng: np.random.Generator, c: SensorClass, gyro: bool) -> SealedTriad:
     u = DEG if gyro else 1.0
     pre = "gyro" if gyro else "accel"
     unit_bias = "dps" if gyro else "mps2"
@@ -429,11 +430,12 @@ def draw_triad(rng: np.random.Generator, c: SensorClass, gyro: bool) -> Triad:
         return rng.uniform(float(lo), float(hi), size)
 
     m = np.diag(draw("scale", 3)) + (1 - np.eye(3)) * draw("cross_axis", (3, 3))
-    return Triad(m=m, b_stat=draw(f"bias_static_{unit_bias}", 3) * u, b_drift=draw(f"bias_drift_{unit_bias}", 3) * u,
-                 tc=draw("correlation_time_s", 3), sigma=draw(f"noise_std_{unit_bias}", 3) * u)
+    return SealedTriad(m=m, b_stat=draw(f"bias_static_{unit_bias}", 3) * u,
+                       b_drift=draw(f"bias_drift_{unit_bias}", 3) * u, tc=draw("correlation_time_s", 3),
+                       sigma=draw(f"noise_std_{unit_bias}", 3) * u)
 
 
-def drift(t: np.ndarray, tr: Triad, rel: float, rng: np.random.Generator) -> np.ndarray:
+def drift(t: np.ndarray, tr: SealedTriad, rel: float, rng: np.random.Generator) -> np.ndarray:
     """eq. (3): b_drift (exp(-t/T_c) + x(t)), x Gauss-Markov of stationary std ``rel`` from x(0) = 0, drawn exactly
     on a 10 Hz grid (T_c >= 50 s: the interpolation changes nothing measurable)."""
     grid = np.arange(0.0, t[-1] + 0.2, 0.1)
@@ -466,7 +468,7 @@ def _tri(x: np.ndarray) -> np.ndarray:
     return np.where(f < 0.5, 4 * f - 1, 3 - 4 * f)
 
 
-def high_holds_ended(plan: Plan, t: np.ndarray) -> np.ndarray:
+def high_holds_ended(plan: SealedPlan, t: np.ndarray) -> np.ndarray:
     """Number of table holds at ``RATCHET_DPS`` or more that ended before each time."""
     ends = np.array([st.t0 + st.duration for st in plan.steps
                      if st.kind == Kind.RATE and abs(st.rate0) >= RATCHET_DPS * DEG - 1e-9])
@@ -477,7 +479,7 @@ def high_holds_ended(plan: Plan, t: np.ndarray) -> np.ndarray:
 @dataclass(frozen=True)
 class Sealed:
     session: Session
-    plan: Plan
+    plan: SealedPlan
     kind: str
     size: float  # |size| in the unit of SIZE
     axis: int  # the axis it acts on
@@ -505,7 +507,7 @@ def generate(seed: int, kind: str, *, rate_hz: float | None = None) -> Sealed:
     x = {"accel": plan.gravity * up, "gyro": mo.w}
     clean: dict[str, np.ndarray] = {}
     noise: dict[str, np.ndarray] = {}
-    triads: dict[str, Triad] = {}
+    triads: dict[str, SealedTriad] = {}
     for sensor in ("accel", "gyro"):
         tr = draw_triad(rng, cls, sensor == "gyro")
         triads[sensor] = tr
