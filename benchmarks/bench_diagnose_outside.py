@@ -18,7 +18,12 @@ The kinds of ``gen_outside.UNANTICIPATED`` are not in the default list (kept out
 final check): ``--kinds alpha_sign_bias,g_scale,temp_misalign,rate_deadband``; their seeds are
 ``base + i * len(UNANTICIPATED) + index`` on their own random streams.
 
-Run: ``python benchmarks/bench_diagnose_outside.py [--base 50000] [--per 4] [--kinds telegraph,...]``
+``--generator sealed`` runs the sealed generator (``benchmarks/gen_sealed.py``: its kinds and nulls, its
+``LOCATION`` and ``COVARIATE``), kept out of every locator development: run once, at the end, as the final check.
+Its seeds are ``base + i * len(gen_sealed.KINDS) + index``.
+
+Run: ``python benchmarks/bench_diagnose_outside.py [--base 50000] [--per 4] [--kinds telegraph,...]
+[--generator outside|sealed]``
 """
 
 from __future__ import annotations
@@ -28,10 +33,12 @@ import sys
 import time
 from collections import Counter
 from pathlib import Path
+from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import gen_outside
+import gen_sealed
 
 from station.diagnose import diagnose
 from station.kernel.limits_file import DEFAULT_LIMITS_PATH, load_limits
@@ -44,17 +51,21 @@ def warmup_tc() -> dict[str, tuple[float, float]] | None:
         return None
 
 
+#: The generator whose recordings are diagnosed (``--generator``); its LOCATION, COVARIATE and NULLS are used.
+GEN: Any = gen_outside
+
+
 def right_place(kind: str, unexplained: list[dict]) -> bool:
-    if kind not in gen_outside.LOCATION:
+    if kind not in GEN.LOCATION:
         return False
-    sensors, kinds = gen_outside.LOCATION[kind]
+    sensors, kinds = GEN.LOCATION[kind]
     return any(u["sensor"] in sensors and set(u["segment_kinds"]) & kinds for u in unexplained)
 
 
 def covariate_right(kind: str, unexplained: list[dict]) -> bool:
     """Whether every unexplained entry at the kind's place names its covariate (a null's: none, or noise colour)."""
-    words = gen_outside.COVARIATE[kind]
-    loc = gen_outside.LOCATION.get(kind)
+    words = GEN.COVARIATE[kind]
+    loc = GEN.LOCATION.get(kind)
     mine = [u for u in unexplained if loc is None or (u["sensor"] in loc[0] and set(u["segment_kinds"]) & loc[1])]
     if loc is not None:  # a "none" text lists the dictionary: it names no covariate
         return bool(mine) and all(not u["covariate"].startswith("none") and any(w in u["covariate"] for w in words)
@@ -66,19 +77,27 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--base", type=int, default=50_000, help="first seed (development used 0-999)")
     ap.add_argument("--per", type=int, default=4, help="recordings per kind")
-    ap.add_argument("--kinds", default=",".join(gen_outside.KINDS), help="comma-separated kinds")
+    ap.add_argument("--kinds", default=None, help="comma-separated kinds (default: the generator's KINDS)")
+    ap.add_argument("--generator", choices=("outside", "sealed"), default="outside",
+                    help="gen_outside (default) or the sealed gen_sealed (the final check only)")
     args = ap.parse_args()
+    global GEN
+    GEN = gen_sealed if args.generator == "sealed" else gen_outside
     tc = warmup_tc()
-    kinds = [k for k in args.kinds.split(",") if k]
+    kinds = [k for k in (args.kinds or ",".join(GEN.KINDS)).split(",") if k]
     stats: dict[str, Counter] = {}
     times: list[float] = []
     improvements: dict[str, list[float]] = {}
     seed = args.base
     for i in range(args.per):
         for kind in kinds:
-            order = gen_outside.KINDS if kind in gen_outside.KINDS else gen_outside.UNANTICIPATED
+            order: tuple[str, ...]
+            if GEN is gen_sealed:
+                order = gen_sealed.KINDS
+            else:
+                order = gen_outside.KINDS if kind in gen_outside.KINDS else gen_outside.UNANTICIPATED
             s = seed + i * len(order) + order.index(kind)
-            rec = gen_outside.generate(s, kind)
+            rec = GEN.generate(s, kind)
             t0 = time.process_time()
             rep = diagnose(rec.session, warmup_tc_s=tc).report.to_json()
             dt = time.process_time() - t0
@@ -91,26 +110,26 @@ def main() -> None:
             st["unexpl"] += bool(un)
             ok = right_place(kind, un) and not named
             st["right"] += ok
-            st["cov"] += covariate_right(kind, un) and (ok or kind in gen_outside.NULLS)
-            loc = gen_outside.LOCATION.get(kind)
+            st["cov"] += covariate_right(kind, un) and (ok or kind in GEN.NULLS)
+            loc = GEN.LOCATION.get(kind)
             emp = [e["heldout_improvement"] for u in un for e in u.get("empirical", [])
                    if loc is None or u["sensor"] in loc[0]]
             if emp:
                 improvements.setdefault(kind, []).append(max(emp))
             where = "; ".join(f"{u['sensor']} {''.join(u['axes'])} {'/'.join(u['segment_kinds'])}: "
                               f"{u['covariate'][:60]}" for u in un) or "-"
-            flag = "RIGHT" if ok else ("" if kind in gen_outside.NULLS else "miss")
+            flag = "RIGHT" if ok else ("" if kind in GEN.NULLS else "miss")
             flag += f" held-out {max(emp):.2f}" if emp else ""
             print(f"  {kind:16s} seed {s}: {rec.plan.rate_hz:4.0f} Hz {rec.session.duration_s:4.0f} s "
                   f"axis {'xyz'[rec.axis]} named {named or '-'} | unexplained {where} {flag} ({dt:.1f} s)",
                   flush=True)
     print()
-    print(f"outside-library generator (benchmarks/gen_outside.py), seeds from {args.base}, {args.per} per kind")
+    print(f"outside-library generator (benchmarks/{GEN.__name__}.py), seeds from {args.base}, {args.per} per kind")
     print(f"{'kind':16s} {'n':>3s} {'right':>6s} {'cov':>4s} {'unexpl':>7s} {'named':>6s} {'held-out':>9s}"
           "   where it acts")
     tot_n = tot_r = null_n = null_named = 0
     for kind, st in stats.items():
-        loc = gen_outside.LOCATION.get(kind)
+        loc = GEN.LOCATION.get(kind)
         where = (f"{'/'.join(sorted(loc[0]))} in {'/'.join(sorted(loc[1]))}" if loc else "null (no physics)")
         imp = improvements.get(kind)
         held = f"{sorted(imp)[len(imp) // 2]:.2f}" if imp else "-"
