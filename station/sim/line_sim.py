@@ -61,7 +61,7 @@ class LineSim:
 
     def rack_specific_force(self) -> np.ndarray:
         """The rack rest's true specific force in the sensor frame (m/s^2): gravity up the tilted ``rack_up``."""
-        g = float(self.rig.metadata.get("gravity_mps2", "9.80665"))
+        g = self.rig.gravity_mps2
         return np.asarray(rotation_vector_matrix(self.rack_tilt_rad).T @ (g * up_vector(self.rack_up)))
 
 
