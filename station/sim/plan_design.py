@@ -150,7 +150,8 @@ def evaluate(plan: LinePlan, limits: LimitsFile, seeds: Sequence[int], margin: f
     resolved = True
     for seed, unit in zip(seeds, design_units(seeds), strict=True):
         line = simulate_line(seed, plan=plan, unit=unit)
-        p = fit_joint(line.rack, line.rig, opts, max_transfer_s=plan.max_transfer_s)
+        p = fit_joint(line.rack, line.rig, opts, max_transfer_s=plan.max_transfer_s,
+                      rack_orientation=plan.rack_orientation, rack_tilt_tolerance_deg=plan.rack_tilt_tolerance_deg)
         for key, cap in caps.items():
             worst[key] = max(worst[key], float(np.nanmax(_std(p, key))) / cap)
         if match_full is not None:
