@@ -11,8 +11,8 @@ from station.fit.joint import fit_joint, tied_rack_force
 from station.kernel.errors import FitError, RackOrientationError
 from station.kernel.line_plan import LinePlan, default_line_plan, line_plan_from_json, line_plan_to_json
 from station.kernel.plan import PlanError
-from station.sequence.runner import refusal_outcome
 from station.sequence.records import Outcome
+from station.sequence.runner import refusal_outcome
 from station.sim.line_sim import simulate_line
 
 OPTIONS = FitOptions(tc_range_s={"accel": (50.0, 167.0), "gyro": (1030.0, 3760.0)})
