@@ -66,6 +66,7 @@ from station.fit.checks import check_finite, check_session, check_time
 from station.fit.determinability import assess
 from station.kernel.errors import FitError, RackOrientationError
 from station.kernel.geometry import AXIS_INDEX, POSE_ANGLES_DEG, up_vector
+from station.kernel.line_plan import ANY_ORIENTATION
 from station.kernel.parameters import FitQuality, ParameterSet, TriadParams
 from station.session.model import Kind, Session
 
@@ -277,7 +278,7 @@ def tied_rack_force(force: np.ndarray, up: str, gravity_mps2: float, tolerance_d
 
 def fit_joint(
     rack: Session, rig: Session, options: FitOptions | None = None, *, max_transfer_s: float = 1800.0,
-    max_blocks: int = 140, clock_slack_s: float = 2.0, rack_orientation: str = "any",
+    max_blocks: int = 140, clock_slack_s: float = 2.0, rack_orientation: str = ANY_ORIENTATION,
     rack_tilt_tolerance_deg: float = 5.0,
 ) -> ParameterSet:
     """Fit eq. 1 with eq. 3's drift to a unit's rack rest and rig recording together.
@@ -303,7 +304,7 @@ def fit_joint(
 def _fit_joint(rack: Session, rig: Session, options: FitOptions, max_transfer_s: float,
                max_blocks: int, clock_slack_s: float, rack_orientation: str,
                rack_tilt_tolerance_deg: float) -> ParameterSet:
-    if rack_orientation != "any" and rack_orientation not in POSE_ANGLES_DEG:
+    if rack_orientation != ANY_ORIENTATION and rack_orientation not in POSE_ANGLES_DEG:
         raise ValueError(f"rack_orientation must be 'any' or a pose name, got {rack_orientation!r}")
     check_time(rack)
     check_finite(rack)
@@ -330,7 +331,7 @@ def _fit_joint(rack: Session, rig: Session, options: FitOptions, max_transfer_s:
     accel_ref = merged.ref_accel_mps2
     rule = "rack rest: M c + b_stat + b_drift exp(-t/T_c) with M c one free offset per axis and rack segment"
     tie: dict[str, Any] = {}
-    if rack_orientation != "any":
+    if rack_orientation != ANY_ORIENTATION:
         gravity = _still_gravity(rig)
         try:
             first = np.linalg.solve(a.p["misalignment"], a.offsets).T  # per rack segment: M^-1 o
