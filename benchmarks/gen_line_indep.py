@@ -302,9 +302,11 @@ WALL0 = 1_800_000_000.0
 
 
 def generate_unit(seed: int, rack_s: float = 3600.0, transfer_s: float = 45.0, rig: RigPlan | None = None,
-                  fs: float = 100.0, hour_s: float = 3600.0) -> LineUnit:
+                  fs: float = 100.0, hour_s: float = 3600.0, rack_tilt_deg: float = 25.0) -> LineUnit:
     """One unit (seed in, same recordings out): rack + rig of one power-on, a full-plan recording of another
-    power-on, and two validation power-ons (full plan; ``hour_s`` at rest)."""
+    power-on, and two validation power-ons (full plan; ``hour_s`` at rest). The rack holds the unit +z up,
+    tilted by a rotation vector whose components are uniform in +-``rack_tilt_deg`` (25: about any attitude
+    near +z; 3: a rack that holds its units on their base, tilts up to 4.2 deg)."""
     rng = np.random.Generator(np.random.PCG64DXSM(np.random.SeedSequence([seed, 4242])))
     unit = draw_unit(rng)
     serial = f"IND-{seed:07d}"
@@ -315,7 +317,7 @@ def generate_unit(seed: int, rack_s: float = 3600.0, transfer_s: float = 45.0, r
 
     # one power-on: the rack (a fixed random tilt, nobody measures it), the transfer, the rig
     drifts = power_on(1)
-    tilt = Rotation.from_rotvec(rng.uniform(-25.0, 25.0, 3) * DEG)
+    tilt = Rotation.from_rotvec(rng.uniform(-rack_tilt_deg, rack_tilt_deg, 3) * DEG)
     rack_tl = Timeline(tilt)
     rack_tl.hold(Kind.REST, rack_s + 1.0)
     n_rack = round(rack_s * fs)

@@ -621,6 +621,7 @@ class Station:
         return LineRigRunner(
             hw.rig, hw.sensors, self.clock, archive=DatabaseArchive(self.recorder.db.sessions),
             max_transfer_s=c.line.plan.max_transfer_s, on_interruption=BACK_TO_RACK if c.back_to_rack else FULL,
+            rack_orientation=c.line.plan.rack_orientation, rack_tilt_tolerance_deg=c.line.plan.rack_tilt_tolerance_deg,
             clock_slack_s=2.0 + 0.2 * self.clock.scale,  # a simulated clock's round trips take `scale` times longer
             plan=c.plan, options=self.options, limits=self.limits.product, out_dir=c.out_dir, station=c.station_id,
             rig_name=hw.rig_name, sensor_urls=list(c.sensor_urls), subscribers=self.subscribers,

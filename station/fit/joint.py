@@ -21,6 +21,18 @@ the Gauss-Markov drift started at 0 at power-on) is used unchanged over the bloc
 recordings (:func:`station.fit.blocks.make_blocks`); the rack's rest is cut into runs that double in
 length from power-on so the fast accelerometer warm-up (T_c 50-167 s) gets short blocks.
 
+A rack that holds its units in one known orientation (``rack_orientation``, e.g. ``"+z"``: every slot holds
+its unit lying on its base, tilted by a small unknown angle) lets the norm tie one offset back in. After the fit
+above, the rack's specific force ``c = M^-1 o`` gives the slot's tilt; a second pass takes the rack's rest as a
+reference ``c'`` whose components across the nominal up axis are those of ``c`` and whose component along it is
+``sqrt(g^2 - |c_across|^2)`` (``g`` the norm of the rig's references: the plan's gravity), and fits the output
+axis along up without a free offset. The rack's level on that axis is then ``M c' + b_stat + b_drift
+exp(-t/T_c)``, as a rest in that orientation on the rig would be: the error of ``c'`` along up is
+``|c_across| d|c_across| / g``, second order in the tilt's error (0.03 mm/s^2 for a 5 deg tilt known to 0.3 mm/s^2;
+not in the stated uncertainties). The two axes across up keep their free offsets: they carry the tilt, which
+nothing measures. A rest whose ``c`` is farther than ``rack_tilt_tolerance_deg`` from the nominal orientation
+is refused (:class:`~station.kernel.errors.RackOrientationError`: the unit was put in its slot another way).
+
 A power interruption between rack and rig (:func:`check_power`) breaks the shared time base: the fit
 is refused, and the line gives the unit the full rig plan or sends it back to the rack.
 """
@@ -52,7 +64,9 @@ from station.fit.calibrate import (
 )
 from station.fit.checks import check_finite, check_session, check_time
 from station.fit.determinability import assess
-from station.kernel.errors import FitError
+from station.kernel.errors import FitError, RackOrientationError
+from station.kernel.geometry import AXIS_INDEX, POSE_ANGLES_DEG, up_vector
+from station.kernel.line_plan import ANY_ORIENTATION
 from station.kernel.parameters import FitQuality, ParameterSet, TriadParams
 from station.session.model import Kind, Session
 
@@ -209,7 +223,10 @@ class _JointTriad:
 def _fit_triad(
     merged: Session, data: np.ndarray, ref: np.ndarray, rig_runs: list[tuple[int, int, int]],
     rack_runs: list[tuple[int, int, int]], indicator: np.ndarray, options: FitOptions, triad: str,
+    tied_axis: int | None = None,
 ) -> _JointTriad:
+    """``tied_axis``: the output axis fitted without the rack's free offsets (its rack samples' reference in
+    ``ref`` is the rack's tied specific force, see the module docstring); its offsets are 0."""
     runs = sorted(rig_runs + rack_runs, key=lambda r: r[1])
     noise = white_noise(merged, data, runs, options.outlier_sigma)
     blocks = make_blocks(merged.t_s, data, np.nan_to_num(ref), np.nan_to_num(merged.ref_accel_mps2), noise.keep,
@@ -217,18 +234,52 @@ def _fit_triad(
     assert blocks.extra is not None
     design = np.column_stack([blocks.ref, np.ones((len(blocks), 1)), blocks.extra])
     tc_range = options.tc_range_s.get(triad)
-    fits = [fit_axis(blocks, k, design, float(noise.sigma[k]), lr_threshold=options.drift_lr_threshold,
-                     tc_range_s=tc_range) for k in range(3)]
-    tri = TriadLinear(fits=fits, n_ref=3, extra=0)
     n_off = indicator.shape[1]
-    offsets = np.array([f.beta[4:4 + n_off] for f in fits])
-    offsets_std = np.array([np.sqrt(np.clip(np.diag(f.beta_cov)[4:4 + n_off], 0.0, None)) for f in fits])
+    fits = [fit_axis(blocks, k, design[:, :4] if k == tied_axis else design, float(noise.sigma[k]),
+                     lr_threshold=options.drift_lr_threshold, tc_range_s=tc_range) for k in range(3)]
+    tri = TriadLinear(fits=fits, n_ref=3, extra=0)
+    offsets = np.array([np.zeros(n_off) if k == tied_axis else f.beta[4:4 + n_off] for k, f in enumerate(fits)])
+    offsets_std = np.array([np.zeros(n_off) if k == tied_axis else
+                            np.sqrt(np.clip(np.diag(f.beta_cov)[4:4 + n_off], 0.0, None))
+                            for k, f in enumerate(fits)])
     return _JointTriad(unpack_triad(tri), tri, blocks, offsets, offsets_std, noise, runs)
+
+
+def _still_gravity(rig: Session) -> float:
+    """The norm of the rig's still references (m/s^2): the local gravity its plan states."""
+    still = np.isin(rig.kind, [int(Kind.REST), int(Kind.POSE)])
+    norms = np.linalg.norm(rig.ref_accel_mps2[still], axis=1)
+    norms = norms[np.isfinite(norms)]
+    if not len(norms):
+        raise FitError("the rig recording has no still reference to take gravity's norm from")
+    return float(np.median(norms))
+
+
+def tied_rack_force(force: np.ndarray, up: str, gravity_mps2: float, tolerance_deg: float) -> tuple[np.ndarray, float]:
+    """The rack rest's reference for the second pass: ``force`` (the first pass's ``M^-1 o``, m/s^2) with its
+    component along the nominal ``up`` (a pose name) replaced by ``sqrt(g^2 - |force across up|^2)``; and the
+    angle (deg) between ``force`` and ``up``. Refuses (:class:`RackOrientationError`) an angle above
+    ``tolerance_deg``."""
+    u = up_vector(up)
+    norm = float(np.linalg.norm(force))
+    angle = math.degrees(math.acos(float(np.clip(force @ u / norm, -1.0, 1.0)))) if norm > 0 else 180.0
+    if not angle <= tolerance_deg:
+        raise RackOrientationError(
+            f"the unit rested {angle:.1f} deg from {up} up in the rack (the plan holds units {up} up within "
+            f"{tolerance_deg:g} deg): it was put in its slot another way; soak it again as the plan says or give "
+            "it the full rig plan")
+    k = AXIS_INDEX[up[1]]
+    across = force.copy()
+    across[k] = 0.0
+    tied = across.copy()
+    tied[k] = u[k] * math.sqrt(max(gravity_mps2**2 - float(across @ across), 0.0))
+    return tied, angle
 
 
 def fit_joint(
     rack: Session, rig: Session, options: FitOptions | None = None, *, max_transfer_s: float = 1800.0,
-    max_blocks: int = 140, clock_slack_s: float = 2.0,
+    max_blocks: int = 140, clock_slack_s: float = 2.0, rack_orientation: str = ANY_ORIENTATION,
+    rack_tilt_tolerance_deg: float = 5.0,
 ) -> ParameterSet:
     """Fit eq. 1 with eq. 3's drift to a unit's rack rest and rig recording together.
 
@@ -236,17 +287,25 @@ def fit_joint(
     steps (and optionally a rest) with references, its ``t_s`` the same sensor time since power-on.
     ``options.max_blocks`` is replaced by ``max_blocks`` (the long rack rest needs more blocks than a rig
     session); thermal terms, g-sensitivity and the scale nonlinearity are not fitted here.
+    ``rack_orientation``: ``"any"`` (the rack's rest has free offsets) or the pose the rack holds its units in
+    (``"+z"``...), within ``rack_tilt_tolerance_deg``: the accelerometer's rack level along up is then tied to
+    the norm of gravity (module docstring); a rest farther from it raises
+    :class:`~station.kernel.errors.RackOrientationError`.
 
     Raises :class:`~station.kernel.errors.FitError` with a one-line reason when the recordings cannot
     give a trustworthy result, including a power interruption between them (:func:`check_power`).
     """
     opts = options or FitOptions()
     with threadpool_limits(limits=1, user_api="blas"), numerics(f"joint fit of {rig.serial!r}"):
-        return _fit_joint(rack, rig, opts, max_transfer_s, max_blocks, clock_slack_s)
+        return _fit_joint(rack, rig, opts, max_transfer_s, max_blocks, clock_slack_s, rack_orientation,
+                          rack_tilt_tolerance_deg)
 
 
 def _fit_joint(rack: Session, rig: Session, options: FitOptions, max_transfer_s: float,
-               max_blocks: int, clock_slack_s: float) -> ParameterSet:
+               max_blocks: int, clock_slack_s: float, rack_orientation: str,
+               rack_tilt_tolerance_deg: float) -> ParameterSet:
+    if rack_orientation != ANY_ORIENTATION and rack_orientation not in POSE_ANGLES_DEG:
+        raise ValueError(f"rack_orientation must be 'any' or a pose name, got {rack_orientation!r}")
     check_time(rack)
     check_finite(rack)
     if not rack.segments_of(Kind.REST, Kind.POSE):
@@ -269,6 +328,31 @@ def _fit_joint(rack: Session, rig: Session, options: FitOptions, max_transfer_s:
              settled_runs(rig, (Kind.REST, Kind.POSE), rig.ref_accel_mps2)]
     with numerics("accelerometer joint fit (rack rest, rig rest and poses)"):
         a = _fit_triad(merged, merged.accel_mps2, merged.ref_accel_mps2, shift, rack_runs, indicator, options, "accel")
+    accel_ref = merged.ref_accel_mps2
+    rule = "rack rest: M c + b_stat + b_drift exp(-t/T_c) with M c one free offset per axis and rack segment"
+    tie: dict[str, Any] = {}
+    if rack_orientation != ANY_ORIENTATION:
+        gravity = _still_gravity(rig)
+        try:
+            first = np.linalg.solve(a.p["misalignment"], a.offsets).T  # per rack segment: M^-1 o
+        except np.linalg.LinAlgError:
+            raise FitError("the accelerometer's M from the rig is singular: no rack orientation to check") from None
+        accel_ref = merged.ref_accel_mps2.copy()
+        angles = []
+        for j, seg in enumerate(rack_segments):
+            tied, angle = tied_rack_force(first[j], rack_orientation, gravity, rack_tilt_tolerance_deg)
+            accel_ref[:n_rack][rack.segment == seg] = tied
+            angles.append(round(angle, 4))
+        k_up = AXIS_INDEX[rack_orientation[1]]
+        with numerics("accelerometer joint fit, second pass (the rack's level along gravity tied to its norm)"):
+            a = _fit_triad(merged, merged.accel_mps2, accel_ref, shift, rack_runs, indicator, options, "accel",
+                           tied_axis=k_up)
+        rule = (f"rack rest, held {rack_orientation} up within {rack_tilt_tolerance_deg:g} deg: M c' + b_stat + "
+                f"b_drift exp(-t/T_c), c' the first pass's M^-1 o across {rack_orientation} and sqrt(g^2 - "
+                f"|c' across|^2) along it (g = {gravity:.5f} m/s^2, the rig's references), free offsets on the "
+                f"two axes across {rack_orientation}; the gyro's rest one free offset per axis")
+        tie = {"rack_orientation": rack_orientation, "rack_tilt_tolerance_deg": rack_tilt_tolerance_deg,
+               "rack_tilt_deg": angles, "gravity_mps2": round(gravity, 9)}
     g_shift = [(s + _RIG_SEGMENT_OFFSET, a0 + n_rack, b0 + n_rack) for s, a0, b0 in
                settled_runs(rig, (Kind.REST, Kind.POSE, Kind.RATE), rig.ref_gyro_radps)]
     with numerics("gyroscope joint fit (rack rest, rig rest, poses and rate steps)"):
@@ -278,17 +362,20 @@ def _fit_joint(rack: Session, rig: Session, options: FitOptions, max_transfer_s:
     def residual(j: _JointTriad, data: np.ndarray, ref: np.ndarray) -> np.ndarray:
         return data - mean_model(j.p, merged.t_s, ref, merged.ref_accel_mps2) - indicator @ j.offsets.T
 
-    a_res = residual(a, merged.accel_mps2, merged.ref_accel_mps2)
+    a_res = residual(a, merged.accel_mps2, accel_ref)
     g_res = residual(g, merged.gyro_radps, merged.ref_gyro_radps)
 
-    def implied(j: _JointTriad) -> list[list[float]]:
-        """The rack's constant input per rack segment, ``M^-1 o`` (the offsets hold ``M c``)."""
+    def implied(j: _JointTriad, ref: np.ndarray) -> list[list[float]]:
+        """The rack's constant input per rack segment, ``M^-1 (M c' + o)`` (``c'`` the rack's reference in the
+        second pass, else 0: the offsets hold ``M c``)."""
+        level = j.offsets + j.p["misalignment"] @ np.array(
+            [np.nan_to_num(ref[:n_rack][rack.segment == seg][0]) for seg in rack_segments]).T
         try:
-            return np.linalg.solve(j.p["misalignment"], j.offsets).T.round(9).tolist()
+            return np.linalg.solve(j.p["misalignment"], level).T.round(9).tolist()
         except np.linalg.LinAlgError:
             return []
 
-    rack_force = implied(a)
+    rack_force = implied(a, accel_ref)
     line: dict[str, Any] = {
         "rack_samples": n_rack,
         "rack_span_s": round(float(rack.t_s[-1] - rack.t_s[0]), 6),
@@ -297,8 +384,9 @@ def _fit_joint(rack: Session, rig: Session, options: FitOptions, max_transfer_s:
         "rack_segments": [int(s) for s in rack_segments],
         "rack_specific_force_mps2": rack_force,
         "rack_gravity_mps2": [round(float(np.linalg.norm(c)), 6) for c in rack_force],
-        "rack_angular_rate_radps": implied(g),
-        "rule": "rack rest: M c + b_stat + b_drift exp(-t/T_c) with M c one free offset per axis and rack segment",
+        "rack_angular_rate_radps": implied(g, merged.ref_gyro_radps),
+        "rule": rule,
+        **tie,
     }
     quality = FitQuality(
         accel=residual_figures(a_res, a.runs, a.noise.keep),
@@ -340,4 +428,5 @@ def _fit_joint(rack: Session, rig: Session, options: FitOptions, max_transfer_s:
     return assess(params, float(merged.t_s[-1]))
 
 
-__all__ = ["BOOT_KEY", "OFFSET_KEY", "WALL_KEY", "PowerContinuity", "check_power", "fit_joint", "power_continuity"]
+__all__ = ["BOOT_KEY", "OFFSET_KEY", "WALL_KEY", "PowerContinuity", "check_power", "fit_joint", "power_continuity",
+           "tied_rack_force"]

@@ -57,6 +57,11 @@ class TimeBaseError(FitError):
     """
 
 
+class RackOrientationError(FitError):
+    """A line unit's rest in the soak rack was not in the orientation the line's plan holds its units in (it was
+    put in its slot another way): a handling fault of the line, not a property of the unit, so it ends ERROR."""
+
+
 class HardwareError(StationError):
     """A station fault (rig, serial link, EEPROM): the run's outcome is ERROR, not FAIL."""
 

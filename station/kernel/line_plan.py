@@ -15,10 +15,13 @@ from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
+from station.kernel.geometry import POSE_ANGLES_DEG
 from station.kernel.plan import PlanError, RigPlan
 
 #: Format of a line plan written to a file (``station-line-plan/1``).
 LINE_PLAN_FORMAT = "station-line-plan/1"
+#: ``rack_orientation`` of a rack that holds its units in any orientation (nobody says which).
+ANY_ORIENTATION = "any"
 
 
 def line_rig_plan() -> RigPlan:
@@ -52,11 +55,19 @@ class LinePlan:
         max_transfer_s: longest time (sensor seconds) between the rack's last sample and the rig's
             first that still counts as one power-on (the unit must stay powered while it moves).
         rig: what the rig does.
+        rack_orientation: how the rack holds its units: ``"any"`` (any fixed orientation, unknown: the joint
+            fit gives the rack's rest one free offset per axis) or a pose name such as ``"+z"`` (every slot holds
+            its unit with that axis up, e.g. lying on its base, within ``rack_tilt_tolerance_deg``: the joint fit
+            then ties the rest's level along gravity to the norm of gravity, see :mod:`station.fit.joint`, and
+            refuses a unit whose rest was farther from that orientation).
+        rack_tilt_tolerance_deg: the largest tilt of a slot against ``rack_orientation`` (deg) the fit accepts.
     """
 
     rack_s: float = 3600.0
     max_transfer_s: float = 1800.0
     rig: RigPlan = field(default_factory=line_rig_plan)
+    rack_orientation: str = ANY_ORIENTATION
+    rack_tilt_tolerance_deg: float = 5.0
 
     def __post_init__(self) -> None:
         if not self.rack_s > 0:
@@ -65,14 +76,24 @@ class LinePlan:
             raise PlanError(f"line plan: max_transfer_s must be > 0, got {self.max_transfer_s!r}")
         if not self.rig.poses or not self.rig.rate_steps:
             raise PlanError("line plan: the rig part needs poses and rate steps (M and b_stat come from the rig)")
+        if self.rack_orientation != ANY_ORIENTATION and self.rack_orientation not in POSE_ANGLES_DEG:
+            raise PlanError(f"line plan: rack_orientation must be {ANY_ORIENTATION!r} or one of "
+                            f"{', '.join(POSE_ANGLES_DEG)}, got {self.rack_orientation!r}")
+        if not 0.0 < self.rack_tilt_tolerance_deg <= 30.0:
+            raise PlanError("line plan: rack_tilt_tolerance_deg must be in (0, 30] deg, got "
+                            f"{self.rack_tilt_tolerance_deg!r}")
 
 
 def line_plan_to_json(plan: LinePlan) -> str:
     """The plan as a versioned JSON document (``format``: :data:`LINE_PLAN_FORMAT`)."""
     rig = asdict(plan.rig)
     rig["rate_steps"] = [list(step) for step in plan.rig.rate_steps]
-    return json.dumps({"format": LINE_PLAN_FORMAT, "rack_s": plan.rack_s, "max_transfer_s": plan.max_transfer_s,
-                       "rig": rig}, indent=2, sort_keys=True)
+    doc: dict[str, Any] = {"format": LINE_PLAN_FORMAT, "rack_s": plan.rack_s, "max_transfer_s": plan.max_transfer_s,
+                           "rig": rig}
+    if plan.rack_orientation != ANY_ORIENTATION:  # the rack's keys only when set: a plan of any orientation keeps
+        doc["rack_orientation"] = plan.rack_orientation  # the bytes (and SHA-256) it had before they existed
+        doc["rack_tilt_tolerance_deg"] = plan.rack_tilt_tolerance_deg
+    return json.dumps(doc, indent=2, sort_keys=True)
 
 
 def line_plan_from_json(text: str) -> LinePlan:
@@ -89,7 +110,8 @@ def line_plan_from_json(text: str) -> LinePlan:
     if not isinstance(rig, dict):
         raise PlanError("line plan: 'rig' must be a table of the rig plan's fields")
     known = {f.name for f in fields(RigPlan)}
-    unknown = sorted(set(rig) - known) + sorted(set(doc) - {"format", "rack_s", "max_transfer_s", "rig"})
+    top = {"format", "rack_s", "max_transfer_s", "rig", "rack_orientation", "rack_tilt_tolerance_deg"}
+    unknown = sorted(set(rig) - known) + sorted(set(doc) - top)
     if unknown:
         raise PlanError(f"line plan: unknown key(s) {', '.join(unknown)}")
     try:
@@ -100,7 +122,9 @@ def line_plan_from_json(text: str) -> LinePlan:
             if key in rig_kwargs:
                 rig_kwargs[key] = tuple(rig_kwargs[key])
         return LinePlan(rack_s=float(doc.get("rack_s", 3600.0)),
-                        max_transfer_s=float(doc.get("max_transfer_s", 1800.0)), rig=RigPlan(**rig_kwargs))
+                        max_transfer_s=float(doc.get("max_transfer_s", 1800.0)), rig=RigPlan(**rig_kwargs),
+                        rack_orientation=str(doc.get("rack_orientation", ANY_ORIENTATION)),
+                        rack_tilt_tolerance_deg=float(doc.get("rack_tilt_tolerance_deg", 5.0)))
     except (TypeError, ValueError) as exc:
         raise PlanError(f"line plan: {exc}") from None
 
@@ -152,5 +176,5 @@ def default_line_plan() -> LinePlan:
     return LinePlan()
 
 
-__all__ = ["LINE_PLAN_FORMAT", "LinePlan", "LinePlanFile", "default_line_plan", "line_plan_from_json",
-           "line_plan_to_json", "line_rig_plan", "load_line_plan_file"]
+__all__ = ["ANY_ORIENTATION", "LINE_PLAN_FORMAT", "LinePlan", "LinePlanFile", "default_line_plan",
+           "line_plan_from_json", "line_plan_to_json", "line_rig_plan", "load_line_plan_file"]

@@ -27,6 +27,7 @@ from station.fit.calibrate import FitOptions
 from station.fit.joint import BOOT_KEY, OFFSET_KEY, check_power, fit_joint, power_continuity
 from station.kernel.clock import Clock
 from station.kernel.errors import FitError, HardwareError
+from station.kernel.line_plan import ANY_ORIENTATION
 from station.kernel.parameters import ParameterSet
 from station.line.recordings import RackArchive, StoredRackRecording
 from station.sensor.protocol import Sensor
@@ -86,11 +87,14 @@ def choose_plan(
 
 
 def fit_line_unit(rack: Session, rig: Session, options: FitOptions | None = None, *,
-                  max_transfer_s: float = 1800.0, clock_slack_s: float = 2.0) -> ParameterSet:
+                  max_transfer_s: float = 1800.0, clock_slack_s: float = 2.0, rack_orientation: str = ANY_ORIENTATION,
+                  rack_tilt_tolerance_deg: float = 5.0) -> ParameterSet:
     """The joint fit of one unit's rack and rig recordings (refused with the reason when they are not one
-    power-on: :class:`~station.kernel.errors.FitError`)."""
+    power-on: :class:`~station.kernel.errors.FitError`; when the rack holds its units in ``rack_orientation``
+    and this unit's rest was not: :class:`~station.kernel.errors.RackOrientationError`)."""
     power = check_power(rack, rig, max_transfer_s=max_transfer_s, clock_slack_s=clock_slack_s)
-    params = fit_joint(rack, rig, options, max_transfer_s=max_transfer_s, clock_slack_s=clock_slack_s)
+    params = fit_joint(rack, rig, options, max_transfer_s=max_transfer_s, clock_slack_s=clock_slack_s,
+                       rack_orientation=rack_orientation, rack_tilt_tolerance_deg=rack_tilt_tolerance_deg)
     params.source["line"] = {"transfer_s": round(power.sensor_gap_s, 6)}
     return params
 
@@ -126,15 +130,19 @@ class LineRigRunner(SequenceRunner):
     """The sequence runner for units that soaked in the rack (see the module docstring).
 
     Args are :class:`~station.sequence.runner.SequenceRunner`'s (``sensors`` are wrapped in :class:`KeepPowered`),
-    plus ``archive`` (where the rack recordings are), ``max_transfer_s``, ``on_interruption`` and ``clock_slack_s``
+    plus ``archive`` (where the rack recordings are), ``max_transfer_s``, ``on_interruption``, ``clock_slack_s``
     (the allowed disagreement of sensor time and station clock, s; a simulated clock's command round trips take
-    its scale times longer in its seconds).
+    its scale times longer in its seconds) and the line plan's ``rack_orientation`` and
+    ``rack_tilt_tolerance_deg`` (:class:`~station.kernel.line_plan.LinePlan`).
     """
 
     def __init__(self, rig: Any, sensors: Sequence[Sensor], clock: Clock, *, archive: RackArchive,
                  max_transfer_s: float = 1800.0, on_interruption: str = FULL, clock_slack_s: float = 2.0,
+                 rack_orientation: str = ANY_ORIENTATION, rack_tilt_tolerance_deg: float = 5.0,
                  **kwargs: Any) -> None:
         self.archive = archive
+        self.rack_orientation = rack_orientation
+        self.rack_tilt_tolerance_deg = float(rack_tilt_tolerance_deg)
         self.max_transfer_s = float(max_transfer_s)
         self.clock_slack_s = float(clock_slack_s)
         self.decisions: dict[str, LineDecision] = {}
@@ -182,7 +190,8 @@ class LineRigRunner(SequenceRunner):
         if stored is None:
             raise FitError("no rack recording of this unit")
         return fit_line_unit(stored.session, session, self.fit_options, max_transfer_s=self.max_transfer_s,
-                             clock_slack_s=self.clock_slack_s)
+                             clock_slack_s=self.clock_slack_s, rack_orientation=self.rack_orientation,
+                             rack_tilt_tolerance_deg=self.rack_tilt_tolerance_deg)
 
 
 __all__ = ["BACK_TO_RACK", "FULL", "LINE", "KeepPowered", "LineDecision", "LineRigRunner", "choose_plan",

@@ -76,7 +76,8 @@ class RigTrajectory:
         return angle, rate, accel
 
     def kinematics(
-        self, t_s: np.ndarray, time_offset_s: float = 0.0, pose_tilt_rad: Mapping[str, np.ndarray] | None = None
+        self, t_s: np.ndarray, time_offset_s: float = 0.0, pose_tilt_rad: Mapping[str, np.ndarray] | None = None,
+        rest_tilt: tuple[np.ndarray, float] | None = None,
     ) -> Kinematics:
         """Sensor kinematics at rig time ``t_s - time_offset_s``, stamped with ``t_s`` (sensor time).
 
@@ -86,15 +87,23 @@ class RigTrajectory:
         stands still there, so body rate and angular acceleration stay as commanded: zero). Rest,
         rate and move segments keep the commanded attitude. Without tilts (None or all zero) the
         result is the commanded kinematics, bit for bit.
+
+        ``rest_tilt`` = ``(phi, until_s)``: the same for the ``rest`` segments' samples before rig time
+        ``until_s`` (a unit held still somewhere other than the rig, e.g. a soak rack's slot that is not level).
         """
         t = np.asarray(t_s, dtype=float)
         angle, rate, accel = self.axis_states(t - time_offset_s)
         kin = kinematics_from_angles(t, angle, rate, accel)
         tilts = {p: np.asarray(v, dtype=float) for p, v in (pose_tilt_rad or {}).items() if np.any(v)}
-        if not tilts:
+        rest_phi = None if rest_tilt is None or not np.any(rest_tilt[0]) else np.asarray(rest_tilt[0], dtype=float)
+        if not tilts and rest_phi is None:
             return kin
         idx = self.segment_of(t - time_offset_s)
         rotation = kin.rotation.copy()
+        if rest_tilt is not None and rest_phi is not None:
+            kinds = np.array([int(s.kind) for s in self.segments])[idx]
+            sel = (kinds == int(Kind.REST)) & (t - time_offset_s < float(rest_tilt[1]))
+            rotation[sel] = rotation[sel] @ rotation_vector_matrix(rest_phi)
         for i, seg in enumerate(self.segments):
             if seg.kind != Kind.POSE or seg.up not in tilts:
                 continue

@@ -41,7 +41,14 @@ from station.fit.calibrate import FitOptions, fit_session
 from station.fit.determinability import assess
 from station.fit.goodness import summary as goodness_summary
 from station.kernel.clock import Clock
-from station.kernel.errors import FitError, HardwareError, StationError, TimeBaseError, UnitRejected
+from station.kernel.errors import (
+    FitError,
+    HardwareError,
+    RackOrientationError,
+    StationError,
+    TimeBaseError,
+    UnitRejected,
+)
 from station.kernel.limits import ProductLimits, table1_limits
 from station.kernel.measurement import Measurement, Verdict
 from station.kernel.nest_frames import NestCalibration
@@ -83,11 +90,14 @@ def refusal_outcome(err: FitError) -> tuple[Outcome, str]:
     """The verdict for a recording the station captured and the fit refused.
 
     A time column that contradicts itself (:class:`TimeBaseError`: a gap inside a segment) means the station's
-    link or clock did not keep up: a station fault, ERROR, which the retest policy does not count. Any other
-    refusal is about what the unit measured: FAIL.
+    link or clock did not keep up: a station fault, ERROR, which the retest policy does not count; so is a line
+    unit's rack rest in another orientation than the line's plan holds its units in (:class:`RackOrientationError`).
+    Any other refusal is about what the unit measured: FAIL.
     """
     if isinstance(err, TimeBaseError):
         return Outcome.ERROR, f"capture fault (station, not the unit): {err}"
+    if isinstance(err, RackOrientationError):  # the line put the unit in its rack slot another way
+        return Outcome.ERROR, f"line handling fault (not the unit): {err}"
     return Outcome.FAIL, f"fit refused the recording: {err}"
 
 

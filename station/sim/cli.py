@@ -17,6 +17,7 @@ import typer
 
 from station.cli import DbOption, fail
 from station.kernel.errors import StationError
+from station.kernel.line_plan import ANY_ORIENTATION, LinePlan
 
 
 def simulate(
@@ -212,6 +213,13 @@ def sim(
         typer.echo("stopped")
 
 
+def _held(line_plan: LinePlan) -> str:
+    """How the plan's rack holds its units, for people."""
+    if line_plan.rack_orientation == ANY_ORIENTATION:
+        return "units in any orientation"
+    return f"units {line_plan.rack_orientation} up within {line_plan.rack_tilt_tolerance_deg:g} deg"
+
+
 def plan(
     limits: Annotated[Path | None, typer.Option("--limits", help="limits file (default: fixtures/limits/default.toml)")]
     = None,
@@ -222,6 +230,13 @@ def plan(
     match_full: Annotated[float | None, typer.Option("--match-full", min=1.0, help="also keep the median stated "
                                                      "std of M and b_stat within this factor of the full rig "
                                                      "plan's on the same units")] = None,
+    rack_orientation: Annotated[str, typer.Option("--rack-orientation", help="how the rack holds its units: 'any' "
+                                                  "(any fixed orientation, unknown) or a pose such as '+z' (every "
+                                                  "slot that axis up, e.g. on its base: the fit ties the rest's "
+                                                  "level along gravity to its norm)")] = "any",
+    rack_tilt_tolerance: Annotated[float, typer.Option("--rack-tilt-tolerance", help="with a pose: the largest "
+                                                       "tilt of a unit's rest against it (deg); farther is "
+                                                       "refused")] = 5.0,
 ) -> None:
     """The shortest line plan (rig part and rack time) whose predicted accuracy meets the limits file.
 
@@ -234,8 +249,10 @@ def plan(
     from station.sim.plan_design import design, throughput
 
     try:
+        LinePlan(rack_orientation=rack_orientation, rack_tilt_tolerance_deg=rack_tilt_tolerance)  # refused here
         lim = load_limits(limits)
-        best, tried = design(lim, seeds=tuple(range(31, 31 + units)), match_full=match_full)
+        best, tried = design(lim, seeds=tuple(range(31, 31 + units)), match_full=match_full,
+                             rack_orientation=rack_orientation, rack_tilt_tolerance_deg=rack_tilt_tolerance)
     except StationError as exc:
         raise fail(exc) from None
     typer.echo("rack s | pose hold s | rig s (predicted) | largest stated std / limit | gyro T_c resolved | meets")
@@ -248,7 +265,8 @@ def plan(
         raise typer.Exit(1)
     t = throughput(best, rig_units, rack_slots)
     out.write_text(line_plan_to_json(best.plan) + "\n")
-    typer.echo(f"chosen: rack {best.plan.rack_s:.0f} s, poses {best.plan.rig.pose_hold_s:.0f} s; rig time per run "
+    typer.echo(f"chosen: rack {best.plan.rack_s:.0f} s ({_held(best.plan)}), poses {best.plan.rig.pose_hold_s:.0f} s; "
+               "rig time per run "
                f"{best.rig_s:.0f} s, per unit at N={rig_units} {t.rig_per_unit_s:.0f} s")
     typer.echo(f"units/h: rig {t.rig_units_per_h:.0f}, rack ({rack_slots} slots) {t.rack_units_per_h:.0f}, "
                f"line {t.line_units_per_h:.0f}")

@@ -207,7 +207,7 @@ def run_line_demo(
     # on a virtual clock this thread owns time from the start: none passes while the line is set up, and the
     # soak, the transfer and the rig role's run each let it pass only through the clock's waits
     with abort_on_signals(lambda: runners[-1] if runners else None), acting(clock, name="demo"), \
-            SimLine(units, scale, seed, plan, clock=clock) as sim:
+            SimLine(units, scale, seed, plan, clock=clock, rack_orientation=line.plan.rack_orientation) as sim:
         console.print(f"soak rack: relay board at {sim.board_url}, {units} unit(s) on "
                       f"{', '.join(u.sensor.device for u in sim.sim.units)}; {clock_words(clock)}; "
                       f"{rack_s:g} s from power-on")

@@ -6,6 +6,11 @@ those samples are not recorded), and the rig runs its plan. Both recordings are 
 simulated session of the unit, so they share its drift realization and its sensor time since
 power-on, as a real unit's two recordings do.
 
+The rack's orientation: with the plan's ``rack_orientation`` ``"any"`` one of the six poses at random, level;
+with a pose name (``"+z"``: every slot holds its unit that way up) that pose tilted by a random angle up to
+``rack_tilt_deg`` about a random horizontal axis (a slot is never quite level; the station does not know the
+tilt). Both drawn from the seed.
+
 ``power_cycled=True``: the unit loses power during the transfer; the rig recording is then a new
 power-on of the same unit (its sensor time restarts at 0, its warm-up starts again).
 
@@ -15,11 +20,13 @@ clock) and ``boot_count`` (the sensor's power-on counter); :func:`station.fit.jo
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+import math
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from station.kernel.line_plan import LinePlan, default_line_plan
+from station.kernel.geometry import AXIS_INDEX, rotation_vector_matrix, up_vector
+from station.kernel.line_plan import ANY_ORIENTATION, LinePlan, default_line_plan
 from station.kernel.plan import RigPlan
 from station.kernel.sensor_class import TABLE1, SensorClass
 from station.physics.unit import UnitTruth
@@ -39,6 +46,7 @@ class LineSim:
         rig: the rig's recording, sensor time since power-on.
         truth: the unit's true parameters.
         rack_up: the pose pointing up in the rack (not known to the station).
+        rack_tilt_rad: the slot's tilt against ``rack_up`` (rotation vector, sensor frame; zeros when level).
         power_cycled: whether the unit lost power between rack and rig.
         source: the simulated session(s) the recordings were cut from.
     """
@@ -49,6 +57,12 @@ class LineSim:
     rack_up: str
     power_cycled: bool
     source: tuple[SimResult, ...]
+    rack_tilt_rad: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+    def rack_specific_force(self) -> np.ndarray:
+        """The rack rest's true specific force in the sensor frame (m/s^2): gravity up the tilted ``rack_up``."""
+        g = self.rig.gravity_mps2
+        return np.asarray(rotation_vector_matrix(self.rack_tilt_rad).T @ (g * up_vector(self.rack_up)))
 
 
 _POSES = ("+z", "-z", "+x", "-x", "+y", "-y")
@@ -84,28 +98,41 @@ def simulate_line(
     sensor_class: SensorClass = TABLE1,
     unit: UnitTruth | None = None,
     power_cycled: bool = False,
+    rack_tilt_deg: float = 3.0,
 ) -> LineSim:
-    """Simulate a unit's rack and rig recordings (the unit drawn with ``seed`` unless given)."""
+    """Simulate a unit's rack and rig recordings (the unit drawn with ``seed`` unless given); ``rack_tilt_deg``:
+    the largest tilt of a slot when the plan's rack holds its units in one orientation."""
     plan = plan if plan is not None else default_line_plan()
     rig: RigPlan = plan.rig
-    rack_up = _POSES[int(np.random.default_rng(np.random.SeedSequence([seed, 7])).integers(len(_POSES)))]
+    tilt = np.zeros(3)
+    if plan.rack_orientation == ANY_ORIENTATION:
+        rack_up = _POSES[int(np.random.default_rng(np.random.SeedSequence([seed, 7])).integers(len(_POSES)))]
+    else:
+        rack_up = plan.rack_orientation
+        u = np.random.default_rng(np.random.SeedSequence([seed, 8])).uniform(size=2)
+        k = AXIS_INDEX[rack_up[1]]
+        axis = np.zeros(3)
+        axis[(k + 1) % 3], axis[(k + 2) % 3] = math.cos(2.0 * math.pi * u[0]), math.sin(2.0 * math.pi * u[0])
+        tilt = math.radians(rack_tilt_deg) * float(u[1]) * axis  # about a horizontal axis of the slot
+    rest_tilt = (tilt, plan.rack_s + transfer_s) if np.any(tilt) else None
     if not power_cycled:
         whole = replace(rig, rest_pose=rack_up, rest_s=plan.rack_s + transfer_s + rig.rest_s)
-        res = simulate_session(seed, plan=whole, sensor_class=sensor_class, unit=unit)
+        res = simulate_session(seed, plan=whole, sensor_class=sensor_class, unit=unit, rest_tilt=rest_tilt)
         s = res.session
         t0_rig = plan.rack_s + transfer_s
         rack = _cut(s, s.t_s < plan.rack_s, wall_clock_at_start_s=repr(POWER_ON_WALL_S), boot_count="1")
         # the rig's own short rest (if any) keeps its reference; its segment index stays that of the long rest
         rig_s = _cut(s, s.t_s >= t0_rig, wall_clock_at_start_s=repr(POWER_ON_WALL_S + t0_rig), boot_count="1")
-        return LineSim(_unknown(rack), rig_s, res.truth, rack_up, False, (res,))
+        return LineSim(_unknown(rack), rig_s, res.truth, rack_up, False, (res,), tilt)
     first = simulate_session(seed, plan=replace(rig, rest_pose=rack_up, rest_s=plan.rack_s, poses=(),
-                                                rate_steps=()), sensor_class=sensor_class, unit=unit)
+                                                rate_steps=()), sensor_class=sensor_class, unit=unit,
+                             rest_tilt=rest_tilt)
     second = simulate_session(seed + 1_000_003, plan=rig, sensor_class=sensor_class, unit=first.truth)
     s1 = first.session
     rack = _cut(s1, s1.t_s < plan.rack_s, wall_clock_at_start_s=repr(POWER_ON_WALL_S), boot_count="1")
     rig_s = _cut(second.session, np.ones(len(second.session), dtype=bool), serial=s1.serial,
                  wall_clock_at_start_s=repr(POWER_ON_WALL_S + plan.rack_s + transfer_s), boot_count="2")
-    return LineSim(_unknown(rack), rig_s, first.truth, rack_up, True, (first, second))
+    return LineSim(_unknown(rack), rig_s, first.truth, rack_up, True, (first, second), tilt)
 
 
 __all__ = ["POWER_ON_WALL_S", "LineSim", "simulate_line"]

@@ -12,6 +12,7 @@ throughput part use it.
 
 from __future__ import annotations
 
+import math
 import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -23,7 +24,8 @@ import numpy as np
 
 from station.compose import StationConfig
 from station.kernel.clock import Clock
-from station.kernel.line_plan import LinePlanFile
+from station.kernel.geometry import POSE_ANGLES_DEG
+from station.kernel.line_plan import ANY_ORIENTATION, LinePlanFile
 from station.kernel.plan import RigPlan
 from station.line.recordings import RackArchive
 from station.line.soak import SoakedUnit, SoakRack
@@ -56,12 +58,16 @@ class SimLine:
             :class:`~station.kernel.virtual_clock.VirtualClock` (scale 1) the thread that enters, soaks, carries
             and runs the rig role must be its actor (``acting(clock, name=...)``): then the line repeats bit for
             bit (docs/simulation.md).
+        rack_orientation: the line plan's (:class:`~station.kernel.line_plan.LinePlan`): ``"any"``, each slot
+            within 20 deg per angle of +z up; a pose, every slot that way up within 2 deg per angle.
     """
 
-    def __init__(self, units: int, scale: float, seed: int, plan: RigPlan, *, clock: Clock | None = None) -> None:
+    def __init__(self, units: int, scale: float, seed: int, plan: RigPlan, *, clock: Clock | None = None,
+                 rack_orientation: str = ANY_ORIENTATION) -> None:
         if clock is not None:
             scale = clock.scale
         self.n, self.scale, self.seed, self.plan = units, scale, seed, plan
+        self.rack_orientation = rack_orientation
         self.sim = SimStation(units, scale, seed, plan=plan, clock=clock)
         self.board_sim: SimulatedRelayBoard | None = None
 
@@ -72,8 +78,13 @@ class SimLine:
             for u in self.sim.units:
                 install_firmware(u.sensor, self.sim.clock)
                 u.sensor.power_off()  # the rack's relay powers it
-                tilt = np.radians(rng.uniform(-20.0, 20.0, size=3))
-                u.source.rig = StaticMount(*tilt)  # still in its rack slot, an orientation nobody measured
+                if self.rack_orientation == ANY_ORIENTATION:
+                    tilt = np.radians(rng.uniform(-20.0, 20.0, size=3))
+                    u.source.rig = StaticMount(*tilt)  # still in its rack slot, an orientation nobody measured
+                else:  # the slots hold their units that way up, within 2 deg per angle
+                    roll, pitch = POSE_ANGLES_DEG[self.rack_orientation]
+                    tilt = np.radians(rng.uniform(-2.0, 2.0, size=3))
+                    u.source.rig = StaticMount(math.radians(roll) + tilt[0], math.radians(pitch) + tilt[1], tilt[2])
 
             def switch(slot: int, on: bool) -> None:
                 sensor = self.sim.units[slot].sensor

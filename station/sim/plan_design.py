@@ -33,7 +33,7 @@ from station.fit.calibrate import FitOptions, fit_session
 from station.fit.joint import fit_joint
 from station.kernel.errors import StationError
 from station.kernel.limits_file import LimitsFile
-from station.kernel.line_plan import LinePlan, line_rig_plan
+from station.kernel.line_plan import ANY_ORIENTATION, LinePlan, line_rig_plan
 from station.kernel.parameters import ParameterSet
 from station.kernel.plan import default_plan
 from station.kernel.sensor_class import TABLE1, SensorClass
@@ -150,7 +150,8 @@ def evaluate(plan: LinePlan, limits: LimitsFile, seeds: Sequence[int], margin: f
     resolved = True
     for seed, unit in zip(seeds, design_units(seeds), strict=True):
         line = simulate_line(seed, plan=plan, unit=unit)
-        p = fit_joint(line.rack, line.rig, opts, max_transfer_s=plan.max_transfer_s)
+        p = fit_joint(line.rack, line.rig, opts, max_transfer_s=plan.max_transfer_s,
+                      rack_orientation=plan.rack_orientation, rack_tilt_tolerance_deg=plan.rack_tilt_tolerance_deg)
         for key, cap in caps.items():
             worst[key] = max(worst[key], float(np.nanmax(_std(p, key))) / cap)
         if match_full is not None:
@@ -172,12 +173,16 @@ def design(
     seeds: Sequence[int] = (31, 32, 33),
     margin: float = 0.8,
     match_full: float | None = None,
+    rack_orientation: str = ANY_ORIENTATION,
+    rack_tilt_tolerance_deg: float = 5.0,
 ) -> tuple[Candidate | None, list[Candidate]]:
-    """The chosen plan (None when no candidate meets the limits) and every candidate evaluated."""
+    """The chosen plan (None when no candidate meets the limits) and every candidate evaluated; every candidate
+    carries ``rack_orientation`` and ``rack_tilt_tolerance_deg`` (how the line's rack holds its units)."""
     tried: list[Candidate] = []
     for rack_s in rack_times_s:
         for hold in sorted(pose_holds_s):
-            plan = LinePlan(rack_s=float(rack_s), rig=replace(line_rig_plan(), pose_hold_s=float(hold)))
+            plan = LinePlan(rack_s=float(rack_s), rig=replace(line_rig_plan(), pose_hold_s=float(hold)),
+                            rack_orientation=rack_orientation, rack_tilt_tolerance_deg=rack_tilt_tolerance_deg)
             try:
                 cand = evaluate(plan, limits, seeds, margin, match_full)
             except StationError:

@@ -65,6 +65,7 @@ def simulate_session(
     soak_s: float = 600.0,
     thermal_lag_s: float = 150.0,
     effect_truth: EffectTruth | None = None,
+    rest_tilt: tuple[np.ndarray, float] | None = None,
 ) -> SimResult:
     """Simulate one session of a unit (drawn from ``sensor_class`` with ``seed`` unless given).
 
@@ -82,6 +83,10 @@ def simulate_session(
 
     ``effect_truth``: explicit SI effect coefficients instead of realizing ``effects`` (e.g. the IEEE 952
     polynomial, which no :class:`Effects` magnitude realizes).
+
+    ``rest_tilt`` = ``(phi, until_s)``: the unit's attitude in the rest before ``until_s`` is tilted by the
+    rotation vector ``phi`` (rad, sensor frame) against the commanded pose, the reference is not (a soak rack's
+    slot: :func:`station.sim.line_sim.simulate_line`). None: nothing changes (same seed, same bytes).
     """
     plan = plan if plan is not None else default_plan()
     effects = effects if effects is not None else Effects()
@@ -104,7 +109,8 @@ def simulate_session(
             environment=Environment(ambient_degc=plateaus[0]), temperature_degc=course, effect_truth=effect_truth,
         )
     t = traj.sample_times()
-    kin = traj.kinematics(t, time_offset_s=model.time_offset_s, pose_tilt_rad=model.effect_truth.pose_tilts())
+    kin = traj.kinematics(t, time_offset_s=model.time_offset_s, pose_tilt_rad=model.effect_truth.pose_tilts(),
+                          rest_tilt=rest_tilt)
     raw = model.render(kin, plan.gravity_mps2)
     segment, kind = traj.labels(t)
     ref_f, ref_w = traj.reference(t)
