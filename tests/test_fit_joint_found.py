@@ -8,6 +8,7 @@ Seeds: development used 901-902 (simulator) and 911-913 (independent generator);
 
 from __future__ import annotations
 
+import hashlib
 import importlib.util
 import sys
 from dataclasses import replace
@@ -143,3 +144,50 @@ def test_one_sign_and_a_capture_without_move_references_are_flagged() -> None:
     note = params.quality.time_offset
     assert note is not None and note.status == "not_determined" and "no transitions" in note.reason
     assert params.time_offset_s == 0.0
+
+
+def test_the_line_rig_role_writes_the_polynomial_and_its_verification_passes(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The line on its transports (virtual clock): a unit with a planted k2 and k3 soaks in the rack, is carried
+    powered to the rig, runs a line rig part with two rate magnitudes, and the rig role's joint fit keeps both
+    terms on every axis (within 3 sigma); the image is layout 3 holding them, the on-rig verification of the
+    firmware's corrected output passes. The station's capture records no reference in the moves: the time offset
+    is not determined and not written."""
+    from station.compose import Station
+    from station.eeprom.image import read_all_slots, select_image
+    from station.kernel.line_plan import LinePlanFile, line_plan_to_json
+    from station.kernel.virtual_clock import VirtualClock, acting
+    from station.line.recordings import DatabaseArchive
+    from station.sequence.records import Outcome
+    from station.sim.line_station import SimLine
+    from station.store.db import open_database
+
+    monkeypatch.setenv("STATION_LOCK_DIR", str(tmp_path / "locks"))
+    plan = LinePlan(rack_s=300.0, rig=TWO_RATES)
+    line = LinePlanFile(plan, "two-rates.json", hashlib.sha256(line_plan_to_json(plan).encode()).hexdigest())
+    clock = VirtualClock()
+    records: dict[str, Any] = {}
+    with acting(clock, name="test"), SimLine(1, 1.0, 3107, line.rig_plan(), clock=clock, effects=Effects(
+            time_offset=TAU_S * 1e3), effect_change=lambda _, et: replace(et, gyro_quadratic=K2, gyro_cubic=K3)) as sim:
+        db_url = f"sqlite:///{tmp_path / 'line.sqlite'}"
+        with open_database(db_url) as database:
+            sim.soak([0], 300.0, DatabaseArchive(database.sessions))
+        sim.to_rig([0], 30.0)
+        config = sim.rig_config([0], line, db_url=db_url, station_id="found-line")
+        station = Station(config, clock=sim.clock, on_provision=lambda r: records.__setitem__(r.serial, r))
+        result = station.run()
+        eeprom = sim.sim.units[0].sensor.eeprom.image()
+    unit = result.units[0]
+    assert unit.outcome is Outcome.PASS, unit.message
+    p = unit.params
+    assert p is not None and p.source["fit"] == "joint (rack + rig)"
+    for name, true in (("scale_quadratic", K2), ("scale_cubic", K3)):
+        k, k_std = getattr(p.gyro, name), getattr(p.gyro, f"{name}_std")
+        assert np.all(k_std > 0) and np.all(np.abs(k - true) <= 3.0 * k_std), (name, (k - true) / k_std)
+    assert p.quality.time_offset is not None and p.quality.time_offset.status == "not_determined"
+    assert p.time_offset_s == 0.0
+    slot = select_image(read_all_slots(eeprom), p.serial)
+    assert slot is not None and slot.image is not None and slot.image.layout_version == 3
+    assert slot.image.effects is not None and np.array_equal(slot.image.effects.quadratic[1], p.gyro.scale_quadratic)
+    rec = records[p.serial]
+    assert rec.verification is not None and rec.verification.passed

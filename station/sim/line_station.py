@@ -56,13 +56,16 @@ class SimLine:
             :class:`~station.kernel.virtual_clock.VirtualClock` (scale 1) the thread that enters, soaks, carries
             and runs the rig role must be its actor (``acting(clock, name=...)``): then the line repeats bit for
             bit (docs/simulation.md).
+        station: further keyword arguments of :class:`~station.sim.station_sim.SimStation` (e.g. ``effects``,
+            ``effect_change``: the units' physics).
     """
 
-    def __init__(self, units: int, scale: float, seed: int, plan: RigPlan, *, clock: Clock | None = None) -> None:
+    def __init__(self, units: int, scale: float, seed: int, plan: RigPlan, *, clock: Clock | None = None,
+                 **station: Any) -> None:
         if clock is not None:
             scale = clock.scale
         self.n, self.scale, self.seed, self.plan = units, scale, seed, plan
-        self.sim = SimStation(units, scale, seed, plan=plan, clock=clock)
+        self.sim = SimStation(units, scale, seed, plan=plan, clock=clock, **station)
         self.board_sim: SimulatedRelayBoard | None = None
 
     def __enter__(self) -> Self:
