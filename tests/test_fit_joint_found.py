@@ -3,14 +3,12 @@ offset recovered from a line unit's rack and rig recordings against known truth,
 the independent line generator (benchmarks/gen_line_indep.py); not kept without them; flagged where the line's rig
 plan or capture cannot determine them.
 
-Seeds: development used 901-902 (simulator) and 911-913 (independent generator); these tests use 3101-3106.
+Seeds: development used 901-902 (simulator) and 911-913 (independent generator); these tests use 3101-3107.
 """
 
 from __future__ import annotations
 
 import hashlib
-import importlib.util
-import sys
 from dataclasses import replace
 from datetime import UTC, datetime
 from pathlib import Path
@@ -28,6 +26,7 @@ from station.kernel.parameters import ParameterSet
 from station.physics.effects import Effects, EffectShapes, EffectTruth
 from station.session.model import Kind, Session
 from station.sim.line_sim import simulate_line
+from tests.test_gen_line_indep import _gen as load_generator
 
 W200 = float(np.radians(200.0))
 PRIOR = {"accel": (50.0, 167.0), "gyro": (1030.0, 3760.0)}
@@ -44,16 +43,6 @@ TWO_RATES = replace(line_rig_plan(), rate_steps=tuple((a, s * r) for a in "zxy" 
 def _truth(seed: int, tau_s: float, k2: np.ndarray, k3: np.ndarray) -> EffectTruth:
     et = Effects(time_offset=tau_s * 1e3).realize(EffectShapes.draw(np.random.default_rng(seed)))
     return replace(et, gyro_quadratic=k2, gyro_cubic=k3)
-
-
-def _gen() -> Any:
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "gen_line_indep.py"
-    spec = importlib.util.spec_from_file_location("gen_line_indep", path)
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules["gen_line_indep"] = mod
-    spec.loader.exec_module(mod)
-    return mod
 
 
 def _assert_recovered(params: ParameterSet, tau_s: float, k2: np.ndarray, k3: np.ndarray) -> None:
@@ -92,7 +81,7 @@ def test_simulated_line_unit_time_offset_and_polynomial_recovered(seed: int) -> 
 
 
 def test_independent_line_unit_time_offset_and_polynomial_recovered() -> None:
-    gen = _gen()
+    gen = load_generator()
     u = gen.generate_unit(3103, rack_s=1800.0, hour_s=10.0, rig=replace(TWO_RATES, rest_s=2.0), time_offset_s=TAU_S,
                           gyro_k2=K2, gyro_k3=K3)
     _assert_recovered(fit_joint(u.rack, u.rig, AUTO), TAU_S, K2, K3)
