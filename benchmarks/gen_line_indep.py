@@ -15,7 +15,8 @@ choices, so that the line's accuracy is not measured only by the simulator its f
   PCG64DXSM stream; eq. 3's Gauss-Markov drift (1 % of b_drift stationary) by exact discretization on the
   sub-sample grid over the whole power-on (rack, transfer, rig: one process); white noise per sub-sample scaled
   so that the averaged sample has the class's per-sample std; quantization to 16/20-bit LSBs. No Earth rate, no
-  temperature effects (the model the line fits, by other code).
+  temperature effects (the model the line fits, by other code). Optionally (given, not drawn) a time offset of the
+  sensor behind the rig and the gyro's IEEE 952 scale polynomial (:class:`Unit`).
 * **Its own plans**, named as the station's: the rack's rest in a random orientation (tilts up to 25 deg), the
   line's rig part (:func:`station.kernel.line_plan.line_rig_plan`, a 2 s rest first), the full plan
   (``default_plan()``: 300 s rest, six 30 s poses, 18 rate steps of 12 s), and a one-hour rest. Tumble rate
@@ -27,7 +28,7 @@ choices, so that the line's accuracy is not measured only by the simulator its f
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.signal import lfilter
@@ -56,9 +57,16 @@ class Triad:
 
 @dataclass(frozen=True)
 class Unit:
+    """The unit's truth; ``time_offset_s`` (the sample stamped t holds the motion at rig time t - tau) and the
+    gyro's scale polynomial ``y_k = u_k + k2_k u_k^2 + k3_k u_k^3`` on ``u = M w`` (per sub-sample, before the
+    averaging) are 0 unless given to :func:`generate_unit` (no random draw: the other numbers stay the same)."""
+
     accel: Triad
     gyro: Triad
     gravity: float
+    time_offset_s: float = 0.0
+    gyro_k2: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    gyro_k3: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
 
 def draw_unit(rng: np.random.Generator) -> Unit:
@@ -269,12 +277,15 @@ def record(tl: Timeline, unit: Unit, drifts: tuple[Drift, Drift], t0: float, n: 
     # the sub-samples: centred on the sample time, uniformly spaced (the first ones of a power-on are clipped to 0
     # for the motion and the warm-up; the drift process starts at the first)
     sub = (t_local[:, None] + (np.arange(SUB) - (SUB - 1) / 2.0)[None, :] / (fs * SUB)).reshape(-1)
-    up, w = tl.sample(np.maximum(sub, 0.0))
+    up, w = tl.sample(np.maximum(sub - unit.time_offset_s, 0.0))  # the motion at rig time t - tau
     outs = []
     for tri, x, drift in ((unit.accel, unit.gravity * up, drifts[0]), (unit.gyro, w, drifts[1])):
         t_abs = t0 + sub
         warm = tri.b_drift * np.exp(-np.maximum(t_abs, 0.0)[:, None] / tri.tc)
-        y = x @ tri.m.T + tri.b_stat + warm + drift.at(t_abs)
+        u = x @ tri.m.T
+        if tri is unit.gyro and (np.any(unit.gyro_k2) or np.any(unit.gyro_k3)):
+            u = u + unit.gyro_k2 * u * u + unit.gyro_k3 * u * u * u
+        y = u + tri.b_stat + warm + drift.at(t_abs)
         y += rng.standard_normal(y.shape) * tri.sigma * math.sqrt(SUB)
         y = y.reshape(n, SUB, 3).mean(axis=1)
         outs.append(np.round(y / tri.lsb) * tri.lsb)
@@ -302,13 +313,17 @@ WALL0 = 1_800_000_000.0
 
 
 def generate_unit(seed: int, rack_s: float = 3600.0, transfer_s: float = 45.0, rig: RigPlan | None = None,
-                  fs: float = 100.0, hour_s: float = 3600.0, rack_tilt_deg: float = 25.0) -> LineUnit:
+                  fs: float = 100.0, hour_s: float = 3600.0, rack_tilt_deg: float = 25.0, time_offset_s: float = 0.0,
+                  gyro_k2: np.ndarray | None = None, gyro_k3: np.ndarray | None = None) -> LineUnit:
     """One unit (seed in, same recordings out): rack + rig of one power-on, a full-plan recording of another
     power-on, and two validation power-ons (full plan; ``hour_s`` at rest). The rack holds the unit +z up,
     tilted by a rotation vector whose components are uniform in +-``rack_tilt_deg`` (25: about any attitude
-    near +z; 3: a rack that holds its units on their base, tilts up to 4.2 deg)."""
+    near +z; 3: a rack that holds its units on their base, tilts up to 4.2 deg). ``time_offset_s`` (s) and the
+    gyro's ``gyro_k2`` (1/(rad/s)), ``gyro_k3`` (1/(rad/s)^2) per axis: see :class:`Unit` (all power-ons)."""
     rng = np.random.Generator(np.random.PCG64DXSM(np.random.SeedSequence([seed, 4242])))
-    unit = draw_unit(rng)
+    unit = replace(draw_unit(rng), time_offset_s=float(time_offset_s),
+                   gyro_k2=np.zeros(3) if gyro_k2 is None else np.asarray(gyro_k2, dtype=float),
+                   gyro_k3=np.zeros(3) if gyro_k3 is None else np.asarray(gyro_k3, dtype=float))
     serial = f"IND-{seed:07d}"
     rig_plan = rig if rig is not None else replace(line_rig_plan(), rest_s=2.0, sample_rate_hz=fs)
 

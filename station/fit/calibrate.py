@@ -32,6 +32,13 @@ from station.fit.checks import check_session
 from station.fit.consistency import check_rotations
 from station.fit.determinability import assess
 from station.fit.goodness import Rows, TriadResidual, goodness_of_fit
+from station.fit.scale_polynomial import (
+    Polynomial,
+    identifiable_terms,
+    no_rate_note,
+    select_polynomial,
+    with_polynomial,
+)
 from station.fit.temperature_terms import (
     assess_temperature,
     axis_regressors,
@@ -60,8 +67,6 @@ AXES = "xyz"
 THERMAL_MODES = ("auto", "off", "require")
 #: Values of :attr:`FitOptions.scale_nonlinearity`.
 NONLINEARITY_MODES = ("auto", "off")
-#: Rate magnitudes within this relative tolerance count as one level (identifiability of the nonlinearity).
-_LEVEL_RTOL = 0.05
 
 
 @dataclass(frozen=True)
@@ -258,50 +263,13 @@ def _fit_triad(
     tc_range = options.tc_range_s.get(triad)
     fits, cols = [], []
     for k in range(3):
-        d_k, col = _with_nonlinearity(design, blocks, nonlin_m, k)
+        d_k, col = with_polynomial(design, blocks, nonlin_m, k)
         fits.append(fit_axis(blocks, k, d_k, float(noise.sigma[k]), lr_threshold=options.drift_lr_threshold,
                              tc_range_s=tc_range))
         cols.append(col)
     tri = TriadLinear(fits=fits, n_ref=3 if with_ref else 0, extra=3 if g_sens else 0,
                        nonlin_col=tuple(cols) if nonlin_m is not None else ())
     return tri, blocks
-
-
-#: A per-axis choice of the IEEE 952 polynomial's terms: M^ (3, 3) and which terms each axis gets, (3, 2) bool
-#: (column 0: the even k2 u^2, column 1: the odd k3 u^3).
-Polynomial = tuple[np.ndarray, np.ndarray]
-
-
-def _with_nonlinearity(
-    design: np.ndarray, blocks: Blocks, nonlin: Polynomial | None, k: int
-) -> tuple[np.ndarray, tuple[int, int]]:
-    """Axis ``k``'s design with the IEEE 952 polynomial's regressors ``u^2`` and ``u^3`` (``u = M^_k . ref`` per
-    block) appended where ``nonlin`` selects them; returns the design and the two columns (-1: not in it)."""
-    if nonlin is None or not nonlin[1][k].any():
-        return design, (-1, -1)
-    u = blocks.ref @ nonlin[0][k]
-    cols, at = [design], design.shape[1]
-    out = [-1, -1]
-    for j, power in enumerate((2, 3)):
-        if nonlin[1][k, j]:
-            cols.append((u**power)[:, None])
-            out[j] = at
-            at += 1
-    return np.column_stack(cols), (out[0], out[1])
-
-
-def nonlinearity_levels(blocks: Blocks, m_row: np.ndarray) -> int:
-    """Distinct rate magnitudes axis ``m_row`` sees in the blocks (levels within :data:`_LEVEL_RTOL` merge; rates
-    under 5 % of the largest, e.g. rest and poses, do not count). Two or more identify ``u + k u|u|``."""
-    u = np.abs(blocks.ref @ m_row)
-    top = float(u.max()) if u.size else 0.0
-    if top <= 0.0:
-        return 0
-    levels: list[float] = []
-    for v in np.sort(u[u > 0.05 * top]):
-        if not levels or v > levels[-1] * (1.0 + _LEVEL_RTOL):
-            levels.append(float(v))
-    return len(levels)
 
 
 def _fit_triad_thermal(
@@ -356,7 +324,7 @@ def _fit_triad_thermal(
                 fit = fit_axis(blocks, k, design, float(noise.sigma[k]), lr_threshold=options.drift_lr_threshold,
                                tc_range_s=tc_range)
         if nonlin_m is not None:  # orders chosen without it: refit with the nonlinearity column last
-            design, col = _with_nonlinearity(design, blocks, nonlin_m, k)
+            design, col = with_polynomial(design, blocks, nonlin_m, k)
             if max(col) >= 0:
                 fit = fit_axis(blocks, k, design, float(noise.sigma[k]), lr_threshold=options.drift_lr_threshold,
                                tc_range_s=tc_range)
@@ -568,17 +536,6 @@ def _top(note: ThermalFit, triad: str) -> int:
     return max([1, *o.get("bias", []), *o.get("scale", [])])
 
 
-def rate_signs(blocks: Blocks, m_row: np.ndarray) -> int:
-    """How many signs (0, 1 or 2) the rate along axis ``m_row`` takes in the rate blocks (rates over 5 % of the
-    largest)."""
-    u = blocks.ref @ m_row
-    top = float(np.abs(u).max()) if u.size else 0.0
-    if top <= 0.0:
-        return 0
-    big = u[np.abs(u) > 0.05 * top]
-    return int(np.any(big > 0)) + int(np.any(big < 0))
-
-
 def _gyro_nonlinearity(
     session: Session, g_ref: np.ndarray, g_runs: list[tuple[int, int, int]], g_noise: NoiseEstimate,
     options: FitOptions, g: dict[str, np.ndarray], g_tri: TriadLinear, g_blocks: Blocks, *, rate: bool,
@@ -590,59 +547,26 @@ def _gyro_nonlinearity(
     more magnitudes and both signs. Two passes, the regressors' M^ from the previous one; a term is kept where
     its Wald statistic passes. Returns the triad's parameters, fits, blocks and a note (``status`` fitted /
     not_identifiable / not_significant; per axis the terms identifiable, kept and their z)."""
-    rule = (f"IEEE 952 u + k2 u^2 + k3 u^3 per axis: k3 where the rate steps hold >= 2 rate magnitudes, k2 where "
-            f"they also hold both signs; a term kept where (k/sigma_k)^2 >= {options.nonlinearity_wald:g}")
     if not rate:
-        return g, g_tri, g_blocks, {"status": "not_identifiable", "rule": rule, "axes": [],
-                                    "reason": "no rate steps (M_w from known angles): the nonlinearity needs rates"}
+        return g, g_tri, g_blocks, no_rate_note(options.nonlinearity_wald)
     m_hat = np.asarray(g["misalignment"], dtype=float)
-    levels = [nonlinearity_levels(g_blocks, m_hat[k]) for k in range(3)]
-    signs = [rate_signs(g_blocks, m_hat[k]) for k in range(3)]
-    use = np.array([[lv >= 2 and sg == 2, lv >= 2] for lv, sg in zip(levels, signs, strict=True)])
-    identifiable = {"k2": [AXES[k] for k in range(3) if use[k, 0]], "k3": [AXES[k] for k in range(3) if use[k, 1]]}
-    missing = []
-    for k in range(3):
-        if not use[k, 1]:
-            missing.append(f"{AXES[k]}: one rate magnitude, neither term (add a step at a second magnitude, "
-                           "e.g. 50 and 200 deg/s)")
-        elif not use[k, 0]:
-            missing.append(f"{AXES[k]}: one sign, k2 u^2 not separable from the bias and k3 (add the same "
-                           "magnitudes in the other direction)")
-    base = {"rule": rule, "levels": levels, "signs": signs, "identifiable": identifiable}
-    if missing:
-        base["not_identifiable"] = missing
-    if not use.any():
-        return g, g_tri, g_blocks, {"status": "not_identifiable", "axes": [], **base,
-                                    "reason": "; ".join(missing)}
-    z = np.zeros((3, 2))
-    for _ in range(2):
-        poly = (m_hat, use)
+    use, base = identifiable_terms(g_blocks, m_hat, options.nonlinearity_wald)
+
+    def refit(poly: Polynomial) -> tuple[dict[str, np.ndarray], tuple[TriadLinear, Blocks]]:
         if dt is None:
             tri, blocks = _fit_triad(session, session.gyro_radps, g_ref, g_runs, g_noise, options, with_ref=True,
                                      g_sens=options.g_sensitivity, triad="gyro", nonlin_m=poly)
-            p = unpack_triad(tri)
-        else:
-            tri, blocks, coeff, _ = _fit_triad_thermal(
-                session, session.gyro_radps, g_ref, g_runs, g_noise, options, with_ref=True,
-                g_sens=options.g_sensitivity, triad="gyro", dt=dt, m_hat=m_hat, orders=orders, nonlin_m=poly)
-            p = {**unpack_triad(tri), **coeff}
-        for j, name in enumerate(("scale_quadratic", "scale_cubic")):
-            std = p[f"{name}_std"]
-            z[:, j] = np.divide(p[name], std, out=np.zeros(3), where=std > 0)
-        keep = use & (z**2 >= options.nonlinearity_wald)
-        m_hat = np.asarray(p["misalignment"], dtype=float)
-        if not keep.any():
-            return g, g_tri, g_blocks, {"status": "not_significant", "axes": [], **base,
-                                        "z": {"k2": [round(float(v), 2) for v in z[:, 0]],
-                                              "k3": [round(float(v), 2) for v in z[:, 1]]},
-                                        "reason": "no axis's term passes the Wald test"}
-        use = keep  # the second pass: the kept terms, the regressors from this pass's M^
-    axes = [AXES[k] for k in range(3) if use[k].any()]
-    return p, tri, blocks, {"status": "fitted", "axes": axes, **base,
-                            "kept": {"k2": [AXES[k] for k in range(3) if use[k, 0]],
-                                     "k3": [AXES[k] for k in range(3) if use[k, 1]]},
-                            "z": {"k2": [round(float(v), 2) for v in z[:, 0]],
-                                  "k3": [round(float(v), 2) for v in z[:, 1]]}, "reason": ""}
+            return unpack_triad(tri), (tri, blocks)
+        tri, blocks, coeff, _ = _fit_triad_thermal(
+            session, session.gyro_radps, g_ref, g_runs, g_noise, options, with_ref=True,
+            g_sens=options.g_sensitivity, triad="gyro", dt=dt, m_hat=poly[0], orders=orders, nonlin_m=poly)
+        return {**unpack_triad(tri), **coeff}, (tri, blocks)
+
+    fitted, note = select_polynomial(refit, m_hat, use, base, options.nonlinearity_wald)
+    if fitted is None:
+        return g, g_tri, g_blocks, note
+    p, (tri, blocks) = fitted
+    return p, tri, blocks, note
 
 
 def _fit_session(session: Session, options: FitOptions) -> ParameterSet:

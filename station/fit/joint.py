@@ -64,6 +64,7 @@ from station.fit.calibrate import (
 )
 from station.fit.checks import check_finite, check_session, check_time
 from station.fit.determinability import assess
+from station.fit.joint_found import joint_polynomial, with_found_terms
 from station.kernel.errors import FitError, RackOrientationError
 from station.kernel.geometry import AXIS_INDEX, POSE_ANGLES_DEG, up_vector
 from station.kernel.line_plan import ANY_ORIENTATION
@@ -218,6 +219,7 @@ class _JointTriad:
     offsets_std: np.ndarray
     noise: NoiseEstimate
     runs: list[tuple[int, int, int]]
+    polynomial: dict[str, Any] | None = None  # the gyro's IEEE 952 note (station.fit.joint_found)
 
 
 def _fit_triad(
@@ -238,11 +240,16 @@ def _fit_triad(
     fits = [fit_axis(blocks, k, design[:, :4] if k == tied_axis else design, float(noise.sigma[k]),
                      lr_threshold=options.drift_lr_threshold, tc_range_s=tc_range) for k in range(3)]
     tri = TriadLinear(fits=fits, n_ref=3, extra=0)
+    note = None
+    if triad == "gyro":  # the scale polynomial's columns after the rack's offsets (station.fit.joint_found)
+        assert tied_axis is None  # the norm tie is the accelerometer's
+        tri, note = joint_polynomial(blocks, design, noise.sigma, options, tri, tc_range)
+        fits = tri.fits
     offsets = np.array([np.zeros(n_off) if k == tied_axis else f.beta[4:4 + n_off] for k, f in enumerate(fits)])
     offsets_std = np.array([np.zeros(n_off) if k == tied_axis else
                             np.sqrt(np.clip(np.diag(f.beta_cov)[4:4 + n_off], 0.0, None))
                             for k, f in enumerate(fits)])
-    return _JointTriad(unpack_triad(tri), tri, blocks, offsets, offsets_std, noise, runs)
+    return _JointTriad(unpack_triad(tri), tri, blocks, offsets, offsets_std, noise, runs, note)
 
 
 def _still_gravity(rig: Session) -> float:
@@ -286,7 +293,9 @@ def fit_joint(
     ``rack``: rest from power-on, references NaN (any orientation, constant); ``rig``: poses and rate
     steps (and optionally a rest) with references, its ``t_s`` the same sensor time since power-on.
     ``options.max_blocks`` is replaced by ``max_blocks`` (the long rack rest needs more blocks than a rig
-    session); thermal terms, g-sensitivity and the scale nonlinearity are not fitted here.
+    session); thermal terms and g-sensitivity are not fitted here; the gyro's IEEE 952 scale polynomial and the
+    time offset are, as ``options.scale_nonlinearity`` and ``options.time_offset`` ask
+    (:mod:`station.fit.joint_found`).
     ``rack_orientation``: ``"any"`` (the rack's rest has free offsets) or the pose the rack holds its units in
     (``"+z"``...), within ``rack_tilt_tolerance_deg``: the accelerometer's rack level along up is then tied to
     the norm of gravity (module docstring); a rest farther from it raises
@@ -425,6 +434,7 @@ def _fit_joint(rack: Session, rig: Session, options: FitOptions, max_transfer_s:
                if options.tc_range_s else {}),
         },
     )
+    params = with_found_terms(params, rig, g.p, g.noise.sigma, options, g.polynomial)  # time offset on the rig part
     return assess(params, float(merged.t_s[-1]))
 
 

@@ -82,10 +82,11 @@ class FoundTerms:
 
 
 def _not_fitted(params: ParameterSet) -> str:
-    """Why the fit did not try: the line's joint fit never does; otherwise the term was switched off (or the set
-    predates it)."""
+    """Why the fit did not try: the term was switched off, or the set predates it (the line's joint fit estimated
+    neither term before it took them)."""
     if "line" in params.source:
-        return "the line's joint fit (rack rest and rig) does not estimate it"
+        return ("the line's joint fit did not estimate it (switched off, or a set written before the joint fit "
+                "estimated these terms)")
     return "the fit did not estimate it (switched off, or a set written before these terms)"
 
 

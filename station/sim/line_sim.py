@@ -29,6 +29,7 @@ from station.kernel.geometry import AXIS_INDEX, rotation_vector_matrix, up_vecto
 from station.kernel.line_plan import ANY_ORIENTATION, LinePlan, default_line_plan
 from station.kernel.plan import RigPlan
 from station.kernel.sensor_class import TABLE1, SensorClass
+from station.physics.effects import Effects, EffectTruth
 from station.physics.unit import UnitTruth
 from station.session.model import Kind, Session
 from station.sim.session_sim import SimResult, simulate_session
@@ -99,9 +100,13 @@ def simulate_line(
     unit: UnitTruth | None = None,
     power_cycled: bool = False,
     rack_tilt_deg: float = 3.0,
+    effects: Effects | None = None,
+    effect_truth: EffectTruth | None = None,
 ) -> LineSim:
     """Simulate a unit's rack and rig recordings (the unit drawn with ``seed`` unless given); ``rack_tilt_deg``:
-    the largest tilt of a slot when the plan's rack holds its units in one orientation."""
+    the largest tilt of a slot when the plan's rack holds its units in one orientation; ``effects`` and
+    ``effect_truth`` as :func:`~station.sim.session_sim.simulate_session` takes them (e.g. a time offset, the gyro's
+    IEEE 952 polynomial), the same in the rack and on the rig."""
     plan = plan if plan is not None else default_line_plan()
     rig: RigPlan = plan.rig
     tilt = np.zeros(3)
@@ -117,7 +122,8 @@ def simulate_line(
     rest_tilt = (tilt, plan.rack_s + transfer_s) if np.any(tilt) else None
     if not power_cycled:
         whole = replace(rig, rest_pose=rack_up, rest_s=plan.rack_s + transfer_s + rig.rest_s)
-        res = simulate_session(seed, plan=whole, sensor_class=sensor_class, unit=unit, rest_tilt=rest_tilt)
+        res = simulate_session(seed, plan=whole, sensor_class=sensor_class, unit=unit, rest_tilt=rest_tilt,
+                               effects=effects, effect_truth=effect_truth)
         s = res.session
         t0_rig = plan.rack_s + transfer_s
         rack = _cut(s, s.t_s < plan.rack_s, wall_clock_at_start_s=repr(POWER_ON_WALL_S), boot_count="1")
@@ -126,8 +132,9 @@ def simulate_line(
         return LineSim(_unknown(rack), rig_s, res.truth, rack_up, False, (res,), tilt)
     first = simulate_session(seed, plan=replace(rig, rest_pose=rack_up, rest_s=plan.rack_s, poses=(),
                                                 rate_steps=()), sensor_class=sensor_class, unit=unit,
-                             rest_tilt=rest_tilt)
-    second = simulate_session(seed + 1_000_003, plan=rig, sensor_class=sensor_class, unit=first.truth)
+                             rest_tilt=rest_tilt, effects=effects, effect_truth=effect_truth)
+    second = simulate_session(seed + 1_000_003, plan=rig, sensor_class=sensor_class, unit=first.truth,
+                              effects=effects, effect_truth=effect_truth)
     s1 = first.session
     rack = _cut(s1, s1.t_s < plan.rack_s, wall_clock_at_start_s=repr(POWER_ON_WALL_S), boot_count="1")
     rig_s = _cut(second.session, np.ones(len(second.session), dtype=bool), serial=s1.serial,

@@ -60,15 +60,17 @@ class SimLine:
             bit (docs/simulation.md).
         rack_orientation: the line plan's (:class:`~station.kernel.line_plan.LinePlan`): ``"any"``, each slot
             within 20 deg per angle of +z up; a pose, every slot that way up within 2 deg per angle.
+        station: further keyword arguments of :class:`~station.sim.station_sim.SimStation` (e.g. ``effects``,
+            ``effect_change``: the units' physics).
     """
 
     def __init__(self, units: int, scale: float, seed: int, plan: RigPlan, *, clock: Clock | None = None,
-                 rack_orientation: str = ANY_ORIENTATION) -> None:
+                 rack_orientation: str = ANY_ORIENTATION, **station: Any) -> None:
         if clock is not None:
             scale = clock.scale
         self.n, self.scale, self.seed, self.plan = units, scale, seed, plan
         self.rack_orientation = rack_orientation
-        self.sim = SimStation(units, scale, seed, plan=plan, clock=clock)
+        self.sim = SimStation(units, scale, seed, plan=plan, clock=clock, **station)
         self.board_sim: SimulatedRelayBoard | None = None
 
     def __enter__(self) -> Self:
