@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from benchmark_modules import load_benchmark
 
 from station.eeprom.image import decode_image, encode_image, run_image
 from station.fit.calibrate import FitOptions
@@ -26,7 +27,6 @@ from station.kernel.parameters import ParameterSet
 from station.physics.effects import Effects, EffectShapes, EffectTruth
 from station.session.model import Kind, Session
 from station.sim.line_sim import simulate_line
-from tests.test_gen_line_indep import _gen as load_generator
 
 W200 = float(np.radians(200.0))
 PRIOR = {"accel": (50.0, 167.0), "gyro": (1030.0, 3760.0)}
@@ -81,7 +81,7 @@ def test_simulated_line_unit_time_offset_and_polynomial_recovered(seed: int) -> 
 
 
 def test_independent_line_unit_time_offset_and_polynomial_recovered() -> None:
-    gen = load_generator()
+    gen = load_benchmark("gen_line_indep")
     u = gen.generate_unit(3103, rack_s=1800.0, hour_s=10.0, rig=replace(TWO_RATES, rest_s=2.0), time_offset_s=TAU_S,
                           gyro_k2=K2, gyro_k3=K3)
     _assert_recovered(fit_joint(u.rack, u.rig, AUTO), TAU_S, K2, K3)

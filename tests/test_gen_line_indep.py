@@ -4,24 +4,14 @@ same seed gives the same bytes."""
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import numpy as np
+from benchmark_modules import load_benchmark
 
 from station.session.model import Kind
 
-_PATH = Path(__file__).resolve().parents[1] / "benchmarks" / "gen_line_indep.py"
-
 
 def _gen():  # type: ignore[no-untyped-def]
-    spec = importlib.util.spec_from_file_location("gen_line_indep", _PATH)
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules["gen_line_indep"] = mod
-    spec.loader.exec_module(mod)
-    return mod
+    return load_benchmark("gen_line_indep")
 
 
 def test_true_parameters_meet_the_references_and_one_power_on_has_one_time_base() -> None:

@@ -6,7 +6,6 @@ and the CSV loading with the station's reader. Recordings at 50 Hz (``rate_hz``)
 from __future__ import annotations
 
 import functools
-import importlib.util
 import io
 import math
 import subprocess
@@ -16,6 +15,7 @@ from types import ModuleType
 
 import numpy as np
 import pytest
+from benchmark_modules import load_benchmark
 from scipy.spatial.transform import Rotation
 
 from station.session.csv_v1 import read_session, write_session
@@ -28,12 +28,7 @@ SEED = 7
 
 @functools.cache
 def _gen() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("gen_sealed", _PATH)
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules["gen_sealed"] = mod
-    spec.loader.exec_module(mod)
-    return mod
+    return load_benchmark("gen_sealed")
 
 
 @functools.cache
