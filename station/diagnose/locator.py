@@ -171,6 +171,14 @@ def covariates(baseline: Any, sd: Any, k: int, *, extended: bool = False) -> dic
                 [1.0 / fs], [1.0, -math.exp(-1.0 / (fs * tau))], step)
     du = _smooth_derivative(sd.u[:, k], fs)
     out["delay growing with time (sample clock rate)"] = -du * t
+    # products of a rate component with a specific-force component and with the temperature: a scale or a
+    # cross-axis coupling that depends on the force along an axis or on the temperature (the library's are one
+    # form each: temperature_scale on the own axis, g_sensitivity a bias)
+    for i in range(3):
+        for j in range(3):
+            out[f"rate {AX[i]} * specific force {AX[j]}"] = rate[:, i] * force[:, j]
+        if "temperature" in out:
+            out[f"rate {AX[i]} * temperature"] = rate[:, i] * temp
     if extended:
         for i, j in ((0, 1), (0, 2), (1, 2)):
             out[f"rate {AX[i]} * rate {AX[j]}"] = rate[:, i] * rate[:, j]
@@ -317,10 +325,17 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
                 if chi / sel.sum() > PHI_LOCATED and stats.chi2.sf(chi, int(sel.sum())) < ALPHA_LOCATED:
                     cells.add((int(kind), k))
         cells |= set(extra_cells or ())
+        # the covariate tests of every axis (whitened, each covariate residualized against the axis's mean model)
+        gains = {k: _covariate_gains(baseline, sd, k, chols[k], x[k * m:(k + 1) * m], res[k * m:(k + 1) * m])
+                 for k in range(3)}
+        # a covariate's own test, where the cells' dispersion does not reach PHI_LOCATED (a small effect in few
+        # blocks): located where it takes a significant part of the axis's chi^2 (module docstring, step 2)
+        targeted = _targeted_cells(sd, gains, res, cells)
+        cells |= set(targeted)
         # the far samples in the moves (only where a rig's reference is there: not on a rig-free recording)
         samples = (_move_sample_cells(baseline.session, sd, sd.residual - fitted)
                    if fitted is not None and move_samples else {})
-        block_cells = set(cells)
+        block_cells = cells - set(targeted)
         cells |= {(int(Kind.MOVE), k) for k in samples}
         if not cells:
             return None
@@ -331,11 +346,9 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
         models: list[EmpiricalModel] = []
         for k in axes:
             rows = slice(k * m, (k + 1) * m)
-            xk = x[rows]
-            xk = xk[:, np.any(xk != 0, axis=0)]
             rk = res[rows]
-            if k in samples and not any(kk == k for _, kk in block_cells):  # seen only at the sample level
-                count, total, held = samples[k]
+            if k in samples and not any(kk == k for _, kk in block_cells | set(targeted)):
+                count, total, held = samples[k]  # seen only at the sample level
                 tests.append(CovariateTest(AX[k], MOVE_SAMPLES, float(count), count / max(total, 1)))
                 chosen.append((AX[k], _samples_text(count, total, held, OUTLIER_ALLOWANCE[sd.sensor])))
                 models.append(empirical.fit(sd.sensor, AX[k], prob.y[:, k] - _mean_fit(prob, beta, nbase, k),
@@ -345,18 +358,10 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
             kinds_k = [c for c, kk in cells if kk == k]
             in_cells = np.isin(sd.kind, kinds_k)
             excess = max(float(np.sum(rk[in_cells] ** 2)) - float(in_cells.sum()), 1e-9)
-            proj, *_ = linalg.lstsq(xk, np.eye(m), check_finite=False)  # for residualizing covariates
             best: tuple[str, float, float] = ("none", 0.0, 0.0)
-            for name, v in covariates(baseline, sd, k).items():
-                cw = linalg.solve_triangular(chols[k], v, lower=True, check_finite=False)
-                cw = cw - xk @ (proj @ cw)
-                nn = float(cw @ cw)
-                if nn <= 1e-300:
-                    continue
-                coef = float(cw @ rk) / nn
-                gain = coef**2 * nn
-                new = rk - coef * cw
-                share = (float(np.sum(rk[in_cells] ** 2)) - float(np.sum(new[in_cells] ** 2))) / excess
+            for name, cw, coef, gain in gains[k]:
+                new_r = rk - coef * cw
+                share = (float(np.sum(rk[in_cells] ** 2)) - float(np.sum(new_r[in_cells] ** 2))) / excess
                 tests.append(CovariateTest(AX[k], name, gain, share))
                 if share >= COVARIATE_SHARE and stats.chi2.sf(gain, 1) < ALPHA_LOCATED and gain > best[1]:
                     best = (name, gain, share)
@@ -382,7 +387,7 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
             cell_rows = np.concatenate([[(int(sd.kind[i]), k) in block_cells for i in range(m)] for k in range(3)])
             stand = robust.stand_ins(names, prob.accepted, x, beta, nbase, cell_rows)
         excess_all = 0.0
-        for c, k in block_cells:
+        for c, k in block_cells | set(targeted):
             sel = sd.kind == c
             excess_all += float(np.sum(z[sel, k] ** 2)) - float(sel.sum())
         periodic = None
@@ -402,6 +407,55 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
                 q_over_class=tuple(float(v / c) for v, c in zip(q_fit, q_cls, strict=True)), tests=tuple(tests[:8]),
                 stand_ins=tuple(stand)),
             empirical=tuple(models))
+
+
+def _covariate_gains(baseline: Any, sd: Any, k: int, chol: np.ndarray, xk: np.ndarray, rk: np.ndarray
+                     ) -> list[tuple[str, np.ndarray, float, float]]:
+    """Axis ``k``'s covariate tests: per covariate of :func:`covariates` (name, its whitened block values
+    residualized against the axis's whitened design ``xk`` (m, p), its least-squares coefficient on the whitened
+    residual ``rk`` (m,), the chi^2 it takes)."""
+    xk = xk[:, np.any(xk != 0, axis=0)]
+    qk = linalg.qr(xk, mode="economic", check_finite=False)[0] if xk.shape[1] else np.zeros((len(rk), 0))
+    out: list[tuple[str, np.ndarray, float, float]] = []
+    for name, v in covariates(baseline, sd, k).items():
+        cw = linalg.solve_triangular(chol, v, lower=True, check_finite=False)
+        cw = cw - qk @ (qk.T @ cw)
+        nn = float(cw @ cw)
+        if nn <= 1e-300:
+            continue
+        coef = float(cw @ rk) / nn
+        out.append((name, cw, coef, coef**2 * nn))
+    return out
+
+
+def _targeted_cells(sd: Any, gains: Mapping[int, list[tuple[str, np.ndarray, float, float]]], res: np.ndarray,
+                    cells: set[tuple[int, int]]) -> dict[tuple[int, int], str]:
+    """Cells (kind code, axis) not located by their dispersion where one covariate's own test locates structure:
+    the strongest covariate's chi^2 on the axis's whitened residual (``res``, the three axes stacked), over the
+    dispersion the axis keeps without it (at least 1: a misstated noise does not pass as structure), beyond the
+    chi^2(1) tail :data:`ALPHA_LOCATED` shared by the dictionary's tests on the three axes (Bonferroni), and in a
+    segment kind the part of that chi^2 taken inside the kind's blocks significant at :data:`ALPHA_LOCATED`.
+    Returns the cells with the covariate that located them."""
+    out: dict[tuple[int, int], str] = {}
+    n_tests = max(1, sum(len(g) for g in gains.values()))
+    m = len(sd.kind)
+    for k, tests in gains.items():
+        if not tests:
+            continue
+        name, cw, coef, gain = max(tests, key=lambda t: t[3])
+        rk = res[k * m:(k + 1) * m]
+        new = rk - coef * cw
+        phi = max(1.0, float(np.mean(new**2)))
+        if stats.chi2.sf(gain / phi, 1) >= ALPHA_LOCATED / n_tests:
+            continue
+        for kind in Kind:
+            sel = sd.kind == int(kind)
+            if (int(kind), k) in cells or sel.sum() < 3:
+                continue
+            drop = float(np.sum(rk[sel] ** 2) - np.sum(new[sel] ** 2))
+            if drop > 0 and stats.chi2.sf(drop / phi, 1) < ALPHA_LOCATED:
+                out[(int(kind), k)] = name
+    return out
 
 
 def _mean_fit(prob: Any, beta: np.ndarray, nbase: int, k: int) -> np.ndarray:
