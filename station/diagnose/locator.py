@@ -326,7 +326,8 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
                     cells.add((int(kind), k))
         cells |= set(extra_cells or ())
         # the covariate tests of every axis (whitened, each covariate residualized against the axis's mean model)
-        gains = {k: _covariate_gains(baseline, sd, k, chols[k], x[k * m:(k + 1) * m], res[k * m:(k + 1) * m])
+        gains = {k: covariate_gains(covariates(baseline, sd, k), chols[k], x[k * m:(k + 1) * m],
+                                    res[k * m:(k + 1) * m])
                  for k in range(3)}
         # a covariate's own test, where the cells' dispersion does not reach PHI_LOCATED (a small effect in few
         # blocks): located where it takes a significant part of the axis's chi^2 (module docstring, step 2)
@@ -409,15 +410,15 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
             empirical=tuple(models))
 
 
-def _covariate_gains(baseline: Any, sd: Any, k: int, chol: np.ndarray, xk: np.ndarray, rk: np.ndarray
-                     ) -> list[tuple[str, np.ndarray, float, float]]:
-    """Axis ``k``'s covariate tests: per covariate of :func:`covariates` (name, its whitened block values
-    residualized against the axis's whitened design ``xk`` (m, p), its least-squares coefficient on the whitened
-    residual ``rk`` (m,), the chi^2 it takes)."""
+def covariate_gains(values: Mapping[str, np.ndarray], chol: np.ndarray, xk: np.ndarray, rk: np.ndarray
+                    ) -> list[tuple[str, np.ndarray, float, float]]:
+    """One axis's covariate tests: per covariate block values in ``values`` (name -> (m,), :func:`covariates`)
+    (name, its values whitened by the axis's Cholesky factor ``chol`` and residualized against the axis's whitened
+    design ``xk`` (m, p), its least-squares coefficient on the whitened residual ``rk`` (m,), the chi^2 it takes)."""
     xk = xk[:, np.any(xk != 0, axis=0)]
     qk = linalg.qr(xk, mode="economic", check_finite=False)[0] if xk.shape[1] else np.zeros((len(rk), 0))
     out: list[tuple[str, np.ndarray, float, float]] = []
-    for name, v in covariates(baseline, sd, k).items():
+    for name, v in values.items():
         cw = linalg.solve_triangular(chol, v, lower=True, check_finite=False)
         cw = cw - qk @ (qk.T @ cw)
         nn = float(cw @ cw)
@@ -499,4 +500,5 @@ def _text(name: str) -> str:
     return f"follows {name}"
 
 
-__all__ = ["ALPHA_LOCATED", "PHI_LOCATED", "TABLE1_DRIFT", "DriftClass", "class_drift_noise", "covariates", "locate"]
+__all__ = ["ALPHA_LOCATED", "PHI_LOCATED", "TABLE1_DRIFT", "DriftClass", "class_drift_noise", "covariate_gains",
+           "covariates", "locate"]
