@@ -23,7 +23,7 @@ rival takes nothing. A stand-in is rejected; what it took up is then left to the
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -56,10 +56,10 @@ class StandIn:
                 "rival_threshold": round(self.rival_threshold, 2)}
 
 
-def _strongest(prob: SensorProblem, baseline: Any) -> tuple[list[tuple[float, int, str, np.ndarray]], int]:
-    """The :data:`RIVALS` covariates with the largest chi^2 on the current model's whitened residual: (gain, axis,
-    name, block values), and the number of covariates tried."""
-    sd = prob.sd
+def _strongest(prob: SensorProblem, values: Sequence[Mapping[str, np.ndarray]]
+               ) -> tuple[list[tuple[float, int, str, np.ndarray]], int]:
+    """The :data:`RIVALS` covariates (``values``: per axis, name -> block values) with the largest chi^2 on the
+    current model's whitened residual: (gain, axis, name, block values), and the number of covariates tried."""
     m = prob.m
     chols, yw = prob.whitened()
     x, _ = prob.design(chols, prob.accepted)
@@ -68,10 +68,9 @@ def _strongest(prob: SensorProblem, baseline: Any) -> tuple[list[tuple[float, in
     found: list[tuple[float, int, str, np.ndarray]] = []
     n = 0
     for k in range(3):
-        values = locator.covariates(baseline, sd, k)
-        gains = locator.covariate_gains(values, chols[k], x[k * m:(k + 1) * m], res[k * m:(k + 1) * m])
+        gains = locator.covariate_gains(values[k], chols[k], x[k * m:(k + 1) * m], res[k * m:(k + 1) * m])
         n += len(gains)
-        found.extend((g, k, name, values[name]) for name, _cw, _coef, g in gains)
+        found.extend((g, k, name, values[k][name]) for name, _cw, _coef, g in gains)
     found.sort(key=lambda t: -t[0])
     return found[:RIVALS], n
 
@@ -80,14 +79,19 @@ def stand_ins(prob: SensorProblem, baseline: Any, names: Sequence[str], skip: Se
     """The accepted effects ``names`` (in ``prob``'s order; ``skip`` and names starting with ``~`` are not tested)
     that stand in for an empirical term (module docstring)."""
     out: list[StandIn] = []
+    values: list[Mapping[str, np.ndarray]] = []
     for i, name in enumerate(names):
         if name.startswith("~") or name in skip:
             continue
+        if not values:
+            values = [locator.covariates(baseline, prob.sd, k) for k in range(3)]
         zf = prob.accepted[i]
         with prob.without(i):
-            rivals, n_tried = _strongest(prob, baseline)
+            rivals, n_tried = _strongest(prob, values)
         crit = float(stats.chi2.isf(ALPHA / max(n_tried, 1), 1))
-        for _g, k, rname, v in rivals:
+        for g, k, rname, v in rivals:
+            if g <= crit:  # a term that takes less than that without F is no rival given F
+                break
             ze = np.zeros((prob.m, 3, 1))
             ze[:, k, 0] = v
             with prob.without(i), prob.given(ze):
