@@ -17,17 +17,21 @@ else treats as a symptom. Here, per sensor, after the selection:
 2. **Located by segment kind.** Its innovations per block (whitened residual, 1 = noise) are grouped by
    segment kind and axis; a cell whose mean square exceeds :data:`PHI_LOCATED` with a chi^2 tail below
    :data:`ALPHA_LOCATED` holds structure the model cannot explain. ``q`` fitted above the class bound is
-   reported with it (``q_over_class``): the free fit had to stretch the drift noise for it.
+   reported with it (``q_over_class``): the free fit had to stretch the drift noise for it. A small effect in a few
+   blocks of a kind does not lift the cell's dispersion to :data:`PHI_LOCATED`; so each covariate's own test
+   locates too (:func:`_targeted_cells`): the strongest covariate of an axis, its chi^2 over the dispersion left
+   beyond the chi^2(1) tail :data:`ALPHA_LOCATED` shared by all covariates of the three axes, locates the kinds
+   where the chi^2 it takes is itself significant at :data:`ALPHA_LOCATED`.
 3. **The covariate it follows, or none.** Each flagged axis's whitened residual is regressed on one physical
-   covariate at a time (:data:`COVARIATES`: the rate and its magnitude, powers, angular acceleration,
-   specific force, temperature and its direction, time since the last rate step, a delay growing with
-   time); one that takes at least :data:`COVARIATE_SHARE` of the axis's excess chi^2 in its flagged cells,
-   significant at :data:`ALPHA_LOCATED`, is named; otherwise a term periodic at the rate table's spin
-   frequency when a cos/sin of the table's angle takes that share of the structure inside the rate holds
-   (sample level, :func:`_spin_periodic`); otherwise a test of the drift model's own consequence:
-   its increments are Gaussian; a bias that jumps between levels (telegraph) has a few increments of the
-   0.5 s window means in the still and rate-hold segments beyond 6 robust sigmas (:func:`_jumps`);
-   otherwise "none".
+   covariate at a time (:func:`covariates`: the rate and its magnitude, powers, angular acceleration, specific
+   force, temperature and its direction, time since the last rate step, a delay growing with time, the products of a
+   rate component with a specific-force component and with the temperature); one that takes at least
+   :data:`COVARIATE_SHARE` of the axis's excess chi^2 in its flagged cells, significant at :data:`ALPHA_LOCATED`, is
+   named; otherwise a term periodic at the rate table's spin frequency when a cos/sin of the table's angle takes
+   that share of the structure inside the rate holds (sample level, :func:`_spin_periodic`); otherwise a test of the
+   drift model's own consequence: its increments are Gaussian; a bias that jumps between levels (telegraph) has a
+   few increments of the 0.5 s window means in the still and rate-hold segments beyond 6 robust sigmas
+   (:func:`_jumps`); otherwise "none".
 4. **Empirical model** per flagged axis (:mod:`station.diagnose.empirical`): a sparse model over the covariate
    dictionary chosen on held-out segments, reported as "empirical, not in the library".
 5. **Stand-ins.** An accepted effect whose fitted signal lies mostly (:data:`STAND_IN_SHARE`) in the
@@ -487,7 +491,8 @@ def _samples_text(count: int, total: int, held: int, allowance: float) -> str:
 def _text(name: str) -> str:
     if name == "none":
         return ("none: no covariate of the dictionary (rate, |rate|, rate^2, rate^3, angular acceleration, specific "
-                "force, temperature and its direction, time since the last rate step, a delay growing with time) "
+                "force, temperature and its direction, time since the last rate step, a delay growing with time, "
+                "rate times force or temperature) "
                 f"takes {COVARIATE_SHARE:.0%} of it, and it is not two-level")
     if name == "periodic":
         return ("periodic at the rate table's spin frequency: a cos/sin of the table's angle takes most of the "
