@@ -145,6 +145,11 @@ def _smooth_derivative(x: np.ndarray, fs: float) -> np.ndarray:
 def covariates(baseline: Any, sd: Any, k: int, *, extended: bool = False) -> dict[str, np.ndarray]:
     """Block-mean physical covariates for axis ``k`` of ``sd`` (m,), by name; ``extended``: also the rate
     components' products, the time since power-on and the table's spin phase (the empirical models')."""
+    return covariates_by_axis(baseline, sd, extended=extended)[k]
+
+
+def covariates_by_axis(baseline: Any, sd: Any, *, extended: bool = False) -> list[dict[str, np.ndarray]]:
+    """:func:`covariates` of the three axes, the covariates they share made once."""
     session = baseline.session
     fs = session.sample_rate_hz
     rate = np.nan_to_num(session.ref_gyro_radps)
@@ -173,8 +178,6 @@ def covariates(baseline: Any, sd: Any, k: int, *, extended: bool = False) -> dic
         for tau in KICK_TAU_S:
             out[f"time since the last rate step (decay {tau:g} s, by the step's size)"] = lfilter(
                 [1.0 / fs], [1.0, -math.exp(-1.0 / (fs * tau))], step)
-    du = _smooth_derivative(sd.u[:, k], fs)
-    out["delay growing with time (sample clock rate)"] = -du * t
     # products of a rate component with a specific-force component and with the temperature: a scale or a
     # cross-axis coupling that depends on the force along an axis or on the temperature (the library's are one
     # form each: temperature_scale on the own axis, g_sensitivity a bias)
@@ -190,7 +193,16 @@ def covariates(baseline: Any, sd: Any, k: int, *, extended: bool = False) -> dic
         angle = np.concatenate([[0.0], np.cumsum(0.5 * (mag[1:] + mag[:-1]) * np.diff(t))])
         out["spin phase cos"] = np.cos(angle)
         out["spin phase sin"] = np.sin(angle)
-    return {name: sd.block_mean(v) for name, v in out.items() if np.ptp(v) > 0}
+    shared = {name: sd.block_mean(v) for name, v in out.items() if np.ptp(v) > 0}
+    du = _smooth_derivative(sd.u, fs)
+    delay = "delay growing with time (sample clock rate)"
+    per_axis: list[dict[str, np.ndarray]] = []
+    for k in range(3):
+        own = dict(shared)
+        if np.ptp(du[:, k]) > 0:
+            own[delay] = sd.block_mean(-du[:, k] * t)
+        per_axis.append(own)
+    return per_axis
 
 
 def _spin_periodic(session: Any, sd: Any, residual: Rows | np.ndarray, k: int) -> tuple[float, int, float, float]:
@@ -330,21 +342,29 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
                     cells.add((int(kind), k))
         cells |= set(extra_cells or ())
         # the covariate tests of every axis (whitened, each covariate residualized against the axis's mean model)
-        gains = {k: covariate_gains(covariates(baseline, sd, k), chols[k], x[k * m:(k + 1) * m],
-                                    res[k * m:(k + 1) * m])
+        values = covariates_by_axis(baseline, sd)
+        gains = {k: covariate_gains(values[k], chols[k], x[k * m:(k + 1) * m], res[k * m:(k + 1) * m])
                  for k in range(3)}
         # a covariate's own test, where the cells' dispersion does not reach PHI_LOCATED (a small effect in few
         # blocks): located where it takes a significant part of the axis's chi^2 (module docstring, step 2)
         targeted = _targeted_cells(sd, gains, res, cells)
         cells |= set(targeted)
         # the far samples in the moves (only where a rig's reference is there: not on a rig-free recording)
-        samples = (_move_sample_cells(baseline.session, sd, sd.residual - fitted)
+        samples = (_move_sample_cells(baseline.session, sd, sd.residual_less(fitted)[:])
                    if fitted is not None and move_samples else {})
         block_cells = cells - set(targeted)
         cells |= {(int(Kind.MOVE), k) for k in samples}
         if not cells:
             return None
         axes = sorted({k for _, k in cells})
+        extended: list[dict[str, np.ndarray]] = []
+
+        def dictionary(k: int) -> dict[str, np.ndarray]:
+            """The empirical models' dictionary of axis k (made once)."""
+            if not extended:
+                extended.extend(covariates_by_axis(baseline, sd, extended=True))
+            return extended[k]
+
         # --- covariate per axis ---
         tests: list[CovariateTest] = []
         chosen: list[tuple[str, str]] = []
@@ -358,7 +378,7 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
                 chosen.append((AX[k], _samples_text(count, total, held, OUTLIER_ALLOWANCE[sd.sensor])))
                 models.append(empirical.fit(sd.sensor, AX[k], prob.y[:, k] - _mean_fit(prob, beta, nbase, k),
                                             1.0 / prob.white[:, k], sd.segment,
-                                            covariates(baseline, sd, k, extended=True)))
+                                            dictionary(k)))
                 continue
             kinds_k = [c for c, kk in cells if kk == k]
             in_cells = np.isin(sd.kind, kinds_k)
@@ -383,7 +403,7 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
             chosen.append((AX[k], best[0]))
             models.append(empirical.fit(sd.sensor, AX[k], prob.y[:, k] - _mean_fit(prob, beta, nbase, k),
                                         1.0 / prob.white[:, k], sd.segment,
-                                        covariates(baseline, sd, k, extended=True)))
+                                        dictionary(k)))
         tests.sort(key=lambda t: (not t.name.startswith("jumps"), -t.gain_chi2))
         # --- stand-ins among the accepted effects ---
         stand: list[str] = []
@@ -506,4 +526,4 @@ def _text(name: str) -> str:
 
 
 __all__ = ["ALPHA_LOCATED", "PHI_LOCATED", "TABLE1_DRIFT", "DriftClass", "class_drift_noise", "covariate_gains",
-           "covariates", "locate"]
+           "covariates", "covariates_by_axis", "locate"]

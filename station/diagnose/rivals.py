@@ -79,12 +79,12 @@ def stand_ins(prob: SensorProblem, baseline: Any, names: Sequence[str], skip: Se
     """The accepted effects ``names`` (in ``prob``'s order; ``skip`` and names starting with ``~`` are not tested)
     that stand in for an empirical term (module docstring)."""
     out: list[StandIn] = []
-    values: list[Mapping[str, np.ndarray]] = []
+    values: Sequence[Mapping[str, np.ndarray]] = ()
     for i, name in enumerate(names):
         if name.startswith("~") or name in skip:
             continue
         if not values:
-            values = [locator.covariates(baseline, prob.sd, k) for k in range(3)]
+            values = locator.covariates_by_axis(baseline, prob.sd)
         zf = prob.accepted[i]
         with prob.without(i):
             rivals, n_tried = _strongest(prob, values)
