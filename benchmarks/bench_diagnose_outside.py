@@ -18,7 +18,9 @@ the seed of a recording is ``base + i * len(KINDS) + index of its kind``, so add
 
 The kinds of ``gen_outside.UNANTICIPATED`` are not in the default list (kept out of development, run only as the
 final check): ``--kinds alpha_sign_bias,g_scale,temp_misalign,rate_deadband``; their seeds are
-``base + i * len(UNANTICIPATED) + index`` on their own random streams.
+``base + i * len(UNANTICIPATED) + index`` on their own random streams. Their first run (report seeds 175000) made
+``g_scale`` and ``temp_misalign`` development kinds of the fourth round (development seeds 176000-176160, the other
+kinds 177000-177200; its report seeds 178000 and 178500, drawn after).
 
 Run: ``python benchmarks/bench_diagnose_outside.py [--base 50000] [--per 4] [--kinds telegraph,...]``
 """
