@@ -17,17 +17,21 @@ else treats as a symptom. Here, per sensor, after the selection:
 2. **Located by segment kind.** Its innovations per block (whitened residual, 1 = noise) are grouped by
    segment kind and axis; a cell whose mean square exceeds :data:`PHI_LOCATED` with a chi^2 tail below
    :data:`ALPHA_LOCATED` holds structure the model cannot explain. ``q`` fitted above the class bound is
-   reported with it (``q_over_class``): the free fit had to stretch the drift noise for it.
+   reported with it (``q_over_class``): the free fit had to stretch the drift noise for it. A small effect in a few
+   blocks of a kind does not lift the cell's dispersion to :data:`PHI_LOCATED`; so each covariate's own test
+   locates too (:func:`_targeted_cells`): the strongest covariate of an axis, its chi^2 over the dispersion left
+   beyond the chi^2(1) tail :data:`ALPHA_LOCATED` shared by all covariates of the three axes, locates the kinds
+   where the chi^2 it takes is itself significant at :data:`ALPHA_LOCATED`.
 3. **The covariate it follows, or none.** Each flagged axis's whitened residual is regressed on one physical
-   covariate at a time (:data:`COVARIATES`: the rate and its magnitude, powers, angular acceleration,
-   specific force, temperature and its direction, time since the last rate step, a delay growing with
-   time); one that takes at least :data:`COVARIATE_SHARE` of the axis's excess chi^2 in its flagged cells,
-   significant at :data:`ALPHA_LOCATED`, is named; otherwise a term periodic at the rate table's spin
-   frequency when a cos/sin of the table's angle takes that share of the structure inside the rate holds
-   (sample level, :func:`_spin_periodic`); otherwise a test of the drift model's own consequence:
-   its increments are Gaussian; a bias that jumps between levels (telegraph) has a few increments of the
-   0.5 s window means in the still and rate-hold segments beyond 6 robust sigmas (:func:`_jumps`);
-   otherwise "none".
+   covariate at a time (:func:`covariates`: the rate and its magnitude, powers, angular acceleration, specific
+   force, temperature and its direction, time since the last rate step, a delay growing with time, the products of a
+   rate component with a specific-force component and with the temperature); one that takes at least
+   :data:`COVARIATE_SHARE` of the axis's excess chi^2 in its flagged cells, significant at :data:`ALPHA_LOCATED`, is
+   named; otherwise a term periodic at the rate table's spin frequency when a cos/sin of the table's angle takes
+   that share of the structure inside the rate holds (sample level, :func:`_spin_periodic`); otherwise a test of the
+   drift model's own consequence: its increments are Gaussian; a bias that jumps between levels (telegraph) has a
+   few increments of the 0.5 s window means in the still and rate-hold segments beyond 6 robust sigmas
+   (:func:`_jumps`); otherwise "none".
 4. **Empirical model** per flagged axis (:mod:`station.diagnose.empirical`): a sparse model over the covariate
    dictionary chosen on held-out segments, reported as "empirical, not in the library".
 5. **Stand-ins.** An accepted effect whose fitted signal lies mostly (:data:`STAND_IN_SHARE`) in the
@@ -141,6 +145,11 @@ def _smooth_derivative(x: np.ndarray, fs: float) -> np.ndarray:
 def covariates(baseline: Any, sd: Any, k: int, *, extended: bool = False) -> dict[str, np.ndarray]:
     """Block-mean physical covariates for axis ``k`` of ``sd`` (m,), by name; ``extended``: also the rate
     components' products, the time since power-on and the table's spin phase (the empirical models')."""
+    return covariates_by_axis(baseline, sd, extended=extended)[k]
+
+
+def covariates_by_axis(baseline: Any, sd: Any, *, extended: bool = False) -> list[dict[str, np.ndarray]]:
+    """:func:`covariates` of the three axes, the covariates they share made once."""
     session = baseline.session
     fs = session.sample_rate_hz
     rate = np.nan_to_num(session.ref_gyro_radps)
@@ -169,8 +178,14 @@ def covariates(baseline: Any, sd: Any, k: int, *, extended: bool = False) -> dic
         for tau in KICK_TAU_S:
             out[f"time since the last rate step (decay {tau:g} s, by the step's size)"] = lfilter(
                 [1.0 / fs], [1.0, -math.exp(-1.0 / (fs * tau))], step)
-    du = _smooth_derivative(sd.u[:, k], fs)
-    out["delay growing with time (sample clock rate)"] = -du * t
+    # products of a rate component with a specific-force component and with the temperature: a scale or a
+    # cross-axis coupling that depends on the force along an axis or on the temperature (the library's are one
+    # form each: temperature_scale on the own axis, g_sensitivity a bias)
+    for i in range(3):
+        for j in range(3):
+            out[f"rate {AX[i]} * specific force {AX[j]}"] = rate[:, i] * force[:, j]
+        if "temperature" in out:
+            out[f"rate {AX[i]} * temperature"] = rate[:, i] * temp
     if extended:
         for i, j in ((0, 1), (0, 2), (1, 2)):
             out[f"rate {AX[i]} * rate {AX[j]}"] = rate[:, i] * rate[:, j]
@@ -178,7 +193,16 @@ def covariates(baseline: Any, sd: Any, k: int, *, extended: bool = False) -> dic
         angle = np.concatenate([[0.0], np.cumsum(0.5 * (mag[1:] + mag[:-1]) * np.diff(t))])
         out["spin phase cos"] = np.cos(angle)
         out["spin phase sin"] = np.sin(angle)
-    return {name: sd.block_mean(v) for name, v in out.items() if np.ptp(v) > 0}
+    shared = {name: sd.block_mean(v) for name, v in out.items() if np.ptp(v) > 0}
+    du = _smooth_derivative(sd.u, fs)
+    delay = "delay growing with time (sample clock rate)"
+    per_axis: list[dict[str, np.ndarray]] = []
+    for k in range(3):
+        own = dict(shared)
+        if np.ptp(du[:, k]) > 0:
+            own[delay] = sd.block_mean(-du[:, k] * t)
+        per_axis.append(own)
+    return per_axis
 
 
 def _spin_periodic(session: Any, sd: Any, residual: Rows | np.ndarray, k: int) -> tuple[float, int, float, float]:
@@ -317,46 +341,52 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
                 if chi / sel.sum() > PHI_LOCATED and stats.chi2.sf(chi, int(sel.sum())) < ALPHA_LOCATED:
                     cells.add((int(kind), k))
         cells |= set(extra_cells or ())
+        # the covariate tests of every axis (whitened, each covariate residualized against the axis's mean model)
+        values = covariates_by_axis(baseline, sd)
+        gains = {k: covariate_gains(values[k], chols[k], x[k * m:(k + 1) * m], res[k * m:(k + 1) * m])
+                 for k in range(3)}
+        # a covariate's own test, where the cells' dispersion does not reach PHI_LOCATED (a small effect in few
+        # blocks): located where it takes a significant part of the axis's chi^2 (module docstring, step 2)
+        targeted = _targeted_cells(sd, gains, res, cells)
+        cells |= set(targeted)
         # the far samples in the moves (only where a rig's reference is there: not on a rig-free recording)
-        samples = (_move_sample_cells(baseline.session, sd, sd.residual - fitted)
+        samples = (_move_sample_cells(baseline.session, sd, sd.residual_less(fitted)[:])
                    if fitted is not None and move_samples else {})
-        block_cells = set(cells)
+        block_cells = cells - set(targeted)
         cells |= {(int(Kind.MOVE), k) for k in samples}
         if not cells:
             return None
         axes = sorted({k for _, k in cells})
+        extended: list[dict[str, np.ndarray]] = []
+
+        def dictionary(k: int) -> dict[str, np.ndarray]:
+            """The empirical models' dictionary of axis k (made once)."""
+            if not extended:
+                extended.extend(covariates_by_axis(baseline, sd, extended=True))
+            return extended[k]
+
         # --- covariate per axis ---
         tests: list[CovariateTest] = []
         chosen: list[tuple[str, str]] = []
         models: list[EmpiricalModel] = []
         for k in axes:
             rows = slice(k * m, (k + 1) * m)
-            xk = x[rows]
-            xk = xk[:, np.any(xk != 0, axis=0)]
             rk = res[rows]
-            if k in samples and not any(kk == k for _, kk in block_cells):  # seen only at the sample level
-                count, total, held = samples[k]
+            if k in samples and not any(kk == k for _, kk in block_cells | set(targeted)):
+                count, total, held = samples[k]  # seen only at the sample level
                 tests.append(CovariateTest(AX[k], MOVE_SAMPLES, float(count), count / max(total, 1)))
                 chosen.append((AX[k], _samples_text(count, total, held, OUTLIER_ALLOWANCE[sd.sensor])))
                 models.append(empirical.fit(sd.sensor, AX[k], prob.y[:, k] - _mean_fit(prob, beta, nbase, k),
                                             1.0 / prob.white[:, k], sd.segment,
-                                            covariates(baseline, sd, k, extended=True)))
+                                            dictionary(k)))
                 continue
             kinds_k = [c for c, kk in cells if kk == k]
             in_cells = np.isin(sd.kind, kinds_k)
             excess = max(float(np.sum(rk[in_cells] ** 2)) - float(in_cells.sum()), 1e-9)
-            proj, *_ = linalg.lstsq(xk, np.eye(m), check_finite=False)  # for residualizing covariates
             best: tuple[str, float, float] = ("none", 0.0, 0.0)
-            for name, v in covariates(baseline, sd, k).items():
-                cw = linalg.solve_triangular(chols[k], v, lower=True, check_finite=False)
-                cw = cw - xk @ (proj @ cw)
-                nn = float(cw @ cw)
-                if nn <= 1e-300:
-                    continue
-                coef = float(cw @ rk) / nn
-                gain = coef**2 * nn
-                new = rk - coef * cw
-                share = (float(np.sum(rk[in_cells] ** 2)) - float(np.sum(new[in_cells] ** 2))) / excess
+            for name, cw, coef, gain in gains[k]:
+                new_r = rk - coef * cw
+                share = (float(np.sum(rk[in_cells] ** 2)) - float(np.sum(new_r[in_cells] ** 2))) / excess
                 tests.append(CovariateTest(AX[k], name, gain, share))
                 if share >= COVARIATE_SHARE and stats.chi2.sf(gain, 1) < ALPHA_LOCATED and gain > best[1]:
                     best = (name, gain, share)
@@ -373,7 +403,7 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
             chosen.append((AX[k], best[0]))
             models.append(empirical.fit(sd.sensor, AX[k], prob.y[:, k] - _mean_fit(prob, beta, nbase, k),
                                         1.0 / prob.white[:, k], sd.segment,
-                                        covariates(baseline, sd, k, extended=True)))
+                                        dictionary(k)))
         tests.sort(key=lambda t: (not t.name.startswith("jumps"), -t.gain_chi2))
         # --- stand-ins among the accepted effects ---
         stand: list[str] = []
@@ -382,7 +412,7 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
             cell_rows = np.concatenate([[(int(sd.kind[i]), k) in block_cells for i in range(m)] for k in range(3)])
             stand = robust.stand_ins(names, prob.accepted, x, beta, nbase, cell_rows)
         excess_all = 0.0
-        for c, k in block_cells:
+        for c, k in block_cells | set(targeted):
             sel = sd.kind == c
             excess_all += float(np.sum(z[sel, k] ** 2)) - float(sel.sum())
         periodic = None
@@ -402,6 +432,55 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
                 q_over_class=tuple(float(v / c) for v, c in zip(q_fit, q_cls, strict=True)), tests=tuple(tests[:8]),
                 stand_ins=tuple(stand)),
             empirical=tuple(models))
+
+
+def covariate_gains(values: Mapping[str, np.ndarray], chol: np.ndarray, xk: np.ndarray, rk: np.ndarray
+                    ) -> list[tuple[str, np.ndarray, float, float]]:
+    """One axis's covariate tests: per covariate block values in ``values`` (name -> (m,), :func:`covariates`)
+    (name, its values whitened by the axis's Cholesky factor ``chol`` and residualized against the axis's whitened
+    design ``xk`` (m, p), its least-squares coefficient on the whitened residual ``rk`` (m,), the chi^2 it takes)."""
+    xk = xk[:, np.any(xk != 0, axis=0)]
+    qk = linalg.qr(xk, mode="economic", check_finite=False)[0] if xk.shape[1] else np.zeros((len(rk), 0))
+    out: list[tuple[str, np.ndarray, float, float]] = []
+    for name, v in values.items():
+        cw = linalg.solve_triangular(chol, v, lower=True, check_finite=False)
+        cw = cw - qk @ (qk.T @ cw)
+        nn = float(cw @ cw)
+        if nn <= 1e-300:
+            continue
+        coef = float(cw @ rk) / nn
+        out.append((name, cw, coef, coef**2 * nn))
+    return out
+
+
+def _targeted_cells(sd: Any, gains: Mapping[int, list[tuple[str, np.ndarray, float, float]]], res: np.ndarray,
+                    cells: set[tuple[int, int]]) -> dict[tuple[int, int], str]:
+    """Cells (kind code, axis) not located by their dispersion where one covariate's own test locates structure:
+    the strongest covariate's chi^2 on the axis's whitened residual (``res``, the three axes stacked), over the
+    dispersion the axis keeps without it (at least 1: a misstated noise does not pass as structure), beyond the
+    chi^2(1) tail :data:`ALPHA_LOCATED` shared by the dictionary's tests on the three axes (Bonferroni), and in a
+    segment kind the part of that chi^2 taken inside the kind's blocks significant at :data:`ALPHA_LOCATED`.
+    Returns the cells with the covariate that located them."""
+    out: dict[tuple[int, int], str] = {}
+    n_tests = max(1, sum(len(g) for g in gains.values()))
+    m = len(sd.kind)
+    for k, tests in gains.items():
+        if not tests:
+            continue
+        name, cw, coef, gain = max(tests, key=lambda t: t[3])
+        rk = res[k * m:(k + 1) * m]
+        new = rk - coef * cw
+        phi = max(1.0, float(np.mean(new**2)))
+        if stats.chi2.sf(gain / phi, 1) >= ALPHA_LOCATED / n_tests:
+            continue
+        for kind in Kind:
+            sel = sd.kind == int(kind)
+            if (int(kind), k) in cells or sel.sum() < 3:
+                continue
+            drop = float(np.sum(rk[sel] ** 2) - np.sum(new[sel] ** 2))
+            if drop > 0 and stats.chi2.sf(drop / phi, 1) < ALPHA_LOCATED:
+                out[(int(kind), k)] = name
+    return out
 
 
 def _mean_fit(prob: Any, beta: np.ndarray, nbase: int, k: int) -> np.ndarray:
@@ -432,7 +511,8 @@ def _samples_text(count: int, total: int, held: int, allowance: float) -> str:
 def _text(name: str) -> str:
     if name == "none":
         return ("none: no covariate of the dictionary (rate, |rate|, rate^2, rate^3, angular acceleration, specific "
-                "force, temperature and its direction, time since the last rate step, a delay growing with time) "
+                "force, temperature and its direction, time since the last rate step, a delay growing with time, "
+                "rate times force or temperature) "
                 f"takes {COVARIATE_SHARE:.0%} of it, and it is not two-level")
     if name == "periodic":
         return ("periodic at the rate table's spin frequency: a cos/sin of the table's angle takes most of the "
@@ -445,4 +525,5 @@ def _text(name: str) -> str:
     return f"follows {name}"
 
 
-__all__ = ["ALPHA_LOCATED", "PHI_LOCATED", "TABLE1_DRIFT", "DriftClass", "class_drift_noise", "covariates", "locate"]
+__all__ = ["ALPHA_LOCATED", "PHI_LOCATED", "TABLE1_DRIFT", "DriftClass", "class_drift_noise", "covariate_gains",
+           "covariates", "covariates_by_axis", "locate"]

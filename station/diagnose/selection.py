@@ -35,7 +35,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy import linalg
 
-from station.diagnose import bootstrap, finding_consistency, locator, retest, robust
+from station.diagnose import bootstrap, finding_consistency, locator, retest, rivals, robust
 from station.diagnose.bootstrap import Bootstrap
 from station.diagnose.candidates import MAX_DELAY_S, Rows, delay_rows
 from station.diagnose.effect_registry import LIBRARY, REGISTRY, RIG_STEPS, engineering
@@ -77,6 +77,9 @@ LOCATOR_ROUNDS = 2
 #: Why an effect the locator finds standing in for located structure is rejected.
 STAND_IN = ("a stand-in: most of its fitted signal lies where the class-frozen model locates structure "
             "(see unexplained)")
+#: Why an effect that an empirical term explains is rejected (rivals.py).
+RIVAL = ("a stand-in for physics outside the library: a term of the empirical dictionary explains its signal "
+         "(it is not significant given the term, the term is given it; see unexplained)")
 #: Why a finding's confidence is capped by the size re-test (retest.py).
 RETEST_CAP = "retest: its size changes by more than its uncertainty between fits"
 
@@ -198,6 +201,8 @@ def select_sensor(baseline: Baseline, sensor: str, *, max_effects: int = 4, cand
     for _step in range(max_effects):
         if not _forward_step(prob, fwd, out):
             break
+    if locate:
+        _rivals(prob, baseline, fwd, out)
     confidence, checks = _audit(prob, baseline, fwd, out)
     if locate and _locate(prob, baseline, fwd, out, drift_class, rig_moves) and _offer_walk(prob, fwd):
         # a stand-in had taken the place of a wander: with the walk in, the checks and the location once more
@@ -406,6 +411,17 @@ def _locate(prob: SensorProblem, baseline: Baseline, fwd: _Forward, out: _Entrie
         _drop(prob, fwd, gone)
         rejected = True
     return rejected
+
+
+def _rivals(prob: SensorProblem, baseline: Baseline, fwd: _Forward, out: _Entries) -> None:
+    """Each finding re-tested against the empirical alternative (rivals.py): one that a term of the locator's
+    dictionary (no library effect) explains, while it explains nothing given that term, is rejected; what it took
+    up is left to the locator."""
+    found = rivals.stand_ins(prob, baseline, fwd.names)
+    for s in found:
+        out.rejected.append(Rejection(s.effect, fwd.sensor, RIVAL, s.details()))
+    if found:
+        _drop(prob, fwd, {s.effect for s in found})
 
 
 def _offer_walk(prob: SensorProblem, fwd: _Forward) -> bool:
