@@ -750,14 +750,16 @@ class SensorProblem:
             pass
         return (DRIFT_NOISE_MAX * change) ** 2 / -math.expm1(-2.0 * span / tc)
 
-    def test_random_walk(self) -> Test:
+    def test_random_walk(self, *, size: bool = True) -> Test:
         """Constrained likelihood-ratio test of a bias random walk ``K^2 min(t_i, t_j)`` shared by the
         three axes, against eq. 3's drift noise bounded by :meth:`drift_noise_max`.
 
         Null: per axis, q over ``[0, q_max]``, and a bias proportional to the temperature rise as a
         nuisance term (so a temperature course the warm-up does not absorb is not taken for a wander).
         Alternative: K^2 >= 0 added, q kept at the null's value (which makes the test conservative).
-        Both at the warm-up T_c re-fitted with the temperature term (then restored).
+        Both at the warm-up T_c re-fitted with the temperature term (then restored). ``size``: a walk that passes
+        is sized on its profile likelihood (:meth:`_walk_size`); without, its ``theta`` and ``cov`` are the test's
+        (K at the null's q, for a caller that uses the decision and the gain only).
         """
         saved = self._snapshot()
         try:
@@ -769,11 +771,11 @@ class SensorProblem:
                     self.refit_drift()
                 finally:
                     self._accepted.pop()
-            return self._random_walk_at_current_tc()
+            return self._random_walk_at_current_tc(size=size)
         finally:
             self._restore(saved)
 
-    def _random_walk_at_current_tc(self) -> Test:
+    def _random_walk_at_current_tc(self, *, size: bool) -> Test:
         """:meth:`test_random_walk` at the current T_c."""
         q_max = [self.drift_noise_max(k) for k in range(3)]
         extra = []
@@ -801,7 +803,7 @@ class SensorProblem:
         # K^2 >= 0 sits on the boundary: the null distribution is half chi^2_1
         crit = float(stats.chi2.isf(2.0 * ALPHA, 1))
         k_walk = math.sqrt(k2)
-        if gain > crit and gain > math.log(self.n_rows):
+        if size and gain > crit and gain > math.log(self.n_rows):
             k_walk, k_std = self._walk_size(extra, q_max, k2)
         return Test(effect="bias_random_walk", sensor=self.sd.sensor, gain=gain, params=1,
                     bic_gain=gain - math.log(self.n_rows), critical=crit, theta=np.array([k_walk]),
