@@ -9,7 +9,8 @@ share for the value re-fitted under the final model (``evidence.retest``). Not c
 not a drawn parameter) and ``pose_tilt`` (per pose, drawn per visit's axis).
 
 Seeds: development used 0-999 (and 200000-203999 for the walk's restricted likelihood and the spread in the stated
-std); report seeds start at ``--base`` (140000+, then 210000-212999). Per finding the line shows z per parameter
+std, 205000-206999 for the walk's profile-likelihood size); report seeds start at ``--base`` (140000+, then
+210000-212999, then 215000-216999). Per finding the line shows z per parameter
 and, for a scalar effect, the value, stated std and truth (SI).
 
 Run: ``python benchmarks/bench_diagnose_magnitudes.py [--base 10000] [--per 10] [--effects lever_arm,...]``

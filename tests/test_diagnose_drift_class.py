@@ -65,3 +65,33 @@ def test_walk_covariance_is_that_of_block_means() -> None:
         if checked >= 5:
             break
     assert checked == 5
+
+
+def test_the_walks_size_is_the_optimum_of_its_profile_with_the_drift_noise() -> None:
+    """Development seed 205007 (the gyroscope's walk): K and eq. 3's drift noise q trade along a ridge; fitting
+    them in turn (two rounds from the test's point) stopped at K = 5.00e-7 rad/s/sqrt(s), 16 % below the optimum of
+    the profile likelihood with q re-fitted at every K (5.94e-7), with q at its class bound. The size is now that
+    optimum, and its std the flatter side's of the profile: the truth (5.24e-7) is inside 3 std."""
+    import indepgen
+
+    rec = indepgen.generate(205007, {"bias_random_walk": 3e-4})
+    baseline = fit_baseline(rec.session, warmup_tc_s={"accel": (50.0, 167.0), "gyro": (1030.0, 3760.0)})
+    sd = baseline.sensor("gyro")
+    prob = SensorProblem(baseline, sd)
+    prob.q_class = locator.class_drift_noise("gyro", sd.params.bias_drift)
+    t = prob.test_random_walk()
+    assert t.passes
+    k, std = float(t.theta[0]), math.sqrt(float(t.cov[0, 0]))
+    truth = float(rec.truth["bias_random_walk gyro"][0])
+
+    # the profile of the restricted likelihood in u = log K^2, q per axis (at most the class's) re-fitted at each
+    extra = [prob._accepted_axis(a) for a in range(3)]
+    q_max = [min(prob.drift_noise_max(a), float(prob.q_class[a])) for a in range(3)]
+
+    def profile(u: float) -> float:
+        return sum(prob._profile_q(a, math.exp(u), extra[a], q_max=q_max[a], reml=True)[1] for a in range(3))
+
+    u = 2.0 * math.log(k)
+    at = profile(u)
+    assert at <= profile(u + 0.1) and at <= profile(u - 0.1)  # 5 % either way in K is worse
+    assert abs(k - truth) <= 3.0 * std

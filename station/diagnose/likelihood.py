@@ -139,8 +139,14 @@ class Test:
         return self.heldout_after - self.heldout_before <= HELDOUT_SE * self.heldout_change_se
 
 
-#: Alternating rounds (q per axis, then K^2) of an accepted random walk's size (:meth:`SensorProblem._walk_size`).
-WALK_SIZE_ROUNDS = 2
+#: An accepted random walk's size (:meth:`SensorProblem._walk_profile`): the step in log K^2 of its bracket search
+#: and the most steps either way; the tolerance of the search in the bracket (log K^2: 0.02 is 1 % in K).
+WALK_SIZE_STEP = 0.5
+WALK_SIZE_SPAN = 6
+WALK_SIZE_XATOL = 0.02
+#: Step in log K^2 either side of the walk's size at which its profile's fall gives K's std
+#: (:meth:`SensorProblem._walk_size`); a relative std of K of 4-10 % is 0.08-0.2 in log K^2.
+WALK_STD_STEP = 0.3
 
 
 @dataclass(frozen=True)
@@ -744,14 +750,16 @@ class SensorProblem:
             pass
         return (DRIFT_NOISE_MAX * change) ** 2 / -math.expm1(-2.0 * span / tc)
 
-    def test_random_walk(self) -> Test:
+    def test_random_walk(self, *, size: bool = True) -> Test:
         """Constrained likelihood-ratio test of a bias random walk ``K^2 min(t_i, t_j)`` shared by the
         three axes, against eq. 3's drift noise bounded by :meth:`drift_noise_max`.
 
         Null: per axis, q over ``[0, q_max]``, and a bias proportional to the temperature rise as a
         nuisance term (so a temperature course the warm-up does not absorb is not taken for a wander).
         Alternative: K^2 >= 0 added, q kept at the null's value (which makes the test conservative).
-        Both at the warm-up T_c re-fitted with the temperature term (then restored).
+        Both at the warm-up T_c re-fitted with the temperature term (then restored). ``size``: a walk that passes
+        is sized on its profile likelihood (:meth:`_walk_size`); without, its ``theta`` and ``cov`` are the test's
+        (K at the null's q, for a caller that uses the decision and the gain only).
         """
         saved = self._snapshot()
         try:
@@ -763,11 +771,11 @@ class SensorProblem:
                     self.refit_drift()
                 finally:
                     self._accepted.pop()
-            return self._random_walk_at_current_tc()
+            return self._random_walk_at_current_tc(size=size)
         finally:
             self._restore(saved)
 
-    def _random_walk_at_current_tc(self) -> Test:
+    def _random_walk_at_current_tc(self, *, size: bool) -> Test:
         """:meth:`test_random_walk` at the current T_c."""
         q_max = [self.drift_noise_max(k) for k in range(3)]
         extra = []
@@ -795,37 +803,59 @@ class SensorProblem:
         # K^2 >= 0 sits on the boundary: the null distribution is half chi^2_1
         crit = float(stats.chi2.isf(2.0 * ALPHA, 1))
         k_walk = math.sqrt(k2)
-        if gain > crit and gain > math.log(self.n_rows):
-            k_walk, k_std = self._walk_size(qs, extra, q_max, k2)
+        if size and gain > crit and gain > math.log(self.n_rows):
+            k_walk, k_std = self._walk_size(extra, q_max, k2)
         return Test(effect="bias_random_walk", sensor=self.sd.sensor, gain=gain, params=1,
                     bic_gain=gain - math.log(self.n_rows), critical=crit, theta=np.array([k_walk]),
                     cov=np.array([[k_std**2]]))
 
-    def _walk_size(self, qs: list[float], extra: list[np.ndarray | None], q_max: list[float],
-                   k2: float) -> tuple[float, float]:
+    def _walk_size(self, extra: list[np.ndarray | None], q_max: list[float], k2: float) -> tuple[float, float]:
         """(K, std of K) of an accepted random walk with eq. 3's drift noise profiled beside it (0 <= q <= q_max per
         axis). The test keeps q at the null's value (conservative for the decision), where q has taken up part of
-        the wander: K from there is low and its curvature ignores the trade between the two. Here K^2 and q are
-        fitted together (alternating profiles from the test's point) and K's uncertainty is the curvature of the
-        profile likelihood in log K^2 with q re-fitted at every K^2; q bounded by the sensor class where it is known
-        (:attr:`q_class`): the drift noise of eq. 3 must not take up the wander. Both on the restricted likelihood
-        (REML, :meth:`_axis_nll`): the mean terms (b_stat, the warm-up, the row of M, accepted effects) take up the
-        walk's slowest part, and maximum likelihood then states K low (by about 0.4 of its own uncertainty on the
-        independent generator's development seeds)."""
+        the wander: K from there is low and its curvature ignores the trade between the two. Here K^2 is fitted on
+        its profile likelihood (:meth:`_walk_profile`: q per axis re-fitted at every K^2), q bounded by the sensor
+        class where it is known (:attr:`q_class`): the drift noise of eq. 3 must not take up the wander. On the
+        restricted likelihood (REML, :meth:`_axis_nll`): the mean terms (b_stat, the warm-up, the row of M,
+        accepted effects) take up the walk's slowest part, and maximum likelihood then states K low.
+
+        K and q trade along a ridge (more walk, less drift noise), so fitting them in turn stops short of the
+        joint optimum: alternating two rounds from the test's point left K up to 15 % low with q at its bound,
+        where the profile still fell steeply towards larger K. The std is from the profile on the side where it
+        is flatter: ``0.5 K h / sqrt(2 (nll(log K^2 +- h) - nll))`` in log K^2 for the step ``h`` either way, the
+        larger of the two (the profile has a kink where q reaches its bound or 0; a symmetric curvature there
+        states K as surer than either side of the profile allows)."""
         if self.q_class is not None:
             q_max = [min(a, float(b)) for a, b in zip(q_max, self.q_class, strict=True)]
-            qs = [min(a, b) for a, b in zip(qs, q_max, strict=True)]
-        for _ in range(WALK_SIZE_ROUNDS):
-            qs = [self._profile_q(k, k2, extra[k], q_max=q_max[k], reml=True)[0] for k in range(3)]
-            _, k2, _ = self._profile_k2(qs, extra, reml=True)
+        u_hat, nll_hat = self._walk_profile(extra, q_max, math.log(k2))
+        h = WALK_STD_STEP
+        sides = [self._walk_nll(extra, q_max, u_hat + s) - nll_hat for s in (h, -h)]
+        k = math.exp(0.5 * u_hat)
+        if min(sides) <= 0.0:
+            return k, math.nan
+        return k, k * 0.5 * h / math.sqrt(2.0 * min(sides))
 
-        def prof(v: float) -> float:
-            return sum(self._profile_q(k, v, extra[k], q_max=q_max[k], reml=True)[1] for k in range(3))
+    def _walk_nll(self, extra: list[np.ndarray | None], q_max: list[float], u: float) -> float:
+        """Profile of the walk's restricted likelihood at ``K^2 = exp(u)``: q per axis (0 <= q <= q_max) re-fitted."""
+        return sum(self._profile_q(k, math.exp(u), extra[k], q_max=q_max[k], reml=True)[1] for k in range(3))
 
-        h = 0.3
-        mid = prof(k2)
-        curv = (prof(k2 * math.exp(h)) - 2.0 * mid + prof(k2 * math.exp(-h))) / h**2
-        return math.sqrt(k2), math.sqrt(k2) * 0.5 / math.sqrt(curv) if curv > 0 else math.nan
+    def _walk_profile(self, extra: list[np.ndarray | None], q_max: list[float], u0: float) -> tuple[float, float]:
+        """(log K^2, nll) at the minimum of :meth:`_walk_nll`, searched from the test's ``u0 = log K^2``: steps of
+        :data:`WALK_SIZE_STEP` in log K^2 downhill until the profile rises, then a bounded search in that bracket."""
+        step = WALK_SIZE_STEP
+        vals = {u0: self._walk_nll(extra, q_max, u0)}
+        for _ in range(WALK_SIZE_SPAN):
+            u = min(vals, key=vals.__getitem__)
+            for v in (u - step, u + step):
+                if v not in vals:
+                    vals[v] = self._walk_nll(extra, q_max, v)
+            if min(vals, key=vals.__getitem__) == u:
+                break
+        u = min(vals, key=vals.__getitem__)
+        res = optimize.minimize_scalar(lambda v: self._walk_nll(extra, q_max, v), bounds=(u - step, u + step),
+                                       method="bounded", options={"xatol": WALK_SIZE_XATOL})
+        if float(res.fun) < vals[u]:
+            return float(res.x), float(res.fun)
+        return u, vals[u]
 
     def _profile_k2(self, qs: list[float], extra: list[np.ndarray | None], *,
                     reml: bool = False) -> tuple[float, float, float]:

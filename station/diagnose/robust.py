@@ -228,7 +228,7 @@ def audit(prob: SensorProblem, baseline: Baseline, names: list[str], regs: dict[
                                                   round(t.threshold, 2))
         if random_walk is not None:
             with prob.random_walk_off():
-                t = prob.test_random_walk()
+                t = prob.test_random_walk(size=False)  # the decision and its gain only
             cons = prob.walk_consistency()
             if t.passes and not bad_cells and cons.consistent:
                 out.confidence["bias_random_walk"] = Confidence(_confidence(t.gain, t.threshold), round(t.gain, 2),
