@@ -209,6 +209,28 @@ def temperature_direction(baseline: Baseline, sd: SensorData) -> np.ndarray:
     return np.asarray(sd.block_mean(np.sign(slope)), dtype=float)
 
 
+@dataclass(frozen=True, eq=False)
+class WhitenedFit:
+    """The current model (the accepted effects) fitted by least squares in whitened units
+    (:meth:`SensorProblem.whitened_fit`).
+
+    Attributes:
+        chols: per-axis Cholesky factors of the block covariance.
+        yw: the whitened stacked data.
+        x: the whitened stacked design (base columns per axis, then the accepted effects).
+        nbase: the number of base columns.
+        beta: the least-squares coefficients.
+        res: the whitened residual ``yw - x beta``.
+    """
+
+    chols: list[np.ndarray]
+    yw: np.ndarray
+    x: np.ndarray
+    nbase: int
+    beta: np.ndarray
+    res: np.ndarray
+
+
 class SensorProblem:
     """The stacked block problem of one sensor; see the module docstring."""
 
@@ -535,6 +557,13 @@ class SensorProblem:
         yw = np.concatenate([linalg.solve_triangular(chols[k], y[:, k], lower=True, check_finite=False)
                              for k in range(3)])
         return chols, yw
+
+    def whitened_fit(self) -> WhitenedFit:
+        """The current model fitted by least squares in whitened units (:class:`WhitenedFit`)."""
+        chols, yw = self.whitened()
+        x, nbase = self.design(chols, self._accepted)
+        beta, *_ = linalg.lstsq(x, yw, check_finite=False)
+        return WhitenedFit(chols, yw, x, nbase, beta, yw - x @ beta)
 
     def design(self, chols: list[np.ndarray], blocks: Sequence[np.ndarray],
                rows: np.ndarray | None = None) -> tuple[np.ndarray, int]:
@@ -1041,10 +1070,8 @@ class SensorProblem:
     # --- fit quality ---------------------------------------------------------------
     def quality(self) -> ModelQuality:
         """Negative log-likelihood, BIC, block chi^2 per axis (white-noise units) of the current model."""
-        chols, yw = self.whitened()
-        x, _ = self.design(chols, self._accepted)
-        beta, *_ = linalg.lstsq(x, yw, check_finite=False)
-        rw = yw - x @ beta
+        fit = self.whitened_fit()
+        chols, x, beta, rw = fit.chols, fit.x, fit.beta, fit.res
         logdet = sum(float(np.log(np.diag(c)).sum()) for c in chols)
         nll = 0.5 * float(rw @ rw) + logdet
         npar = self._rank(x) + int(np.count_nonzero(self.q)) + (1 if self.k2 > 0 else 0)
@@ -1067,5 +1094,5 @@ class SensorProblem:
 __all__ = [
     "ALPHA", "DRIFT_NOISE_MAX", "FOLDS", "HELDOUT_SE", "PROFILE_TC", "RCOND", "TC_FLOOR_S", "WALK_CONSISTENCY_Z",
     "WANDER_LIKE",
-    "ModelQuality", "SensorProblem", "Test", "base_drift",
+    "ModelQuality", "SensorProblem", "Test", "WhitenedFit", "base_drift",
 ]

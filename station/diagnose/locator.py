@@ -322,10 +322,8 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
     q_cls = class_drift_noise(sd.sensor, sd.params.bias_drift, drift_class)
     q_fit = prob.q.copy()
     with prob.drift_noise_at_most(q_cls):
-        chols, yw = prob.whitened()
-        x, nbase = prob.design(chols, prob.accepted)
-        beta, *_ = linalg.lstsq(x, yw, check_finite=False)
-        res = yw - x @ beta
+        fit = prob.whitened_fit()
+        chols, x, nbase, beta, res = fit.chols, fit.x, fit.nbase, fit.beta, fit.res
         m = prob.m
         z = res.reshape(3, m).T
         cells: set[tuple[int, int]] = set()

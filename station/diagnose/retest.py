@@ -87,11 +87,8 @@ class SizeCheck:
 
 
 def _joint(prob: Any) -> tuple[np.ndarray, np.ndarray, int]:
-    chols, yw = prob.whitened()
-    x, nbase = prob.design(chols, prob.accepted)
-    beta, *_ = linalg.lstsq(x, yw, check_finite=False)
-    cov = linalg.pinv(x.T @ x)
-    return beta, cov, nbase
+    fit = prob.whitened_fit()
+    return fit.beta, linalg.pinv(fit.x.T @ fit.x), fit.nbase
 
 
 def sizes(prob: Any, names: list[str], reported: dict[str, tuple[np.ndarray, np.ndarray | None]]

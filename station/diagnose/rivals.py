@@ -28,7 +28,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy import linalg, stats
+from scipy import stats
 
 from station.diagnose import locator
 from station.diagnose.likelihood import ALPHA, SensorProblem
@@ -61,10 +61,8 @@ def _strongest(prob: SensorProblem, values: Sequence[Mapping[str, np.ndarray]]
     """The :data:`RIVALS` covariates (``values``: per axis, name -> block values) with the largest chi^2 on the
     current model's whitened residual: (gain, axis, name, block values), and the number of covariates tried."""
     m = prob.m
-    chols, yw = prob.whitened()
-    x, _ = prob.design(chols, prob.accepted)
-    beta, *_ = linalg.lstsq(x, yw, check_finite=False)
-    res = yw - x @ beta
+    fit = prob.whitened_fit()
+    chols, x, res = fit.chols, fit.x, fit.res
     found: list[tuple[float, int, str, np.ndarray]] = []
     n = 0
     for k in range(3):
@@ -75,13 +73,13 @@ def _strongest(prob: SensorProblem, values: Sequence[Mapping[str, np.ndarray]]
     return found[:RIVALS], n
 
 
-def stand_ins(prob: SensorProblem, baseline: Any, names: Sequence[str], skip: Sequence[str] = ()) -> list[StandIn]:
-    """The accepted effects ``names`` (in ``prob``'s order; ``skip`` and names starting with ``~`` are not tested)
-    that stand in for an empirical term (module docstring)."""
+def stand_ins(prob: SensorProblem, baseline: Any, names: Sequence[str]) -> list[StandIn]:
+    """The accepted effects ``names`` (in ``prob``'s order; names starting with ``~`` are not tested) that stand in
+    for an empirical term (module docstring)."""
     out: list[StandIn] = []
     values: Sequence[Mapping[str, np.ndarray]] = ()
     for i, name in enumerate(names):
-        if name.startswith("~") or name in skip:
+        if name.startswith("~"):
             continue
         if not values:
             values = locator.covariates_by_axis(baseline, prob.sd)
