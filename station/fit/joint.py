@@ -25,7 +25,7 @@ A rack that holds its units in one known orientation (``rack_orientation``, e.g.
 its unit lying on its base, tilted by a small unknown angle) lets the norm tie one offset back in. After the fit
 above, the rack's specific force ``c = M^-1 o`` gives the slot's tilt; a second pass takes the rack's rest as a
 reference ``c'`` whose components across the nominal up axis are those of ``c`` and whose component along it is
-``sqrt(g^2 - |c_across|^2)`` (``g`` the norm of the rig's references: the plan's gravity), and fits the output
+``sqrt(g^2 - |c_across|^2)`` (``g`` the rig recording's local gravity), and fits the output
 axis along up without a free offset. The rack's level on that axis is then ``M c' + b_stat + b_drift
 exp(-t/T_c)``, as a rest in that orientation on the rig would be: the error of ``c'`` along up is
 ``|c_across| d|c_across| / g``, second order in the tilt's error (0.03 mm/s^2 for a 5 deg tilt known to 0.3 mm/s^2;
@@ -252,16 +252,6 @@ def _fit_triad(
     return _JointTriad(unpack_triad(tri), tri, blocks, offsets, offsets_std, noise, runs, note)
 
 
-def _still_gravity(rig: Session) -> float:
-    """The norm of the rig's still references (m/s^2): the local gravity its plan states."""
-    still = np.isin(rig.kind, [int(Kind.REST), int(Kind.POSE)])
-    norms = np.linalg.norm(rig.ref_accel_mps2[still], axis=1)
-    norms = norms[np.isfinite(norms)]
-    if not len(norms):
-        raise FitError("the rig recording has no still reference to take gravity's norm from")
-    return float(np.median(norms))
-
-
 def tied_rack_force(force: np.ndarray, up: str, gravity_mps2: float, tolerance_deg: float) -> tuple[np.ndarray, float]:
     """The rack rest's reference for the second pass: ``force`` (the first pass's ``M^-1 o``, m/s^2) with its
     component along the nominal ``up`` (a pose name) replaced by ``sqrt(g^2 - |force across up|^2)``; and the
@@ -276,10 +266,9 @@ def tied_rack_force(force: np.ndarray, up: str, gravity_mps2: float, tolerance_d
             f"{tolerance_deg:g} deg): it was put in its slot another way; soak it again as the plan says or give "
             "it the full rig plan")
     k = AXIS_INDEX[up[1]]
-    across = force.copy()
-    across[k] = 0.0
-    tied = across.copy()
-    tied[k] = u[k] * math.sqrt(max(gravity_mps2**2 - float(across @ across), 0.0))
+    tied = force.copy()
+    tied[k] = 0.0  # across up: the first pass's; along up: from the norm
+    tied[k] = u[k] * math.sqrt(max(gravity_mps2**2 - float(tied @ tied), 0.0))
     return tied, angle
 
 
@@ -341,7 +330,7 @@ def _fit_joint(rack: Session, rig: Session, options: FitOptions, max_transfer_s:
     rule = "rack rest: M c + b_stat + b_drift exp(-t/T_c) with M c one free offset per axis and rack segment"
     tie: dict[str, Any] = {}
     if rack_orientation != ANY_ORIENTATION:
-        gravity = _still_gravity(rig)
+        gravity = rig.gravity_mps2  # the local gravity the rig's references are made with
         try:
             first = np.linalg.solve(a.p["misalignment"], a.offsets).T  # per rack segment: M^-1 o
         except np.linalg.LinAlgError:
@@ -358,7 +347,7 @@ def _fit_joint(rack: Session, rig: Session, options: FitOptions, max_transfer_s:
                            tied_axis=k_up)
         rule = (f"rack rest, held {rack_orientation} up within {rack_tilt_tolerance_deg:g} deg: M c' + b_stat + "
                 f"b_drift exp(-t/T_c), c' the first pass's M^-1 o across {rack_orientation} and sqrt(g^2 - "
-                f"|c' across|^2) along it (g = {gravity:.5f} m/s^2, the rig's references), free offsets on the "
+                f"|c' across|^2) along it (g = {gravity:.5f} m/s^2, the rig recording's gravity), free offsets on the "
                 f"two axes across {rack_orientation}; the gyro's rest one free offset per axis")
         tie = {"rack_orientation": rack_orientation, "rack_tilt_tolerance_deg": rack_tilt_tolerance_deg,
                "rack_tilt_deg": angles, "gravity_mps2": round(gravity, 9)}
