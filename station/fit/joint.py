@@ -67,7 +67,7 @@ from station.fit.determinability import assess
 from station.fit.joint_found import joint_polynomial, with_found_terms
 from station.kernel.errors import FitError, RackOrientationError
 from station.kernel.geometry import AXIS_INDEX, POSE_ANGLES_DEG, up_vector
-from station.kernel.line_plan import ANY_ORIENTATION
+from station.kernel.line_plan import ANY_ORIENTATION, RACK_TILT_TOLERANCE_DEG
 from station.kernel.parameters import FitQuality, ParameterSet, TriadParams
 from station.session.model import Kind, Session
 
@@ -275,7 +275,7 @@ def tied_rack_force(force: np.ndarray, up: str, gravity_mps2: float, tolerance_d
 def fit_joint(
     rack: Session, rig: Session, options: FitOptions | None = None, *, max_transfer_s: float = 1800.0,
     max_blocks: int = 140, clock_slack_s: float = 2.0, rack_orientation: str = ANY_ORIENTATION,
-    rack_tilt_tolerance_deg: float = 5.0,
+    rack_tilt_tolerance_deg: float = RACK_TILT_TOLERANCE_DEG,
 ) -> ParameterSet:
     """Fit eq. 1 with eq. 3's drift to a unit's rack rest and rig recording together.
 

@@ -22,6 +22,8 @@ from station.kernel.plan import PlanError, RigPlan
 LINE_PLAN_FORMAT = "station-line-plan/1"
 #: ``rack_orientation`` of a rack that holds its units in any orientation (nobody says which).
 ANY_ORIENTATION = "any"
+#: The largest tilt of a rack slot against the plan's rack orientation (deg) the joint fit accepts, by default.
+RACK_TILT_TOLERANCE_DEG = 5.0
 
 
 def line_rig_plan() -> RigPlan:
@@ -67,7 +69,7 @@ class LinePlan:
     max_transfer_s: float = 1800.0
     rig: RigPlan = field(default_factory=line_rig_plan)
     rack_orientation: str = ANY_ORIENTATION
-    rack_tilt_tolerance_deg: float = 5.0
+    rack_tilt_tolerance_deg: float = RACK_TILT_TOLERANCE_DEG
 
     def __post_init__(self) -> None:
         if not self.rack_s > 0:
@@ -176,5 +178,6 @@ def default_line_plan() -> LinePlan:
     return LinePlan()
 
 
-__all__ = ["ANY_ORIENTATION", "LINE_PLAN_FORMAT", "LinePlan", "LinePlanFile", "default_line_plan",
+__all__ = ["ANY_ORIENTATION", "LINE_PLAN_FORMAT", "RACK_TILT_TOLERANCE_DEG", "LinePlan", "LinePlanFile",
+           "default_line_plan",
            "line_plan_from_json", "line_plan_to_json", "line_rig_plan", "load_line_plan_file"]

@@ -27,7 +27,7 @@ from station.fit.calibrate import FitOptions
 from station.fit.joint import BOOT_KEY, OFFSET_KEY, check_power, fit_joint, power_continuity
 from station.kernel.clock import Clock
 from station.kernel.errors import FitError, HardwareError
-from station.kernel.line_plan import ANY_ORIENTATION
+from station.kernel.line_plan import ANY_ORIENTATION, RACK_TILT_TOLERANCE_DEG
 from station.kernel.parameters import ParameterSet
 from station.line.recordings import RackArchive, StoredRackRecording
 from station.sensor.protocol import Sensor
@@ -88,7 +88,7 @@ def choose_plan(
 
 def fit_line_unit(rack: Session, rig: Session, options: FitOptions | None = None, *,
                   max_transfer_s: float = 1800.0, clock_slack_s: float = 2.0, rack_orientation: str = ANY_ORIENTATION,
-                  rack_tilt_tolerance_deg: float = 5.0) -> ParameterSet:
+                  rack_tilt_tolerance_deg: float = RACK_TILT_TOLERANCE_DEG) -> ParameterSet:
     """The joint fit of one unit's rack and rig recordings (refused with the reason when they are not one
     power-on: :class:`~station.kernel.errors.FitError`; when the rack holds its units in ``rack_orientation``
     and this unit's rest was not: :class:`~station.kernel.errors.RackOrientationError`)."""
@@ -138,7 +138,7 @@ class LineRigRunner(SequenceRunner):
 
     def __init__(self, rig: Any, sensors: Sequence[Sensor], clock: Clock, *, archive: RackArchive,
                  max_transfer_s: float = 1800.0, on_interruption: str = FULL, clock_slack_s: float = 2.0,
-                 rack_orientation: str = ANY_ORIENTATION, rack_tilt_tolerance_deg: float = 5.0,
+                 rack_orientation: str = ANY_ORIENTATION, rack_tilt_tolerance_deg: float = RACK_TILT_TOLERANCE_DEG,
                  **kwargs: Any) -> None:
         self.archive = archive
         self.rack_orientation = rack_orientation

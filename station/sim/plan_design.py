@@ -33,7 +33,7 @@ from station.fit.calibrate import FitOptions, fit_session
 from station.fit.joint import fit_joint
 from station.kernel.errors import StationError
 from station.kernel.limits_file import LimitsFile
-from station.kernel.line_plan import ANY_ORIENTATION, LinePlan, line_rig_plan
+from station.kernel.line_plan import ANY_ORIENTATION, RACK_TILT_TOLERANCE_DEG, LinePlan, line_rig_plan
 from station.kernel.parameters import ParameterSet
 from station.kernel.plan import default_plan
 from station.kernel.sensor_class import TABLE1, SensorClass
@@ -174,7 +174,7 @@ def design(
     margin: float = 0.8,
     match_full: float | None = None,
     rack_orientation: str = ANY_ORIENTATION,
-    rack_tilt_tolerance_deg: float = 5.0,
+    rack_tilt_tolerance_deg: float = RACK_TILT_TOLERANCE_DEG,
 ) -> tuple[Candidate | None, list[Candidate]]:
     """The chosen plan (None when no candidate meets the limits) and every candidate evaluated; every candidate
     carries ``rack_orientation`` and ``rack_tilt_tolerance_deg`` (how the line's rack holds its units)."""
