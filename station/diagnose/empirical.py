@@ -2,7 +2,7 @@
 
 For each axis the locator (:mod:`station.diagnose.locator`) flags, a sparse linear model of the block residual
 (the final model's, with eq. 3's drift noise at the sensor class) over a dictionary of physical covariates
-(:func:`station.diagnose.locator.covariates`: rate components, their magnitude, squares, cubes and products,
+(:func:`station.diagnose.locator.covariates_by_axis`: rate components, their magnitude, squares, cubes and products,
 the products of a rate component with a specific-force component and with the temperature, angular
 acceleration, specific force, temperature and its direction, time since the last rate step, a delay growing
 with time, time since power-on, the table's spin phase). Terms are chosen by forward selection

@@ -23,7 +23,7 @@ else treats as a symptom. Here, per sensor, after the selection:
    beyond the chi^2(1) tail :data:`ALPHA_LOCATED` shared by all covariates of the three axes, locates the kinds
    where the chi^2 it takes is itself significant at :data:`ALPHA_LOCATED`.
 3. **The covariate it follows, or none.** Each flagged axis's whitened residual is regressed on one physical
-   covariate at a time (:func:`covariates`: the rate and its magnitude, powers, angular acceleration, specific
+   covariate at a time (:func:`covariates_by_axis`: the rate and its magnitude, powers, angular acceleration, specific
    force, temperature and its direction, time since the last rate step, a delay growing with time, the products of a
    rate component with a specific-force component and with the temperature); one that takes at least
    :data:`COVARIATE_SHARE` of the axis's excess chi^2 in its flagged cells, significant at :data:`ALPHA_LOCATED`, is
@@ -142,14 +142,10 @@ def _smooth_derivative(x: np.ndarray, fs: float) -> np.ndarray:
     return np.gradient(uniform_filter1d(x, size=w, axis=0, mode="nearest"), 1.0 / fs, axis=0)
 
 
-def covariates(baseline: Any, sd: Any, k: int, *, extended: bool = False) -> dict[str, np.ndarray]:
-    """Block-mean physical covariates for axis ``k`` of ``sd`` (m,), by name; ``extended``: also the rate
-    components' products, the time since power-on and the table's spin phase (the empirical models')."""
-    return covariates_by_axis(baseline, sd, extended=extended)[k]
-
-
 def covariates_by_axis(baseline: Any, sd: Any, *, extended: bool = False) -> list[dict[str, np.ndarray]]:
-    """:func:`covariates` of the three axes, the covariates they share made once."""
+    """Per axis of ``sd`` its block-mean physical covariates (m,), by name (the covariates the axes share made
+    once); ``extended``: also the rate components' products, the time since power-on and the table's spin phase
+    (the empirical models')."""
     session = baseline.session
     fs = session.sample_rate_hz
     rate = np.nan_to_num(session.ref_gyro_radps)
@@ -346,11 +342,12 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
         # a covariate's own test, where the cells' dispersion does not reach PHI_LOCATED (a small effect in few
         # blocks): located where it takes a significant part of the axis's chi^2 (module docstring, step 2)
         targeted = _targeted_cells(sd, gains, res, cells)
-        cells |= set(targeted)
+        block_cells = set(cells)  # by the cells' dispersion (and the other checks' cells)
+        structure_cells = block_cells | set(targeted)  # and by a covariate's own test: the block-level structure
+        cells |= structure_cells
         # the far samples in the moves (only where a rig's reference is there: not on a rig-free recording)
         samples = (_move_sample_cells(baseline.session, sd, sd.residual_less(fitted)[:])
                    if fitted is not None and move_samples else {})
-        block_cells = cells - set(targeted)
         cells |= {(int(Kind.MOVE), k) for k in samples}
         if not cells:
             return None
@@ -370,7 +367,7 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
         for k in axes:
             rows = slice(k * m, (k + 1) * m)
             rk = res[rows]
-            if k in samples and not any(kk == k for _, kk in block_cells | set(targeted)):
+            if k in samples and not any(kk == k for _, kk in structure_cells):
                 count, total, held = samples[k]  # seen only at the sample level
                 tests.append(CovariateTest(AX[k], MOVE_SAMPLES, float(count), count / max(total, 1)))
                 chosen.append((AX[k], _samples_text(count, total, held, OUTLIER_ALLOWANCE[sd.sensor])))
@@ -410,7 +407,7 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
             cell_rows = np.concatenate([[(int(sd.kind[i]), k) in block_cells for i in range(m)] for k in range(3)])
             stand = robust.stand_ins(names, prob.accepted, x, beta, nbase, cell_rows)
         excess_all = 0.0
-        for c, k in block_cells | set(targeted):
+        for c, k in structure_cells:
             sel = sd.kind == c
             excess_all += float(np.sum(z[sel, k] ** 2)) - float(sel.sum())
         periodic = None
@@ -434,7 +431,7 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
 
 def covariate_gains(values: Mapping[str, np.ndarray], chol: np.ndarray, xk: np.ndarray, rk: np.ndarray
                     ) -> list[tuple[str, np.ndarray, float, float]]:
-    """One axis's covariate tests: per covariate block values in ``values`` (name -> (m,), :func:`covariates`)
+    """One axis's covariate tests: per covariate block values in ``values`` (name -> (m,), :func:`covariates_by_axis`)
     (name, its values whitened by the axis's Cholesky factor ``chol`` and residualized against the axis's whitened
     design ``xk`` (m, p), its least-squares coefficient on the whitened residual ``rk`` (m,), the chi^2 it takes)."""
     xk = xk[:, np.any(xk != 0, axis=0)]
@@ -524,4 +521,4 @@ def _text(name: str) -> str:
 
 
 __all__ = ["ALPHA_LOCATED", "PHI_LOCATED", "TABLE1_DRIFT", "DriftClass", "class_drift_noise", "covariate_gains",
-           "covariates", "covariates_by_axis", "locate"]
+           "covariates_by_axis", "locate"]

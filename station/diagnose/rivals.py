@@ -5,7 +5,7 @@ outside the library leaves a signal that a library effect can partly take up: on
 specific force along its axis, a ``temperature_scale`` takes the difference between the scale seen in the rate holds
 and in the tumbles (they happen at other temperatures), and is named although the temperature has nothing to do
 with it. So each accepted finding is re-tested against the strongest covariates of the locator's dictionary
-(:func:`station.diagnose.locator.covariates`, the empirical models' terms: rate, force and temperature and their
+(:func:`station.diagnose.locator.covariates_by_axis`, the empirical models' terms: rate, force and temperature and their
 products), each a per-axis term ``E`` that is no library effect:
 
 - ``E`` is taken from the residual of the model without the finding: the :data:`RIVALS` covariates (over the three
