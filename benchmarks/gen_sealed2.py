@@ -512,7 +512,7 @@ class Recording:
     plan: Plan
     kind: str
     size: float  # |size| in the unit of SIZE
-    axis: int  # the axis it acts on (-1: every axis)
+    axis: int  # the axis it acts on (-1: every axis, or none)
     params: dict[str, float]
     planted: dict[str, np.ndarray]  # sensor -> (n, 3) what the kind added to the output (before quantization)
     temp_true: np.ndarray
@@ -554,6 +554,8 @@ def generate(seed: int, kind: str, *, rate_hz: float | None = None) -> Recording
     params: dict[str, float] = {"c": sgn * size}
     add = {s: np.zeros((n, 3)) for s in ("accel", "gyro")}
     others = [j for j in range(3) if j != axis]
+    if kind == "none":
+        axis = -1
     if kind == "resonant_noise":
         f0 = float(kr.uniform(0.15, 0.35)) * fs
         q = float(kr.uniform(2.0, 5.0))
