@@ -120,7 +120,7 @@ def test_acts_where_it_says_and_nowhere_else(kind: str) -> None:
             seg = np.asarray(rec.session.segment)
             there = np.unique(seg[np.isin(kinds, [c for c, lab in LABELS.items() if lab in segs])])
             best[sensor] = max(float(np.sqrt(np.max(np.sum(d[seg == s] ** 2, axis=0)))) / sigma for s in there)
-    assert max(best.values()) > 5.0, (kind, best)  # clock_jitter: the gyro (the accelerometer's part is small)
+    assert min(best.values()) > 5.0, (kind, best)
     assert rec.kind == kind
 
 
@@ -396,4 +396,4 @@ def test_bench_runs_the_second_sealed_generator(monkeypatch: pytest.MonkeyPatch,
     assert "benchmarks/gen_sealed2.py" in out
     assert f"clock_jitter     seed {300082 + g.KINDS.index('clock_jitter')}:" in out
     assert "axis all" in out
-    assert "accel/gyro in move" in out
+    assert "gyro in move" in out
