@@ -24,10 +24,11 @@ kinds 177000-177200; its report seeds 178000 and 178500, drawn after).
 
 ``--generator sealed`` runs the sealed generator (``benchmarks/gen_sealed.py``: its kinds and nulls, its
 ``LOCATION`` and ``COVARIATE``), kept out of every locator development: run once, at the end, as the final check.
-Its seeds are ``base + i * len(gen_sealed.KINDS) + index``.
+Its seeds are ``base + i * len(gen_sealed.KINDS) + index``. ``--generator sealed2`` runs the second sealed generator
+(``benchmarks/gen_sealed2.py``) the same way, seeds ``base + i * len(gen_sealed2.KINDS) + index``.
 
 Run: ``python benchmarks/bench_diagnose_outside.py [--base 50000] [--per 4] [--kinds telegraph,...]
-[--generator outside|sealed]``
+[--generator outside|sealed|sealed2]``
 """
 
 from __future__ import annotations
@@ -43,6 +44,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import gen_outside
 import gen_sealed
+import gen_sealed2
 
 from station.diagnose import diagnose
 from station.kernel.errors import StationError
@@ -58,6 +60,11 @@ def warmup_tc() -> dict[str, tuple[float, float]] | None:
 
 #: The generator whose recordings are diagnosed (``--generator``); its LOCATION, COVARIATE and NULLS are used.
 GEN: Any = gen_outside
+
+
+def axis_label(axis: int) -> str:
+    """The planted axis's letter; ``all`` for a kind on every axis (gen_sealed2's ``axis`` -1)."""
+    return "xyz"[axis] if axis >= 0 else "all"
 
 
 def right_place(kind: str, unexplained: list[dict]) -> bool:
@@ -94,11 +101,11 @@ def main() -> None:
     ap.add_argument("--base", type=int, default=50_000, help="first seed (development used 0-999)")
     ap.add_argument("--per", type=int, default=4, help="recordings per kind")
     ap.add_argument("--kinds", default=None, help="comma-separated kinds (default: the generator's KINDS)")
-    ap.add_argument("--generator", choices=("outside", "sealed"), default="outside",
-                    help="gen_outside (default) or the sealed gen_sealed (the final check only)")
+    ap.add_argument("--generator", choices=("outside", "sealed", "sealed2"), default="outside",
+                    help="gen_outside (default), or the sealed gen_sealed / gen_sealed2 (the final check only)")
     args = ap.parse_args()
     global GEN
-    GEN = gen_sealed if args.generator == "sealed" else gen_outside
+    GEN = {"sealed": gen_sealed, "sealed2": gen_sealed2}.get(args.generator, gen_outside)
     tc = warmup_tc()
     kinds = [k for k in (args.kinds or ",".join(GEN.KINDS)).split(",") if k]
     stats: dict[str, Counter] = {}
@@ -108,8 +115,8 @@ def main() -> None:
     for i in range(args.per):
         for kind in kinds:
             order: tuple[str, ...]
-            if GEN is gen_sealed:
-                order = gen_sealed.KINDS
+            if GEN is not gen_outside:
+                order = GEN.KINDS
             else:
                 order = gen_outside.KINDS if kind in gen_outside.KINDS else gen_outside.UNANTICIPATED
             s = seed + i * len(order) + order.index(kind)
@@ -123,7 +130,7 @@ def main() -> None:
                 st["n"] += 1
                 st["refused"] += 1
                 print(f"  {kind:16s} seed {s}: {rec.plan.rate_hz:4.0f} Hz {rec.session.duration_s:4.0f} s "
-                      f"axis {'xyz'[rec.axis]} refused: {exc} ({dt:.1f} s)", flush=True)
+                      f"axis {axis_label(rec.axis)} refused: {exc} ({dt:.1f} s)", flush=True)
                 continue
             dt = time.process_time() - t0
             times.append(dt)
@@ -147,7 +154,7 @@ def main() -> None:
             flag = "RIGHT" if ok else ("" if kind in GEN.NULLS else "miss")
             flag += f" held-out {max(emp):.2f}" if emp else ""
             print(f"  {kind:16s} seed {s}: {rec.plan.rate_hz:4.0f} Hz {rec.session.duration_s:4.0f} s "
-                  f"axis {'xyz'[rec.axis]} named {named or '-'} | unexplained {where} {flag} ({dt:.1f} s)",
+                  f"axis {axis_label(rec.axis)} named {named or '-'} | unexplained {where} {flag} ({dt:.1f} s)",
                   flush=True)
     print()
     print(f"outside-library generator (benchmarks/{GEN.__name__}.py), seeds from {args.base}, {args.per} per kind")
