@@ -4,8 +4,8 @@
 unit must not get coefficients from clipped samples. The diagnosis's job is to say where the recording and the
 model differ, so it censors instead, with the same detection (:func:`station.fit.checks.saturations`, not a copy):
 
-1. **The rail.** Per saturated axis and side (maximum / minimum) the level it sits at (the value the check found).
-   Every sample of the whole recording at or beyond it is *at the rail*, in any segment kind (also the ramps and
+1. **The rails.** Per saturated axis and side (maximum / minimum) the level it sits at (the value the check found).
+   Every sample of the whole recording at or beyond one is *at the rail*, in any segment kind (also the ramps and
    tumbles), and so are its neighbours within :data:`NEIGHBOURS_S` either side (a sensor whose front end
    saturates before its digital filter gives a few distorted samples around the rail ones).
 2. **Censored segments.** The fit and the diagnosis take a settled segment as one block of data (its mean), and a
@@ -33,7 +33,7 @@ import numpy as np
 
 from station.diagnose.residuals import Baseline
 from station.diagnose.results import Censored, Unexplained
-from station.fit.checks import AXES, Saturation, check_accel_design, check_gyro_design, saturations
+from station.fit.checks import AXES, check_accel_design, check_gyro_design, saturations
 from station.kernel.display import display_for
 from station.kernel.errors import FitError
 from station.session.model import Session
@@ -57,7 +57,7 @@ UNDETERMINED = {"gyro": ("M_w column {a} (gyro scale factor {a} and the cross-ax
 @dataclass(frozen=True, eq=False)
 class Censoring:
     """What :func:`censor` did to a recording: ``session`` with the censored segments' references taken away per
-    triad, ``entries`` one per saturated axis and side (empty: nothing saturated, ``session`` is the recording
+    triad, ``entries`` one per saturated axis (empty: nothing saturated, ``session`` is the recording
     itself), ``determined`` False where the censored recording fails the fit's design checks."""
 
     session: Session
@@ -75,14 +75,15 @@ class Censoring:
         return replace(baseline, accel=accel, gyro=gyro)
 
     def unexplained(self) -> tuple[Unexplained, ...]:
-        """The report's entries: one :class:`Unexplained` per saturated axis and side."""
+        """The report's entries: one :class:`Unexplained` per saturated axis."""
         return tuple(Unexplained(c.sensor, (c.axis,), kinds, _covariate(c), {}, math.nan, censored=c)
                      for c, kinds in zip(self.entries, self.kinds, strict=True))
 
 
 def _covariate(c: Censored) -> str:
-    return (f"{INPUT[c.sensor]} {c.axis}: clips at {c.level:+.4g} {c.unit} (saturated output at its {c.side}; "
-            f"{c.samples_at_level} samples at it)")
+    levels = " and ".join(f"{v:+.4g}" for v in c.levels)
+    return (f"{INPUT[c.sensor]} {c.axis}: clips at {levels} {c.unit} (saturated output: {c.samples_at_level} "
+            f"samples at the rail{'s' if len(c.levels) > 1 else ''})")
 
 
 def _dilate(mask: np.ndarray, n: int) -> np.ndarray:
@@ -104,23 +105,25 @@ def censor(session: Session) -> Censoring:
     data = {"accel": session.accel_mps2, "gyro": session.gyro_radps}
     reach = max(1, math.ceil(NEIGHBOURS_S * session.sample_rate_hz))
     segments = session.segments()
-    rails: dict[tuple[str, int, str], list[Saturation]] = {}
-    for s in found:
-        rails.setdefault((s.sensor, s.axis, s.side), []).append(s)
+    rails: dict[tuple[str, int], dict[str, float]] = {}
+    for s in found:  # the level the check found per axis and side
+        rails.setdefault((s.sensor, s.axis), {}).setdefault(s.side, s.level)
     made: list[tuple[Censored, tuple[str, ...]]] = []
     masks: dict[str, np.ndarray] = {}
-    for (sensor, axis, side), hits in rails.items():
-        level = hits[0].level
+    for (sensor, axis), sides in rails.items():
         x = data[sensor][:, axis]
-        at = x >= level if side == "maximum" else x <= level
+        at = np.zeros(len(x), dtype=bool)
+        for side, level in sides.items():
+            at |= x >= level if side == "maximum" else x <= level
         near = _dilate(at, reach)
         touched = [g for g in segments if near[g.start:g.stop].any()]
         for g in touched:
             refs[sensor][g.start:g.stop] = np.nan
             masks.setdefault(sensor, np.zeros(len(session), dtype=bool))[g.start:g.stop] = True
         shown = display_for(QUANTITY[sensor])
-        entry = Censored(sensor, AXES[axis], side, level, round(shown.convert(level), 3), shown.unit,
-                         int(np.count_nonzero(at)), int(sum(len(g) for g in touched)),
+        levels = sorted(sides.values())
+        entry = Censored(sensor, AXES[axis], tuple(levels), tuple(round(shown.convert(v), 3) for v in levels),
+                         shown.unit, int(np.count_nonzero(at)), int(sum(len(g) for g in touched)),
                          tuple(sorted({g.index for g in touched})), STATEMENT)
         made.append((entry, tuple(sorted({g.kind.label for g in touched}))))
     out = session.replace(ref_accel_mps2=refs["accel"], ref_gyro_radps=refs["gyro"])

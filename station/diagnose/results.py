@@ -469,19 +469,20 @@ class Untestable:
 
 @dataclass(frozen=True)
 class Censored:
-    """A saturated (clipped) axis the diagnosis censored (:mod:`station.diagnose.censoring`): where its output sits
-    at a rail, the samples at it and the segments taken out of its triad's data, and what that leaves undetermined.
+    """A saturated (clipped) axis the diagnosis censored (:mod:`station.diagnose.censoring`): the rails its output
+    sits at, the samples at them and the segments taken out of its triad's data, and what that leaves undetermined.
 
-    ``level`` is in the display convention (``unit``: deg/s for the gyro's rate, mg for the accelerometer's
-    specific force, :mod:`station.kernel.display`); ``level_si`` in the sensor's SI unit. ``not_determined``: the
-    parameters the censored recording cannot determine (empty: the rest is diagnosed as usual), with ``reason``.
+    ``levels`` (one per rail, the minimum before the maximum) are in the display convention (``unit``: deg/s for
+    the gyro's rate, mg for the accelerometer's specific force, :mod:`station.kernel.display`), ``levels_si`` in
+    the sensor's SI unit. ``samples_at_level``: samples at or beyond a rail; ``samples_excluded``: the samples of
+    the censored segments (``segments``: their indices in the recording). ``not_determined``: the parameters the
+    censored recording cannot determine (empty: the rest is diagnosed as usual), with ``reason``.
     """
 
     sensor: str
     axis: str
-    side: str  # maximum | minimum
-    level_si: float
-    level: float
+    levels_si: tuple[float, ...]
+    levels: tuple[float, ...]
     unit: str
     samples_at_level: int
     samples_excluded: int
@@ -491,8 +492,8 @@ class Censored:
     reason: str = ""
 
     def to_json(self) -> Json:
-        out: Json = {"axis": self.axis, "side": self.side, "level": self.level, "unit": self.unit,
-                     "level_si": self.level_si, "samples_at_level": self.samples_at_level,
+        out: Json = {"axis": self.axis, "levels": list(self.levels), "unit": self.unit,
+                     "levels_si": list(self.levels_si), "samples_at_level": self.samples_at_level,
                      "samples_excluded": self.samples_excluded, "segments": list(self.segments),
                      "statement": self.statement, "not_determined": list(self.not_determined)}
         if self.reason:
@@ -501,7 +502,7 @@ class Censored:
 
     @classmethod
     def from_json(cls, sensor: str, d: Mapping[str, Any]) -> Censored:
-        return cls(sensor, d["axis"], d["side"], d["level_si"], d["level"], d["unit"], d["samples_at_level"],
+        return cls(sensor, d["axis"], tuple(d["levels_si"]), tuple(d["levels"]), d["unit"], d["samples_at_level"],
                    d["samples_excluded"], tuple(d["segments"]), d["statement"], tuple(d["not_determined"]),
                    d.get("reason", ""))
 
