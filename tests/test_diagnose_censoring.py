@@ -27,6 +27,7 @@ from station.diagnose.results import FORMAT, FORMAT_CENSORED, ReportFormatError,
 from station.fit.calibrate import fit_session
 from station.fit.checks import saturations
 from station.kernel.errors import FitError
+from station.sequence.runner import Outcome, refusal_outcome
 from station.session import write_session
 from station.session.model import Kind, Session
 
@@ -95,6 +96,8 @@ def test_fit_still_refuses_with_its_message() -> None:
     assert abs(abs(float(m.group(6))) - level) <= 1e-5 * level  # printed to 6 digits
     first = saturations(session)[0]
     assert msg == first.reason
+    # the production sequence's verdict on that refusal: a unit FAIL with the reason, not a station fault
+    assert refusal_outcome(info.value) == (Outcome.FAIL, f"fit refused the recording: {msg}")
 
 
 def test_clipped_gyro_located_not_a_finding(gyro_case: tuple) -> None:
