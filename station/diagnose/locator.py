@@ -277,8 +277,9 @@ def _far_samples(session: Any, sd: Any, residual: np.ndarray
     held = np.zeros(3, dtype=int)
     settled = np.zeros(3, dtype=int)
     total = settled_n = 0
+    censored = getattr(sd, "censored", None)  # saturated segments (censoring.py): not this triad's data
     for s in session.segments():
-        if len(s) < 10 or (sd.censored is not None and sd.censored[s.start]):  # a saturated segment: censored
+        if len(s) < 10 or (censored is not None and censored[s.start]):
             continue
         x = residual[s.start:s.stop]
         local = uniform_filter1d(x, size=max(3, min(len(s), 101)), axis=0, mode="nearest")
