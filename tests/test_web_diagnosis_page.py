@@ -179,6 +179,6 @@ def test_summary_of_no_report_or_an_odd_one() -> None:
     assert s.findings[0].confidence is None and s.findings[0].bic_gain is None
     assert DiagnosisSummary.of(load_report(report.to_json())) == s
     with pytest.raises(ReportFormatError, match="station-diagnosis/1"):
-        load_report({**report.to_json(), "format": "station-diagnosis/2"})
+        load_report({**report.to_json(), "format": "station-diagnosis/3"})
     with pytest.raises(ReportFormatError, match="malformed"):
         load_report({"format": "station-diagnosis/1", "findings": []})

@@ -57,6 +57,13 @@ def _print_text(report: DiagnosisReport) -> None:
     for f in findings:
         _print_finding(f)
     for u in unexplained:
+        if (c := u.censored) is not None:
+            typer.echo(f"  UNEXPLAINED ({u.sensor}, axis {c.axis}, in {'/'.join(u.segment_kinds)} segments): "
+                       f"{u.covariate}; {c.samples_excluded} samples in {len(c.segments)} segment(s) censored. "
+                       f"{c.statement}.")
+            if c.not_determined:
+                typer.echo(f"    not determined: {'; '.join(c.not_determined)} ({c.reason})")
+            continue
         typer.echo(f"  UNEXPLAINED ({u.sensor}, axes {''.join(u.axes)}, in {'/'.join(u.segment_kinds)} "
                    f"segments): {u.covariate}; excess chi2 {round(u.excess_chi2, 1):.0f}. No candidate of the library "
                    "explains it.")

@@ -63,16 +63,17 @@ def _why_not_fitted(params: ParameterSet, effect: str) -> str:
 
 def compensation(
     session: Session, findings: list[tuple[str, str]], *,
-    warmup_tc_s: Mapping[str, tuple[float, float]] | None = None,
+    warmup_tc_s: Mapping[str, tuple[float, float]] | None = None, censored: bool = False,
 ) -> list[Compensation]:
-    """One :class:`Compensation` per ``(effect, sensor)`` in ``findings`` (the diagnosis's findings, in order)."""
+    """One :class:`Compensation` per ``(effect, sensor)`` in ``findings`` (the diagnosis's findings, in order).
+    ``censored``: ``session`` has its saturated segments censored (:mod:`station.diagnose.censoring`)."""
     effects = [e for e, _ in findings]
     physics = [_physics(e) for e in effects]
     params: ParameterSet | None = None
     error = ""
     options = FitOptions(tc_range_s=dict(warmup_tc_s or {}), thermal="auto", scale_nonlinearity="auto",
                          time_offset="auto" if "time_offset" in physics else "off",
-                         g_sensitivity="g_sensitivity" in physics)
+                         g_sensitivity="g_sensitivity" in physics, censored_saturation=censored)
     if any(p in APPLIED for p in physics):
         try:
             params = fit_session(session, options)

@@ -235,7 +235,7 @@ def _spin_periodic(session: Any, sd: Any, residual: Rows | np.ndarray, k: int) -
     return chi, dof, (chi / excess if excess > 0 else 0.0), math.sqrt(amp2 / max(n_all, 1))
 
 
-def _jumps(session: Any, residual: Rows | np.ndarray, k: int) -> tuple[int, int]:
+def _jumps(session: Any, residual: Rows | np.ndarray, k: int, censored: np.ndarray | None = None) -> tuple[int, int]:
     """Jumps of axis ``k``'s ``residual`` (n, 3) inside the still and rate-hold segments: (number of increments
     between adjacent :data:`JUMP_WINDOW_S` window means further than :data:`JUMP_SIGMAS` robust sigmas, number
     of increments). Eq. 3's drift, a random walk and short-correlated noise have Gaussian increments; a bias
@@ -244,7 +244,7 @@ def _jumps(session: Any, residual: Rows | np.ndarray, k: int) -> tuple[int, int]
     w = max(10, round(JUMP_WINDOW_S * fs))
     inc: list[np.ndarray] = []
     for seg in session.segments():
-        if seg.kind == Kind.MOVE or len(seg) < 3 * w:
+        if seg.kind == Kind.MOVE or len(seg) < 3 * w or (censored is not None and censored[seg.start]):
             continue
         x = residual[seg.start:seg.stop, k]
         nwin = len(x) // w
@@ -277,8 +277,9 @@ def _far_samples(session: Any, sd: Any, residual: np.ndarray
     held = np.zeros(3, dtype=int)
     settled = np.zeros(3, dtype=int)
     total = settled_n = 0
+    censored = getattr(sd, "censored", None)  # saturated segments (censoring.py): not this triad's data
     for s in session.segments():
-        if len(s) < 10:
+        if len(s) < 10 or (censored is not None and censored[s.start]):
             continue
         x = residual[s.start:s.stop]
         local = uniform_filter1d(x, size=max(3, min(len(s), 101)), axis=0, mode="nearest")
@@ -391,7 +392,7 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
                 if dof and share >= COVARIATE_SHARE and stats.chi2.sf(chi, dof) < ALPHA_LOCATED:
                     best = ("periodic", chi, share)
             if best[0] == "none" and fitted is not None:
-                count, total = _jumps(baseline.session, sd.residual_less(fitted), k)
+                count, total = _jumps(baseline.session, sd.residual_less(fitted), k, sd.censored)
                 tests.append(CovariateTest(AX[k], "jumps (two-level)", float(count), count / max(total, 1)))
                 if count >= JUMP_MIN and count >= JUMP_MIN_SHARE * total:
                     best = ("two-level", float(count), 0.0)

@@ -28,13 +28,14 @@ class Diagnosis:
     Attributes:
         report: the typed report (:class:`~station.diagnose.results.DiagnosisReport`; ``report.to_json()`` is the
             ``station-diagnosis/1`` object).
-        baseline: the base fit and residuals.
+        baseline: the base fit and residuals; None where the recording, its saturated segments censored, determines
+            no base fit (:mod:`station.diagnose.censoring`).
         curves: per finding, its block residual before and after.
         rerun: the simulator re-runs (base and extended), None when the recording cannot drive it.
     """
 
     report: DiagnosisReport
-    baseline: Baseline
+    baseline: Baseline | None
     curves: list[ResidualCurve] = field(default_factory=list)
     rerun: Rerun | None = None
 

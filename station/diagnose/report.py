@@ -47,6 +47,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from station.diagnose.bootstrap import RESAMPLES, SEED
+from station.diagnose.censoring import Censoring, censor
 from station.diagnose.diagnosis_progress import DONE, STAGES, Progress, Stage
 from station.diagnose.finding_compensation import compensation
 from station.diagnose.locator import TABLE1_DRIFT, DriftClass
@@ -99,10 +100,16 @@ def diagnose(session: Session, *, warmup_tc_s: Mapping[str, tuple[float, float]]
                                 drift_class=drift_class)
         tell(len(STAGES))
         return out
+    censoring = censor(session)  # a saturated axis: censored here, refused by station fit
+    if not censoring.determined:
+        tell(len(STAGES))
+        return _not_determined(session, censoring)
+    censored = bool(censoring.entries)
+    session = censoring.session
     # the linear algebra is on a few hundred blocks: BLAS threads only spin
     with threadpool_limits(limits=1, user_api="blas"):
         tell(0)
-        baseline = fit_baseline(session, warmup_tc_s=warmup_tc_s)
+        baseline = censoring.apply(fit_baseline(session, warmup_tc_s=warmup_tc_s, censored=censored))
         tell(1)
         decision = select(baseline, resamples=resamples, seed=seed, drift_class=drift_class)
         curves = [ResidualCurve(f"{f.sensor} {f.effect}", baseline.sensor(f.sensor).t_s, *f.block_residual)
@@ -121,15 +128,28 @@ def diagnose(session: Session, *, warmup_tc_s: Mapping[str, tuple[float, float]]
             section = runs.summary()
             parts = [runs.finding_part(f.effect, f.sensor) for f in decision.findings]
         tell(3)
-        calibration = compensation(session, [(f.effect, f.sensor) for f in decision.findings], warmup_tc_s=warmup_tc_s)
+        calibration = compensation(session, [(f.effect, f.sensor) for f in decision.findings], warmup_tc_s=warmup_tc_s,
+                                   censored=censored)
     findings = tuple(replace(f, rerun=part, calibration=c)
                      for f, part, c in zip(decision.findings, parts, calibration, strict=True))
     report = DiagnosisReport(
         serial=session.serial, findings=findings, rejected=decision.rejected, inseparable=decision.inseparable,
-        unexplained=decision.unexplained, location=locate(baseline), warmup_tc_range_s=warmup_ranges(baseline),
+        unexplained=decision.unexplained + censoring.unexplained(), location=locate(baseline),
+        warmup_tc_range_s=warmup_ranges(baseline),
         base_fit=BaseFitNoise.of(baseline), rerun=section)
     tell(len(STAGES))
     return Diagnosis(report=report, baseline=baseline, curves=curves, rerun=runs)
+
+
+def _not_determined(session: Session, censoring: Censoring) -> Diagnosis:
+    """The diagnosis of a recording whose censored data cannot determine the base fit: the censored entries (with
+    the parameters not determined) and nothing else; no number for what the data cannot give."""
+    report = DiagnosisReport(
+        serial=session.serial, findings=(), rejected=(), inseparable=(), unexplained=censoring.unexplained(),
+        location={}, warmup_tc_range_s=None, base_fit=None,
+        rerun=RerunError("not run: with the saturated segments censored the base fit is not determined "
+                         "(see unexplained: not_determined)"))
+    return Diagnosis(report=report, baseline=None, curves=[], rerun=None)
 
 
 def save_figure(diagnosis: Diagnosis, path: str | os.PathLike[str]) -> None:
@@ -148,6 +168,8 @@ def save_figure(diagnosis: Diagnosis, path: str | os.PathLike[str]) -> None:
     curves = diagnosis.curves
     if not curves:
         b = diagnosis.baseline
+        if b is None:
+            raise FitError("no figure: the censored recording determines no base fit (see the report)")
         curves = [ResidualCurve(f"{sd.sensor} base model", sd.t_s, sd.y, sd.y) for sd in (b.accel, b.gyro)]
     for title, t, before, after in curves:
         rows.append((title.split(" ")[0], f"{title}: block residual before", f"{title}: block residual after",
@@ -155,7 +177,7 @@ def save_figure(diagnosis: Diagnosis, path: str | os.PathLike[str]) -> None:
     runs = diagnosis.rerun
     if runs is not None:
         for sensor in ("accel", "gyro"):
-            sd = diagnosis.baseline.sensor(sensor)
+            sd = runs.baseline.sensor(sensor)
             rows.append((sensor, f"{sensor}: recording - base simulation", f"{sensor}: recording - simulation "
                          f"with {len(runs.extended.effects)} effect(s)", sd.t_s, runs.base.block_residual[sensor],
                          runs.extended.block_residual[sensor]))

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 from scipy.ndimage import uniform_filter1d
 
-from station.fit.calibrate import fit_session, mean_model
+from station.fit.calibrate import FitOptions, fit_session, mean_model
 from station.fit.goodness import Rows
 from station.kernel.parameters import ParameterSet, TriadParams
 from station.session.model import Kind, Session
@@ -63,6 +63,8 @@ class SensorData:
         extra_var: variance added to each block mean's white-noise variance, (m, 3), in the sensor's unit
             squared: known physics of unknown phase (a rig-free recording's horizontal Earth rate, whose
             heading each pose draws anew, :mod:`station.diagnose.rigfree_diagnosis`); None: none.
+        censored: per sample, whether it lies in a segment censored from this triad's data (a saturated axis,
+            :mod:`station.diagnose.censoring`; the segment has no reference for the triad); None: none censored.
     """
 
     sensor: str
@@ -82,6 +84,7 @@ class SensorData:
     kind: np.ndarray
     tc_range_s: tuple[float, float] | None = None
     extra_var: np.ndarray | None = None
+    censored: np.ndarray | None = None
 
     @property
     def u(self) -> np.ndarray:
@@ -266,7 +269,8 @@ def _sensor_data(
 
 
 def fit_baseline(
-    session: Session, *, max_settled_blocks: int = 150, warmup_tc_s: Mapping[str, tuple[float, float]] | None = None
+    session: Session, *, max_settled_blocks: int = 150, warmup_tc_s: Mapping[str, tuple[float, float]] | None = None,
+    censored: bool = False,
 ) -> Baseline:
     """Fit the base model to ``session`` and compute both triads' residuals and blocks.
 
@@ -274,6 +278,9 @@ def fit_baseline(
     correlation time T_c in s (qualification data, e.g. a limits file's ``correlation_time_s``): the
     diagnosis then takes a warm-up that decays faster or slower than that for something other than eq. 3's
     drift. Sensors not in it, or None: the recording alone decides T_c.
+
+    ``censored``: ``session`` is :func:`station.diagnose.censoring.censor`'s (saturated segments without their
+    triad's reference): the base fit passes over them (``FitOptions.censored_saturation``).
 
     Raises :class:`station.kernel.errors.FitError` when the base fit refuses the recording, ValueError for a range
     that is not ``0 < low <= high``.
@@ -286,7 +293,8 @@ def fit_baseline(
         if not (0.0 < lo <= hi and math.isfinite(hi)):
             raise ValueError(f"warm-up T_c range of the {name} must be 0 < low <= high (s), got {rng!r}")
         ranges[name] = (lo, hi)
-    return baseline_from_params(session, fit_session(session), warmup_tc_s=ranges,
+    options = FitOptions(censored_saturation=True) if censored else None
+    return baseline_from_params(session, fit_session(session, options), warmup_tc_s=ranges,
                                 max_settled_blocks=max_settled_blocks)
 
 

@@ -26,8 +26,13 @@ from station.diagnose.compensation_gain import CompensationGain
 from station.diagnose.residuals import SENSORS, BaseFitNoise, SensorLocation
 from station.kernel.errors import StationError
 
-#: Format tag of the report (:meth:`DiagnosisReport.to_json`); :func:`load_report` refuses any other.
+#: Format tag of the report (:meth:`DiagnosisReport.to_json`); :func:`load_report` refuses any other than these.
 FORMAT = "station-diagnosis/1"
+#: The tag of a report that censored a saturated axis (:class:`Censored` entries, ``base_fit`` null where the
+#: censored recording determines no base fit): /1 plus those; written only where they occur, so a report
+#: without them stays the /1 object it was, and a reader of /1 alone refuses one it would misread.
+FORMAT_CENSORED = "station-diagnosis/2"
+FORMATS = (FORMAT, FORMAT_CENSORED)
 
 Json = dict[str, Any]
 
@@ -463,8 +468,50 @@ class Untestable:
 
 
 @dataclass(frozen=True)
+class Censored:
+    """A saturated (clipped) axis the diagnosis censored (:mod:`station.diagnose.censoring`): the rails its output
+    sits at, the samples at them and the segments taken out of its triad's data, and what that leaves undetermined.
+
+    ``levels`` (one per rail, the minimum before the maximum) are in the display convention (``unit``: deg/s for
+    the gyro's rate, mg for the accelerometer's specific force, :mod:`station.kernel.display`), ``levels_si`` in
+    the sensor's SI unit. ``samples_at_level``: samples at or beyond a rail; ``samples_excluded``: the samples of
+    the censored segments (``segments``: their indices in the recording). ``not_determined``: the parameters the
+    censored recording cannot determine (empty: the rest is diagnosed as usual), with ``reason``.
+    """
+
+    sensor: str
+    axis: str
+    levels_si: tuple[float, ...]
+    levels: tuple[float, ...]
+    unit: str
+    samples_at_level: int
+    samples_excluded: int
+    segments: tuple[int, ...]
+    statement: str
+    not_determined: tuple[str, ...] = ()
+    reason: str = ""
+
+    def to_json(self) -> Json:
+        out: Json = {"axis": self.axis, "levels": list(self.levels), "unit": self.unit,
+                     "levels_si": list(self.levels_si), "samples_at_level": self.samples_at_level,
+                     "samples_excluded": self.samples_excluded, "segments": list(self.segments),
+                     "statement": self.statement, "not_determined": list(self.not_determined)}
+        if self.reason:
+            out["reason"] = self.reason
+        return out
+
+    @classmethod
+    def from_json(cls, sensor: str, d: Mapping[str, Any]) -> Censored:
+        return cls(sensor, d["axis"], tuple(d["levels_si"]), tuple(d["levels"]), d["unit"], d["samples_at_level"],
+                   d["samples_excluded"], tuple(d["segments"]), d["statement"], tuple(d["not_determined"]),
+                   d.get("reason", ""))
+
+
+@dataclass(frozen=True)
 class Unexplained:
-    """Where the final model leaves structure that no candidate explains (:mod:`station.diagnose.robust`)."""
+    """Where the final model leaves structure that no candidate explains (:mod:`station.diagnose.robust`), or a
+    saturated axis the diagnosis censored (``censored``; its ``excess_chi2`` is NaN, written null: censored samples
+    are not fitted)."""
 
     sensor: str
     axes: tuple[str, ...]
@@ -477,8 +524,14 @@ class Unexplained:
     locator: LocatorEvidence | None = None
     #: empirical models of the located axes (:mod:`station.diagnose.empirical`); None where none were fitted
     empirical: tuple[EmpiricalModel, ...] | None = None
+    #: a saturated axis censored from the diagnosis's data (:mod:`station.diagnose.censoring`); None otherwise
+    censored: Censored | None = None
 
     def to_json(self) -> Json:
+        if self.censored is not None:
+            return {"sensor": self.sensor, "axes": list(self.axes), "segment_kinds": list(self.segment_kinds),
+                    "covariate": self.covariate, "dispersion": self.dispersion, "excess_chi2": None,
+                    "explained_by": None, "note": self.censored.statement, "censored": self.censored.to_json()}
         out: Json = {"sensor": self.sensor, "axes": list(self.axes), "segment_kinds": list(self.segment_kinds),
                      "covariate": self.covariate, "dispersion": self.dispersion,
                      "excess_chi2": round(self.excess_chi2, 1), "explained_by": None,
@@ -493,10 +546,13 @@ class Unexplained:
 
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> Unexplained:
-        loc, emp = d.get("locator"), d.get("empirical")
+        loc, emp, cen = d.get("locator"), d.get("empirical"), d.get("censored")
+        chi2 = d["excess_chi2"]
         return cls(d["sensor"], tuple(d["axes"]), tuple(d["segment_kinds"]), d["covariate"], d["dispersion"],
-                   d["excess_chi2"], d.get("periodic"), None if loc is None else LocatorEvidence.from_json(loc),
-                   None if emp is None else tuple(EmpiricalModel.from_json(e) for e in emp))
+                   float("nan") if chi2 is None else chi2, d.get("periodic"),
+                   None if loc is None else LocatorEvidence.from_json(loc),
+                   None if emp is None else tuple(EmpiricalModel.from_json(e) for e in emp),
+                   None if cen is None else Censored.from_json(d["sensor"], cen))
 
 
 @dataclass(frozen=True)
@@ -699,7 +755,7 @@ class DiagnosisReport:
     unexplained: tuple[Unexplained, ...]
     location: Mapping[str, SensorLocation]
     warmup_tc_range_s: Mapping[str, tuple[float, float]] | None
-    base_fit: BaseFitNoise
+    base_fit: BaseFitNoise | None  # None: a censored recording that determines no base fit (``not_determined``)
     rerun: RerunSummary | RerunError
     method: str | None = None
     untestable: tuple[Untestable, ...] = ()
@@ -723,7 +779,8 @@ class DiagnosisReport:
 
     def to_json(self) -> Json:
         """The ``station-diagnosis/1`` object (see :mod:`station.diagnose.report`)."""
-        out: Json = {"format": FORMAT, "serial": self.serial}
+        censored = self.base_fit is None or any(u.censored is not None for u in self.unexplained)
+        out: Json = {"format": FORMAT_CENSORED if censored else FORMAT, "serial": self.serial}
         if self.method is not None:
             out["method"] = self.method
         out["findings"] = [f.to_json() for f in self.findings]
@@ -736,7 +793,7 @@ class DiagnosisReport:
             "location": {s: loc.to_json() for s, loc in self.location.items()},
             "warmup_tc_range_s": None if self.warmup_tc_range_s is None else {
                 s: list(r) for s, r in self.warmup_tc_range_s.items()},
-            "base_fit": self.base_fit.to_json(),
+            "base_fit": None if self.base_fit is None else self.base_fit.to_json(),
         })
         if self.rig_free is not None:
             out["rig_free"] = self.rig_free.to_json()
@@ -759,9 +816,9 @@ class SensorReport:
 def load_report(d: Mapping[str, Any]) -> DiagnosisReport:
     """A :class:`DiagnosisReport` from its JSON object (:meth:`DiagnosisReport.to_json`, also after a round trip
     through strict JSON, NaN as null). Raises :class:`ReportFormatError` for another format or a malformed one."""
-    if not isinstance(d, Mapping) or d.get("format") != FORMAT:
+    if not isinstance(d, Mapping) or d.get("format") not in FORMATS:
         found = d.get("format") if isinstance(d, Mapping) else type(d).__name__
-        raise ReportFormatError(f"not a {FORMAT} diagnosis (format {found!r})")
+        raise ReportFormatError(f"not a {FORMAT} diagnosis (format {found!r}; known: {', '.join(FORMATS)})")
     try:
         rerun = d["rerun"]
         tc = d["warmup_tc_range_s"]
@@ -773,7 +830,7 @@ def load_report(d: Mapping[str, Any]) -> DiagnosisReport:
             unexplained=tuple(Unexplained.from_json(u) for u in d["unexplained"]),
             location={s: SensorLocation.from_json(v) for s, v in d["location"].items()},
             warmup_tc_range_s=None if tc is None else {s: (r[0], r[1]) for s, r in tc.items()},
-            base_fit=BaseFitNoise.from_json(d["base_fit"]),
+            base_fit=None if d["base_fit"] is None else BaseFitNoise.from_json(d["base_fit"]),
             rerun=RerunError(rerun["error"]) if "error" in rerun else RerunSummary.from_json(rerun),
             method=d.get("method"),
             untestable=tuple(Untestable.from_json(u) for u in d.get("untestable", ())),
@@ -784,8 +841,11 @@ def load_report(d: Mapping[str, Any]) -> DiagnosisReport:
 
 __all__ = [
     "FORMAT",
+    "FORMATS",
+    "FORMAT_CENSORED",
     "BlockFit",
     "BlockStatistics",
+    "Censored",
     "CheckEntry",
     "Compensation",
     "Confidence",

@@ -109,6 +109,9 @@ class FitOptions:
             estimates it on the transitions (moves, rate ramps) and keeps it where its Wald statistic exceeds
             ``time_offset_wald``; ``'off'`` (the default) never.
         time_offset_wald: Wald statistic (z^2) the offset must exceed to be kept (9: 3 sigma).
+        censored_saturation: the caller censored the saturated settled segments by taking their triad's reference
+            away (:func:`station.fit.checks.check_session`'s ``censored``; only the diagnosis does,
+            :mod:`station.diagnose.censoring`). False (the default, ``station fit``): a saturated axis is refused.
     """
 
     max_blocks: int = 70
@@ -128,6 +131,7 @@ class FitOptions:
     nonlinearity_wald: float = 9.0
     time_offset: str = "off"
     time_offset_wald: float = 9.0
+    censored_saturation: bool = False
 
     def __post_init__(self) -> None:
         if self.time_offset not in NONLINEARITY_MODES:
@@ -570,7 +574,8 @@ def _gyro_nonlinearity(
 
 
 def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
-    gyro_method = check_session(session, min_pose_samples=options.min_pose_samples)
+    gyro_method = check_session(session, min_pose_samples=options.min_pose_samples,
+                                censored=options.censored_saturation)
     ts = 1.0 / session.sample_rate_hz
 
     # --- accelerometer: rest + poses -----------------------------------------

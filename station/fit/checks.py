@@ -4,6 +4,8 @@ refused with a one-line reason (which sensor, axis or segment, and why).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from station.fit.consistency import check_recording, check_references
@@ -39,32 +41,88 @@ def check_finite(session: Session) -> None:
             raise FitError(f"{name} {AXES[j]} is NaN or infinite at sample {i} (t={session.t_s[i]:.4f} s)")
 
 
-def check_axes_alive(session: Session, name: str, data: np.ndarray, mask: np.ndarray) -> None:
-    """Refuse a dead (constant) axis and a saturated (clipped) axis among the ``mask``ed samples.
+@dataclass(frozen=True)
+class Saturation:
+    """An axis sitting at its session-wide maximum or minimum in a settled segment (:func:`axis_saturations`).
+
+    Attributes:
+        sensor: ``accel`` or ``gyro``; axis: 0, 1, 2 (x, y, z).
+        side: ``maximum`` or ``minimum``; level: the value it sits at (the sensor's SI unit).
+        segment, kind: the settled segment and its kind; at, samples: samples at the level and in the segment.
+    """
+
+    sensor: str
+    axis: int
+    side: str
+    level: float
+    segment: int
+    kind: Kind
+    at: int
+    samples: int
+
+    @property
+    def reason(self) -> str:
+        """The input check's one-line refusal."""
+        return (f"{self.sensor} {AXES[self.axis]} is saturated: {self.at} of {self.samples} samples of "
+                f"{self.kind.label} segment {self.segment} sit at its {self.side} {self.level:.6g}")
+
+
+def axis_saturations(session: Session, name: str, data: np.ndarray, mask: np.ndarray, j: int, *,
+                     ref: np.ndarray | None = None) -> tuple[Saturation, ...]:
+    """Every settled segment (in order; per segment the maximum before the minimum) where axis ``j`` sits at its
+    maximum or minimum over the ``mask``ed samples for at least half of the segment's samples.
 
     Saturated: in some settled segment the axis sits at its session-wide maximum or minimum
     for most samples, while it is not stuck in most other settled segments (a quantized
     axis quieter than one LSB is constant everywhere and is not saturated).
+
+    ``ref``: the sensor's reference; when given, a settled segment without a finite reference is passed over (a
+    caller that censored the saturated segments by taking their reference away: the fit does not use them).
     """
-    index = np.flatnonzero(mask)
+    x = data[np.flatnonzero(mask), j]
+    hi, lo = x.max(), x.min()
     segments = [s for s in session.segments_of(Kind.REST, Kind.POSE, Kind.RATE) if len(s) >= 20]
+    stuck = [np.ptp(data[s.start:s.stop, j]) == 0.0 for s in segments]
+    if sum(stuck) > len(segments) // 2:
+        return ()
+    hits = []
+    for seg in segments:
+        if ref is not None and not np.all(np.isfinite(ref[seg.start:seg.stop])):
+            continue
+        v = data[seg.start:seg.stop, j]
+        for label, value in (("maximum", hi), ("minimum", lo)):
+            at = int(np.count_nonzero(v == value))
+            if at >= 0.5 * len(v):
+                hits.append(Saturation(name, j, label, float(value), seg.index, seg.kind, at, len(v)))
+    return tuple(hits)
+
+
+def check_axes_alive(session: Session, name: str, data: np.ndarray, mask: np.ndarray, *,
+                     ref: np.ndarray | None = None) -> None:
+    """Refuse a dead (constant) axis and a saturated (clipped) axis among the ``mask``ed samples
+    (:func:`axis_saturations`; ``ref`` as there)."""
+    index = np.flatnonzero(mask)
     for j in range(3):
         x = data[index, j]
         if np.ptp(x) == 0.0:
             raise FitError(f"{name} {AXES[j]} is constant at {x[0]:.6g} over the whole session (dead axis)")
-        hi, lo = x.max(), x.min()
-        stuck = [np.ptp(data[s.start:s.stop, j]) == 0.0 for s in segments]
-        if sum(stuck) > len(segments) // 2:
-            continue
-        for seg in segments:
-            v = data[seg.start:seg.stop, j]
-            for label, value in (("maximum", hi), ("minimum", lo)):
-                at = int(np.count_nonzero(v == value))
-                if at >= 0.5 * len(v):
-                    raise FitError(
-                        f"{name} {AXES[j]} is saturated: {at} of {len(v)} samples of {seg.kind.label} segment "
-                        f"{seg.index} sit at its {label} {value:.6g}"
-                    )
+        hits = axis_saturations(session, name, data, mask, j, ref=ref)
+        if hits:
+            raise FitError(hits[0].reason)
+
+
+def saturations(session: Session) -> tuple[Saturation, ...]:
+    """Every saturated settled segment of both sensors' live axes (:func:`axis_saturations` over the settled
+    samples): what :func:`check_session` refuses, for a caller that censors it instead (the diagnosis)."""
+    settled = np.isin(session.kind, (Kind.REST, Kind.POSE, Kind.RATE))
+    if not settled.any():
+        return ()
+    out: list[Saturation] = []
+    for name, data in (("accel", session.accel_mps2), ("gyro", session.gyro_radps)):
+        for j in range(3):
+            if np.ptp(data[settled, j]) > 0.0:
+                out += axis_saturations(session, name, data, settled, j)
+    return tuple(out)
 
 
 def check_pose_lengths(session: Session, min_samples: int) -> None:
@@ -131,8 +189,12 @@ def check_gyro_design(session: Session) -> str:
     raise FitError("no rate step and no known-angle rotation (angle.N): M_w cannot be fitted")
 
 
-def check_session(session: Session, *, min_pose_samples: int) -> str:
-    """Run every check; returns the gyro scale method ('rate' or 'angle')."""
+def check_session(session: Session, *, min_pose_samples: int, censored: bool = False) -> str:
+    """Run every check; returns the gyro scale method ('rate' or 'angle').
+
+    ``censored``: the caller took the reference away (NaN) from every settled segment where a triad saturates
+    (the diagnosis, :mod:`station.diagnose.censoring`): the saturation check passes over segments without the
+    triad's reference, which the fit does not use; a saturation anywhere else is still refused."""
     check_time(session)
     check_finite(session)
     check_recording(session)
@@ -140,8 +202,8 @@ def check_session(session: Session, *, min_pose_samples: int) -> str:
     settled = np.isin(session.kind, (Kind.REST, Kind.POSE, Kind.RATE))
     if not settled.any():
         raise FitError("no settled segment (rest, pose or rate) in the session")
-    check_axes_alive(session, "accel", session.accel_mps2, settled)
-    check_axes_alive(session, "gyro", session.gyro_radps, settled)
+    check_axes_alive(session, "accel", session.accel_mps2, settled, ref=session.ref_accel_mps2 if censored else None)
+    check_axes_alive(session, "gyro", session.gyro_radps, settled, ref=session.ref_gyro_radps if censored else None)
     check_references(session)
     check_accel_design(session)
     return check_gyro_design(session)
