@@ -28,7 +28,9 @@ Two parts, one command, one table each:
      has no Earth rate by default), deg/s; also the fitted eq. 3 bias against the true one (same RMS,
      without the recording's noise and stochastic drift: ``model``).
 
-   The row "truth" corrects with the unit's true parameters: the floor of each figure.
+   The row "truth" corrects with the unit's true parameters: the floor of each figure. Below the table: the pose
+   RMS ratio (line / full) with a paired bootstrap over the units (:func:`ratio_noise`); why the figure is noisy
+   and what the line's fit gives up: ``line_pose_study.py``.
 
 3. **Predicted against measured accuracy** (``--parts predict``; ``line_predict.py``): the plan designer's
    predicted standard uncertainties per parameter group against the RMS error (estimate - truth) over
