@@ -28,7 +28,9 @@ Two parts, one command, one table each:
      has no Earth rate by default), deg/s; also the fitted eq. 3 bias against the true one (same RMS,
      without the recording's noise and stochastic drift: ``model``).
 
-   The row "truth" corrects with the unit's true parameters: the floor of each figure.
+   The row "truth" corrects with the unit's true parameters: the floor of each figure. Below the table: the pose
+   RMS ratio (line / full) with a paired bootstrap over the units (:func:`ratio_noise`); why the figure is noisy
+   and what the line's fit gives up: ``line_pose_study.py``.
 
 3. **Predicted against measured accuracy** (``--parts predict``; ``line_predict.py``): the plan designer's
    predicted standard uncertainties per parameter group against the RMS error (estimate - truth) over
@@ -372,13 +374,32 @@ def main() -> None:
             for name, figs in res.items():
                 for k, v in figs.items():
                     per.setdefault(name, {}).setdefault(k, []).append(v)
-            print(f"  {part} unit {i + 1}/{args.units} (seed {seed}): pose full {res['full']['pose']:.2f} line "
-                  f"{res['line']['pose']:.2f} mm/s^2; gyro hour full {res['full']['gyro_hour']:.4f} line "
+            print(f"  {part} unit {i + 1}/{args.units} (seed {seed}): pose full {res['full']['pose']:.3f} line "
+                  f"{res['line']['pose']:.3f} mm/s^2; gyro hour full {res['full']['gyro_hour']:.4f} line "
                   f"{res['line']['gyro_hour']:.4f} deg/s", flush=True)
         print(f"\naccuracy on {label}, {args.units} units (seeds {args.seed0} + 1000 i), rack {args.rack_s:.0f} s, "
               f"rack orientation {args.rack_orientation}:\n")
         accuracy_table(per)
     print(f"wall time {time.monotonic() - t0:.0f} s")
+
+
+def ratio_noise(full: np.ndarray, line: np.ndarray, draws: int = 4000, sizes: tuple[int, ...] = (30, 60, 100)) -> str:
+    """How well these units determine the ratio of the median pose RMS (line / full): the ratio, a paired
+    bootstrap over the units (90 % interval), the same for other numbers of units (these units' pairs resampled to
+    that size), the median per-unit ratio, how often the line is better, and the per-unit log ratio's mean and std."""
+    rng = np.random.default_rng(1)
+    n = len(full)
+    parts = []
+    for size in (n, *(s for s in sizes if s != n)):
+        idx = rng.integers(0, n, (draws, size))
+        r = np.median(line[idx], axis=1) / np.median(full[idx], axis=1)
+        lo, hi = np.percentile(r, [5, 95])
+        parts.append(f"{size} units {lo:.3f}-{hi:.3f}")
+    lr = np.log(line / full)
+    sd = float(lr.std(ddof=1)) if n > 1 else math.nan
+    return (f"ratio of medians {np.median(line) / np.median(full):.3f}; bootstrap 90 % ({'; '.join(parts)}); "
+            f"median per-unit ratio {np.median(line / full):.3f}; line better on {int(np.sum(line < full))} of {n}; "
+            f"per-unit log ratio mean {lr.mean():+.3f}, std {sd:.3f}")
 
 
 def accuracy_table(per: dict[str, dict[str, list[float]]]) -> None:
@@ -403,6 +424,7 @@ def accuracy_table(per: dict[str, dict[str, list[float]]]) -> None:
               f"{med(name, 'minute_model'):.3f} / {np.sqrt(np.mean(np.square(per[name]['minute_model']))):.3f} | "
               f"{med(name, 'minute_any'):.3f} / {np.sqrt(np.mean(np.square(per[name]['minute_any']))):.3f} | "
               f"{med(name, 'gyro_hour'):.5f} / {p90(name, 'gyro_hour'):.5f} | {model} | {resolved} |")
+    print("\npose RMS, line / full: " + ratio_noise(np.array(per["full"]["pose"]), np.array(per["line"]["pose"])))
     g = (med("full", "gyro_hour") / med("line", "gyro_hour"), p90("full", "gyro_hour") / p90("line", "gyro_hour"))
     print(f"\ngyro bias over the first hour, full / line: median {g[0]:.2f}x, p90 {g[1]:.2f}x")
 
