@@ -97,9 +97,12 @@ def stand_ins(prob: SensorProblem, baseline: Any, names: Sequence[str]) -> list[
             if f_given.passes:
                 continue
             e_given = prob.test_mean(f"empirical {rname}", ze)
-            if e_given.params > 0 and e_given.gain > max(crit, e_given.threshold) and e_given.validates:
+            # the term given F at its own test's level (F's is F's): the dictionary's multiplicity was paid above,
+            # in choosing the term (its gain without F beyond ``crit``); and it explains at least as much as F
+            if (e_given.params > 0 and e_given.gain > e_given.threshold and e_given.gain >= f_given.gain
+                    and e_given.validates):
                 out.append(StandIn(name, rname, locator.AX[k], f_given.gain, f_given.threshold, e_given.gain,
-                                   max(crit, e_given.threshold)))
+                                   e_given.threshold))
                 break
     return out
 
