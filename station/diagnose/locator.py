@@ -24,8 +24,10 @@ else treats as a symptom. Here, per sensor, after the selection:
    where the chi^2 it takes is itself significant at :data:`ALPHA_LOCATED`.
 3. **The covariate it follows, or none.** Each flagged axis's whitened residual is regressed on one physical
    covariate at a time (:func:`covariates_by_axis`: the rate and its magnitude, powers, angular acceleration, specific
-   force, temperature and its direction, time since the last rate step, a delay growing with time, the products of a
-   rate component with a specific-force component and with the temperature); one that takes at least
+   force, its square, size and sign, temperature, its direction and rate, time since the last rate step, the force and
+   the rate through first-order lags (creep, settling after a step), the direction of the last rotation, a delay
+   growing with time, the products of a rate component with a specific-force component and with the temperature,
+   of the force with the temperature, of the force and the rate with the temperature's rate); one that takes at least
    :data:`COVARIATE_SHARE` of the axis's excess chi^2 in its flagged cells, significant at :data:`ALPHA_LOCATED`, is
    named; otherwise a term periodic at the rate table's spin frequency when a cos/sin of the table's angle takes
    that share of the structure inside the rate holds (sample level, :func:`_spin_periodic`); otherwise a test of the
