@@ -98,6 +98,8 @@ KICK_TAU_S = (4.0, 10.0, 25.0, 60.0)
 LAG_TAU_S = (1.0, 3.0, 10.0)
 #: The temperature's rate of change is taken over this window (s): the sensor's temperature is slow and quantized.
 TEMP_RATE_WINDOW_S = 10.0
+#: The rate's magnitude changing faster than this (rad/s^2, 2 deg/s^2) is a rate step (a ramp or a tumble).
+STEP_MIN_RADPS2 = 2.0 * math.pi / 180.0
 #: A rotation about an axis faster than this (rad/s, 2 deg/s) sets the axis's direction of the last rotation.
 DIRECTION_MIN_RADPS = 2.0 * math.pi / 180.0
 #: The sign of a specific-force component is taken smoothly over this share of ``g`` (tanh(f / (share g))).
@@ -235,12 +237,20 @@ def covariates_by_axis(baseline: Any, sd: Any, *, extended: bool = False) -> lis
         out[f"|specific force {AX[j]}| (even in the force)"] = np.abs(force[:, j])
         out[f"direction of the last rotation about {AX[j]} (sign of rate {AX[j]}, held)"] = direction[:, j]
         out[f"sign of specific force {AX[j]} (direction-dependent)"] = np.tanh(force[:, j] / (FORCE_SIGN_SHARE * g))
+    # and a scale settling after each rate step: the rate times a decay of the time since the last step ended
+    ramping = np.abs(step) > STEP_MIN_RADPS2
+    ended = ramping & ~np.append(ramping[1:], False)
+    last = np.maximum.accumulate(np.where(ended, np.arange(len(t)), -1))
+    since = np.where(last >= 0, t - t[np.maximum(last, 0)], np.inf)
     for tau in LAG_TAU_S:
         creep = _lag_excess(force, fs, tau)
         settle = _lag_excess(rate, fs, tau)
+        decay = np.exp(-since / tau)
         for j in range(3):
             out[f"specific force {AX[j]} creep since the last step (first-order lag {tau:g} s)"] = creep[:, j]
             out[f"rate {AX[j]} settling since the last rate step (first-order lag {tau:g} s)"] = settle[:, j]
+            out[f"rate {AX[j]} * time since the last rate step (a scale settling, decay {tau:g} s)"] = (
+                rate[:, j] * decay)
     if extended:
         for i, j in ((0, 1), (0, 2), (1, 2)):
             out[f"rate {AX[i]} * rate {AX[j]}"] = rate[:, i] * rate[:, j]
@@ -496,14 +506,20 @@ def covariate_gains(values: Mapping[str, np.ndarray], chol: np.ndarray, xk: np.n
     xk = xk[:, np.any(xk != 0, axis=0)]
     qk = linalg.qr(xk, mode="economic", check_finite=False)[0] if xk.shape[1] else np.zeros((len(rk), 0))
     out: list[tuple[str, np.ndarray, float, float]] = []
-    for name, v in values.items():
-        cw = linalg.solve_triangular(chol, v, lower=True, check_finite=False)
-        cw = cw - qk @ (qk.T @ cw)
-        nn = float(cw @ cw)
+    if not values:
+        return out
+    names = list(values)
+    # all covariates at once: one triangular solve and one projection for the dictionary's matrix
+    cws = linalg.solve_triangular(chol, np.column_stack([values[n] for n in names]), lower=True, check_finite=False)
+    cws = cws - qk @ (qk.T @ cws)
+    norms = np.einsum("ij,ij->j", cws, cws)
+    dots = cws.T @ rk
+    for i, name in enumerate(names):
+        nn = float(norms[i])
         if nn <= 1e-300:
             continue
-        coef = float(cw @ rk) / nn
-        out.append((name, cw, coef, coef**2 * nn))
+        coef = float(dots[i]) / nn
+        out.append((name, cws[:, i], coef, coef**2 * nn))
     return out
 
 
