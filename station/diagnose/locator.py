@@ -47,6 +47,7 @@ models (:class:`~station.diagnose.results.EmpiricalModel`: ``empirical``).
 from __future__ import annotations
 
 import math
+import weakref
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -160,7 +161,7 @@ def _lag_excess(x: np.ndarray, fs: float, tau: float) -> np.ndarray:
     at ``x[0]``: zero while ``x`` holds, after each step of ``x`` the step decaying with ``tau`` (a creep or a
     settling that follows the step)."""
     a = math.exp(-1.0 / (fs * tau))
-    lagged = lfilter([1.0 - a], [1.0, -a], x - x[0], axis=0) + x[0]
+    lagged = lfilter([1.0 - a], [1.0, -a], np.ascontiguousarray((x - x[0]).T), axis=-1).T + x[0]
     return np.asarray(x - lagged)
 
 
@@ -176,10 +177,25 @@ def _last_direction(rate: np.ndarray) -> np.ndarray:
     return out
 
 
+#: The dictionary of a sensor's blocks, made once per (sensor data, baseline, extended): the rivals and the locator
+#: ask for the same one; held weakly by the sensor data (gone with the diagnosis).
+_MADE: weakref.WeakKeyDictionary[Any, dict[tuple[int, bool], list[dict[str, np.ndarray]]]] = (
+    weakref.WeakKeyDictionary())
+
+
 def covariates_by_axis(baseline: Any, sd: Any, *, extended: bool = False) -> list[dict[str, np.ndarray]]:
     """Per axis of ``sd`` its block-mean physical covariates (m,), by name (the covariates the axes share made
     once); ``extended``: also the rate components' products, the time since power-on and the table's spin phase
-    (the empirical models')."""
+    (the empirical models'). Made once per ``sd``, ``baseline`` and ``extended`` (the arrays are not to be changed)."""
+    made = _MADE.setdefault(sd, {})
+    key = (id(baseline), extended)
+    if key not in made:
+        made[key] = _covariates_by_axis(baseline, sd, extended)
+    return made[key]
+
+
+def _covariates_by_axis(baseline: Any, sd: Any, extended: bool) -> list[dict[str, np.ndarray]]:
+    """:func:`covariates_by_axis`, made."""
     session = baseline.session
     fs = session.sample_rate_hz
     rate = np.nan_to_num(session.ref_gyro_radps)
