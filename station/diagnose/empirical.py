@@ -4,11 +4,13 @@ For each axis the locator (:mod:`station.diagnose.locator`) flags, a sparse line
 (the final model's, with eq. 3's drift noise at the sensor class) over a dictionary of physical covariates
 (:func:`station.diagnose.locator.covariates_by_axis`: rate components, their magnitude, squares, cubes and products,
 the products of a rate component with a specific-force component and with the temperature, angular
-acceleration, specific force, temperature and its direction, time since the last rate step, a delay growing
-with time, time since power-on, the table's spin phase). Terms are chosen by forward selection
-on **held-out segments**: the blocks are split into :data:`FOLDS` folds by segment (interleaved), every
-candidate term is fitted on the other folds and scored on the held-out one, and a term is kept only while the
-held-out weighted squared error falls by at least :data:`MIN_GAIN` of what is left; at most :data:`MAX_TERMS`.
+acceleration, specific force, its square, size and sign, temperature, its direction and rate, force times temperature,
+force and rate times the temperature's rate, time since the last rate step, force and rate through first-order lags,
+the direction of the last rotation, a delay growing with time, time since power-on, the table's spin phase). Terms
+are chosen by forward selection on **held-out segments**: the blocks are split into :data:`FOLDS` folds by segment
+(interleaved), every candidate term is fitted on the other folds and scored on the held-out one, and a term is kept
+only while the held-out weighted squared error falls by at least :data:`MIN_GAIN` of what is left; at most
+:data:`MAX_TERMS`.
 
 The result is reported as *empirical, not in the library*: a description of the structure and how much of it a
 held-out segment's prediction removes, not a finding and not a calibration term.

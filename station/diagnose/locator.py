@@ -24,8 +24,10 @@ else treats as a symptom. Here, per sensor, after the selection:
    where the chi^2 it takes is itself significant at :data:`ALPHA_LOCATED`.
 3. **The covariate it follows, or none.** Each flagged axis's whitened residual is regressed on one physical
    covariate at a time (:func:`covariates_by_axis`: the rate and its magnitude, powers, angular acceleration, specific
-   force, temperature and its direction, time since the last rate step, a delay growing with time, the products of a
-   rate component with a specific-force component and with the temperature); one that takes at least
+   force, its square, size and sign, temperature, its direction and rate, time since the last rate step, the force and
+   the rate through first-order lags (creep, settling after a step), the direction of the last rotation, a delay
+   growing with time, the products of a rate component with a specific-force component and with the temperature,
+   of the force with the temperature, of the force and the rate with the temperature's rate); one that takes at least
    :data:`COVARIATE_SHARE` of the axis's excess chi^2 in its flagged cells, significant at :data:`ALPHA_LOCATED`, is
    named; otherwise a term periodic at the rate table's spin frequency when a cos/sin of the table's angle takes
    that share of the structure inside the rate holds (sample level, :func:`_spin_periodic`); otherwise a test of the
@@ -45,6 +47,7 @@ models (:class:`~station.diagnose.results.EmpiricalModel`: ``empirical``).
 from __future__ import annotations
 
 import math
+import weakref
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -91,6 +94,17 @@ AX = "xyz"
 MOVE_SAMPLES = "isolated samples far from the model in the moves"
 #: Time constants (s) of the decay after a rate step that the ``since the last rate step`` covariate tries.
 KICK_TAU_S = (4.0, 10.0, 25.0, 60.0)
+#: Time constants (s) of the first-order lags through which the specific force and the rate pass: ``x - L_tau[x]``
+#: is an anelastic creep or a settling after every step of ``x`` (a tumble, a rate step), gone once settled.
+LAG_TAU_S = (1.0, 3.0, 10.0)
+#: The temperature's rate of change is taken over this window (s): the sensor's temperature is slow and quantized.
+TEMP_RATE_WINDOW_S = 10.0
+#: The rate's magnitude changing faster than this (rad/s^2, 2 deg/s^2) is a rate step (a ramp or a tumble).
+STEP_MIN_RADPS2 = 2.0 * math.pi / 180.0
+#: A rotation about an axis faster than this (rad/s, 2 deg/s) sets the axis's direction of the last rotation.
+DIRECTION_MIN_RADPS = 2.0 * math.pi / 180.0
+#: The sign of a specific-force component is taken smoothly over this share of ``g`` (tanh(f / (share g))).
+FORCE_SIGN_SHARE = 0.2
 
 
 @dataclass(frozen=True)
@@ -142,10 +156,46 @@ def _smooth_derivative(x: np.ndarray, fs: float) -> np.ndarray:
     return np.gradient(uniform_filter1d(x, size=w, axis=0, mode="nearest"), 1.0 / fs, axis=0)
 
 
+def _lag_excess(x: np.ndarray, fs: float, tau: float) -> np.ndarray:
+    """``x - L[x]`` per column of ``x`` (n, 3), ``L`` a first-order lag of time constant ``tau`` (s) started settled
+    at ``x[0]``: zero while ``x`` holds, after each step of ``x`` the step decaying with ``tau`` (a creep or a
+    settling that follows the step)."""
+    a = math.exp(-1.0 / (fs * tau))
+    lagged = lfilter([1.0 - a], [1.0, -a], np.ascontiguousarray((x - x[0]).T), axis=-1).T + x[0]
+    return np.asarray(x - lagged)
+
+
+def _last_direction(rate: np.ndarray) -> np.ndarray:
+    """Per axis the sign of the last rotation about it faster than :data:`DIRECTION_MIN_RADPS` (held while still;
+    0 before the first), (n, 3)."""
+    n = len(rate)
+    out = np.zeros_like(rate)
+    for j in range(rate.shape[1]):
+        moving = np.abs(rate[:, j]) > DIRECTION_MIN_RADPS
+        last = np.maximum.accumulate(np.where(moving, np.arange(n), -1))
+        out[:, j] = np.where(last >= 0, np.sign(rate[np.maximum(last, 0), j]), 0.0)
+    return out
+
+
+#: The dictionary of a sensor's blocks, made once per (sensor data, baseline, extended): the rivals and the locator
+#: ask for the same one; held weakly by the sensor data (gone with the diagnosis).
+_MADE: weakref.WeakKeyDictionary[Any, dict[tuple[int, bool], list[dict[str, np.ndarray]]]] = (
+    weakref.WeakKeyDictionary())
+
+
 def covariates_by_axis(baseline: Any, sd: Any, *, extended: bool = False) -> list[dict[str, np.ndarray]]:
     """Per axis of ``sd`` its block-mean physical covariates (m,), by name (the covariates the axes share made
     once); ``extended``: also the rate components' products, the time since power-on and the table's spin phase
-    (the empirical models')."""
+    (the empirical models'). Made once per ``sd``, ``baseline`` and ``extended`` (the arrays are not to be changed)."""
+    made = _MADE.setdefault(sd, {})
+    key = (id(baseline), extended)
+    if key not in made:
+        made[key] = _covariates_by_axis(baseline, sd, extended)
+    return made[key]
+
+
+def _covariates_by_axis(baseline: Any, sd: Any, extended: bool) -> list[dict[str, np.ndarray]]:
+    """:func:`covariates_by_axis`, made."""
     session = baseline.session
     fs = session.sample_rate_hz
     rate = np.nan_to_num(session.ref_gyro_radps)
@@ -168,6 +218,17 @@ def covariates_by_axis(baseline: Any, sd: Any, *, extended: bool = False) -> lis
         dtemp = _smooth_derivative(temp, fs)
         scale = max(float(np.percentile(np.abs(dtemp), 90)), 1e-12)
         out["temperature direction (heating vs cooling: hysteresis)"] = np.tanh(dtemp / (0.2 * scale))
+        # the temperature's rate of change (a thermal gradient while the temperature moves): a bias following it, and
+        # a scale of the force or the rate following it
+        tw = max(3, round(TEMP_RATE_WINDOW_S * fs) | 1)
+        trate = np.gradient(uniform_filter1d(np.asarray(temp, dtype=float), size=tw, mode="nearest"), 1.0 / fs)
+        if np.ptp(trate) > 0:
+            out["temperature rate dT/dt"] = trate
+            for j in range(3):
+                out[f"specific force {AX[j]} * temperature rate dT/dt"] = force[:, j] * trate
+                out[f"rate {AX[j]} * temperature rate dT/dt"] = rate[:, j] * trate
+        for j in range(3):
+            out[f"specific force {AX[j]} * temperature"] = force[:, j] * temp
     # a kick after each rate step, by the step's size, decaying: |d|w|/dt| through a first-order lag
     step = np.abs(_smooth_derivative(mag, fs))
     if np.any(step > 0):
@@ -182,6 +243,30 @@ def covariates_by_axis(baseline: Any, sd: Any, *, extended: bool = False) -> lis
             out[f"rate {AX[i]} * specific force {AX[j]}"] = rate[:, i] * force[:, j]
         if "temperature" in out:
             out[f"rate {AX[i]} * temperature"] = rate[:, i] * temp
+    # even functions of the force (a bias by the force's size, not its sign), a bias by the direction of the last
+    # rotation about an axis or by the sign of a force component (direction-dependent), and the force and the rate
+    # through first-order lags (a creep after each tumble, a scale settling after each rate step)
+    g = max(float(np.median(np.linalg.norm(force, axis=1))), 1e-9)
+    direction = _last_direction(rate)
+    for j in range(3):
+        out[f"specific force^2 {AX[j]} (even in the force)"] = force[:, j] ** 2
+        out[f"|specific force {AX[j]}| (even in the force)"] = np.abs(force[:, j])
+        out[f"direction of the last rotation about {AX[j]} (sign of rate {AX[j]}, held)"] = direction[:, j]
+        out[f"sign of specific force {AX[j]} (direction-dependent)"] = np.tanh(force[:, j] / (FORCE_SIGN_SHARE * g))
+    # and a scale settling after each rate step: the rate times a decay of the time since the last step ended
+    ramping = np.abs(step) > STEP_MIN_RADPS2
+    ended = ramping & ~np.append(ramping[1:], False)
+    last = np.maximum.accumulate(np.where(ended, np.arange(len(t)), -1))
+    since = np.where(last >= 0, t - t[np.maximum(last, 0)], np.inf)
+    for tau in LAG_TAU_S:
+        creep = _lag_excess(force, fs, tau)
+        settle = _lag_excess(rate, fs, tau)
+        decay = np.exp(-since / tau)
+        for j in range(3):
+            out[f"specific force {AX[j]} creep since the last step (first-order lag {tau:g} s)"] = creep[:, j]
+            out[f"rate {AX[j]} settling since the last rate step (first-order lag {tau:g} s)"] = settle[:, j]
+            out[f"rate {AX[j]} * time since the last rate step (a scale settling, decay {tau:g} s)"] = (
+                rate[:, j] * decay)
     if extended:
         for i, j in ((0, 1), (0, 2), (1, 2)):
             out[f"rate {AX[i]} * rate {AX[j]}"] = rate[:, i] * rate[:, j]
@@ -438,14 +523,20 @@ def covariate_gains(values: Mapping[str, np.ndarray], chol: np.ndarray, xk: np.n
     xk = xk[:, np.any(xk != 0, axis=0)]
     qk = linalg.qr(xk, mode="economic", check_finite=False)[0] if xk.shape[1] else np.zeros((len(rk), 0))
     out: list[tuple[str, np.ndarray, float, float]] = []
-    for name, v in values.items():
-        cw = linalg.solve_triangular(chol, v, lower=True, check_finite=False)
-        cw = cw - qk @ (qk.T @ cw)
-        nn = float(cw @ cw)
+    if not values:
+        return out
+    names = list(values)
+    # all covariates at once: one triangular solve and one projection for the dictionary's matrix
+    cws = linalg.solve_triangular(chol, np.column_stack([values[n] for n in names]), lower=True, check_finite=False)
+    cws = cws - qk @ (qk.T @ cws)
+    norms = np.einsum("ij,ij->j", cws, cws)
+    dots = cws.T @ rk
+    for i, name in enumerate(names):
+        nn = float(norms[i])
         if nn <= 1e-300:
             continue
-        coef = float(cw @ rk) / nn
-        out.append((name, cw, coef, coef**2 * nn))
+        coef = float(dots[i]) / nn
+        out.append((name, cws[:, i], coef, coef**2 * nn))
     return out
 
 
@@ -507,8 +598,9 @@ def _samples_text(count: int, total: int, held: int, allowance: float) -> str:
 def _text(name: str) -> str:
     if name == "none":
         return ("none: no covariate of the dictionary (rate, |rate|, rate^2, rate^3, angular acceleration, specific "
-                "force, temperature and its direction, time since the last rate step, a delay growing with time, "
-                "rate times force or temperature) "
+                "force and its square and size, temperature, its direction and rate, time since the last rate step, "
+                "force and rate through lags, the direction of the last rotation, a delay growing with time, "
+                "rate times force or temperature, force times temperature) "
                 f"takes {COVARIATE_SHARE:.0%} of it, and it is not two-level")
     if name == "periodic":
         return ("periodic at the rate table's spin frequency: a cos/sin of the table's angle takes most of the "

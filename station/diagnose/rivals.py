@@ -9,16 +9,20 @@ with it. So each accepted finding is re-tested against the strongest covariates 
 products), each a per-axis term ``E`` that is no library effect:
 
 - ``E`` is taken from the residual of the model without the finding: the :data:`RIVALS` covariates (over the three
-  axes) with the largest chi^2 on it;
+  axes) with the largest chi^2 on it, each beyond the chi^2(1) tail ``ALPHA`` shared by the dictionary's tests
+  (Bonferroni: the rival is the best of many; a bigger dictionary pays for itself here);
 - the finding ``F`` is a **stand-in** for ``E`` when ``F`` is not significant given ``E`` (its own test and
   threshold, :meth:`station.diagnose.likelihood.SensorProblem.test_mean`), while ``E`` is significant given ``F``
-  beyond the chi^2(1) tail ``ALPHA`` shared by the dictionary's tests (Bonferroni: the rival is the best of many)
-  and does not make the held-out segments' prediction worse (``Test.validates``).
+  by its own test (the same level ``ALPHA`` as ``F``'s), explains at least as much as ``F`` (its gain given ``F``
+  not below ``F``'s given it: the model with ``E`` alone fits as well as the one with ``F`` alone) and does not make
+  the held-out segments' prediction worse (``Test.validates``).
 
-The two conditions together are the selection's own rule for two candidates that explain the same signal
+The conditions together are the selection's own rule for two candidates that explain the same signal
 (``selection._unique``), with the empirical term as the other candidate. A library effect whose form is a
 dictionary term (a ``temperature_scale`` on one axis is ``rate * temperature``) is kept: given ``F`` such a
-rival takes nothing. A stand-in is rejected; what it took up is then left to the locator (``unexplained``).
+rival takes nothing (a chi^2(1) draw, not beyond ``ALPHA``'s level). A true library effect of another form is not
+explained by a dictionary term: it stays significant given it. A stand-in is rejected; what it took up is then
+left to the locator (``unexplained``).
 """
 
 from __future__ import annotations
@@ -97,9 +101,12 @@ def stand_ins(prob: SensorProblem, baseline: Any, names: Sequence[str]) -> list[
             if f_given.passes:
                 continue
             e_given = prob.test_mean(f"empirical {rname}", ze)
-            if e_given.params > 0 and e_given.gain > max(crit, e_given.threshold) and e_given.validates:
+            # the term given F at its own test's level (F's is F's): the dictionary's multiplicity was paid above,
+            # in choosing the term (its gain without F beyond ``crit``); and it explains at least as much as F
+            if (e_given.params > 0 and e_given.gain > e_given.threshold and e_given.gain >= f_given.gain
+                    and e_given.validates):
                 out.append(StandIn(name, rname, locator.AX[k], f_given.gain, f_given.threshold, e_given.gain,
-                                   max(crit, e_given.threshold)))
+                                   e_given.threshold))
                 break
     return out
 
