@@ -783,7 +783,8 @@ class SensorProblem:
         """Constrained likelihood-ratio test of a bias random walk ``K^2 min(t_i, t_j)`` shared by the
         three axes, against eq. 3's drift noise bounded by :meth:`drift_noise_max`.
 
-        Null: per axis, q over ``[0, q_max]``, and a bias proportional to the temperature rise as a
+        Null: per axis, q over ``[0, q_max]`` (at most the sensor class's, :attr:`q_class`, where it is known), and a
+        bias proportional to the temperature rise as a
         nuisance term (so a temperature course the warm-up does not absorb is not taken for a wander).
         Alternative: K^2 >= 0 added, q kept at the null's value (which makes the test conservative).
         Both at the warm-up T_c re-fitted with the temperature term (then restored). ``size``: a walk that passes
@@ -807,6 +808,12 @@ class SensorProblem:
     def _random_walk_at_current_tc(self, *, size: bool) -> Test:
         """:meth:`test_random_walk` at the current T_c."""
         q_max = [self.drift_noise_max(k) for k in range(3)]
+        if self.q_class is not None:
+            # eq. 3's drift noise at most the sensor class's in the null too, as in the walk's size (_walk_size): over
+            # a record shorter than T_c its noise is itself a random walk (GM(T_c) ~ 2 min(t_i, t_j) / T_c), so a q
+            # the class does not grant takes up the wander and leaves the test nothing (a gyro's warm-up share,
+            # drift_noise_max, is up to 5x the class's where b_drift is poorly determined)
+            q_max = [min(a, float(b)) for a, b in zip(q_max, self.q_class, strict=True)]
         extra = []
         # the temperature course is a nuisance term of both hypotheses; where the temperature both rises and falls,
         # so is an offset that depends on its direction (a bias with a play or lag in temperature, hysteresis: a

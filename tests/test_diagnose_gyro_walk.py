@@ -1,0 +1,79 @@
+"""The gyroscope's bias random walk against known truth (the independent generator, development seeds): named with
+its size where the recording resolves it, not named where there is none, and the generator's stochastic truth that
+benchmarks/bench_gyro_walk_power.py's oracle uses."""
+
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from station.diagnose import diagnose, locator
+from station.diagnose.likelihood import SensorProblem
+from station.diagnose.residuals import fit_baseline
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import indepgen
+
+TC = {"accel": (50.0, 167.0), "gyro": (1030.0, 3760.0)}
+DEG = math.pi / 180.0
+
+
+def test_a_gyro_walk_the_class_bound_resolves_is_named_with_its_size() -> None:
+    """Development seed 340113, the gyroscope's K 9e-5 deg/s/sqrt(s) (3 x the generator's): the oracle's gain (q and
+    every deterministic term at the truth) 4064, the class test's (q anywhere up to the class's bound) 201. The
+    walk's test with eq. 3's drift noise in its null bounded only by the warm-up's share (3 x the class's bound here)
+    gains 0.6: the drift noise takes up the walk; bounded by the class too, as the walk's size already was, it is
+    named, at its size."""
+    rec = indepgen.generate(340113, {"bias_random_walk": 9e-4})
+    truth = float(rec.truth["bias_random_walk gyro"][0])
+    assert math.isclose(truth, 9e-5 * DEG, rel_tol=1e-12)
+
+    baseline = fit_baseline(rec.session, warmup_tc_s=TC)
+    sd = baseline.sensor("gyro")
+    prob = SensorProblem(baseline, sd)
+    assert prob.test_random_walk(size=False).gain < 18.2  # no class bound: the drift noise takes the walk
+    prob.q_class = locator.class_drift_noise("gyro", sd.params.bias_drift)
+    test = prob.test_random_walk(size=False)
+    assert test.passes and test.gain > 100.0
+
+    found = [f for f in diagnose(rec.session, warmup_tc_s=TC).report.findings
+             if f.effect == "bias_random_walk" and f.sensor == "gyro"]
+    assert len(found) == 1
+    f = found[0]
+    assert f.theta is not None and f.theta_std is not None
+    k, std = float(f.theta[0]), float(f.theta_std[0])
+    assert 0.0 < std < 0.2 * k
+    assert abs(k - truth) <= 3.0 * std
+
+
+def test_no_walk_is_named_on_a_recording_without_one() -> None:
+    """Development seed 340100, no walk planted (the power study's first null): nothing named on either sensor."""
+    rec = indepgen.generate(340100, {})
+    report = diagnose(rec.session, warmup_tc_s=TC).report
+    assert [f.effect for f in report.findings] == []
+
+
+def test_the_generators_stochastic_truth_is_its_output_less_the_deterministic_part() -> None:
+    """What the oracle is given: the gyro's output less ``gyro_deterministic`` is the drift noise, the walk and the
+    white noise; on a still block of 2 s its sample variance is the white variance (the drift noise and a walk of
+    3e-5 deg/s/sqrt(s) add less than 1e-3 of it there)."""
+    rec = indepgen.generate(340101, {"bias_random_walk": 3e-4})
+    res = rec.session.gyro_radps - np.asarray(rec.truth["gyro_deterministic"])
+    fs = rec.plan.rate_hz
+    n = int(2.0 * fs)
+    blocks = res[: len(res) // n * n].reshape(-1, n, 3)
+    within = blocks.var(axis=1, ddof=1).mean(axis=0)
+    white = np.asarray(rec.truth["gyro_white_var"])
+    assert np.allclose(within, white, rtol=0.05)
+    # the slow part (block means) is eq. 3's drift noise started at 0 plus the walk: its spread grows with time
+    means = blocks.mean(axis=1)
+    q = np.asarray(rec.truth["gyro_drift_noise_var"])
+    tc = np.asarray(rec.truth["gyro_tc"])
+    span = float(rec.session.t_s[-1])
+    k2 = float(rec.truth["bias_random_walk gyro"][0]) ** 2
+    expected = white / n + q * -np.expm1(-2.0 * span / tc) + k2 * span  # the last block's variance, about
+    assert np.all(np.abs(means[-10:]).max(axis=0) < 6.0 * np.sqrt(expected))
