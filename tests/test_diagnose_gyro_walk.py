@@ -77,3 +77,33 @@ def test_the_generators_stochastic_truth_is_its_output_less_the_deterministic_pa
     k2 = float(rec.truth["bias_random_walk gyro"][0]) ** 2
     expected = white / n + q * -np.expm1(-2.0 * span / tc) + k2 * span  # the last block's variance, about
     assert np.all(np.abs(means[-10:]).max(axis=0) < 6.0 * np.sqrt(expected))
+
+
+def test_the_power_studys_oracle_finds_a_walk_at_its_size_and_none_where_there_is_none() -> None:
+    """benchmarks/bench_gyro_walk_power.py's oracle on a made-up gyroscope residual (30 min at 50 Hz: white noise
+    0.01 deg/s, eq. 3's drift noise 0.0015 deg/s started at 0 with T_c 2000 s, and a walk of 3e-4 deg/s/sqrt(s)):
+    the walk's K within 15 %, its gain far above the threshold; without the walk a gain of chance size."""
+    from benchmark_modules import load_benchmark
+    from scipy.signal import lfilter
+
+    bench = load_benchmark("bench_gyro_walk_power")
+    rng = np.random.default_rng(340777)
+    fs, n = 50.0, 90_000
+    t = np.arange(n) / fs
+    sigma, gm_std, tc, k = 0.01 * DEG, 0.0015 * DEG, 2000.0, 3e-4 * DEG
+    phi = math.exp(-1.0 / (fs * tc))
+    gm = lfilter([math.sqrt(1.0 - phi**2) * gm_std], [1.0, -phi], rng.standard_normal((n, 3)), axis=0)
+    white = rng.standard_normal((n, 3)) * sigma
+    walk = np.cumsum(rng.standard_normal((n, 3)), axis=0) * k / math.sqrt(fs)
+
+    def truth(residual: np.ndarray) -> object:
+        return bench.Truth(t, residual, np.full(3, gm_std**2), np.full(3, tc), np.full(3, sigma**2),
+                           np.full(3, 0.15 * DEG))
+
+    on = bench.oracle_tests(truth(white + gm + walk), k)
+    assert on["oracle"] > 10.0 * bench.CRIT
+    assert abs(on["oracle_k"] - 3e-4) < 0.15 * 3e-4
+    assert on["lambda"] > 1000.0
+    off = bench.oracle_tests(truth(white + gm), 0.0)
+    assert off["lambda"] == 0.0
+    assert off["oracle"] < 10.0 and off["class"] < 10.0
