@@ -13,8 +13,9 @@ residual's 4 s block means (the walk's information lies far below their 0.125 Hz
 * ``station``: the diagnosis itself, ``bias_random_walk`` named on the gyroscope (``diagnose()``), and the raw gain
   of its walk test at the first step (:meth:`SensorProblem.test_random_walk`).
 
-All three at the station's level: the critical value of half chi^2_1 at ``ALPHA`` (1e-5; 18.2), which the two oracle
-tests' null distributions follow (checked on the nulls: the share of gains above 2.71 is ~5 %). ``lambda`` is the
+All at the station's level: the critical value of half chi^2_1 at ``ALPHA`` (1e-5; 18.2), the asymptotic null
+distribution of the oracle tests (nothing estimated but K^2, and q in the class test; the nulls print the share of
+gains above 2.71, the 5 % point, as a coarse check: the 1e-5 tail is beyond a few nulls). ``lambda`` is the
 oracle's noncentrality at the true K (2 KL divergence of the two block distributions, the expected gain): power
 ~ P(Z > sqrt(18.2) - sqrt(lambda)), 90 % at lambda ~ 31.
 
@@ -159,8 +160,8 @@ def station_test(session: Session, tc: dict[str, tuple[float, float]] | None, tr
 
     * ``gain_share``: eq. 3's drift noise in the null bounded by the warm-up's share alone (``drift_noise_max``), not
       also by the class's (``q_class``): the test before the class bound;
-    * ``gain_prof``: the drift noise re-fitted in the alternative too (0 <= q <= its bound, per axis, at every K^2),
-      where the test keeps the null's q;
+    * ``gain_prof``: the drift noise re-fitted in the alternative too (0 <= q <= the warm-up's share,
+      ``drift_noise_max``, per axis, at every K^2), where the test keeps the null's q;
     * ``gain_qtrue``: q and T_c at their true values in both hypotheses (the mean terms still estimated)."""
     baseline = fit_baseline(session, warmup_tc_s=tc)
     sd = baseline.sensor("gyro")
