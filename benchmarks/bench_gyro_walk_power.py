@@ -10,8 +10,9 @@ residual's 4 s block means (the walk's information lies far below their 0.125 Hz
 * ``class``: the same with q per axis unknown in ``[0, q_class]`` (the sensor class's bound the locator uses,
   :func:`station.diagnose.locator.class_drift_noise`: 3 x 1 % of |b_drift|), profiled in both hypotheses: the best a
   test can do that knows the class but not the unit's own drift noise;
-* ``station``: the diagnosis itself, ``bias_random_walk`` named on the gyroscope (``diagnose()``), and the raw gain
-  of its walk test at the first step (:meth:`SensorProblem.test_random_walk`).
+* ``station``: the diagnosis itself, ``bias_random_walk`` named on the gyroscope (``diagnose()``; with
+  ``--class-bound`` its walk test's null bounded by the class, ``likelihood.WALK_NULL_CLASS_BOUND``), and the raw gain
+  of its walk test at the first step (:meth:`SensorProblem.test_random_walk`), with and without that bound.
 
 All at the station's level: the critical value of half chi^2_1 at ``ALPHA`` (1e-5; 18.2), the asymptotic null
 distribution of the oracle tests (nothing estimated but K^2, and q in the class test; the nulls print the share of
@@ -24,7 +25,7 @@ The station simulator's walk is given per accelerometer (``Effects.bias_random_w
 it): set so that its gyro has the same K. Seeds: development 340000-344999, report 345000-349999.
 
 Run: ``python benchmarks/bench_gyro_walk_power.py [--base 340000] [--per 4] [--nulls 4] [--mults 0.1,0.3,1,3,10]
-[--generators indep,sim]``
+[--generators indep,sim] [--class-bound] [--plan]``
 """
 
 # ruff: noqa: E402  (BLAS threads set before numpy is imported)
@@ -51,7 +52,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import indepgen
 from bench_diagnose_indep import warmup_tc
 
-from station.diagnose import diagnose
+from station.diagnose import diagnose, likelihood
 from station.diagnose.likelihood import ALPHA, SensorProblem
 from station.diagnose.locator import class_drift_noise
 from station.diagnose.residuals import fit_baseline
@@ -155,11 +156,12 @@ def oracle_tests(tr: Truth, k_true: float) -> dict[str, float]:
 
 
 def station_test(session: Session, tc: dict[str, tuple[float, float]] | None, truth: Truth) -> dict[str, float]:
-    """The gyroscope's walk test at the first step of the selection (:meth:`SensorProblem.test_random_walk`): its
-    gain and decision; and three variants of it on the same block problem, to tell where the power goes:
+    """The gyroscope's walk test at the first step of the selection (:meth:`SensorProblem.test_random_walk`) with
+    eq. 3's drift noise in its null bounded by the class too (``walk_null_class_bound``): its gain and decision; and
+    three variants of it on the same block problem, to tell where the power goes:
 
-    * ``gain_share``: eq. 3's drift noise in the null bounded by the warm-up's share alone (``drift_noise_max``), not
-      also by the class's (``q_class``): the test before the class bound;
+    * ``gain_share``: the drift noise in the null bounded by the warm-up's share alone (``drift_noise_max``), not
+      also by the class's (``q_class``): the station's default test (``WALK_NULL_CLASS_BOUND`` off);
     * ``gain_prof``: the drift noise re-fitted in the alternative too (0 <= q <= the warm-up's share,
       ``drift_noise_max``, per axis, at every K^2), where the test keeps the null's q;
     * ``gain_qtrue``: q and T_c at their true values in both hypotheses (the mean terms still estimated)."""
@@ -172,11 +174,12 @@ def station_test(session: Session, tc: dict[str, tuple[float, float]] | None, tr
         return p
 
     prob = problem()
+    prob.walk_null_class_bound = True
     t = prob.test_random_walk(size=False)
     q_cls = prob.q_class
     assert q_cls is not None
     ratio = float(np.median([prob.drift_noise_max(k) / q_cls[k] for k in range(3)]))
-    prob.q_class = None  # the null's q bounded by the warm-up's share alone (the test before the class bound)
+    prob.walk_null_class_bound = False  # the null's q bounded by the warm-up's share alone (the station's default)
     t_share = prob.test_random_walk(size=False)
 
     prob = problem()
@@ -294,11 +297,14 @@ def main() -> None:
                     help="sizes, times the independent generator's 3e-5 deg/s/sqrt(s)")
     ap.add_argument("--generators", default="indep,sim")
     ap.add_argument("--no-diagnose", action="store_true", help="only the tests, not the whole diagnosis")
+    ap.add_argument("--class-bound", action="store_true",
+                    help="diagnose with the walk test's null bounded by the class (WALK_NULL_CLASS_BOUND on)")
     ap.add_argument("--plan", action="store_true", help="only the noncentrality by recording length (no recordings)")
     args = ap.parse_args()
     if args.plan:
         plan_table([float(x) for x in args.mults.split(",")])
         return
+    likelihood.WALK_NULL_CLASS_BOUND = args.class_bound
     tc = warmup_tc()
     mults = [0.0, *(float(x) for x in args.mults.split(","))]
     cases = {"indep": indep_case, "sim": sim_case}
@@ -324,7 +330,7 @@ def main() -> None:
                 print(f"  {gen:5s} seed {seed} K {k_dps:.2e}: lambda {row['lambda']:8.1f} oracle {row['oracle']:8.1f} "
                       f"(K {row['oracle_k']:.2e}) class {row['class']:7.1f} | station: q true {row['gain_qtrue']:7.1f} "
                       f"q re-fitted {row['gain_prof']:7.1f} share only {row['gain_share']:6.1f} "
-                      f"test {row['gain']:6.1f} "
+                      f"class-bounded {row['gain']:6.1f} "
                       f"named {row['named']:.0f}" + (f" K {row['named_k']:.2e}" if row.get("named_k", math.nan)
                                                      == row.get("named_k", math.nan) else "")
                       + f"  q_max/q_class {row['q_max_over_class']:.1f}", flush=True)
@@ -333,7 +339,7 @@ def main() -> None:
     print(f"gyro bias random walk: detections at half chi^2_1 > {CRIT:.1f} (ALPHA {ALPHA:g}), "
           f"seeds {args.base}-{seed - 1}")
     print(f"{'gen':5s} {'K deg/s/rt(s)':>13s} {'n':>3s} {'lambda':>7s} {'P pred':>6s} {'oracle':>7s} {'class':>6s} "
-          f"{'q true':>6s} {'q refit':>7s} {'share':>6s} {'test':>6s} {'named':>6s}")
+          f"{'q true':>6s} {'q refit':>7s} {'share':>6s} {'class-b':>7s} {'named':>6s}")
     keys = ("oracle", "class", "gain_qtrue", "gain_prof", "gain_share", "gain")
     for (gen, mult), rows in table.items():
         n = len(rows)
@@ -342,7 +348,7 @@ def main() -> None:
         det = [f"{sum(r[key] > CRIT for r in rows):d}/{n}" for key in keys]
         named = f"{sum(r['named'] > 0 for r in rows)}/{n}" if not args.no_diagnose else "-"
         print(f"{gen:5s} {mult * K_GEN_DPS:13.2e} {n:3d} {lam:7.1f} {pred:6.2f} {det[0]:>7s} {det[1]:>6s} {det[2]:>6s} "
-              f"{det[3]:>7s} {det[4]:>6s} {det[5]:>6s} {named:>6s}")
+              f"{det[3]:>7s} {det[4]:>6s} {det[5]:>7s} {named:>6s}")
     nulls = [r for (g, m), rows in table.items() if m == 0.0 for r in rows]
     if nulls:
         print("nulls: gains above 2.71 (5 % of half chi^2_1): " + ", ".join(

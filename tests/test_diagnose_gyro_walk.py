@@ -9,8 +9,9 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
-from station.diagnose import diagnose, locator
+from station.diagnose import diagnose, likelihood, locator
 from station.diagnose.likelihood import SensorProblem
 from station.diagnose.residuals import fit_baseline
 
@@ -22,12 +23,12 @@ TC = {"accel": (50.0, 167.0), "gyro": (1030.0, 3760.0)}
 DEG = math.pi / 180.0
 
 
-def test_a_gyro_walk_the_class_bound_resolves_is_named_with_its_size() -> None:
+def test_a_gyro_walk_the_class_bound_resolves_is_named_with_its_size(monkeypatch: pytest.MonkeyPatch) -> None:
     """Development seed 340113, the gyroscope's K 9e-5 deg/s/sqrt(s) (3 x the generator's): the oracle's gain (q and
     every deterministic term at the truth) 4064, the class test's (q anywhere up to the class's bound) 201. The
-    walk's test with eq. 3's drift noise in its null bounded only by the warm-up's share (3 x the class's bound here)
-    gains 0.6: the drift noise takes up the walk; bounded by the class too, as the walk's size already was, it is
-    named, at its size."""
+    walk's test with eq. 3's drift noise in its null bounded only by the warm-up's share (3 x the class's bound here;
+    the default) gains 0.6: the drift noise takes up the walk, and nothing is named. Bounded by the class too
+    (``WALK_NULL_CLASS_BOUND``), as the walk's size already is, it is named, at its size."""
     rec = indepgen.generate(340113, {"bias_random_walk": 9e-4})
     truth = float(rec.truth["bias_random_walk gyro"][0])
     assert math.isclose(truth, 9e-5 * DEG, rel_tol=1e-12)
@@ -35,13 +36,20 @@ def test_a_gyro_walk_the_class_bound_resolves_is_named_with_its_size() -> None:
     baseline = fit_baseline(rec.session, warmup_tc_s=TC)
     sd = baseline.sensor("gyro")
     prob = SensorProblem(baseline, sd)
-    assert prob.test_random_walk(size=False).gain < 18.2  # no class bound: the drift noise takes the walk
     prob.q_class = locator.class_drift_noise("gyro", sd.params.bias_drift)
+    assert not prob.walk_null_class_bound  # the default: the test as it was
+    assert prob.test_random_walk(size=False).gain < 18.2  # the drift noise takes the walk
+    prob.walk_null_class_bound = True
     test = prob.test_random_walk(size=False)
     assert test.passes and test.gain > 100.0
 
-    found = [f for f in diagnose(rec.session, warmup_tc_s=TC).report.findings
-             if f.effect == "bias_random_walk" and f.sensor == "gyro"]
+    def gyro_walks() -> list:
+        return [f for f in diagnose(rec.session, warmup_tc_s=TC).report.findings
+                if f.effect == "bias_random_walk" and f.sensor == "gyro"]
+
+    assert gyro_walks() == []
+    monkeypatch.setattr(likelihood, "WALK_NULL_CLASS_BOUND", True)
+    found = gyro_walks()
     assert len(found) == 1
     f = found[0]
     assert f.theta is not None and f.theta_std is not None
@@ -50,8 +58,10 @@ def test_a_gyro_walk_the_class_bound_resolves_is_named_with_its_size() -> None:
     assert abs(k - truth) <= 3.0 * std
 
 
-def test_no_walk_is_named_on_a_recording_without_one() -> None:
-    """Development seed 340100, no walk planted (the power study's first null): nothing named on either sensor."""
+def test_no_walk_is_named_on_a_recording_without_one(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Development seed 340100, no walk planted (the power study's first null): nothing named on either sensor, with
+    the walk test's null bounded by the class too."""
+    monkeypatch.setattr(likelihood, "WALK_NULL_CLASS_BOUND", True)
     rec = indepgen.generate(340100, {})
     report = diagnose(rec.session, warmup_tc_s=TC).report
     assert [f.effect for f in report.findings] == []
