@@ -292,6 +292,9 @@ class Recording:
     #: (1/U, 1/U^2) and M; the time offset (s). And, keyed ``"<effect> <sensor>"``, the drawn parameters of each
     #: effect in the diagnosis's candidate forms (SI, per axis or per matrix element; the IEEE scale terms as
     #: coefficients of the powers of ``M x``, the diagnosis's modelled input). The draws are the same as without.
+    #: Per sensor the stochastic model an oracle knows: ``<sensor>_drift_noise_var`` (eq. 3's drift noise, stationary
+    #: variance, started at 0), ``<sensor>_tc``, ``<sensor>_white_var`` (noise and ADC), and
+    #: ``<sensor>_deterministic`` (n, 3): the output without drift noise, walk, white noise and ADC.
     truth: dict[str, np.ndarray | float] = field(default_factory=dict)
 
     def write(self, path: str | Path) -> None:
@@ -402,7 +405,14 @@ def generate(seed: int, effects: dict[str, float] | None = None, plan: Plan | No
         phi = np.exp(-1.0 / (fs * tc))
         gm = np.stack([lfilter([math.sqrt(1 - phi[k] ** 2) * 0.01 * abs(b_drift[k])], [1.0, -phi[k]],
                                rng.standard_normal(n)) for k in range(3)], axis=1)
-        y = y + b_drift * np.exp(-t[:, None] / tc) + gm
+        y = y + b_drift * np.exp(-t[:, None] / tc)
+        # the stochastic model of the output (an oracle's knowledge, e.g. benchmarks/bench_gyro_walk_power.py):
+        # eq. 3's drift noise variance (stationary, started at 0 at power-on), its T_c, the white variance
+        truth[f"{sensor}_drift_noise_var"] = (0.01 * b_drift) ** 2
+        truth[f"{sensor}_tc"] = tc.copy()
+        truth[f"{sensor}_white_var"] = sigma**2 + lsb**2 / 12.0
+        y = y + gm
+        stochastic = gm.copy()
         if gyro and eff.get("g_sensitivity"):
             gs = rng.normal(size=(3, 3))
             gs *= eff["g_sensitivity"] * DEG / G0 / np.abs(gs).max()
@@ -416,8 +426,14 @@ def generate(seed: int, effects: dict[str, float] | None = None, plan: Plan | No
         if eff.get("bias_random_walk"):
             k = eff["bias_random_walk"] * (0.1 * DEG if gyro else 1.0)
             truth[f"bias_random_walk {sensor}"] = np.array([k])
-            y = y + np.cumsum(rng.standard_normal((n, 3)), axis=0) * k / math.sqrt(fs)
-        y = y + rng.standard_normal((n, 3)) * sigma
+            walk = np.cumsum(rng.standard_normal((n, 3)), axis=0) * k / math.sqrt(fs)
+            y = y + walk
+            stochastic += walk
+        white = rng.standard_normal((n, 3)) * sigma
+        y = y + white
+        stochastic += white
+        #: everything but the drift noise, the walk, the white noise and the ADC: y - this is their sum
+        truth[f"{sensor}_deterministic"] = y - stochastic
         if eff.get("outliers") and not gyro:
             hit = rng.random((n, 3)) < eff["outliers"]
             y = y + hit * rng.choice([-1.0, 1.0], (n, 3)) * rng.uniform(6.0, 12.0, (n, 3)) * sigma

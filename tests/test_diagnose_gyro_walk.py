@@ -1,0 +1,119 @@
+"""The gyroscope's bias random walk against known truth (the independent generator, development seeds): named with
+its size where the recording resolves it, not named where there is none, and the generator's stochastic truth that
+benchmarks/bench_gyro_walk_power.py's oracle uses."""
+
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from station.diagnose import diagnose, likelihood, locator
+from station.diagnose.likelihood import SensorProblem
+from station.diagnose.residuals import fit_baseline
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import indepgen
+
+TC = {"accel": (50.0, 167.0), "gyro": (1030.0, 3760.0)}
+DEG = math.pi / 180.0
+
+
+def test_a_gyro_walk_the_class_bound_resolves_is_named_with_its_size(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Development seed 340113, the gyroscope's K 9e-5 deg/s/sqrt(s) (3 x the generator's): the oracle's gain (q and
+    every deterministic term at the truth) 4064, the class test's (q anywhere up to the class's bound) 201. The
+    walk's test with eq. 3's drift noise in its null bounded only by the warm-up's share (3 x the class's bound here;
+    the default) gains 0.6: the drift noise takes up the walk, and nothing is named. Bounded by the class too
+    (``WALK_NULL_CLASS_BOUND``), as the walk's size already is, it is named, at its size."""
+    rec = indepgen.generate(340113, {"bias_random_walk": 9e-4})
+    truth = float(rec.truth["bias_random_walk gyro"][0])
+    assert math.isclose(truth, 9e-5 * DEG, rel_tol=1e-12)
+
+    baseline = fit_baseline(rec.session, warmup_tc_s=TC)
+    sd = baseline.sensor("gyro")
+    prob = SensorProblem(baseline, sd)
+    prob.q_class = locator.class_drift_noise("gyro", sd.params.bias_drift)
+    assert not prob.walk_null_class_bound  # the default: the test as it was
+    assert prob.test_random_walk(size=False).gain < 18.2  # the drift noise takes the walk
+    prob.walk_null_class_bound = True
+    test = prob.test_random_walk(size=False)
+    assert test.passes and test.gain > 100.0
+
+    def gyro_walks() -> list:
+        return [f for f in diagnose(rec.session, warmup_tc_s=TC).report.findings
+                if f.effect == "bias_random_walk" and f.sensor == "gyro"]
+
+    assert gyro_walks() == []
+    monkeypatch.setattr(likelihood, "WALK_NULL_CLASS_BOUND", True)
+    found = gyro_walks()
+    assert len(found) == 1
+    f = found[0]
+    assert f.theta is not None and f.theta_std is not None
+    k, std = float(f.theta[0]), float(f.theta_std[0])
+    assert 0.0 < std < 0.2 * k
+    assert abs(k - truth) <= 3.0 * std
+
+
+def test_no_walk_is_named_on_a_recording_without_one(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Development seed 340100, no walk planted (the power study's first null): nothing named on either sensor, with
+    the walk test's null bounded by the class too."""
+    monkeypatch.setattr(likelihood, "WALK_NULL_CLASS_BOUND", True)
+    rec = indepgen.generate(340100, {})
+    report = diagnose(rec.session, warmup_tc_s=TC).report
+    assert [f.effect for f in report.findings] == []
+
+
+def test_the_generators_stochastic_truth_is_its_output_less_the_deterministic_part() -> None:
+    """What the oracle is given: the gyro's output less ``gyro_deterministic`` is the drift noise, the walk and the
+    white noise; on a still block of 2 s its sample variance is the white variance (the drift noise and a walk of
+    3e-5 deg/s/sqrt(s) add less than 1e-3 of it there)."""
+    rec = indepgen.generate(340101, {"bias_random_walk": 3e-4})
+    res = rec.session.gyro_radps - np.asarray(rec.truth["gyro_deterministic"])
+    fs = rec.plan.rate_hz
+    n = int(2.0 * fs)
+    blocks = res[: len(res) // n * n].reshape(-1, n, 3)
+    within = blocks.var(axis=1, ddof=1).mean(axis=0)
+    white = np.asarray(rec.truth["gyro_white_var"])
+    assert np.allclose(within, white, rtol=0.05)
+    # the slow part (block means) is eq. 3's drift noise started at 0 plus the walk: its spread grows with time
+    means = blocks.mean(axis=1)
+    q = np.asarray(rec.truth["gyro_drift_noise_var"])
+    tc = np.asarray(rec.truth["gyro_tc"])
+    span = float(rec.session.t_s[-1])
+    k2 = float(rec.truth["bias_random_walk gyro"][0]) ** 2
+    expected = white / n + q * -np.expm1(-2.0 * span / tc) + k2 * span  # the last block's variance, about
+    assert np.all(np.abs(means[-10:]).max(axis=0) < 6.0 * np.sqrt(expected))
+
+
+def test_the_power_studys_oracle_finds_a_walk_at_its_size_and_none_where_there_is_none() -> None:
+    """benchmarks/bench_gyro_walk_power.py's oracle on a made-up gyroscope residual (30 min at 50 Hz: white noise
+    0.01 deg/s, eq. 3's drift noise 0.0015 deg/s started at 0 with T_c 2000 s, and a walk of 3e-4 deg/s/sqrt(s)):
+    the walk's K within 15 %, its gain far above the threshold; without the walk a gain of chance size."""
+    from benchmark_modules import load_benchmark
+    from scipy.signal import lfilter
+
+    bench = load_benchmark("bench_gyro_walk_power")
+    rng = np.random.default_rng(340777)
+    fs, n = 50.0, 90_000
+    t = np.arange(n) / fs
+    sigma, gm_std, tc, k = 0.01 * DEG, 0.0015 * DEG, 2000.0, 3e-4 * DEG
+    phi = math.exp(-1.0 / (fs * tc))
+    gm = lfilter([math.sqrt(1.0 - phi**2) * gm_std], [1.0, -phi], rng.standard_normal((n, 3)), axis=0)
+    white = rng.standard_normal((n, 3)) * sigma
+    walk = np.cumsum(rng.standard_normal((n, 3)), axis=0) * k / math.sqrt(fs)
+
+    def truth(residual: np.ndarray) -> object:
+        return bench.Truth(t, residual, np.full(3, gm_std**2), np.full(3, tc), np.full(3, sigma**2),
+                           np.full(3, 0.15 * DEG))
+
+    on = bench.oracle_tests(truth(white + gm + walk), k)
+    assert on["oracle"] > 10.0 * bench.CRIT
+    assert abs(on["oracle_k"] - 3e-4) < 0.15 * 3e-4
+    assert on["lambda"] > 1000.0
+    off = bench.oracle_tests(truth(white + gm), 0.0)
+    assert off["lambda"] == 0.0
+    assert off["oracle"] < 10.0 and off["class"] < 10.0
