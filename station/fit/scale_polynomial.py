@@ -1,15 +1,27 @@
-"""The gyro's IEEE 952 scale polynomial ``y = u + k2 u^2 + k3 u^3`` in a fit: which terms the rate steps identify,
-their regressors, and the two-pass selection by the Wald test.
+"""The IEEE scale polynomial ``y = u + k2 u^2 + k3 u^3`` in a fit (IEEE Std 952 for the gyro, the same form as
+IEEE Std 1293's accelerometer model): which terms the blocks identify, their regressors, and the two-pass
+selection by the Wald test.
 
 Shared by the rig's fit (:func:`station.fit.calibrate.fit_session`) and the line's joint fit
 (:mod:`station.fit.joint_found`): both ask the same questions of their blocks and keep a term by the same rule;
 only how a triad is refitted with the extra columns differs (a callable here).
 
+The gyro (rate steps):
+
 * k3 (odd) where the axis sees **two or more rate magnitudes** (with one, ``u^3 = |u|^2 u`` is a scale error M
   already holds);
-* k2 (even) where it also sees **both signs** (with one sign, ``u^2`` is not separable from the bias and ``u^3``);
-* a term kept where its Wald statistic ``(k / sigma_k)^2`` reaches the threshold, in two passes (the regressors'
-  ``u = M^_k . ref`` from the previous pass's M^).
+* k2 (even) where it also sees **both signs** (with one sign, ``u^2`` is not separable from the bias and ``u^3``).
+
+The accelerometer (poses on a 1 g rig: each axis sees +g, -g and about 0):
+
+* k3 as for the gyro: two or more magnitudes of specific force along the axis (tilted poses, a centrifuge); at
+  +-g alone it is a scale error;
+* k2 where the axis sees **both signs of one magnitude and the zero level** (poses across the axis): ``k2 g^2``
+  is then the mean of the +g and -g poses less the poses across the axis, which no bias, scale or misalignment
+  term explains (they are constant, odd, or linear in the other axes' force).
+
+In both, a term is kept where its Wald statistic ``(k / sigma_k)^2`` reaches the threshold, in two passes (the
+regressors' ``u = M^_k . ref`` from the previous pass's M^).
 """
 
 from __future__ import annotations
@@ -75,10 +87,22 @@ def rate_signs(blocks: Blocks, m_row: np.ndarray) -> int:
     return int(np.any(big > 0)) + int(np.any(big < 0))
 
 
-def polynomial_rule(wald: float) -> str:
+def polynomial_rule(wald: float, triad: str = "gyro") -> str:
     """The selection rule as the note states it."""
+    if triad == "accel":
+        return (f"IEEE u + k2 u^2 + k3 u^3 per axis: k3 where the poses hold >= 2 magnitudes of specific force along "
+                f"the axis, k2 where they hold both signs of one magnitude and the zero level (or >= 2 magnitudes "
+                f"and both signs); a term kept where (k/sigma_k)^2 >= {wald:g}")
     return (f"IEEE 952 u + k2 u^2 + k3 u^3 per axis: k3 where the rate steps hold >= 2 rate magnitudes, k2 where "
             f"they also hold both signs; a term kept where (k/sigma_k)^2 >= {wald:g}")
+
+
+def zero_level(blocks: Blocks, m_row: np.ndarray) -> bool:
+    """Whether axis ``m_row`` sees the zero level in the blocks (an input under 5 % of the largest, e.g. a pose
+    across the axis) beside a nonzero one."""
+    u = np.abs(blocks.ref @ m_row)
+    top = float(u.max()) if u.size else 0.0
+    return top > 0.0 and bool(np.any(u < 0.05 * top))
 
 
 def no_rate_note(wald: float) -> dict[str, Any]:
@@ -87,24 +111,36 @@ def no_rate_note(wald: float) -> dict[str, Any]:
             "reason": "no rate steps (M_w from known angles): the nonlinearity needs rates"}
 
 
-def identifiable_terms(blocks: Blocks, m_hat: np.ndarray, wald: float) -> tuple[np.ndarray, dict[str, Any]]:
-    """Which terms the rate blocks identify per axis, (3, 2) bool (k2, k3), and the note's common part: the rule,
-    rate levels and signs per axis, the axes per term, and for each axis lacking a term the rig step that would
-    separate it (``not_identifiable``)."""
+def identifiable_terms(
+    blocks: Blocks, m_hat: np.ndarray, wald: float, triad: str = "gyro"
+) -> tuple[np.ndarray, dict[str, Any]]:
+    """Which terms the blocks identify per axis, (3, 2) bool (k2, k3), and the note's common part: the rule,
+    levels and signs per axis (and for the accelerometer whether the zero level is seen), the axes per term, and
+    for each axis lacking a term the rig step that would separate it (``not_identifiable``). ``triad``:
+    ``'gyro'`` (rate steps) or ``'accel'`` (poses; see the module's rules)."""
     levels = [nonlinearity_levels(blocks, m_hat[k]) for k in range(3)]
     signs = [rate_signs(blocks, m_hat[k]) for k in range(3)]
-    use = np.array([[lv >= 2 and sg == 2, lv >= 2] for lv, sg in zip(levels, signs, strict=True)])
+    zero = [zero_level(blocks, m_hat[k]) for k in range(3)] if triad == "accel" else [False] * 3
+    use = np.array([[sg == 2 and (lv >= 2 or z), lv >= 2]
+                    for lv, sg, z in zip(levels, signs, zero, strict=True)])
     identifiable = {"k2": [AXES[k] for k in range(3) if use[k, 0]], "k3": [AXES[k] for k in range(3) if use[k, 1]]}
+    second = ("poses tilted so that the axis sees a second magnitude of specific force, e.g. g cos 60 deg"
+              if triad == "accel" else "a step at a second magnitude, e.g. 50 and 200 deg/s")
     missing = []
     for k in range(3):
-        if not use[k, 1]:
-            missing.append(f"{AXES[k]}: one rate magnitude, neither term (add a step at a second magnitude, "
-                           "e.g. 50 and 200 deg/s)")
+        if not use[k].any():
+            missing.append(f"{AXES[k]}: one magnitude in one direction, neither term (add {second}, in both "
+                           "directions)" if triad == "accel" else
+                           f"{AXES[k]}: one rate magnitude, neither term (add {second})")
+        elif not use[k, 1]:
+            missing.append(f"{AXES[k]}: one magnitude, k3 u^3 not separable from the scale (add {second})")
         elif not use[k, 0]:
             missing.append(f"{AXES[k]}: one sign, k2 u^2 not separable from the bias and k3 (add the same "
                            "magnitudes in the other direction)")
-    base: dict[str, Any] = {"rule": polynomial_rule(wald), "levels": levels, "signs": signs,
+    base: dict[str, Any] = {"rule": polynomial_rule(wald, triad), "levels": levels, "signs": signs,
                             "identifiable": identifiable}
+    if triad == "accel":
+        base["zero_level"] = zero
     if missing:
         base["not_identifiable"] = missing
     return use, base
@@ -147,4 +183,4 @@ def select_polynomial(
 
 
 __all__ = ["LEVEL_RTOL", "Polynomial", "identifiable_terms", "no_rate_note", "nonlinearity_levels",
-           "polynomial_rule", "rate_signs", "select_polynomial", "with_polynomial"]
+           "polynomial_rule", "rate_signs", "select_polynomial", "with_polynomial", "zero_level"]
