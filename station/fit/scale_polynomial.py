@@ -12,13 +12,13 @@ The gyro (rate steps):
   already holds);
 * k2 (even) where it also sees **both signs** (with one sign, ``u^2`` is not separable from the bias and ``u^3``).
 
-The accelerometer (poses on a 1 g rig: each axis sees +g, -g and about 0):
-
-* k3 as for the gyro: two or more magnitudes of specific force along the axis (tilted poses, a centrifuge); at
-  +-g alone it is a scale error;
-* k2 where the axis sees **both signs of one magnitude and the zero level** (poses across the axis): ``k2 g^2``
-  is then the mean of the +g and -g poses less the poses across the axis, which no bias, scale or misalignment
-  term explains (they are constant, odd, or linear in the other axes' force).
+The accelerometer (poses), by the same rule: k3 where the poses hold two or more magnitudes of specific force
+along the axis, k2 where they also hold both signs. On a 1 g rig of face-up poses (+g, -g and about 0 along each
+axis) neither is fitted: k3 is a scale error there, and although ``k2 g^2`` could be told from the bias (the mean
+of the +g and -g poses less the poses across the axis), with it the three levels would carry three parameters (b,
+M, k2) and nothing would be left to test them: one pose off its reference would be taken for a k2 and applied.
+Tilted poses (an axis at ``g cos theta``) determine both terms and leave that test (``not_identifiable`` says
+so per axis).
 
 In both, a term is kept where its Wald statistic ``(k / sigma_k)^2`` reaches the threshold, in two passes (the
 regressors' ``u = M^_k . ref`` from the previous pass's M^).
@@ -89,20 +89,10 @@ def rate_signs(blocks: Blocks, m_row: np.ndarray) -> int:
 
 def polynomial_rule(wald: float, triad: str = "gyro") -> str:
     """The selection rule as the note states it."""
-    if triad == "accel":
-        return (f"IEEE u + k2 u^2 + k3 u^3 per axis: k3 where the poses hold >= 2 magnitudes of specific force along "
-                f"the axis, k2 where they hold both signs of one magnitude and the zero level (or >= 2 magnitudes "
-                f"and both signs); a term kept where (k/sigma_k)^2 >= {wald:g}")
-    return (f"IEEE 952 u + k2 u^2 + k3 u^3 per axis: k3 where the rate steps hold >= 2 rate magnitudes, k2 where "
+    steps = "poses hold >= 2 magnitudes of specific force along the axis" if triad == "accel" else \
+        "rate steps hold >= 2 rate magnitudes"
+    return (f"{'IEEE 952 ' if triad == 'gyro' else ''}u + k2 u^2 + k3 u^3 per axis: k3 where the {steps}, k2 where "
             f"they also hold both signs; a term kept where (k/sigma_k)^2 >= {wald:g}")
-
-
-def zero_level(blocks: Blocks, m_row: np.ndarray) -> bool:
-    """Whether axis ``m_row`` sees the zero level in the blocks (an input under 5 % of the largest, e.g. a pose
-    across the axis) beside a nonzero one."""
-    u = np.abs(blocks.ref @ m_row)
-    top = float(u.max()) if u.size else 0.0
-    return top > 0.0 and bool(np.any(u < 0.05 * top))
 
 
 def no_rate_note(wald: float) -> dict[str, Any]:
@@ -115,32 +105,26 @@ def identifiable_terms(
     blocks: Blocks, m_hat: np.ndarray, wald: float, triad: str = "gyro"
 ) -> tuple[np.ndarray, dict[str, Any]]:
     """Which terms the blocks identify per axis, (3, 2) bool (k2, k3), and the note's common part: the rule,
-    levels and signs per axis (and for the accelerometer whether the zero level is seen), the axes per term, and
+    levels and signs per axis, the axes per term, and
     for each axis lacking a term the rig step that would separate it (``not_identifiable``). ``triad``:
     ``'gyro'`` (rate steps) or ``'accel'`` (poses; see the module's rules)."""
     levels = [nonlinearity_levels(blocks, m_hat[k]) for k in range(3)]
     signs = [rate_signs(blocks, m_hat[k]) for k in range(3)]
-    zero = [zero_level(blocks, m_hat[k]) for k in range(3)] if triad == "accel" else [False] * 3
-    use = np.array([[sg == 2 and (lv >= 2 or z), lv >= 2]
-                    for lv, sg, z in zip(levels, signs, zero, strict=True)])
+    use = np.array([[lv >= 2 and sg == 2, lv >= 2] for lv, sg in zip(levels, signs, strict=True)])
     identifiable = {"k2": [AXES[k] for k in range(3) if use[k, 0]], "k3": [AXES[k] for k in range(3) if use[k, 1]]}
-    second = ("poses tilted so that the axis sees a second magnitude of specific force, e.g. g cos 60 deg"
-              if triad == "accel" else "a step at a second magnitude, e.g. 50 and 200 deg/s")
     missing = []
     for k in range(3):
-        if not use[k].any():
-            missing.append(f"{AXES[k]}: one magnitude in one direction, neither term (add {second}, in both "
-                           "directions)" if triad == "accel" else
-                           f"{AXES[k]}: one rate magnitude, neither term (add {second})")
+        if not use[k, 1] and triad == "accel":
+            missing.append(f"{AXES[k]}: one magnitude of specific force, neither term (add poses tilted so that "
+                           "the axis sees a second magnitude, e.g. g cos 60 deg, in both directions)")
         elif not use[k, 1]:
-            missing.append(f"{AXES[k]}: one magnitude, k3 u^3 not separable from the scale (add {second})")
+            missing.append(f"{AXES[k]}: one rate magnitude, neither term (add a step at a second magnitude, "
+                           "e.g. 50 and 200 deg/s)")
         elif not use[k, 0]:
             missing.append(f"{AXES[k]}: one sign, k2 u^2 not separable from the bias and k3 (add the same "
                            "magnitudes in the other direction)")
     base: dict[str, Any] = {"rule": polynomial_rule(wald, triad), "levels": levels, "signs": signs,
                             "identifiable": identifiable}
-    if triad == "accel":
-        base["zero_level"] = zero
     if missing:
         base["not_identifiable"] = missing
     return use, base
@@ -183,4 +167,4 @@ def select_polynomial(
 
 
 __all__ = ["LEVEL_RTOL", "Polynomial", "identifiable_terms", "no_rate_note", "nonlinearity_levels",
-           "polynomial_rule", "rate_signs", "select_polynomial", "with_polynomial", "zero_level"]
+           "polynomial_rule", "rate_signs", "select_polynomial", "with_polynomial"]
