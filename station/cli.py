@@ -179,6 +179,16 @@ def _print_params(params: object) -> None:
                           "200 deg/s): " + ", ".join(parts))
         else:
             console.print(f"gyro scale nonlinearity: {nl.status}: {nl.reason}")
+    anl = params.quality.accel_scale_polynomial
+    if anl is not None:
+        from station.kernel.found_terms import found_terms
+
+        if anl.fitted:
+            parts = [f"{t.name.split('.', 1)[1]} {t.shown()}" for t in found_terms(params).polynomial
+                     if t.name.startswith("accel.") and t.applied]
+            console.print("accelerometer scale polynomial u + k2 u^2 + k3 u^3 fitted: " + ", ".join(parts))
+        else:
+            console.print(f"accelerometer scale polynomial: {anl.status}: {anl.reason}")
     offset = params.quality.time_offset
     if offset is not None:
         if offset.fitted:
@@ -213,8 +223,10 @@ def fit(
         help="temperature terms: auto (when the recording's temperature course separates them from the warm-up), "
              "off, require (not for a rig-free fit)")] = "auto",
     scale_nonlinearity: Annotated[str, typer.Option(
-        help="gyro scale nonlinearity y = u + k2 u^2 + k3 u^3 (IEEE 952): auto (k3 where the rate steps hold two or "
-             "more rate magnitudes, k2 where they also hold both signs, each kept where significant), off")] = "auto",
+        help="scale polynomial y = u + k2 u^2 + k3 u^3 of the gyro (IEEE 952: k3 where the rate steps hold two or "
+             "more rate magnitudes, k2 where they also hold both signs) and the accelerometer (k2 where the poses "
+             "hold +g, -g and 0 along the axis, k3 with a second magnitude): auto (each kept where significant), "
+             "off")] = "auto",
     time_offset: Annotated[str, typer.Option(
         help="the sensor's time offset behind the rig, estimated on the moves and rate ramps and applied by "
              "Algorithm 1: auto (kept where significant), off")] = "auto",

@@ -107,7 +107,16 @@ def random_plan(rng: np.random.Generator) -> Plan:
     )
 
 
+#: Tilted poses a plan may name besides the session format's six (``random_plan`` never draws them): gravity along
+#: a body diagonal, so that each axis sees +-g/sqrt(3), a second magnitude of specific force, in both directions.
+CORNER_POSES = {"corner+++": (1.0, 1.0, 1.0), "corner--+": (-1.0, -1.0, 1.0), "corner-+-": (-1.0, 1.0, -1.0),
+                "corner+--": (1.0, -1.0, -1.0)}
+
+
 def _pose_rotation(pose: str, yaw_rad: float = 0.0) -> Rotation:
+    if pose in CORNER_POSES:  # the sensor's diagonal up, then turned by yaw
+        r, _ = Rotation.align_vectors([UP], [np.array(CORNER_POSES[pose]) / math.sqrt(3.0)])
+        return Rotation.from_rotvec(yaw_rad * UP) * r
     roll, pitch = POSE_ANGLES_DEG[pose]
     return Rotation.from_euler("ZYX", [yaw_rad, pitch * DEG, roll * DEG])
 

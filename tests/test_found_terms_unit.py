@@ -98,7 +98,7 @@ def test_not_determined_and_not_fitted_are_flagged_not_numbers(
     # a rig plan without negative rates cannot separate k2 from the bias: not determined, with the rig step
     one_sign = replace(session, ref_gyro_radps=np.where(session.ref_gyro_radps < 0, np.nan, session.ref_gyro_radps))
     poly = found_terms(fit_session(one_sign, AUTO)).polynomial
-    k2 = [f for f in poly if ".k2." in f.name]
+    k2 = [f for f in poly if f.name.startswith("gyro.k2.")]
     assert all(f.status == "not_determined" and "other direction" in f.reason for f in k2)
 
 
@@ -137,7 +137,11 @@ def test_api_page_and_certificate_carry_the_found_terms(store: dict[str, Any]) -
     ft = p["found_terms"]
     assert ft["time_offset"]["status"] == "fitted"
     assert ft["time_offset"]["value"] == pytest.approx(params.time_offset_s, rel=1e-12)
-    assert [t["status"] for t in ft["polynomial"]] == ["fitted"] * 3 + ["not_significant"] * 3
+    # the gyro's planted k2 kept, its k3 estimated and not kept; the accelerometer on a 1 g rig of face poses:
+    # neither term determined (one magnitude of specific force along each axis), the poses that would help named
+    assert [t["status"] for t in ft["polynomial"]] == (["fitted"] * 3 + ["not_significant"] * 3
+                                                       + ["not_determined"] * 6)
+    assert all("tilted" in t["reason"] and t["value"] is None for t in ft["polynomial"][6:])
     assert ft["polynomial"][4]["value"] is None and ft["polynomial"][4]["z"] is not None
     assert 'id="found-terms"' in page and 'data-name="gyro.k2.x" data-status="fitted"' in page
     assert 'data-name="time_offset" data-status="fitted"' in page
@@ -148,6 +152,9 @@ def test_api_page_and_certificate_carry_the_found_terms(store: dict[str, Any]) -
         assert "ppm/(deg/s)" in row.shown()
         with pytest.raises(KeyError):  # estimated, not kept: no row
             cert.parameter(f"gyro.k3.{a}")
+        for term in ("k2", "k3"):  # not determined: a row without a number
+            accel_row = cert.parameter(f"accel.{term}.{a}")
+            assert math.isnan(accel_row.value_si) and accel_row.group == "accelerometer"
     tau = cert.parameter("time_offset_s")
     assert tau.value_si == params.time_offset_s and tau.u_si == params.time_offset_std_s and "ms" in tau.shown()
 

@@ -47,11 +47,11 @@ def _fields(effect: str, sensor: str) -> tuple[str, ...]:
     return own or COMPENSATION[effect]
 
 
-def _why_not_fitted(params: ParameterSet, effect: str) -> str:
+def _why_not_fitted(params: ParameterSet, effect: str, sensor: str) -> str:
     if effect.startswith("temperature_"):
         return f"the fit has the terms but did not fit them here: {params.thermal.status}: {params.thermal.reason}"
     if effect == "scale_nonlinearity":
-        note = params.quality.scale_nonlinearity
+        note = params.quality.accel_scale_polynomial if sensor == "accel" else params.quality.scale_nonlinearity
         return (f"the fit has the term but did not fit it here: {note.status if note else None}: "
                 f"{note.reason if note else None}")
     if effect == "time_offset":
@@ -90,7 +90,7 @@ def compensation(
             fields = ", ".join(f for f in _fields(eff, sensor) if np.any(np.asarray(field_value(params, f)) != 0))
             out.append(Compensation(name, True, f"the calibration fits and applies it ({fields})"))
         else:
-            out.append(Compensation(name, False, _why_not_fitted(params, eff)))
+            out.append(Compensation(name, False, _why_not_fitted(params, eff, sensor)))
     if findings:  # each finding's corrected error on held-out segments, with and without its compensation
         out = [replace(c, gain=g) for c, g in zip(out, gains(session, findings, physics, options), strict=True)]
     return out

@@ -97,13 +97,15 @@ class FitOptions:
             ``a + b exp(-t/tau)`` (any tau), at least this (K).
         reference_temperature_degc: T_ref (degC); None: the unit's temperature at power-on (mean of the
             first second of the recording).
-        scale_nonlinearity: the gyro's scale-factor polynomial of IEEE Std 952, ``y = u + k2 u^2 + k3 u^3`` per
-            output axis (``u`` = M ref; Algorithm 1's line 6' inverts it): ``'auto'`` fits the odd k3 on the axes
-            whose rate steps hold at least two distinct rate magnitudes (with one, ``u^3`` is ``|u|^2 u``, a scale
-            error M already holds) and the even k2 where they also hold both signs, and keeps each term where its
-            Wald statistic exceeds ``nonlinearity_wald``; ``'off'`` (the default) never. The result says which
-            (``quality['scale_nonlinearity']``). (The older ``u + k u|u|`` term is no longer fitted; sets that
-            hold it still load and are applied.)
+        scale_nonlinearity: the scale-factor polynomial ``y = u + k2 u^2 + k3 u^3`` per output axis (``u`` = M
+            ref; Algorithm 1's line 6' inverts it), of the gyro (IEEE Std 952) and of the accelerometer:
+            ``'auto'`` fits the odd k3 on the axes whose blocks hold at least two distinct input magnitudes (with
+            one, ``u^3`` is ``|u|^2 u``, a scale error M already holds), the gyro's even k2 where its rate steps
+            also hold both signs, the accelerometer's where its poses hold +g, -g and 0 along the axis
+            (:mod:`station.fit.scale_polynomial`), and keeps each term where its Wald statistic exceeds
+            ``nonlinearity_wald``; ``'off'`` (the default) never. The result says which
+            (``quality['scale_nonlinearity']`` for the gyro, ``quality['accel_scale_polynomial']``). (The older
+            ``u + k u|u|`` term is no longer fitted; sets that hold it still load and are applied.)
         nonlinearity_wald: Wald statistic (z^2) a term must exceed to be kept (9: 3 sigma).
         time_offset: the sensor's lag behind the rig's reference (:mod:`station.fit.time_offset`): ``'auto'``
             estimates it on the transitions (moves, rate ramps) and keeps it where its Wald statistic exceeds
@@ -471,8 +473,9 @@ def _sample_design(
     dt: np.ndarray | None = None, order: int = 1,
 ) -> Rows:
     """The linear regressors of eq. (1) per sample: reference (if M is fitted here), 1, force (g-sensitivity);
-    with ``nonlinearity`` (the gyro reference) the polynomial's regressors (a superset: ``ref_i^2``, ``ref_i^3``); with
-    ``dt`` the temperature regressors the fit used up to ``order`` (a superset for the scale: every ``ref_i dT^j``).
+    with ``nonlinearity`` (the triad's reference) the polynomial's regressors (a superset: ``ref_i^2``,
+    ``ref_i^3``); with ``dt`` the temperature regressors the fit used up to ``order`` (a superset for the scale:
+    every ``ref_i dT^j``).
     Made for the rows asked only (the goodness of fit reads them per segment)."""
 
     def rows(lo: int, hi: int) -> np.ndarray:
@@ -540,35 +543,37 @@ def _top(note: ThermalFit, triad: str) -> int:
     return max([1, *o.get("bias", []), *o.get("scale", [])])
 
 
-def _gyro_nonlinearity(
-    session: Session, g_ref: np.ndarray, g_runs: list[tuple[int, int, int]], g_noise: NoiseEstimate,
-    options: FitOptions, g: dict[str, np.ndarray], g_tri: TriadLinear, g_blocks: Blocks, *, rate: bool,
+def _triad_polynomial(
+    session: Session, triad: str, ref: np.ndarray, runs: list[tuple[int, int, int]], noise: NoiseEstimate,
+    options: FitOptions, p0: dict[str, np.ndarray], tri0: TriadLinear, blocks0: Blocks, *,
     dt: np.ndarray | None, orders: tuple[list[int], list[int]] | None,
 ) -> tuple[dict[str, np.ndarray], TriadLinear, Blocks, dict[str, Any]]:
-    """The gyro refitted with the IEEE 952 polynomial ``u + k2 u^2 + k3 u^3`` (see
-    :attr:`FitOptions.scale_nonlinearity`) on the axes and terms the rate steps identify: the odd k3 needs two
-    or more rate magnitudes (with one, ``u^3 = |u|^2 u`` is a scale error M already holds), the even k2 two or
-    more magnitudes and both signs. Two passes, the regressors' M^ from the previous one; a term is kept where
-    its Wald statistic passes. Returns the triad's parameters, fits, blocks and a note (``status`` fitted /
-    not_identifiable / not_significant; per axis the terms identifiable, kept and their z)."""
-    if not rate:
-        return g, g_tri, g_blocks, no_rate_note(options.nonlinearity_wald)
-    m_hat = np.asarray(g["misalignment"], dtype=float)
-    use, base = identifiable_terms(g_blocks, m_hat, options.nonlinearity_wald)
+    """A triad refitted with the IEEE scale polynomial ``u + k2 u^2 + k3 u^3`` (see
+    :attr:`FitOptions.scale_nonlinearity`) on the axes and terms its blocks identify
+    (:func:`station.fit.scale_polynomial.identifiable_terms`: the gyro's rate steps, the accelerometer's poses).
+    Two passes, the regressors' M^ from the previous one; a term is kept where its Wald statistic passes.
+    Returns the triad's parameters, fits, blocks and a note (``status`` fitted / not_identifiable /
+    not_significant; per axis the terms identifiable, kept and their z); the first three unchanged when no term
+    is kept."""
+    gyro = triad == "gyro"
+    data = session.gyro_radps if gyro else session.accel_mps2
+    g_sens = options.g_sensitivity and gyro
+    m_hat = np.asarray(p0["misalignment"], dtype=float)
+    use, base = identifiable_terms(blocks0, m_hat, options.nonlinearity_wald, triad)
 
     def refit(poly: Polynomial) -> tuple[dict[str, np.ndarray], tuple[TriadLinear, Blocks]]:
         if dt is None:
-            tri, blocks = _fit_triad(session, session.gyro_radps, g_ref, g_runs, g_noise, options, with_ref=True,
-                                     g_sens=options.g_sensitivity, triad="gyro", nonlin_m=poly)
+            tri, blocks = _fit_triad(session, data, ref, runs, noise, options, with_ref=True, g_sens=g_sens,
+                                     triad=triad, nonlin_m=poly)
             return unpack_triad(tri), (tri, blocks)
         tri, blocks, coeff, _ = _fit_triad_thermal(
-            session, session.gyro_radps, g_ref, g_runs, g_noise, options, with_ref=True,
-            g_sens=options.g_sensitivity, triad="gyro", dt=dt, m_hat=poly[0], orders=orders, nonlin_m=poly)
+            session, data, ref, runs, noise, options, with_ref=True, g_sens=g_sens, triad=triad, dt=dt,
+            m_hat=poly[0], orders=orders, nonlin_m=poly)
         return {**unpack_triad(tri), **coeff}, (tri, blocks)
 
     fitted, note = select_polynomial(refit, m_hat, use, base, options.nonlinearity_wald)
     if fitted is None:
-        return g, g_tri, g_blocks, note
+        return p0, tri0, blocks0, note
     p, (tri, blocks) = fitted
     return p, tri, blocks, note
 
@@ -626,11 +631,19 @@ def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
             "gyro": {"bias": g_orders[0], "scale": g_orders[1]},
         })
     nonlin_note: dict[str, Any] | None = None
+    a_poly_note: dict[str, Any] | None = None
     if options.scale_nonlinearity != "off":
-        with numerics("gyroscope fit with the scale nonlinearity"):
-            g, g_tri, g_blocks, nonlin_note = _gyro_nonlinearity(
-                session, g_ref, g_runs, g_noise, options, g, g_tri, g_blocks, rate=gyro_method == "rate", dt=dt,
-                orders=g_orders if dt is not None else None)
+        with numerics("accelerometer fit with the scale polynomial"):
+            a, a_tri, a_blocks, a_poly_note = _triad_polynomial(
+                session, "accel", session.ref_accel_mps2, a_runs, a_noise, options, a, a_tri, a_blocks, dt=dt,
+                orders=a_orders if dt is not None else None)
+        if gyro_method != "rate":
+            nonlin_note = no_rate_note(options.nonlinearity_wald)
+        else:
+            with numerics("gyroscope fit with the scale nonlinearity"):
+                g, g_tri, g_blocks, nonlin_note = _triad_polynomial(
+                    session, "gyro", g_ref, g_runs, g_noise, options, g, g_tri, g_blocks, dt=dt,
+                    orders=g_orders if dt is not None else None)
     angle_report: dict[str, Any] = {}
     if gyro_method == "angle":
         bias_t = g["bias_static"] + np.zeros((len(session), 3))
@@ -669,10 +682,14 @@ def _fit_session(session: Session, options: FitOptions) -> ParameterSet:
         },
         known_angle=angle_report or None,
         scale_nonlinearity=None if nonlin_note is None else NonlinearityNote.from_dict(nonlin_note),
+        accel_scale_polynomial=None if a_poly_note is None else NonlinearityNote.from_dict(a_poly_note),
         time_offset=offset_note,
     )
     deg = float(np.degrees(1.0))
-    a_design = _sample_design(len(session), session.ref_accel_mps2, None, dt=dt, order=_top(thermal_note, "accel"))
+    a_design = _sample_design(len(session), session.ref_accel_mps2, None,
+                              nonlinearity=session.ref_accel_mps2 if (np.any(a.get("scale_quadratic", 0.0))
+                                                                      or np.any(a.get("scale_cubic", 0.0))) else None,
+                              dt=dt, order=_top(thermal_note, "accel"))
     g_design = _sample_design(len(session), g_ref if gyro_method == "rate" else None,
                               session.ref_accel_mps2 if options.g_sensitivity else None,
                               nonlinearity=g_ref if (np.any(g.get("scale_quadratic", 0.0))

@@ -1,15 +1,27 @@
-"""The gyro's IEEE 952 scale polynomial ``y = u + k2 u^2 + k3 u^3`` in a fit: which terms the rate steps identify,
-their regressors, and the two-pass selection by the Wald test.
+"""The IEEE scale polynomial ``y = u + k2 u^2 + k3 u^3`` in a fit (IEEE Std 952 for the gyro, the same form as
+IEEE Std 1293's accelerometer model): which terms the blocks identify, their regressors, and the two-pass
+selection by the Wald test.
 
 Shared by the rig's fit (:func:`station.fit.calibrate.fit_session`) and the line's joint fit
 (:mod:`station.fit.joint_found`): both ask the same questions of their blocks and keep a term by the same rule;
 only how a triad is refitted with the extra columns differs (a callable here).
 
+The gyro (rate steps):
+
 * k3 (odd) where the axis sees **two or more rate magnitudes** (with one, ``u^3 = |u|^2 u`` is a scale error M
   already holds);
-* k2 (even) where it also sees **both signs** (with one sign, ``u^2`` is not separable from the bias and ``u^3``);
-* a term kept where its Wald statistic ``(k / sigma_k)^2`` reaches the threshold, in two passes (the regressors'
-  ``u = M^_k . ref`` from the previous pass's M^).
+* k2 (even) where it also sees **both signs** (with one sign, ``u^2`` is not separable from the bias and ``u^3``).
+
+The accelerometer (poses), by the same rule: k3 where the poses hold two or more magnitudes of specific force
+along the axis, k2 where they also hold both signs. On a 1 g rig of face-up poses (+g, -g and about 0 along each
+axis) neither is fitted: k3 is a scale error there, and although ``k2 g^2`` could be told from the bias (the mean
+of the +g and -g poses less the poses across the axis), with it the three levels would carry three parameters (b,
+M, k2) and nothing would be left to test them: one pose off its reference would be taken for a k2 and applied.
+Tilted poses (an axis at ``g cos theta``) determine both terms and leave that test (``not_identifiable`` says
+so per axis).
+
+In both, a term is kept where its Wald statistic ``(k / sigma_k)^2`` reaches the threshold, in two passes (the
+regressors' ``u = M^_k . ref`` from the previous pass's M^).
 """
 
 from __future__ import annotations
@@ -75,9 +87,11 @@ def rate_signs(blocks: Blocks, m_row: np.ndarray) -> int:
     return int(np.any(big > 0)) + int(np.any(big < 0))
 
 
-def polynomial_rule(wald: float) -> str:
+def polynomial_rule(wald: float, triad: str = "gyro") -> str:
     """The selection rule as the note states it."""
-    return (f"IEEE 952 u + k2 u^2 + k3 u^3 per axis: k3 where the rate steps hold >= 2 rate magnitudes, k2 where "
+    steps = "poses hold >= 2 magnitudes of specific force along the axis" if triad == "accel" else \
+        "rate steps hold >= 2 rate magnitudes"
+    return (f"{'IEEE 952 ' if triad == 'gyro' else ''}u + k2 u^2 + k3 u^3 per axis: k3 where the {steps}, k2 where "
             f"they also hold both signs; a term kept where (k/sigma_k)^2 >= {wald:g}")
 
 
@@ -87,23 +101,29 @@ def no_rate_note(wald: float) -> dict[str, Any]:
             "reason": "no rate steps (M_w from known angles): the nonlinearity needs rates"}
 
 
-def identifiable_terms(blocks: Blocks, m_hat: np.ndarray, wald: float) -> tuple[np.ndarray, dict[str, Any]]:
-    """Which terms the rate blocks identify per axis, (3, 2) bool (k2, k3), and the note's common part: the rule,
-    rate levels and signs per axis, the axes per term, and for each axis lacking a term the rig step that would
-    separate it (``not_identifiable``)."""
+def identifiable_terms(
+    blocks: Blocks, m_hat: np.ndarray, wald: float, triad: str = "gyro"
+) -> tuple[np.ndarray, dict[str, Any]]:
+    """Which terms the blocks identify per axis, (3, 2) bool (k2, k3), and the note's common part: the rule,
+    levels and signs per axis, the axes per term, and
+    for each axis lacking a term the rig step that would separate it (``not_identifiable``). ``triad``:
+    ``'gyro'`` (rate steps) or ``'accel'`` (poses; see the module's rules)."""
     levels = [nonlinearity_levels(blocks, m_hat[k]) for k in range(3)]
     signs = [rate_signs(blocks, m_hat[k]) for k in range(3)]
     use = np.array([[lv >= 2 and sg == 2, lv >= 2] for lv, sg in zip(levels, signs, strict=True)])
     identifiable = {"k2": [AXES[k] for k in range(3) if use[k, 0]], "k3": [AXES[k] for k in range(3) if use[k, 1]]}
     missing = []
     for k in range(3):
-        if not use[k, 1]:
+        if not use[k, 1] and triad == "accel":
+            missing.append(f"{AXES[k]}: one magnitude of specific force, neither term (add poses tilted so that "
+                           "the axis sees a second magnitude, e.g. g cos 60 deg, in both directions)")
+        elif not use[k, 1]:
             missing.append(f"{AXES[k]}: one rate magnitude, neither term (add a step at a second magnitude, "
                            "e.g. 50 and 200 deg/s)")
         elif not use[k, 0]:
             missing.append(f"{AXES[k]}: one sign, k2 u^2 not separable from the bias and k3 (add the same "
                            "magnitudes in the other direction)")
-    base: dict[str, Any] = {"rule": polynomial_rule(wald), "levels": levels, "signs": signs,
+    base: dict[str, Any] = {"rule": polynomial_rule(wald, triad), "levels": levels, "signs": signs,
                             "identifiable": identifiable}
     if missing:
         base["not_identifiable"] = missing

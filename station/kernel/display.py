@@ -114,6 +114,9 @@ DISPLAYS: dict[str, Display] = {d.quantity: d for d in (
     Display("nonlinearity", "ppm/(deg/s)", 1e6 / _DEG_PER_RAD, "1/(rad/s)", label="scale nonlinearity"),
     Display("nonlinearity_cubic", "ppm/(deg/s)^2", 1e6 / _DEG_PER_RAD**2, "1/(rad/s)^2",
             label="cubic scale nonlinearity"),
+    Display("accel_nonlinearity", "ppm/g", 1e6 * G0_MPS2, "1/(m/s^2)", label="accelerometer scale nonlinearity"),
+    Display("accel_nonlinearity_cubic", "ppm/g^2", 1e6 * G0_MPS2**2, "1/(m/s^2)^2",
+            label="accelerometer cubic scale nonlinearity"),
     Display("temperature", "degC", 1.0, "degC", label="temperature"),
     Display("count", "", 1.0, "1", label="count"),
     Display("ratio", "", 1.0, "1", label="ratio"),
@@ -122,7 +125,8 @@ DISPLAYS: dict[str, Display] = {d.quantity: d for d in (
 #: SI unit -> the quantity of a value in it, where the unit alone decides.
 _BY_SI_UNIT = {"m/s^2": "acceleration", "rad/s": "angular_rate", "s": "time_constant", "m/s^2/K": "accel_tempco",
                "rad/s/K": "gyro_tempco", "1/K": "scale_tempco", "degC": "temperature", "1/(rad/s)": "nonlinearity",
-               "1/(rad/s)^2": "nonlinearity_cubic"}
+               "1/(rad/s)^2": "nonlinearity_cubic", "1/(m/s^2)": "accel_nonlinearity",
+               "1/(m/s^2)^2": "accel_nonlinearity_cubic"}
 
 
 def display_for(quantity: str) -> Display:

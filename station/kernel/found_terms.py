@@ -1,9 +1,10 @@
 """The found terms of a parameter set with their determinability, for people and the JSON API.
 
-The time offset tau (``ParameterSet.time_offset_s``) and the gyro's IEEE 952 scale polynomial (``scale_quadratic``
-k2, ``scale_cubic`` k3 per axis) are fitted where the recording determines them and kept where significant
-(docs/found-terms.md). What the set holds for them is a number (0 when not kept); what the fit could say about them
-is in its notes (``quality.time_offset``, ``quality.scale_nonlinearity``). :func:`found_terms` reads both into one
+The time offset tau (``ParameterSet.time_offset_s``) and the scale polynomials of the gyro (IEEE 952) and the
+accelerometer (``scale_quadratic`` k2, ``scale_cubic`` k3 per axis) are fitted where the recording determines them
+and kept where significant (docs/found-terms.md). What the set holds for them is a number (0 when not kept); what
+the fit could say about them is in its notes (``quality.time_offset``, ``quality.scale_nonlinearity`` for the gyro,
+``quality.accel_scale_polynomial``). :func:`found_terms` reads both into one
 typed summary, so that a term the recording could not determine is shown as such (no number), not as a 0:
 
 * ``fitted``: kept, in the set, applied by Algorithm 1 (value and standard uncertainty);
@@ -68,7 +69,7 @@ class FoundTerm:
 
 @dataclass(frozen=True)
 class FoundTerms:
-    """The time offset and the six polynomial terms (gyro k2, k3 per axis) of one set."""
+    """The time offset and the twelve polynomial terms (gyro, then accelerometer: k2, k3 per axis) of one set."""
 
     time_offset: FoundTerm
     polynomial: tuple[FoundTerm, ...]
@@ -81,9 +82,11 @@ class FoundTerms:
         return {"time_offset": self.time_offset.to_dict(), "polynomial": [t.to_dict() for t in self.polynomial]}
 
 
-def _not_fitted(params: ParameterSet) -> str:
+def _not_fitted(params: ParameterSet, triad: str = "gyro") -> str:
     """Why the fit did not try: the term was switched off, or the set predates it (the line's joint fit estimated
-    neither term before it took them)."""
+    neither term before it took them, and does not estimate the accelerometer's polynomial)."""
+    if "line" in params.source and triad == "accel":
+        return "the line's joint fit does not estimate the accelerometer's scale polynomial"
     if "line" in params.source:
         return ("the line's joint fit did not estimate it (switched off, or a set written before the joint fit "
                 "estimated these terms)")
@@ -106,18 +109,22 @@ def _time_offset(params: ParameterSet) -> FoundTerm:
                      reason=note.reason)
 
 
-def _polynomial(params: ParameterSet) -> tuple[FoundTerm, ...]:
-    note = params.quality.scale_nonlinearity
+#: The SI unit of the polynomial's k2 and k3 per triad.
+_POLY_UNITS = {"gyro": ("1/(rad/s)", "1/(rad/s)^2"), "accel": ("1/(m/s^2)", "1/(m/s^2)^2")}
+
+
+def _polynomial(params: ParameterSet, triad: str) -> tuple[FoundTerm, ...]:
+    note = params.quality.scale_nonlinearity if triad == "gyro" else params.quality.accel_scale_polynomial
     detail = dict(note.detail) if note is not None else {}
-    g = params.gyro
+    g = params.gyro if triad == "gyro" else params.accel
     out: list[FoundTerm] = []
-    for term, field, unit in (("k2", "scale_quadratic", "1/(rad/s)"), ("k3", "scale_cubic", "1/(rad/s)^2")):
+    for term, field, unit in zip(("k2", "k3"), ("scale_quadratic", "scale_cubic"), _POLY_UNITS[triad], strict=True):
         values, stds = getattr(g, field), getattr(g, f"{field}_std")
         identifiable = (detail.get("identifiable") or {}).get(term)
         zs = (detail.get("z") or {}).get(term) or [math.nan] * 3
         missing = detail.get("not_identifiable") or []
         for k, a in enumerate(_AXES):
-            name = f"gyro.{term}.{a}"
+            name = f"{triad}.{term}.{a}"
             value, std = float(values[k]), float(stds[k])
             z = float(zs[k]) if isinstance(zs[k], int | float) else math.nan
             if value != 0.0:
@@ -126,7 +133,7 @@ def _polynomial(params: ParameterSet) -> tuple[FoundTerm, ...]:
                 # no note, or the note of the older u|u| term: the polynomial was not fitted
                 why = note.reason if note is not None and note.status == "not_identifiable" else ""
                 status = "not_determined" if why else "not_fitted"
-                out.append(FoundTerm(name, status, unit=unit, reason=why or _not_fitted(params)))
+                out.append(FoundTerm(name, status, unit=unit, reason=why or _not_fitted(params, triad)))
             elif a not in identifiable:
                 why = next((m for m in missing if isinstance(m, str) and m.startswith(f"{a}:")), note.reason)
                 out.append(FoundTerm(name, "not_determined", unit=unit, reason=why))
@@ -137,5 +144,5 @@ def _polynomial(params: ParameterSet) -> tuple[FoundTerm, ...]:
 
 
 def found_terms(params: ParameterSet) -> FoundTerms:
-    """The set's time offset and gyro polynomial terms, each with what the fit could say about it."""
-    return FoundTerms(_time_offset(params), _polynomial(params))
+    """The set's time offset and the polynomial terms of both triads, each with what the fit could say about it."""
+    return FoundTerms(_time_offset(params), (*_polynomial(params, "gyro"), *_polynomial(params, "accel")))

@@ -374,7 +374,7 @@ class GoodnessOfFit:
 
 @dataclass(frozen=True)
 class NonlinearityNote:
-    """Whether the gyro scale nonlinearity ``u + k u|u|`` was fitted: ``status`` (``'fitted'``,
+    """Whether a triad's scale polynomial ``u + k2 u^2 + k3 u^3`` was fitted: ``status`` (``'fitted'``,
     ``'not_significant'``, ``'not_identifiable'``), the axes kept, the rule, a reason when not fitted, and the
     rest of the fit's note (rate levels per axis, Wald statistics) read-only in ``detail``."""
 
@@ -396,12 +396,12 @@ class NonlinearityNote:
         return out
 
     @classmethod
-    def from_dict(cls, d: Any) -> NonlinearityNote:
+    def from_dict(cls, d: Any, name: str = "scale_nonlinearity") -> NonlinearityNote:
         if not isinstance(d, dict) or not isinstance(d.get("status"), str):
-            raise TypeError("'quality.scale_nonlinearity' must be an object with a 'status'")
+            raise TypeError(f"'quality.{name}' must be an object with a 'status'")
         axes = d.get("axes", [])
         if not isinstance(axes, list) or not all(isinstance(a, str) for a in axes):
-            raise TypeError("'quality.scale_nonlinearity.axes' must be a list of axis names")
+            raise TypeError(f"'quality.{name}.axes' must be a list of axis names")
         detail = {k: v for k, v in d.items() if k not in ("status", "rule", "axes", "reason")}
         return cls(status=d["status"], axes=tuple(axes), rule=str(d.get("rule", "")), reason=str(d.get("reason", "")),
                    detail=json.loads(json.dumps(detail)))
@@ -499,7 +499,9 @@ class FitQuality:
         outliers: samples the noise estimate left out, per triad and axis.
         drift_likelihood_ratio: eq. 3's drift against none, per triad and axis.
         known_angle: the known-angle gyro fit's report (a Ferraris recording), read-only JSON.
-        scale_nonlinearity: the nonlinearity note (None when the fit did not consider it).
+        scale_nonlinearity: the gyro's scale polynomial note (None when the fit did not consider it).
+        accel_scale_polynomial: the accelerometer's scale polynomial note (None when the fit did not consider it,
+            e.g. a set from before the accelerometer's polynomial was fitted).
         time_offset: the time-offset note (None when the fit did not consider it).
         goodness_of_fit: the test against the recording (None: not tested, e.g. an image or an old file).
         rig_free: a rig-free fit's report (``station-rigfree/1``: convention, gravity-norm and move figures,
@@ -518,6 +520,7 @@ class FitQuality:
     drift_likelihood_ratio: Mapping[str, tuple[float, ...]] | None = None
     known_angle: Mapping[str, Any] | None = None
     scale_nonlinearity: NonlinearityNote | None = None
+    accel_scale_polynomial: NonlinearityNote | None = None
     goodness_of_fit: GoodnessOfFit | None = None
     rig_free: Mapping[str, Any] | None = None
     determinability_rule: str = ""
@@ -527,7 +530,7 @@ class FitQuality:
     time_offset: TimeOffsetNote | None = None
 
     _KNOWN = ("rig_free", "accel", "gyro", "gyro_scale_method", "outliers", "drift_likelihood_ratio", "known_angle",
-              "scale_nonlinearity", "goodness_of_fit", "determinability", "time_offset")
+              "scale_nonlinearity", "accel_scale_polynomial", "goodness_of_fit", "determinability", "time_offset")
 
     @property
     def passed(self) -> bool:
@@ -566,6 +569,8 @@ class FitQuality:
             out["known_angle"] = dict(self.known_angle)
         if self.scale_nonlinearity is not None:
             out["scale_nonlinearity"] = self.scale_nonlinearity.to_dict()
+        if self.accel_scale_polynomial is not None:
+            out["accel_scale_polynomial"] = self.accel_scale_polynomial.to_dict()
         if self.time_offset is not None:
             out["time_offset"] = self.time_offset.to_dict()
         if self.goodness_of_fit is not None:
@@ -619,6 +624,9 @@ class FitQuality:
             known_angle=section("known_angle"),
             scale_nonlinearity=(None if d.get("scale_nonlinearity") is None
                                 else NonlinearityNote.from_dict(d["scale_nonlinearity"])),
+            accel_scale_polynomial=(None if d.get("accel_scale_polynomial") is None
+                                    else NonlinearityNote.from_dict(d["accel_scale_polynomial"],
+                                                                    "accel_scale_polynomial")),
             goodness_of_fit=None if d.get("goodness_of_fit") is None else GoodnessOfFit.from_dict(d["goodness_of_fit"]),
             time_offset=None if d.get("time_offset") is None else TimeOffsetNote.from_dict(d["time_offset"]),
             rig_free=section("rig_free"),

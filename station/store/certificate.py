@@ -229,13 +229,14 @@ def _parameters(params: ParameterSet, checks: dict[str, LimitCheck]) -> list[Cer
                 c.low if c is not None else None, c.high if c is not None else None, verdict, _display(name, unit)))
     # the found terms: a kept one with its value, one the fit estimated but the recording did not determine as "—"
     # (not determined: no number); a term the fit did not try, or estimated and not kept, has no row
-    labels = {"k2": "scale polynomial k2 {a} (IEEE 952, u²)", "k3": "scale polynomial k3 {a} (IEEE 952, u³)"}
+    labels = {"k2": "scale polynomial k2 {a} ({std}, u²)", "k3": "scale polynomial k3 {a} ({std}, u³)"}
     found = found_terms(params)
     for t in found.polynomial:
         if t.status in ("fitted", "not_determined"):
-            _, term, a = t.name.split(".")
-            out.append(CertificateParameter(t.name, "gyroscope", labels[term].format(a=a), t.value, t.std, t.unit,
-                                            None, None, "", _display(t.name, t.unit)))
+            triad, term, a = t.name.split(".")
+            group, standard = ("gyroscope", "IEEE 952") if triad == "gyro" else ("accelerometer", "IEEE 1293")
+            out.append(CertificateParameter(t.name, group, labels[term].format(a=a, std=standard), t.value, t.std,
+                                            t.unit, None, None, "", _display(t.name, t.unit)))
     t = found.time_offset
     if t.status in ("fitted", "not_determined"):
         out.append(CertificateParameter("time_offset_s", "timing", "time offset (unit minus rig)", t.value,
