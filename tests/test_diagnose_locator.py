@@ -165,6 +165,7 @@ def test_far_samples_in_the_moves_are_counted_and_told_held() -> None:
     class _Sd:
         sensor = "gyro"
         sigma = np.full(3, 1e-3)
+        censored = None  # no saturated segment
 
     count, total, rep = locator._move_samples(session, _Sd(), gyro_h - ramp)
     assert total[0] == 1500

@@ -362,7 +362,7 @@ def _far_samples(session: Any, sd: Any, residual: np.ndarray
     held = np.zeros(3, dtype=int)
     settled = np.zeros(3, dtype=int)
     total = settled_n = 0
-    censored = getattr(sd, "censored", None)  # saturated segments (censoring.py): not this triad's data
+    censored = sd.censored  # saturated segments (censoring.py): not this triad's data
     for s in session.segments():
         if len(s) < 10 or (censored is not None and censored[s.start]):
             continue
