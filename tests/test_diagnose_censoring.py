@@ -22,7 +22,7 @@ from typer.testing import CliRunner
 
 from station.cli import app
 from station.diagnose import diagnose
-from station.diagnose.censoring import NEIGHBOURS_S, censor
+from station.diagnose.censoring import CURVE_POINTS, NEIGHBOURS_S, censor
 from station.diagnose.results import FORMAT, FORMAT_CENSORED, ReportFormatError, load_report
 from station.fit.calibrate import fit_session
 from station.fit.checks import saturations
@@ -176,6 +176,35 @@ def test_every_hold_clipped_is_not_determined() -> None:
     out = rep.to_json()
     assert out["base_fit"] is None and out["format"] == FORMAT_CENSORED
     assert load_report(out).to_json() == out
+
+
+def test_not_determined_plot_shows_the_recording_and_its_censored_part(tmp_path: Path) -> None:
+    """No base fit, so no residual to draw: ``--plot`` draws the clipped sensor as recorded and what censoring
+    leaves of it (NaN in every censored segment, the recording elsewhere), and the report is printed as well."""
+    rec = indepgen.generate(SEEDS[0])
+    ref = np.nan_to_num(rec.session.ref_gyro_radps[:, 1])
+    low = np.abs(ref[(rec.session.kind == int(Kind.RATE)) & (np.abs(ref) > DEG)]).min()
+    session = clip_axis(rec.session, "gyro", 1, math.floor(0.8 * low / GYRO_LSB) * GYRO_LSB)
+    d = diagnose(session, resamples=0)
+    (curve,) = d.curves
+    assert curve.title == "gyro recording" and curve.labels == ("as recorded", "left after censoring")
+    every = math.ceil(len(session) / CURVE_POINTS)
+    assert len(curve.t_s) <= CURVE_POINTS and np.array_equal(curve.t_s, session.t_s[::every])
+    assert np.array_equal(curve.before, session.gyro_radps[::every])
+    (entry,) = [u.censored for u in d.report.unexplained if u.censored is not None]
+    gone = np.zeros(len(session), dtype=bool)
+    for g in session.segments():
+        if g.index in entry.segments:
+            gone[g.start:g.stop] = True
+    gone = gone[::every]
+    assert gone.any() and (~gone).any()
+    assert np.isnan(curve.after[gone]).all() and np.array_equal(curve.after[~gone], curve.before[~gone])
+    path, png = tmp_path / "clipped.csv", tmp_path / "clipped.png"
+    write_session(session, path)
+    out = CliRunner().invoke(app, ["diagnose", str(path), "--resamples", "0", "--plot", str(png)])
+    assert out.exit_code == 0, out.output
+    assert "UNEXPLAINED (gyro, axis y" in out.output and f"wrote {png}" in out.output
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
 def test_accel_output_stage_below_one_g() -> None:

@@ -31,6 +31,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from station.diagnose.outcome import ResidualCurve
 from station.diagnose.residuals import Baseline
 from station.diagnose.results import Censored, Unexplained
 from station.fit.checks import AXES, check_accel_design, check_gyro_design, saturations
@@ -41,6 +42,8 @@ from station.session.model import Session
 #: Samples within this time (s) of a sample at the rail are excluded with it: a digital low-pass after a
 #: saturated front end (bandwidth >= 20 Hz, a first-order time constant <= 8 ms) settles to 1e-3 in 7 of them.
 NEIGHBOURS_S = 0.05
+#: At most this many samples per curve in the figure of a recording that determines no base fit.
+CURVE_POINTS = 5000
 #: What the input each sensor's axis measures is called (the covariate the clip follows).
 INPUT = {"gyro": "rate about", "accel": "specific force along"}
 #: The display quantity of each sensor's input.
@@ -73,6 +76,20 @@ class Censoring:
         accel, gyro = (baseline.sensor(s) if s not in masks else replace(baseline.sensor(s), censored=masks[s])
                        for s in ("accel", "gyro"))
         return replace(baseline, accel=accel, gyro=gyro)
+
+    def curves(self) -> list[ResidualCurve]:
+        """The figure's rows where the censored data determine no base fit (no residual to show): per censored
+        sensor its recording over time since power-on and what censoring leaves of it (NaN where censored), every
+        k-th sample so that at most :data:`CURVE_POINTS` are drawn (a rail is flat: a stride keeps it)."""
+        out = []
+        every = max(1, math.ceil(len(self.session) / CURVE_POINTS))
+        for sensor, mask in self.masks:
+            x = np.array(self.session.gyro_radps if sensor == "gyro" else self.session.accel_mps2, dtype=float)
+            left = x.copy()
+            left[mask] = np.nan
+            out.append(ResidualCurve(f"{sensor} recording", np.asarray(self.session.t_s)[::every], x[::every],
+                                     left[::every], ("as recorded", "left after censoring")))
+        return out
 
     def unexplained(self) -> tuple[Unexplained, ...]:
         """The report's entries: one :class:`Unexplained` per saturated axis."""
@@ -144,4 +161,4 @@ def censor(session: Session) -> Censoring:
                      tuple(masks.items()))
 
 
-__all__ = ["NEIGHBOURS_S", "Censoring", "censor"]
+__all__ = ["CURVE_POINTS", "NEIGHBOURS_S", "Censoring", "censor"]

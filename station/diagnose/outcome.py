@@ -13,12 +13,17 @@ from station.diagnose.results import DiagnosisReport
 
 
 class ResidualCurve(NamedTuple):
-    """One finding's block residual, before and after it was taken into the model (m, 3), sensor units (SI)."""
+    """One finding's block residual, before and after it was taken into the model (m, 3), sensor units (SI).
+
+    ``labels`` name the two panels where they are not the block residual (None): a recording whose censored data
+    determine no base fit has no residual, and its curves are the recording itself and what censoring leaves of it
+    (NaN where censored)."""
 
     title: str  # "SENSOR EFFECT", e.g. "accel lever_arm"
     t_s: np.ndarray  # block times (s)
     before: np.ndarray
     after: np.ndarray
+    labels: tuple[str, str] | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -30,7 +35,8 @@ class Diagnosis:
             ``station-diagnosis/1`` object).
         baseline: the base fit and residuals; None where the recording, its saturated segments censored, determines
             no base fit (:mod:`station.diagnose.censoring`).
-        curves: per finding, its block residual before and after.
+        curves: per finding, its block residual before and after; where no base fit is determined, per censored
+            sensor its recording and what censoring leaves of it.
         rerun: the simulator re-runs (base and extended), None when the recording cannot drive it.
     """
 

@@ -149,7 +149,7 @@ def _not_determined(session: Session, censoring: Censoring) -> Diagnosis:
         location={}, warmup_tc_range_s=None, base_fit=None,
         rerun=RerunError("not run: with the saturated segments censored the base fit is not determined "
                          "(see unexplained: not_determined)"))
-    return Diagnosis(report=report, baseline=None, curves=[], rerun=None)
+    return Diagnosis(report=report, baseline=None, curves=censoring.curves(), rerun=None)
 
 
 def save_figure(diagnosis: Diagnosis, path: str | os.PathLike[str]) -> None:
@@ -169,11 +169,11 @@ def save_figure(diagnosis: Diagnosis, path: str | os.PathLike[str]) -> None:
     if not curves:
         b = diagnosis.baseline
         if b is None:
-            raise FitError("no figure: the censored recording determines no base fit (see the report)")
+            raise FitError("no figure: the recording determines no base fit (see the report)")
         curves = [ResidualCurve(f"{sd.sensor} base model", sd.t_s, sd.y, sd.y) for sd in (b.accel, b.gyro)]
-    for title, t, before, after in curves:
-        rows.append((title.split(" ")[0], f"{title}: block residual before", f"{title}: block residual after",
-                     t, before, after))
+    for title, t, before, after, labels in curves:
+        left, right = labels or ("block residual before", "block residual after")
+        rows.append((title.split(" ")[0], f"{title}: {left}", f"{title}: {right}", t, before, after))
     runs = diagnosis.rerun
     if runs is not None:
         for sensor in ("accel", "gyro"):

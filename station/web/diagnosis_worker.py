@@ -171,8 +171,10 @@ def _curves_of(diagnosis: Diagnosis) -> tuple[Curve, ...]:
             t, before, after = (np.asarray(a, dtype=float) for a in (t, before, after))
         except (TypeError, ValueError):
             continue
+        labels = getattr(item, "labels", None) or ("before", "after")
         if before.ndim == 2 and before.shape == after.shape and before.shape[0] == t.size:
-            out.append(Curve(str(title), "rad/s" if str(title).startswith("gyro") else "m/s^2", t, before, after))
+            out.append(Curve(str(title), "rad/s" if str(title).startswith("gyro") else "m/s^2", t, before, after,
+                             (str(labels[0]), str(labels[1]))))
     baseline = diagnosis.baseline
     runs = diagnosis.rerun  # the simulator re-run with the findings switched on, when present
     if out and baseline is not None and runs is not None and runs.extended is not runs.base:
