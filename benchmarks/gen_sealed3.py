@@ -654,7 +654,7 @@ def generate(seed: int, kind: str, *, rate_hz: float | None = None) -> Recording
         add["accel"][:, axis] = sgn * size * power
         params.update(v_res_dps=v_res / DEG, q=q)
     elif kind == "fifo_drop":
-        drops = max(2, int(round(size * 1e-3 * fs)))
+        drops = max(2, round(size * 1e-3 * fs))
         when = np.sort(kr.uniform(0.0, float(t[-1]), drops))
         slip = np.searchsorted(when, t, side="right") / fs
         late = motion(plan, t + slip)
