@@ -68,12 +68,15 @@ def _white_sigma(sensor: str) -> np.ndarray:
     return np.std(np.diff(y, axis=0), axis=0) / math.sqrt(2.0)
 
 
+#: Segment kinds where a kind may leak a little (not asserted either way): the pose after a ramp carries the end
+#: of the supply regulator's lag.
+MAY = {"supply_sag": {"accel": {"pose"}}}
 #: Where each kind changes the output (sensor -> segment kinds) as its physics says; everywhere else its recording
 #: is the ``none`` recording bit for bit. LOCATION must lie inside this. ``fifo_drop`` is checked apart (its last
 #: samples of a hold already show the next move: the data are late).
 ACTS = {
     "shock_steps": {"gyro": {"pose", "rate", "move"}},
-    "supply_sag": {"accel": {"pose", "rate", "move"}},  # the pose after a ramp: the regulator's lag
+    "supply_sag": {"accel": {"rate", "move"}},
     "warm_noise": {"gyro": {"rest", "pose", "rate", "move"}},
     "log_settling": {"accel": {"rest", "pose", "rate", "move"}},
     "scale_warmup": {"gyro": {"rate", "move"}},
@@ -117,7 +120,7 @@ def test_acts_where_it_says_and_nowhere_else(kind: str) -> None:
             sel = kinds == code
             if label in acts.get(sensor, set()):
                 assert np.max(np.abs(d[sel])) > 5 * _lsb(sensor), (kind, sensor, label)
-            else:
+            elif label not in MAY.get(kind, {}).get(sensor, set()):
                 assert np.all(d[sel] == 0.0), (kind, sensor, label)
         if sensor in sensors:
             where = np.isin(kinds, [c for c, lab in LABELS.items() if lab in segs])
@@ -196,7 +199,7 @@ def test_design_snr_of_every_kind() -> None:
     g = _gen()
     for kind in g.SEALED3:
         snr = g.design_snr(_rec(kind))
-        assert snr.snr >= 20.0 and snr.n > 100, (kind, snr)
+        assert snr.snr >= 20.0 and snr.n > 40, (kind, snr)
     assert g.design_snr(_rec("none")).snr == 0.0
 
 
@@ -233,7 +236,7 @@ def test_shock_steps() -> None:
     d = _diff("shock_steps", "gyro")[:, k]
     t = np.asarray(rec.session.t_s)
     ends = g.tilt_ends(rec.plan)
-    assert len(ends) == rec.params["n_steps"] >= 8
+    assert len(ends) == rec.params["n_steps"] >= 8 and np.array_equal(ends, rec.events)
     level = np.searchsorted(ends, t, side="right")
     assert np.all(d[level == 0] == 0.0)
     means = np.array([d[level == i].mean() for i in range(len(ends) + 1) if np.any(level == i)])
@@ -287,7 +290,7 @@ def test_log_settling() -> None:
     t = np.asarray(rec.session.t_s)
     d = _diff("log_settling", "accel")[:, k]
     assert np.max(np.abs(d - c * np.log1p(t / tau0))) <= 1.01 * _lsb("accel")
-    assert 0.8 * 0.012 <= abs(c) <= 1.25 * 0.012 and 1.0 <= tau0 <= 5.0
+    assert 0.8 * 0.035 <= abs(c) <= 1.25 * 0.035 and 1.0 <= tau0 <= 5.0
 
 
 def test_scale_warmup() -> None:
@@ -300,11 +303,13 @@ def test_scale_warmup() -> None:
     # the unit's M (scale 0.97-1.003, cross-axis 1e-3) against the reference's w_k
     assert np.max(np.abs(d - expected)) <= 0.035 * np.max(np.abs(expected)) + 0.0011 * np.max(np.abs(c * w)) \
         + 1.01 * _lsb("gyro")
-    # an axis's early spins read differently from its late ones (the same face's scale, another time)
+    # in the spins about the axis the relative error decays as c exp(-t/tau): early spins read differently from late
     rate = _kinds() == int(Kind.RATE)
     about = rate & (np.abs(w[:, k]) > 100 * DEG)
-    rel = d[about] / w[about, k]
-    assert abs(rel[0]) > 3 * abs(rel[-1]) and abs(rel[0]) > 0.1 * abs(c)
+    model = c * np.exp(-t[about] / tau) * w[about, k]
+    assert np.all(np.abs(d[about] - model) <= 0.035 * np.abs(model) + 1.01 * _lsb("gyro"))
+    decay = np.exp(-t[about] / tau)
+    assert decay.max() > 1.3 * decay.min()  # spun early and late: the scale error differs by 30 % at least
 
 
 def test_stepper_rect() -> None:
@@ -337,7 +342,9 @@ def test_fifo_drop() -> None:
     seg, kinds = np.asarray(rec.session.segment), _kinds()
     w = _ref("ref_gyro_radps")
     late = [g.motion(rec.plan, t + m / FS).w - w for m in range(drops + 1)]
-    found, exact = [], 0
+    drop_t = np.array(rec.events)
+    assert len(drop_t) == drops and np.all(np.diff(drop_t) >= 0)
+    exact = 0
     moves = np.unique(seg[kinds == int(Kind.MOVE)])
     for sg in moves:
         there = seg == sg
@@ -345,9 +352,8 @@ def test_fifo_drop() -> None:
         m = int(np.argmin(err))
         if err[m] <= 0.035 * float(np.max(np.abs(late[m][there]))) + 3 * _lsb("gyro"):
             exact += 1
-            found.append(m)
+            assert m == int(np.sum(drop_t <= t[there][0])), sg  # the drops so far
     assert exact >= len(moves) - drops  # a move with a drop inside it fits no single slip
-    assert np.all(np.diff(found) >= 0) and found[0] == 0 and found[-1] == drops
 
 
 def test_slew_limit() -> None:
@@ -355,7 +361,7 @@ def test_slew_limit() -> None:
     k, limit = rec.axis, rec.params["limit_dps2"] * DEG
     w = _ref("ref_gyro_radps")[:, k]
     alpha_ref = np.gradient(w, 1.0 / FS)
-    assert 0.55 * np.max(np.abs(alpha_ref)) < limit < 0.9 * np.max(np.abs(alpha_ref))
+    assert 0.4 * np.max(np.abs(alpha_ref)) < limit < 0.8 * np.max(np.abs(alpha_ref))
     planted = rec.planted["gyro"][:, k]
     y0 = np.asarray(_rec("none").session.gyro_radps)[:, k]
     # the limited output's steps are at most limit/fs (the noise of two samples on top)
@@ -371,13 +377,15 @@ def test_alpha_cross() -> None:
     d = _diff("alpha_cross", "gyro")[:, k]
     expected = c * rec.alpha[:, j]
     assert np.max(np.abs(d - expected)) <= 1.01 * _lsb("gyro")
-    # the body angular acceleration is the reference rate's derivative (independent of the generator's formula)
-    w = _ref("ref_gyro_radps")[:, j]
-    seg = np.asarray(rec.session.segment)
+    # the body angular acceleration is the reference rate's derivative (independent of the generator's formula; the
+    # same plan at 416 Hz, where a central difference is accurate)
+    fine = _gen().generate(SEED, "alpha_cross", rate_hz=416.0)
+    w = np.asarray(fine.session.ref_gyro_radps)[:, j]
+    seg = np.asarray(fine.session.segment)
     inner = np.r_[False, (seg[2:] == seg[:-2]), False]
-    fd = np.gradient(w, 1.0 / FS)
-    # (a central difference at 52 Hz over moves as short as 0.5 s: its own error, dt^2 alpha''/6, is a few %)
-    assert np.max(np.abs(fd - rec.alpha[:, j])[inner]) < 0.07 * np.max(np.abs(rec.alpha[:, j]))
+    fd = np.gradient(w, 1.0 / 416.0)
+    assert np.max(np.abs(fd - fine.alpha[:, j])[inner]) < 0.01 * np.max(np.abs(fine.alpha[:, j]))
+    assert np.max(np.abs(fine.planted["gyro"][:, k] - c * fd)[inner]) < 0.01 * np.max(np.abs(c * fd))
 
 
 def test_truth_recorded() -> None:
