@@ -99,8 +99,9 @@ KEY = 0x5EA13003
 #: Converters (own choice): +-6 g at 18 bit, +-1250 deg/s at 21 bit.
 ACCEL_FULL = 6.0 * G0
 GYRO_FULL = 1250.0 * DEG
-ACCEL_LSB = 2.0 * ACCEL_FULL / 2**18
-GYRO_LSB = 2.0 * GYRO_FULL / 2**21
+ACCEL_BITS, GYRO_BITS = 18, 21
+ACCEL_LSB = 2.0 * ACCEL_FULL / 2**ACCEL_BITS
+GYRO_LSB = 2.0 * GYRO_FULL / 2**GYRO_BITS
 #: Thermometer resolution (K) and noise (K).
 TEMP_LSB = 1.0 / 32.0
 TEMP_NOISE = 0.03
@@ -494,41 +495,54 @@ def lot_class(rng: np.random.Generator) -> SensorClass:
 
 
 @dataclass(frozen=True)
-class Triad:
-    m: np.ndarray
-    b_stat: np.ndarray
-    b_drift: np.ndarray
-    tc: np.ndarray
-    sigma: np.ndarray
+class Unit:
+    """One triad of the unit (SI): eq. (1)'s ``gain`` matrix M and ``offset`` b_stat, eq. (3)'s ``drift_amp``
+    b_drift and ``drift_tc`` T_c, and the ``white`` noise std per axis."""
+
+    gain: np.ndarray
+    offset: np.ndarray
+    drift_amp: np.ndarray
+    drift_tc: np.ndarray
+    white: np.ndarray
 
 
-def draw_triad(rng: np.random.Generator, c: SensorClass, gyro: bool) -> Triad:
-    unit = DEG if gyro else 1.0
-    pre, ub = ("gyro", "dps") if gyro else ("accel", "mps2")
+def draw_unit(rng: np.random.Generator, cls: SensorClass, sensor: str) -> Unit:
+    """One triad drawn uniformly from the class's ranges (deg/s ranges converted to rad/s)."""
+    to_si = DEG if sensor == "gyro" else 1.0
+    suffix = "dps" if sensor == "gyro" else "mps2"
 
-    def u(name: str, shape: int | tuple[int, int]) -> np.ndarray:
-        lo, hi = getattr(c, f"{pre}_{name}")
-        return lo + (hi - lo) * rng.random(shape)
+    def draw(param: str, count: int) -> np.ndarray:
+        low, high = getattr(cls, f"{sensor}_{param}")
+        return np.array([low + (high - low) * float(rng.random()) for _ in range(count)])
 
-    m = u("cross_axis", (3, 3))
-    np.fill_diagonal(m, u("scale", 3))
-    return Triad(m=m, b_stat=u(f"bias_static_{ub}", 3) * unit, b_drift=u(f"bias_drift_{ub}", 3) * unit,
-                 tc=u("correlation_time_s", 3), sigma=u(f"noise_std_{ub}", 3) * unit)
+    gain = np.empty((3, 3))
+    for i, j in np.ndindex(3, 3):
+        gain[i, j] = draw("scale" if i == j else "cross_axis", 1)[0]
+    return Unit(gain=gain, offset=draw(f"bias_static_{suffix}", 3) * to_si,
+                drift_amp=draw(f"bias_drift_{suffix}", 3) * to_si, drift_tc=draw("correlation_time_s", 3),
+                white=draw(f"noise_std_{suffix}", 3) * to_si)
 
 
-def drift(t: np.ndarray, tr: Triad, rel: float, rng: np.random.Generator) -> np.ndarray:
+def drift(t: np.ndarray, unit: Unit, rel: float, rng: np.random.Generator) -> np.ndarray:
     """eq. (3): b_drift (exp(-t/T_c) + x(t)), x Gauss-Markov of stationary std ``rel`` from x(0) = 0, exact on a 1 s
     grid, a cubic spline between (T_c >= 50 s: nothing of it is lost)."""
     grid = np.arange(0.0, t[-1] + 2.0, 1.0)
-    out = np.empty((len(t), 3))
-    for k in range(3):
-        phi = math.exp(-1.0 / tr.tc[k])
+    columns = []
+    for amp, tc in zip(unit.drift_amp, unit.drift_tc, strict=True):
+        phi = math.exp(-1.0 / tc)
         x = np.zeros(len(grid))
         e = rng.standard_normal(len(grid)) * rel * math.sqrt(1.0 - phi * phi)
         for i in range(1, len(grid)):
             x[i] = phi * x[i - 1] + e[i]
-        out[:, k] = tr.b_drift[k] * (np.exp(-t / tr.tc[k]) + CubicSpline(grid, x)(t))
-    return out
+        columns.append(amp * (np.exp(-t / tc) + CubicSpline(grid, x)(t)))
+    return np.column_stack(columns)
+
+
+def convert(y: np.ndarray, full: float, bits: int) -> np.ndarray:
+    """The converter: ``bits`` over +-``full``, rounded to the nearest code, clipped to the codes that exist."""
+    lsb = 2.0 * full / 2**bits
+    codes = np.clip(np.rint(y / lsb), -(2 ** (bits - 1)), 2 ** (bits - 1) - 1)
+    return codes * lsb
 
 
 def first_lag(x: np.ndarray, fs: float, tau: float) -> np.ndarray:
@@ -591,8 +605,8 @@ def tilt_ends(plan: Plan) -> np.ndarray:
 
 
 def generate(seed: int, kind: str, *, rate_hz: float | None = None) -> Recording:
-    """One recording of ``kind`` (:data:`KINDS`): seed in, same session out. ``rate_hz`` overrides the drawn
-    sample rate (tests only; the rest of the plan is the same)."""
+    """The recording of ``kind`` (one of :data:`KINDS`) for ``seed``; the same seed gives the same bytes. With
+    ``rate_hz`` the plan is drawn as usual but sampled at that rate (for the tests)."""
     if kind not in KINDS:
         raise ValueError(f"unknown kind {kind!r} (one of {', '.join(KINDS)})")
     rng, kr = _streams(seed, kind)
@@ -604,10 +618,12 @@ def generate(seed: int, kind: str, *, rate_hz: float | None = None) -> Recording
     temp = temperature(t, rng)
     cls = lot_class(rng)
     truth = {"accel": plan.gravity * mo.up, "gyro": mo.w}
-    triads = {s: draw_triad(rng, cls, s == "gyro") for s in ("accel", "gyro")}
-    bias = {s: triads[s].b_stat + drift(t, triads[s], cls.drift_noise_rel, rng) for s in ("accel", "gyro")}
-    clean = {s: truth[s] @ triads[s].m.T + bias[s] for s in ("accel", "gyro")}  # eq. (1), (3)
-    noise = {s: rng.standard_normal((n, 3)) * triads[s].sigma for s in ("accel", "gyro")}
+    units = {s: draw_unit(rng, cls, s) for s in ("accel", "gyro")}
+    clean: dict[str, np.ndarray] = {}
+    noise: dict[str, np.ndarray] = {}
+    for s, u in units.items():  # eq. (1) with the bias of eq. (3)
+        clean[s] = np.einsum("ij,nj->ni", u.gain, truth[s]) + u.offset + drift(t, u, cls.drift_noise_rel, rng)
+        noise[s] = rng.standard_normal((n, 3)) * u.white
     temp_read = np.round((temp + TEMP_NOISE * rng.standard_normal(n)) / TEMP_LSB) * TEMP_LSB
 
     axis = int(kr.integers(3))
@@ -625,11 +641,11 @@ def generate(seed: int, kind: str, *, rate_hz: float | None = None) -> Recording
     if kind == "shaped_noise":
         for s in ("accel", "gyro"):
             e = kr.standard_normal((n + 1, 3))
-            add[s] = 0.6 * triads[s].sigma * (e[1:] - e[:-1]) / math.sqrt(2.0) - 0.2 * noise[s]
+            add[s] = 0.6 * units[s].white * (e[1:] - e[:-1]) / math.sqrt(2.0) - 0.2 * noise[s]
     elif kind == "dither_noise":
         for s in ("accel", "gyro"):
             dith = 0.8 * kr.choice([-1.0, 1.0], size=(n, 3)) + 0.6 * kr.standard_normal((n, 3))
-            add[s] = dith * triads[s].sigma - noise[s]
+            add[s] = dith * units[s].white - noise[s]
     elif kind == "shock_steps":
         ends = tilt_ends(plan)
         steps = kr.choice([-1.0, 1.0], size=len(ends)) * kr.uniform(0.6, 1.4, len(ends)) * size * DEG
@@ -648,7 +664,7 @@ def generate(seed: int, kind: str, *, rate_hz: float | None = None) -> Recording
         t_min = float(temp.min())
         factor = 1.0 + size * (temp - t_min) / 10.0
         extra = np.sqrt(factor**2 - 1.0)
-        add["gyro"] = kr.standard_normal((n, 3)) * triads["gyro"].sigma * extra[:, None]
+        add["gyro"] = kr.standard_normal((n, 3)) * units["gyro"].white * extra[:, None]
         params.update(t_min=t_min, peak_factor=float(factor.max()))
     elif kind == "log_settling":
         tau0 = float(kr.uniform(1.0, 5.0))
@@ -656,7 +672,7 @@ def generate(seed: int, kind: str, *, rate_hz: float | None = None) -> Recording
         params.update(tau0_s=tau0)
     elif kind == "scale_warmup":
         tau = float(kr.uniform(200.0, 500.0))
-        add["gyro"][:, axis] = sgn * size * np.exp(-t / tau) * (truth["gyro"] @ triads["gyro"].m.T)[:, axis]
+        add["gyro"][:, axis] = sgn * size * np.exp(-t / tau) * (truth["gyro"] @ units["gyro"].gain[axis])
         params.update(tau_s=tau)
     elif kind == "stepper_rect":
         v_res = float(kr.uniform(30.0, 80.0)) * DEG
@@ -670,7 +686,7 @@ def generate(seed: int, kind: str, *, rate_hz: float | None = None) -> Recording
         slip = np.searchsorted(when, t, side="right") / fs
         late = motion(plan, t + slip)
         for s, x in (("accel", plan.gravity * late.up), ("gyro", late.w)):
-            add[s] = (x - truth[s]) @ triads[s].m.T
+            add[s] = np.einsum("ij,nj->ni", units[s].gain, x - truth[s])
         params.update(drops=float(drops), slip_s=drops / fs)
         events = tuple(float(v) for v in when)
     elif kind == "slew_limit":
@@ -683,10 +699,8 @@ def generate(seed: int, kind: str, *, rate_hz: float | None = None) -> Recording
         c = sgn * size * DEG  # (rad/s) per (rad/s^2)
         add["gyro"][:, axis] = c * mo.alpha[:, j]
         params.update(j=float(j), c_s=c)
-    out: dict[str, np.ndarray] = {}
-    for s, (full, lsb) in (("accel", (ACCEL_FULL, ACCEL_LSB)), ("gyro", (GYRO_FULL, GYRO_LSB))):
-        y = clean[s] + noise[s] + add[s]
-        out[s] = np.clip(np.round(y / lsb) * lsb, -full, full - lsb)
+    out = {"accel": convert(clean["accel"] + noise["accel"] + add["accel"], ACCEL_FULL, ACCEL_BITS),
+           "gyro": convert(clean["gyro"] + noise["gyro"] + add["gyro"], GYRO_FULL, GYRO_BITS)}
     meta = {"serial": f"SEAL3-{seed:06d}", "sample_rate_hz": f"{fs:g}", "gravity_mps2": f"{plan.gravity:.5f}",
             "station": "gen_sealed3", "rig": "gen_sealed3 three-axis table"}
     session = Session(metadata=meta, t_s=t, segment=mo.segment, kind=mo.kind, accel_mps2=out["accel"],
@@ -759,31 +773,36 @@ def design_snr(rec: Recording) -> Snr:
     return best
 
 
-def snr_table(first: int, count: int, rate_hz: float | None = 52.0) -> list[tuple[str, Snr, Snr]]:
-    """(kind, the smallest, the median :class:`Snr`) over seeds ``first .. first + count - 1`` (no diagnosis)."""
-    rows = []
+def snr_table(first: int, count: int, rate_hz: float | None = 52.0) -> dict[str, tuple[Snr, Snr]]:
+    """Per kind the smallest and the median :class:`Snr` over seeds ``first .. first + count - 1`` (no diagnosis)."""
+    table: dict[str, tuple[Snr, Snr]] = {}
     for kind in SEALED3:
-        v = sorted((design_snr(generate(s, kind, rate_hz=rate_hz)) for s in range(first, first + count)),
-                   key=lambda x: x.snr)
-        rows.append((kind, v[0], v[len(v) // 2]))
-    return rows
+        ranked = sorted((design_snr(generate(seed, kind, rate_hz=rate_hz)) for seed in range(first, first + count)),
+                        key=lambda x: x.snr)
+        table[kind] = (ranked[0], ranked[count // 2])
+    return table
 
 
-if __name__ == "__main__":
+def _main(argv: list[str]) -> int:
     from station.session.csv_v1 import write_session
 
-    argv = sys.argv[1:]
     if len(argv) == 3 and argv[0] == "--snr":
         print(f"{'kind':14s} {'sensor':6s} {'min SNR':>9s} {'rms/sigma':>9s} {'n':>7s}   "
               f"{'median SNR':>10s} {'rms/sigma':>9s} {'n':>7s}   (52 Hz)")
-        for kind, lo, med in snr_table(int(argv[1]), int(argv[2])):
-            print(f"{kind:14s} {lo.sensor:6s} {lo.snr:9.1f} {lo.rms_sigma:9.3f} {lo.n:7d}   "
-                  f"{med.snr:10.1f} {med.rms_sigma:9.3f} {med.n:7d}")
-        sys.exit(0)
+        for kind, (low, mid) in snr_table(int(argv[1]), int(argv[2])).items():
+            print(f"{kind:14s} {low.sensor:6s} {low.snr:9.1f} {low.rms_sigma:9.3f} {low.n:7d}   "
+                  f"{mid.snr:10.1f} {mid.rms_sigma:9.3f} {mid.n:7d}")
+        return 0
     if len(argv) != 3:
-        sys.exit("usage: python benchmarks/gen_sealed3.py SEED KIND OUT.csv  |  --snr FIRST_SEED COUNT")
+        print("usage: python benchmarks/gen_sealed3.py SEED KIND OUT.csv  |  --snr FIRST_SEED COUNT", file=sys.stderr)
+        return 2
     rec = generate(int(argv[0]), argv[1])
     write_session(rec.session, argv[2])
-    where = "every axis" if rec.axis < 0 else f"axis {'xyz'[rec.axis]}"
-    print(f"{argv[2]}: {rec.kind} {len(rec.session)} samples at {rec.plan.rate_hz:g} Hz, "
-          f"{rec.session.duration_s:.0f} s, {where}, design SNR {design_snr(rec).snr:.0f}")
+    axis = "every axis" if rec.axis < 0 else "axis " + "xyz"[rec.axis]
+    print(f"{argv[2]}: {rec.kind}, {rec.plan.rate_hz:g} Hz, {rec.session.duration_s:.0f} s "
+          f"({len(rec.session)} samples), {axis}, design SNR {design_snr(rec).snr:.0f}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(_main(sys.argv[1:]))

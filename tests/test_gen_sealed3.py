@@ -18,6 +18,7 @@ from benchmark_modules import load_benchmark
 from scipy.signal import welch
 from scipy.spatial.transform import Rotation
 
+from station.fit.consistency import check_consistency
 from station.session.csv_v1 import read_session, write_session
 from station.session.model import Kind
 
@@ -436,7 +437,7 @@ def test_seed_in_same_bytes_out(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize("kind", ["none", "shaped_noise", "dither_noise", *sorted(ACTS), "fifo_drop"])
 def test_every_kind_loads(kind: str, tmp_path: Path) -> None:
-    """Every kind's recording goes through the station's writer and reader unchanged."""
+    """Every kind's recording goes through the station's writer and reader unchanged, and passes its input checks."""
     rec = _rec(kind)
     path = tmp_path / f"{kind}.csv"
     write_session(rec.session, path)
@@ -444,6 +445,7 @@ def test_every_kind_loads(kind: str, tmp_path: Path) -> None:
     assert len(back) == len(rec.session) and back.sample_rate_hz == FS
     np.testing.assert_allclose(back.gyro_radps, rec.session.gyro_radps, atol=1e-6 * DEG)
     np.testing.assert_allclose(back.accel_mps2, rec.session.accel_mps2, atol=1e-6)
+    check_consistency(back)  # the station's input checks (no fit) accept it
 
 
 def test_unknown_kind_refused() -> None:
@@ -475,3 +477,20 @@ def test_bench_runs_the_third_sealed_generator(monkeypatch: pytest.MonkeyPatch,
     assert "benchmarks/gen_sealed3.py" in out
     assert f"alpha_cross      seed {400200 + g.KINDS.index('alpha_cross')}:" in out
     assert "gyro in move" in out
+
+
+def test_cli_writes_the_same_file_twice(tmp_path: Path) -> None:
+    import subprocess
+
+    g = _gen()
+    seed = next(s for s in range(400000, 400100) if g.draw_plan(g._streams(s, "none")[0]).rate_hz == FS)
+    outs = []
+    for name in ("a.csv", "b.csv"):
+        out = tmp_path / name
+        subprocess.run([sys.executable, str(_BENCH / "gen_sealed3.py"), str(seed), "shock_steps", str(out)],
+                       check=True, capture_output=True, text=True)
+        outs.append(out.read_bytes())
+    assert outs[0] == outs[1]
+    assert len(read_session(tmp_path / "a.csv")) == len(g.generate(seed, "shock_steps").session)
+    bad = subprocess.run([sys.executable, str(_BENCH / "gen_sealed3.py"), "1"], capture_output=True, text=True)
+    assert bad.returncode == 2 and "usage" in bad.stderr
