@@ -80,10 +80,9 @@ kind's design SNR (:func:`design_snr`, no diagnosis) over COUNT seeds at 52 Hz.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 from scipy.interpolate import CubicSpline
@@ -92,11 +91,11 @@ from scipy.linalg import expm
 from station.kernel.sensor_class import TABLE1, SensorClass
 from station.session.model import Kind, Session
 
-DEG = math.pi / 180.0
-G0 = 9.80665
-#: Second word of every SeedSequence of this generator (the first is the seed, the third the stream).
+G0 = 9.80665  # standard gravity (m/s^2): the converter's g
+DEG = math.pi / 180.0  # rad per degree
+#: This generator's word in its seed sequences ``[seed, KEY, stream]`` (stream 0: plan and unit; 1 + i: kind i).
 KEY = 0x5EA13003
-#: Converters (own choice): +-6 g at 18 bit, +-1250 deg/s at 21 bit.
+#: The converters (own choice): accelerometer +-6 g at 18 bit, gyro +-1250 deg/s at 21 bit.
 ACCEL_FULL = 6.0 * G0
 GYRO_FULL = 1250.0 * DEG
 ACCEL_BITS, GYRO_BITS = 18, 21
@@ -485,13 +484,13 @@ def temperature(t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
 def lot_class(rng: np.random.Generator) -> SensorClass:
     """``table1_lot``: every Table 1 range cut to a window of half its width at a random place."""
     changes: dict[str, tuple[float, float]] = {}
-    for f in dataclasses.fields(TABLE1):
+    for f in fields(TABLE1):
         v = getattr(TABLE1, f.name)
         if isinstance(v, tuple):
             lo, hi = v
             start = lo + float(rng.random()) * 0.5 * (hi - lo)
             changes[f.name] = (start, start + 0.5 * (hi - lo))
-    return dataclasses.replace(TABLE1, name="table1_lot", **changes)  # type: ignore[arg-type]
+    return replace(TABLE1, name="table1_lot", **changes)  # type: ignore[arg-type]
 
 
 @dataclass(frozen=True)

@@ -14,7 +14,7 @@ from types import ModuleType
 
 import numpy as np
 import pytest
-from benchmark_modules import load_benchmark
+from benchmark_modules import load_benchmark, run_outside_bench_undiagnosed
 from scipy.signal import welch
 from scipy.spatial.transform import Rotation
 
@@ -456,27 +456,13 @@ def test_unknown_kind_refused() -> None:
 def test_bench_runs_the_third_sealed_generator(monkeypatch: pytest.MonkeyPatch,
                                                capsys: pytest.CaptureFixture[str]) -> None:
     """``bench_diagnose_outside.py --generator sealed3`` draws its recordings from gen_sealed3 (seed mapping,
-    places); the diagnosis is replaced by an empty report here: the kinds are not diagnosed before the final
-    check."""
-    monkeypatch.syspath_prepend(str(_BENCH))
-    import bench_diagnose_outside as bench
-
-    class _Empty:
-        class report:
-            @staticmethod
-            def to_json() -> dict[str, list[object]]:
-                return {"findings": [], "unexplained": []}
-
-    monkeypatch.setattr(bench, "diagnose", lambda session, warmup_tc_s=None: _Empty)
-    monkeypatch.setattr(bench, "GEN", bench.gen_outside)  # main() sets it: restored after the test
-    monkeypatch.setattr(sys, "argv", ["bench", "--generator", "sealed3", "--base", "400200", "--per", "1",
-                                      "--kinds", "none,alpha_cross"])
-    bench.main()
+    places), with no diagnosis run."""
+    run_outside_bench_undiagnosed(monkeypatch, ["--generator", "sealed3", "--base", "400200", "--per", "1",
+                                                "--kinds", "none,alpha_cross"])
     out = capsys.readouterr().out
-    g = _gen()
     assert "benchmarks/gen_sealed3.py" in out
-    assert f"alpha_cross      seed {400200 + g.KINDS.index('alpha_cross')}:" in out
-    assert "gyro in move" in out
+    assert f"alpha_cross      seed {400200 + _gen().KINDS.index('alpha_cross')}:" in out
+    assert "gyro in move" in out and "nulls with a (false) finding: 0/1" in out
 
 
 def test_cli_writes_the_same_file_twice(tmp_path: Path) -> None:
