@@ -25,10 +25,11 @@ kinds 177000-177200; its report seeds 178000 and 178500, drawn after).
 ``--generator sealed`` runs the sealed generator (``benchmarks/gen_sealed.py``: its kinds and nulls, its
 ``LOCATION`` and ``COVARIATE``), kept out of every locator development: run once, at the end, as the final check.
 Its seeds are ``base + i * len(gen_sealed.KINDS) + index``. ``--generator sealed2`` runs the second sealed generator
-(``benchmarks/gen_sealed2.py``) the same way, seeds ``base + i * len(gen_sealed2.KINDS) + index``.
+(``benchmarks/gen_sealed2.py``) the same way, seeds ``base + i * len(gen_sealed2.KINDS) + index``; ``--generator
+sealed3`` the third (``benchmarks/gen_sealed3.py``), seeds ``base + i * len(gen_sealed3.KINDS) + index``.
 
 Run: ``python benchmarks/bench_diagnose_outside.py [--base 50000] [--per 4] [--kinds telegraph,...]
-[--generator outside|sealed|sealed2]``
+[--generator outside|sealed|sealed2|sealed3]``
 """
 
 from __future__ import annotations
@@ -45,6 +46,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import gen_outside
 import gen_sealed
 import gen_sealed2
+import gen_sealed3
 
 from station.diagnose import diagnose
 from station.kernel.errors import StationError
@@ -101,11 +103,12 @@ def main() -> None:
     ap.add_argument("--base", type=int, default=50_000, help="first seed (development used 0-999)")
     ap.add_argument("--per", type=int, default=4, help="recordings per kind")
     ap.add_argument("--kinds", default=None, help="comma-separated kinds (default: the generator's KINDS)")
-    ap.add_argument("--generator", choices=("outside", "sealed", "sealed2"), default="outside",
-                    help="gen_outside (default), or the sealed gen_sealed / gen_sealed2 (the final check only)")
+    ap.add_argument("--generator", choices=("outside", "sealed", "sealed2", "sealed3"), default="outside",
+                    help="gen_outside (default), or the sealed gen_sealed / gen_sealed2 / gen_sealed3 (the final "
+                         "check only)")
     args = ap.parse_args()
     global GEN
-    GEN = {"sealed": gen_sealed, "sealed2": gen_sealed2}.get(args.generator, gen_outside)
+    GEN = {"sealed": gen_sealed, "sealed2": gen_sealed2, "sealed3": gen_sealed3}.get(args.generator, gen_outside)
     tc = warmup_tc()
     kinds = [k for k in (args.kinds or ",".join(GEN.KINDS)).split(",") if k]
     stats: dict[str, Counter] = {}

@@ -15,7 +15,7 @@ from types import ModuleType
 
 import numpy as np
 import pytest
-from benchmark_modules import load_benchmark
+from benchmark_modules import load_benchmark, run_outside_bench_undiagnosed
 from scipy.spatial.transform import Rotation
 
 from station.session.csv_v1 import read_session, write_session
@@ -323,20 +323,8 @@ def test_unknown_kind_refused() -> None:
 def test_bench_runs_the_sealed_generator(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
     """``bench_diagnose_outside.py --generator sealed`` draws its recordings from gen_sealed (seed mapping, places);
     the diagnosis is replaced by an empty report here: the sealed kinds are not diagnosed before the final check."""
-    monkeypatch.syspath_prepend(str(_PATH.parent))
-    import bench_diagnose_outside as bench
-
-    class _Empty:
-        class report:
-            @staticmethod
-            def to_json() -> dict[str, list[object]]:
-                return {"findings": [], "unexplained": []}
-
-    monkeypatch.setattr(bench, "diagnose", lambda session, warmup_tc_s=None: _Empty)
-    monkeypatch.setattr(bench, "GEN", bench.gen_outside)  # main() sets it: restored after the test
-    monkeypatch.setattr(sys, "argv", ["bench", "--generator", "sealed", "--base", "5", "--per", "1",
-                                      "--kinds", "none,accel_creep"])
-    bench.main()
+    run_outside_bench_undiagnosed(monkeypatch, ["--generator", "sealed", "--base", "5", "--per", "1",
+                                                "--kinds", "none,accel_creep"])
     out = capsys.readouterr().out
     g = _gen()
     assert "benchmarks/gen_sealed.py" in out

@@ -15,7 +15,7 @@ from types import ModuleType
 
 import numpy as np
 import pytest
-from benchmark_modules import load_benchmark
+from benchmark_modules import load_benchmark, run_outside_bench_undiagnosed
 from scipy.integrate import cumulative_trapezoid
 from scipy.signal import welch
 from scipy.spatial.transform import Rotation
@@ -377,20 +377,8 @@ def test_bench_runs_the_second_sealed_generator(monkeypatch: pytest.MonkeyPatch,
     """``bench_diagnose_outside.py --generator sealed2`` draws its recordings from gen_sealed2 (seed mapping,
     places); the diagnosis is replaced by an empty report here: the kinds are not diagnosed before the final
     check."""
-    monkeypatch.syspath_prepend(str(_BENCH))
-    import bench_diagnose_outside as bench
-
-    class _Empty:
-        class report:
-            @staticmethod
-            def to_json() -> dict[str, list[object]]:
-                return {"findings": [], "unexplained": []}
-
-    monkeypatch.setattr(bench, "diagnose", lambda session, warmup_tc_s=None: _Empty)
-    monkeypatch.setattr(bench, "GEN", bench.gen_outside)  # main() sets it: restored after the test
-    monkeypatch.setattr(sys, "argv", ["bench", "--generator", "sealed2", "--base", "300082", "--per", "1",
-                                      "--kinds", "none,clock_jitter"])
-    bench.main()
+    run_outside_bench_undiagnosed(monkeypatch, ["--generator", "sealed2", "--base", "300082", "--per", "1",
+                                                "--kinds", "none,clock_jitter"])
     out = capsys.readouterr().out
     g = _gen()
     assert "benchmarks/gen_sealed2.py" in out
