@@ -411,6 +411,10 @@ def main() -> None:
                     walk = [f for f in rep.findings if f.effect == "bias_random_walk" and f.sensor == "gyro"]
                     row["named"] = float(bool(walk))
                     row["named_k"] = float(walk[0].theta[0]) / DEG if walk and walk[0].theta is not None else math.nan
+                    std = walk[0].theta_std if walk else None
+                    # the named size against the truth, in its own standard deviations
+                    row["named_z"] = ((row["named_k"] - k_dps) / (float(std[0]) / DEG)
+                                      if std is not None and float(std[0]) > 0 else math.nan)
                 table.setdefault((gen, mult), []).append(row)
                 print(f"  {gen:5s} seed {seed} K {k_dps:.2e}: lambda {row['lambda']:8.1f} oracle {row['oracle']:8.1f} "
                       f"(K {row['oracle_k']:.2e}) class {row['class']:7.1f} | station: q true {row['gain_qtrue']:7.1f} "
@@ -421,7 +425,7 @@ def main() -> None:
                       f"class(est b_drift) {row['class_est']:6.1f} "
                       f"cb(true b_drift) {row['cb_true_class']:6.1f} profile LR: share {row['pr_share']:6.1f} "
                       f"class-bounded {row['pr_cb']:6.1f} ({row['cpu_pr']:.1f} s) "
-                      f"named {row['named']:.0f}" + (f" K {row['named_k']:.2e}" if row.get("named_k", math.nan)
+                      f"named {row['named']:.0f}" + (f" K {row['named_k']:.2e} z {row['named_z']:+.2f}" if row.get("named_k", math.nan)
                                                      == row.get("named_k", math.nan) else "")
                       + f"  q_max/q_class {row['q_max_over_class']:.1f}", flush=True)
                 seed += 1
@@ -441,6 +445,12 @@ def main() -> None:
         print(f"{gen:5s} {mult * K_GEN_DPS:13.2e} {n:3d} {lam:7.1f} {pred:6.2f} "
               + " ".join(f"{d:>{max(len(label), 5)}s}" for d, (_, label) in zip(det, cols, strict=True))
               + f" {named:>6s}")
+    zs = [(gen, mult, r["named_z"]) for (gen, mult), rows in table.items() for r in rows
+          if r.get("named_z", math.nan) == r.get("named_z", math.nan)]
+    if zs:
+        print("named walks' size against the truth, (K - truth) / std: " + ", ".join(
+            f"{g} {m * K_GEN_DPS:.0e} {z:+.2f}" for g, m, z in zs)
+              + f"; within 3 std {sum(abs(z) <= 3.0 for _, _, z in zs)}/{len(zs)}")
     nulls = [r for (g, m), rows in table.items() if m == 0.0 for r in rows]
     if nulls:
         print("nulls: gains above 2.71 (5 % of half chi^2_1): " + ", ".join(
