@@ -425,8 +425,9 @@ def main() -> None:
                       f"class(est b_drift) {row['class_est']:6.1f} "
                       f"cb(true b_drift) {row['cb_true_class']:6.1f} profile LR: share {row['pr_share']:6.1f} "
                       f"class-bounded {row['pr_cb']:6.1f} ({row['cpu_pr']:.1f} s) "
-                      f"named {row['named']:.0f}" + (f" K {row['named_k']:.2e} z {row['named_z']:+.2f}" if row.get("named_k", math.nan)
-                                                     == row.get("named_k", math.nan) else "")
+                      f"named {row['named']:.0f}"
+                      + (f" K {row['named_k']:.2e} z {row['named_z']:+.2f}"
+                         if row.get("named_k", math.nan) == row.get("named_k", math.nan) else "")
                       + f"  q_max/q_class {row['q_max_over_class']:.1f}", flush=True)
                 seed += 1
     print()
