@@ -373,6 +373,38 @@ COLUMNS = (
 )
 
 
+def openaxes_table(log: Path) -> None:
+    """The walk test's gain on the real OpenAXES BMI160 gyroscope (rig-free; ``log``: its CSV), judged against the
+    station's Table 1 class and against its own data-sheet class (fixtures/limits/openaxes-bmi160.toml), with eq. 3's
+    drift noise in the null bounded by: the warm-up's share (the default), the class too, nothing (q free); and the
+    profile likelihood ratio (``WALK_PROFILE_TC``: T_c and q re-fitted in both hypotheses) with either bound."""
+    from station.diagnose.locator import TABLE1_DRIFT, DriftClass
+    from station.diagnose.rigfree_diagnosis import rig_free_baseline
+    from station.kernel.limits_file import load_limits
+    from station.session.multipos_import import import_openaxes
+
+    baseline = rig_free_baseline(import_openaxes(log, accel="adxl355"))
+    sd = baseline.sensor("gyro")
+    own = DriftClass.from_limits(load_limits(Path(__file__).resolve().parents[1] / "fixtures" / "limits"
+                                             / "openaxes-bmi160.toml"))
+    print(f"OpenAXES BMI160 gyroscope: {len(sd.t_s)} blocks over {float(sd.t_s.max()):.0f} s; walk test gain "
+          f"(critical {CRIT:.1f})")
+    print(f"{'class':16s} {'q/q_class':>20s} {'default':>8s} {'class-b':>8s} {'q free':>7s} {'profile':>8s} "
+          f"{'cb profile':>10s}")
+    for name, cls in (("Table 1", TABLE1_DRIFT), ("openaxes-bmi160", own)):
+        gains = []
+        for bound, profile, free in ((False, False, False), (True, False, False), (False, False, True),
+                                     (False, True, False), (True, True, False)):
+            prob = SensorProblem(baseline, sd)
+            prob.q_class = class_drift_noise("gyro", sd.params.bias_drift, cls)
+            prob.walk_null_class_bound, prob.walk_profile_tc = bound, profile
+            if free:
+                prob.drift_noise_max = lambda k: math.inf  # type: ignore[method-assign]
+            gains.append(prob.test_random_walk(size=False).gain)
+        ratio = ",".join(f"{x:.3g}" for x in prob.q / prob.q_class)
+        print(f"{name:16s} {ratio:>20s} " + " ".join(f"{g:8.1f}" for g in gains))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--base", type=int, default=340_000)
@@ -385,7 +417,11 @@ def main() -> None:
     ap.add_argument("--class-bound", action="store_true",
                     help="diagnose with the walk test's null bounded by the class (WALK_NULL_CLASS_BOUND on)")
     ap.add_argument("--plan", action="store_true", help="only the noncentrality by recording length (no recordings)")
+    ap.add_argument("--openaxes", type=Path, help="only the walk test on this real OpenAXES log (no recordings)")
     args = ap.parse_args()
+    if args.openaxes is not None:
+        openaxes_table(args.openaxes)
+        return
     if args.plan:
         plan_table([float(x) for x in args.mults.split(",")])
         return
