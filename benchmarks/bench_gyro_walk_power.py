@@ -14,6 +14,15 @@ residual's 4 s block means (the walk's information lies far below their 0.125 Hz
   ``--class-bound`` its walk test's null bounded by the class, ``likelihood.WALK_NULL_CLASS_BOUND``), and the raw gain
   of its walk test at the first step (:meth:`SensorProblem.test_random_walk`), with and without that bound.
 
+Where the station loses against the class test, one thing at a time (the summary's columns, :data:`COLUMNS`): the
+reference that also estimates b_stat and the warm-up's amplitude (``class+mean``: the restricted likelihood, at the
+true T_c), and T_c too over the class's range (``class+mean+T_c``); with the class's bound at the station's estimate of
+|b_drift| (``class(b est)``); with q free (``free q``: the shape alone); and the station's class-bounded test with q
+re-fitted in its alternative, without the temperature nuisance term, at the true T_c, with the class's bound at the
+true |b_drift|, and as the full profile likelihood ratio (``likelihood.WALK_PROFILE_TC``: T_c and q re-fitted in
+both hypotheses; ``profile`` with the default bound). ``--openaxes LOG``: the same walk test's gains on the real
+OpenAXES BMI160 gyroscope by bound and class.
+
 All at the station's level: the critical value of half chi^2_1 at ``ALPHA`` (1e-5; 18.2), the asymptotic null
 distribution of the oracle tests (nothing estimated but K^2, and q in the class test; the nulls print the share of
 gains above 2.71, the 5 % point, as a coarse check: the 1e-5 tail is beyond a few nulls). ``lambda`` is the
@@ -22,10 +31,11 @@ oracle's noncentrality at the true K (2 KL divergence of the two block distribut
 
 Sizes are the gyroscope's K in deg/s/sqrt(s); ``--mults`` times the independent generator's (0.1 x 3e-4 = 3e-5).
 The station simulator's walk is given per accelerometer (``Effects.bias_random_walk``, the gyro 5 deg/s per m/s^2 of
-it): set so that its gyro has the same K. Seeds: development 340000-344999, report 345000-349999.
+it): set so that its gyro has the same K. Seeds: development 340000-344999 and 520000-520999, report
+345000-349999 and 850105-850134.
 
 Run: ``python benchmarks/bench_gyro_walk_power.py [--base 340000] [--per 4] [--nulls 4] [--mults 0.1,0.3,1,3,10]
-[--generators indep,sim] [--class-bound] [--plan]``
+[--generators indep,sim] [--class-bound] [--no-diagnose] [--plan] [--openaxes LOG]``
 """
 
 # ruff: noqa: E402  (BLAS threads set before numpy is imported)
@@ -333,7 +343,8 @@ def plan_table(mults: list[float]) -> None:
     """Noncentrality of the walk on a still recording of S minutes (one axis times three; a typical unit of the class:
     |b_drift| 0.15 deg/s, drift noise 1 % of it, T_c 2000 s, noise 0.0115 deg/s at 100 Hz), for the oracle (q known)
     for the class test (q anywhere in [0, q_class]: the null's best q, min over a grid), and for a class that states the
-    drift noise without a margin (q in [0, q_true]); 90 % power at ~31."""
+    drift noise without a margin (q in [0, q_true]), and for a test that leaves q free (up to 1e5 q_true: the walk told
+    from the drift noise by its shape alone, T_c known); 90 % power at ~31."""
     b, tc, sigma, fs = 0.15 * DEG, 2000.0, 0.0115 * DEG, 100.0
     q_true = (0.01 * b) ** 2
     q_cls = float(class_drift_noise("gyro", np.full(3, b))[0])
@@ -342,7 +353,8 @@ def plan_table(mults: list[float]) -> None:
           f"1 %, class bound {math.sqrt(q_cls / q_true):.0f}x that std); columns: K in deg/s/sqrt(s)")
     print(f"{'minutes':>7s} " + " ".join(f"{'oracle ' + format(x * K_GEN_DPS, '.0e'):>14s} "
                                           f"{'class ' + format(x * K_GEN_DPS, '.0e'):>13s} "
-                                          f"{'q<=true ' + format(x * K_GEN_DPS, '.0e'):>13s}" for x in mults))
+                                          f"{'q<=true ' + format(x * K_GEN_DPS, '.0e'):>13s} "
+                                          f"{'free ' + format(x * K_GEN_DPS, '.0e'):>11s}" for x in mults))
     for mins in minutes:
         span = 60.0 * mins
         m = 300
@@ -360,7 +372,8 @@ def plan_table(mults: list[float]) -> None:
             oracle = 3.0 * _two_kl(c1, white + q_true * gm)
             cls = 3.0 * min(_two_kl(c1, white + q * gm) for q in [0.0, *(q_cls * np.logspace(-3, 0, 19))])
             tight = 3.0 * min(_two_kl(c1, white + q * gm) for q in [0.0, *(q_true * np.logspace(-3, 0, 19))])
-            cells.append(f"{oracle:14.1f} {cls:13.1f} {tight:13.1f}")
+            free = 3.0 * min(_two_kl(c1, white + q * gm) for q in [0.0, *(q_true * np.logspace(-3, 5, 49))])
+            cells.append(f"{oracle:14.1f} {cls:13.1f} {tight:13.1f} {free:11.2f}")
         print(f"{mins:7d} " + " ".join(cells))
 
 
