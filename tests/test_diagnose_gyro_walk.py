@@ -89,18 +89,18 @@ def test_the_generators_stochastic_truth_is_its_output_less_the_deterministic_pa
     assert np.all(np.abs(means[-10:]).max(axis=0) < 6.0 * np.sqrt(expected))
 
 
-def test_the_power_studys_oracle_finds_a_walk_at_its_size_and_none_where_there_is_none() -> None:
-    """benchmarks/bench_gyro_walk_power.py's oracle on a made-up gyroscope residual (30 min at 50 Hz: white noise
-    0.01 deg/s, eq. 3's drift noise 0.0015 deg/s started at 0 with T_c 2000 s, and a walk of 3e-4 deg/s/sqrt(s)):
-    the walk's K within 15 %, its gain far above the threshold; without the walk a gain of chance size."""
+def _made_up_residual(seed: int, n: int, k_dps: float) -> tuple[object, np.ndarray, np.ndarray, np.ndarray, object]:
+    """(the power study's module, white noise + eq. 3's drift noise, the walk, t, Truth of a residual) of a made-up
+    gyroscope at 50 Hz: white noise 0.01 deg/s, drift noise 0.0015 deg/s started at 0 with T_c 2000 s, a walk of
+    ``k_dps`` deg/s/sqrt(s)."""
     from benchmark_modules import load_benchmark
     from scipy.signal import lfilter
 
     bench = load_benchmark("bench_gyro_walk_power")
-    rng = np.random.default_rng(340777)
-    fs, n = 50.0, 90_000
+    rng = np.random.default_rng(seed)
+    fs = 50.0
     t = np.arange(n) / fs
-    sigma, gm_std, tc, k = 0.01 * DEG, 0.0015 * DEG, 2000.0, 3e-4 * DEG
+    sigma, gm_std, tc, k = 0.01 * DEG, 0.0015 * DEG, 2000.0, k_dps * DEG
     phi = math.exp(-1.0 / (fs * tc))
     gm = lfilter([math.sqrt(1.0 - phi**2) * gm_std], [1.0, -phi], rng.standard_normal((n, 3)), axis=0)
     white = rng.standard_normal((n, 3)) * sigma
@@ -110,11 +110,20 @@ def test_the_power_studys_oracle_finds_a_walk_at_its_size_and_none_where_there_i
         return bench.Truth(t, residual, np.full(3, gm_std**2), np.full(3, tc), np.full(3, sigma**2),
                            np.full(3, 0.15 * DEG))
 
-    on = bench.oracle_tests(truth(white + gm + walk), k)
+    return bench, white + gm, walk, t, truth
+
+
+def test_the_power_studys_oracle_finds_a_walk_at_its_size_and_none_where_there_is_none() -> None:
+    """benchmarks/bench_gyro_walk_power.py's oracle on a made-up gyroscope residual (30 min at 50 Hz: white noise
+    0.01 deg/s, eq. 3's drift noise 0.0015 deg/s started at 0 with T_c 2000 s, and a walk of 3e-4 deg/s/sqrt(s)):
+    the walk's K within 15 %, its gain far above the threshold; without the walk a gain of chance size."""
+    bench, noise, walk, _, truth = _made_up_residual(340777, 90_000, 3e-4)
+    k = 3e-4 * DEG
+    on = bench.oracle_tests(truth(noise + walk), k)
     assert on["oracle"] > 10.0 * bench.CRIT
     assert abs(on["oracle_k"] - 3e-4) < 0.15 * 3e-4
     assert on["lambda"] > 1000.0
-    off = bench.oracle_tests(truth(white + gm), 0.0)
+    off = bench.oracle_tests(truth(noise), 0.0)
     assert off["lambda"] == 0.0
     assert off["oracle"] < 10.0 and off["class"] < 10.0
 
@@ -125,28 +134,13 @@ def test_the_power_studys_reference_with_the_mean_fitted_takes_no_offset_or_warm
     50 Hz, white noise 0.01 deg/s, eq. 3's drift noise 0.0015 deg/s with T_c 2000 s) that also holds an offset of
     0.05 deg/s and a warm-up of 0.2 deg/s exp(-t/T_c): the oracle, which takes the residual for mean-free, calls
     them a walk; the two that fit the mean do not. With a walk of 1e-3 deg/s/sqrt(s) added, both find it."""
-    from benchmark_modules import load_benchmark
-    from scipy.signal import lfilter
-
-    bench = load_benchmark("bench_gyro_walk_power")
-    rng = np.random.default_rng(520901)
-    fs, n = 50.0, 30_000
-    t = np.arange(n) / fs
-    sigma, gm_std, tc, k = 0.01 * DEG, 0.0015 * DEG, 2000.0, 1e-3 * DEG
-    phi = math.exp(-1.0 / (fs * tc))
-    gm = lfilter([math.sqrt(1.0 - phi**2) * gm_std], [1.0, -phi], rng.standard_normal((n, 3)), axis=0)
-    noise = rng.standard_normal((n, 3)) * sigma + gm
-    mean = (0.05 + 0.2 * np.exp(-t / tc))[:, None] * DEG * np.ones(3)
-    walk = np.cumsum(rng.standard_normal((n, 3)), axis=0) * k / math.sqrt(fs)
-
-    def truth(residual: np.ndarray) -> object:
-        return bench.Truth(t, residual, np.full(3, gm_std**2), np.full(3, tc), np.full(3, sigma**2),
-                           np.full(3, 0.15 * DEG))
+    bench, noise, walk, t, truth = _made_up_residual(520901, 30_000, 1e-3)
+    mean = (0.05 + 0.2 * np.exp(-t / 2000.0))[:, None] * DEG * np.ones(3)
 
     off = bench.oracle_tests(truth(noise + mean), 0.0)
     assert off["oracle"] > 100.0 * bench.CRIT  # the mean-free reference: the offset and warm-up look like a walk
     assert off["class_mean"] < 10.0 and off["class_mean_tc"] < 10.0
-    on = bench.oracle_tests(truth(noise + mean + walk), k)
+    on = bench.oracle_tests(truth(noise + mean + walk), 1e-3 * DEG)
     assert on["class_mean"] > bench.CRIT and on["class_mean_tc"] > bench.CRIT
 
 
