@@ -14,6 +14,15 @@ residual's 4 s block means (the walk's information lies far below their 0.125 Hz
   ``--class-bound`` its walk test's null bounded by the class, ``likelihood.WALK_NULL_CLASS_BOUND``), and the raw gain
   of its walk test at the first step (:meth:`SensorProblem.test_random_walk`), with and without that bound.
 
+Where the station loses against the class test, one thing at a time (the summary's columns, :data:`COLUMNS`): the
+reference that also estimates b_stat and the warm-up's amplitude (``class+mean``: the restricted likelihood, at the
+true T_c), and T_c too over the class's range (``class+mean+T_c``); with the class's bound at the station's estimate of
+|b_drift| (``class(b est)``); with q free (``free q``: the shape alone); and the station's class-bounded test with q
+re-fitted in its alternative, without the temperature nuisance term, at the true T_c, with the class's bound at the
+true |b_drift|, and as the full profile likelihood ratio (``likelihood.WALK_PROFILE_TC``: T_c and q re-fitted in
+both hypotheses; ``profile`` with the default bound). ``--openaxes LOG``: the same walk test's gains on the real
+OpenAXES BMI160 gyroscope by bound and class.
+
 All at the station's level: the critical value of half chi^2_1 at ``ALPHA`` (1e-5; 18.2), the asymptotic null
 distribution of the oracle tests (nothing estimated but K^2, and q in the class test; the nulls print the share of
 gains above 2.71, the 5 % point, as a coarse check: the 1e-5 tail is beyond a few nulls). ``lambda`` is the
@@ -22,10 +31,11 @@ oracle's noncentrality at the true K (2 KL divergence of the two block distribut
 
 Sizes are the gyroscope's K in deg/s/sqrt(s); ``--mults`` times the independent generator's (0.1 x 3e-4 = 3e-5).
 The station simulator's walk is given per accelerometer (``Effects.bias_random_walk``, the gyro 5 deg/s per m/s^2 of
-it): set so that its gyro has the same K. Seeds: development 340000-344999, report 345000-349999.
+it): set so that its gyro has the same K. Seeds: development 340000-344999 and 520000-520999, report
+345000-349999 and 850105-850134.
 
 Run: ``python benchmarks/bench_gyro_walk_power.py [--base 340000] [--per 4] [--nulls 4] [--mults 0.1,0.3,1,3,10]
-[--generators indep,sim] [--class-bound] [--plan]``
+[--generators indep,sim] [--class-bound] [--no-diagnose] [--plan] [--openaxes LOG]``
 """
 
 # ruff: noqa: E402  (BLAS threads set before numpy is imported)
@@ -53,7 +63,7 @@ import indepgen
 from bench_diagnose_indep import warmup_tc
 
 from station.diagnose import diagnose, likelihood
-from station.diagnose.likelihood import ALPHA, SensorProblem
+from station.diagnose.likelihood import ALPHA, SensorProblem, Test
 from station.diagnose.locator import class_drift_noise
 from station.diagnose.residuals import fit_baseline
 from station.fit.blocks import power_on_gm_correlation
@@ -87,7 +97,7 @@ class Oracle:
     ``A = diag(white / n_b) + q GM`` and the walk's block covariance ``W``, ``A^-1/2 W A^-T/2 = V diag(l) V^T``, so
     ``-2 log L(K^2) = sum(z^2 / (1 + K^2 l) + log(1 + K^2 l)) + const`` with ``z = V^T A^-1/2 r``."""
 
-    def __init__(self, tr: Truth) -> None:
+    def __init__(self, tr: Truth, *, mean_fitted: bool = False, tc: np.ndarray | None = None) -> None:
         n = len(tr.t_s)
         fs = (n - 1) / (tr.t_s[-1] - tr.t_s[0])
         nb = round(BLOCK_S * fs)
@@ -95,20 +105,33 @@ class Oracle:
         self.t = tr.t_s[: m * nb].reshape(m, nb).mean(axis=1)
         self.r = tr.residual[: m * nb].reshape(m, nb, 3).mean(axis=1)
         self.nb, self.tr = nb, tr
+        #: eq. 3's T_c per axis of the drift noise and the warm-up (default: the truth)
+        self.tc = tr.tc if tc is None else tc
         width = nb / fs
         self.dist = np.abs(self.t[:, None] - self.t[None, :])
         self.walk = np.minimum(self.t[:, None], self.t[None, :])
         self.walk[np.diag_indices(m)] -= width / 6.0
+        #: ``mean_fitted``: per axis, the likelihood of the contrasts orthogonal to b_stat and the warm-up
+        #: exp(-t/T_c) (eq. 3, at the true T_c): the restricted likelihood of those two mean terms estimated
+        self.contrast: list[np.ndarray | None] = [None] * 3
+        if mean_fitted:
+            for k in range(3):
+                x = np.column_stack([np.ones(m), np.exp(-self.t / float(self.tc[k]))])
+                self.contrast[k] = linalg.null_space(x.T)
 
     def parts(self, k: int, q: float) -> tuple[np.ndarray, np.ndarray, float]:
         """(z^2, l, log det A) of axis k at drift-noise variance q."""
-        a = q * power_on_gm_correlation(self.t, self.dist, float(self.tr.tc[k]))
+        a = q * power_on_gm_correlation(self.t, self.dist, float(self.tc[k]))
         a[np.diag_indices_from(a)] += self.tr.white[k] / self.nb
+        walk, r = self.walk, self.r[:, k]
+        nsp = self.contrast[k]
+        if nsp is not None:
+            a, walk, r = nsp.T @ a @ nsp, nsp.T @ walk @ nsp, nsp.T @ r
         ch = linalg.cholesky(a, lower=True)
-        x = linalg.solve_triangular(ch, self.walk, lower=True)
+        x = linalg.solve_triangular(ch, walk, lower=True)
         w = linalg.solve_triangular(ch, x.T, lower=True)
         lam, vec = linalg.eigh(0.5 * (w + w.T))
-        z = vec.T @ linalg.solve_triangular(ch, self.r[:, k], lower=True)
+        z = vec.T @ linalg.solve_triangular(ch, r, lower=True)
         return z * z, np.clip(lam, 0.0, None), 2.0 * float(np.log(np.diag(ch)).sum())
 
 
@@ -138,10 +161,29 @@ def oracle_tests(tr: Truth, k_true: float) -> dict[str, float]:
     gain = max(0.0, _m2ll(known, 0.0) - nll1)
     k2t = k_true**2
     lam = sum(float(np.sum(k2t * lam - np.log1p(k2t * lam))) for _, lam, _ in known)
-    # the class test: q per axis on a grid in [0, q_class], both hypotheses profiled (the walk shared by the axes)
     q_cls = class_drift_noise("gyro", tr.b_drift)
-    grids = [[0.0, *(float(q_cls[k]) * 3.0 ** -e for e in (4, 3, 2, 1, 0))] for k in range(3)]
-    per_axis = [[o.parts(k, q) for q in grids[k]] for k in range(3)]
+    out = {"oracle": gain, "oracle_k": math.sqrt(k2_hat) / DEG, "lambda": lam,
+           "class": _class_gain(o, q_cls, k2_ref, range(-4, 1)),
+           # q free (up to 3^8 x the class's bound): the walk told from eq. 3's drift noise by its shape alone
+           "free": _class_gain(o, q_cls, k2_ref, range(-4, 9))}
+    # the class test with b_stat and the warm-up estimated (restricted likelihood): what the mean terms cost
+    out["class_mean"] = _class_gain(Oracle(tr, mean_fitted=True), q_cls, k2_ref, range(-4, 1))
+    # ... and T_c not known either: per axis anywhere on a grid over the class's range (the station's limits,
+    # TC_GRID), in both hypotheses
+    oracles = [Oracle(tr, mean_fitted=True, tc=np.full(3, tc)) for tc in TC_GRID]
+    out["class_mean_tc"] = _class_gain(oracles, q_cls, k2_ref, range(-4, 1))
+    return out
+
+
+#: T_c (s) over the station's gyroscope class range (1030-3760 s), for the reference test that does not know T_c.
+TC_GRID = (1030.0, 1300.0, 1650.0, 2100.0, 2700.0, 3760.0)
+
+
+def _class_gain(o: Oracle | list[Oracle], q_cls: np.ndarray, k2_ref: float, exps: range) -> float:
+    """The class test's gain: q per axis on the grid ``0, q_class 3^e`` (e in ``exps``), and over the oracles
+    ``o`` (e.g. one per T_c), both hypotheses profiled (the walk shared by the axes)."""
+    grids = [[0.0, *(float(q_cls[k]) * 3.0 ** e for e in exps)] for k in range(3)]
+    per_axis = [[oi.parts(k, q) for oi in (o if isinstance(o, list) else [o]) for q in grids[k]] for k in range(3)]
     null = sum(min(_m2ll([p], 0.0) for p in per_axis[k]) for k in range(3))
     # the alternative: K^2 on a grid, each axis's q at its best for that K^2, then refined around the best K^2
     def alt(k2: float) -> float:
@@ -151,8 +193,7 @@ def oracle_tests(tr: Truth, k_true: float) -> dict[str, float]:
     i = int(np.argmin(vals))
     res = optimize.minimize_scalar(lambda u: alt(math.exp(u)), bounds=(math.log(grid[max(i - 1, 0)]),
                                    math.log(grid[min(i + 1, len(grid) - 1)])), method="bounded")
-    gain_cls = max(0.0, null - min(float(res.fun), vals[i], null))
-    return {"oracle": gain, "oracle_k": math.sqrt(k2_hat) / DEG, "lambda": lam, "class": gain_cls}
+    return max(0.0, null - min(float(res.fun), vals[i], null))
 
 
 def station_test(session: Session, tc: dict[str, tuple[float, float]] | None, truth: Truth) -> dict[str, float]:
@@ -182,26 +223,68 @@ def station_test(session: Session, tc: dict[str, tuple[float, float]] | None, tr
     prob.walk_null_class_bound = False  # the null's q bounded by the warm-up's share alone (the station's default)
     t_share = prob.test_random_walk(size=False)
 
+    def refitted_q(prob: SensorProblem, *, cls: bool) -> Test:
+        """The test with q re-fitted in the alternative too (at most the warm-up's share, and the class's where
+        ``cls``)."""
+        def profiled_k2(qs: list[float], extra: list[np.ndarray | None], *, reml: bool = False
+                        ) -> tuple[float, float, float]:
+            q_max = [prob.drift_noise_max(k) for k in range(3)]
+            if cls:
+                q_max = [min(a, float(b)) for a, b in zip(q_max, q_cls, strict=True)]
+
+            def total(u: float) -> float:
+                return sum(prob._profile_q(k, math.exp(u), extra[k], q_max=q_max[k])[1] for k in range(3))
+
+            u0 = math.log(float(np.median(prob.white)) / max(float(prob.sd.t_s.max()), 1.0))
+            grid = [u0 + math.log(10.0) * e for e in np.arange(-2.0, 3.01, 1.0)]
+            vals = [total(u) for u in grid]
+            i = int(np.argmin(vals))
+            res = optimize.minimize_scalar(total, bounds=(grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]),
+                                           method="bounded", options={"xatol": 0.2, "maxiter": 10})
+            return min(float(res.fun), vals[i]), math.exp(float(res.x)), math.nan
+
+        prob._profile_k2 = profiled_k2  # type: ignore[method-assign]
+        prob.walk_null_class_bound = cls
+        return prob.test_random_walk(size=False)
+
+    t_prof = refitted_q(problem(), cls=False)
+    t_cb_prof = refitted_q(problem(), cls=True)
+    # class-bounded, without the temperature course as a nuisance term of the test
     prob = problem()
+    prob.walk_null_class_bound = True
+    prob.d_temp = np.zeros_like(prob.d_temp)
+    prob.temp_direction = np.zeros_like(prob.temp_direction)
+    t_cb_notemp = prob.test_random_walk(size=False)
+    # class-bounded, T_c at its true value (not re-fitted)
+    prob = problem()
+    prob.walk_null_class_bound = True
+    for k in range(3):
+        prob._set_tc(k, float(truth.tc[k]))
+    prob._fit_q()
+    prob.refit_drift = lambda: None  # type: ignore[method-assign]
+    t_cb_tc = prob.test_random_walk(size=False)
 
-    def profiled_k2(qs: list[float], extra: list[np.ndarray | None], *, reml: bool = False
-                    ) -> tuple[float, float, float]:
-        q_max = [prob.drift_noise_max(k) for k in range(3)]
-
-        def total(u: float) -> float:
-            return sum(prob._profile_q(k, math.exp(u), extra[k], q_max=q_max[k])[1] for k in range(3))
-
-        u0 = math.log(float(np.median(prob.white)) / max(float(prob.sd.t_s.max()), 1.0))
-        grid = [u0 + math.log(10.0) * e for e in np.arange(-2.0, 3.01, 1.0)]
-        vals = [total(u) for u in grid]
-        i = int(np.argmin(vals))
-        res = optimize.minimize_scalar(total, bounds=(grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]),
-                                       method="bounded", options={"xatol": 0.2, "maxiter": 10})
-        best = min(float(res.fun), vals[i])
-        return best, math.exp(float(res.x)), math.nan
-
-    prob._profile_k2 = profiled_k2  # type: ignore[method-assign]
-    t_prof = prob.test_random_walk(size=False)
+    # the full profile likelihood ratio (T_c and q re-fitted in both hypotheses), q bounded by the warm-up's share
+    # alone (the default's null) and by the class too
+    prob = problem()
+    prob.walk_profile_tc = True
+    t_pr_share = prob.test_random_walk(size=False)
+    prob = problem()
+    prob.walk_profile_tc = True
+    prob.walk_null_class_bound = True
+    t0 = time.process_time()
+    t_pr_cb = prob.test_random_walk(size=False)
+    cpu_pr = time.process_time() - t0
+    # class-bounded, the class's bound at the unit's true |b_drift| (as the reference class test has it), not at
+    # the station's estimate of it
+    prob = problem()
+    prob.q_class = class_drift_noise("gyro", truth.b_drift)
+    prob.walk_null_class_bound = True
+    t_cb_true_class = prob.test_random_walk(size=False)
+    # the reference class test (every mean term known) with the class's bound at the station's estimate of |b_drift|
+    k2_ref = float(np.median(truth.white)) / round(BLOCK_S * (len(truth.t_s) - 1)
+                                                   / (truth.t_s[-1] - truth.t_s[0])) / float(truth.t_s[-1])
+    class_est = _class_gain(Oracle(truth), q_cls, k2_ref, range(-4, 1))
 
     prob = problem()
     for k in range(3):
@@ -218,6 +301,9 @@ def station_test(session: Session, tc: dict[str, tuple[float, float]] | None, tr
     t_true = prob.test_random_walk(size=False)
     return {"gain": t.gain, "threshold": t.threshold, "passes": float(t.passes),
             "gain_share": t_share.gain, "gain_prof": t_prof.gain, "gain_qtrue": t_true.gain,
+            "pr_share": t_pr_share.gain, "pr_cb": t_pr_cb.gain, "cpu_pr": cpu_pr,
+            "cb_true_class": t_cb_true_class.gain, "class_est": class_est, "cb_prof": t_cb_prof.gain,
+            "cb_notemp": t_cb_notemp.gain, "cb_tc": t_cb_tc.gain,
             "q_max_over_class": ratio}
 
 
@@ -257,7 +343,8 @@ def plan_table(mults: list[float]) -> None:
     """Noncentrality of the walk on a still recording of S minutes (one axis times three; a typical unit of the class:
     |b_drift| 0.15 deg/s, drift noise 1 % of it, T_c 2000 s, noise 0.0115 deg/s at 100 Hz), for the oracle (q known)
     for the class test (q anywhere in [0, q_class]: the null's best q, min over a grid), and for a class that states the
-    drift noise without a margin (q in [0, q_true]); 90 % power at ~31."""
+    drift noise without a margin (q in [0, q_true]), and for a test that leaves q free (up to 1e5 q_true: the walk told
+    from the drift noise by its shape alone, T_c known); 90 % power at ~31."""
     b, tc, sigma, fs = 0.15 * DEG, 2000.0, 0.0115 * DEG, 100.0
     q_true = (0.01 * b) ** 2
     q_cls = float(class_drift_noise("gyro", np.full(3, b))[0])
@@ -266,7 +353,8 @@ def plan_table(mults: list[float]) -> None:
           f"1 %, class bound {math.sqrt(q_cls / q_true):.0f}x that std); columns: K in deg/s/sqrt(s)")
     print(f"{'minutes':>7s} " + " ".join(f"{'oracle ' + format(x * K_GEN_DPS, '.0e'):>14s} "
                                           f"{'class ' + format(x * K_GEN_DPS, '.0e'):>13s} "
-                                          f"{'q<=true ' + format(x * K_GEN_DPS, '.0e'):>13s}" for x in mults))
+                                          f"{'q<=true ' + format(x * K_GEN_DPS, '.0e'):>13s} "
+                                          f"{'free ' + format(x * K_GEN_DPS, '.0e'):>11s}" for x in mults))
     for mins in minutes:
         span = 60.0 * mins
         m = 300
@@ -284,8 +372,50 @@ def plan_table(mults: list[float]) -> None:
             oracle = 3.0 * _two_kl(c1, white + q_true * gm)
             cls = 3.0 * min(_two_kl(c1, white + q * gm) for q in [0.0, *(q_cls * np.logspace(-3, 0, 19))])
             tight = 3.0 * min(_two_kl(c1, white + q * gm) for q in [0.0, *(q_true * np.logspace(-3, 0, 19))])
-            cells.append(f"{oracle:14.1f} {cls:13.1f} {tight:13.1f}")
+            free = 3.0 * min(_two_kl(c1, white + q * gm) for q in [0.0, *(q_true * np.logspace(-3, 5, 49))])
+            cells.append(f"{oracle:14.1f} {cls:13.1f} {tight:13.1f} {free:11.2f}")
         print(f"{mins:7d} " + " ".join(cells))
+
+
+#: The summary table's columns (row key, header): every gain against the critical value.
+COLUMNS = (
+    ("oracle", "oracle"), ("class", "class"), ("class_mean", "class+mean"), ("class_mean_tc", "class+mean+T_c"),
+    ("class_est", "class(b est)"), ("free", "free q"), ("gain_qtrue", "q known"), ("gain_prof", "q refit"),
+    ("gain_share", "default"), ("pr_share", "profile"), ("gain", "class-b"), ("cb_prof", "cb q refit"),
+    ("cb_notemp", "cb no temp"), ("cb_tc", "cb T_c true"), ("cb_true_class", "cb b true"), ("pr_cb", "cb profile"),
+)
+
+
+def openaxes_table(log: Path) -> None:
+    """The walk test's gain on the real OpenAXES BMI160 gyroscope (rig-free; ``log``: its CSV), judged against the
+    station's Table 1 class and against its own data-sheet class (fixtures/limits/openaxes-bmi160.toml), with eq. 3's
+    drift noise in the null bounded by: the warm-up's share (the default), the class too, nothing (q free); and the
+    profile likelihood ratio (``WALK_PROFILE_TC``: T_c and q re-fitted in both hypotheses) with either bound."""
+    from station.diagnose.locator import TABLE1_DRIFT, DriftClass
+    from station.diagnose.rigfree_diagnosis import rig_free_baseline
+    from station.kernel.limits_file import load_limits
+    from station.session.multipos_import import import_openaxes
+
+    baseline = rig_free_baseline(import_openaxes(log, accel="adxl355"))
+    sd = baseline.sensor("gyro")
+    own = DriftClass.from_limits(load_limits(Path(__file__).resolve().parents[1] / "fixtures" / "limits"
+                                             / "openaxes-bmi160.toml"))
+    print(f"OpenAXES BMI160 gyroscope: {len(sd.t_s)} blocks over {float(sd.t_s.max()):.0f} s; walk test gain "
+          f"(critical {CRIT:.1f})")
+    print(f"{'class':16s} {'q/q_class':>20s} {'default':>8s} {'class-b':>8s} {'q free':>7s} {'profile':>8s} "
+          f"{'cb profile':>10s}")
+    for name, cls in (("Table 1", TABLE1_DRIFT), ("openaxes-bmi160", own)):
+        gains = []
+        for bound, profile, free in ((False, False, False), (True, False, False), (False, False, True),
+                                     (False, True, False), (True, True, False)):
+            prob = SensorProblem(baseline, sd)
+            prob.q_class = class_drift_noise("gyro", sd.params.bias_drift, cls)
+            prob.walk_null_class_bound, prob.walk_profile_tc = bound, profile
+            if free:
+                prob.drift_noise_max = lambda k: math.inf  # type: ignore[method-assign]
+            gains.append(prob.test_random_walk(size=False).gain)
+        ratio = ",".join(f"{x:.3g}" for x in prob.q / prob.q_class)
+        print(f"{name:16s} {ratio:>20s} " + " ".join(f"{g:8.1f}" for g in gains))
 
 
 def main() -> None:
@@ -300,7 +430,11 @@ def main() -> None:
     ap.add_argument("--class-bound", action="store_true",
                     help="diagnose with the walk test's null bounded by the class (WALK_NULL_CLASS_BOUND on)")
     ap.add_argument("--plan", action="store_true", help="only the noncentrality by recording length (no recordings)")
+    ap.add_argument("--openaxes", type=Path, help="only the walk test on this real OpenAXES log (no recordings)")
     args = ap.parse_args()
+    if args.openaxes is not None:
+        openaxes_table(args.openaxes)
+        return
     if args.plan:
         plan_table([float(x) for x in args.mults.split(",")])
         return
@@ -326,29 +460,47 @@ def main() -> None:
                     walk = [f for f in rep.findings if f.effect == "bias_random_walk" and f.sensor == "gyro"]
                     row["named"] = float(bool(walk))
                     row["named_k"] = float(walk[0].theta[0]) / DEG if walk and walk[0].theta is not None else math.nan
+                    std = walk[0].theta_std if walk else None
+                    # the named size against the truth, in its own standard deviations
+                    row["named_z"] = ((row["named_k"] - k_dps) / (float(std[0]) / DEG)
+                                      if std is not None and float(std[0]) > 0 else math.nan)
                 table.setdefault((gen, mult), []).append(row)
                 print(f"  {gen:5s} seed {seed} K {k_dps:.2e}: lambda {row['lambda']:8.1f} oracle {row['oracle']:8.1f} "
                       f"(K {row['oracle_k']:.2e}) class {row['class']:7.1f} | station: q true {row['gain_qtrue']:7.1f} "
                       f"q re-fitted {row['gain_prof']:7.1f} share only {row['gain_share']:6.1f} "
-                      f"class-bounded {row['gain']:6.1f} "
-                      f"named {row['named']:.0f}" + (f" K {row['named_k']:.2e}" if row.get("named_k", math.nan)
-                                                     == row.get("named_k", math.nan) else "")
+                      f"class-bounded {row['gain']:6.1f} [q refit {row['cb_prof']:6.1f} no temp "
+                      f"{row['cb_notemp']:6.1f} T_c true {row['cb_tc']:6.1f}] free {row['free']:6.1f} "
+                      f"class+mean {row['class_mean']:6.1f} class+mean+T_c {row['class_mean_tc']:6.1f} "
+                      f"class(est b_drift) {row['class_est']:6.1f} "
+                      f"cb(true b_drift) {row['cb_true_class']:6.1f} profile LR: share {row['pr_share']:6.1f} "
+                      f"class-bounded {row['pr_cb']:6.1f} ({row['cpu_pr']:.1f} s) "
+                      f"named {row['named']:.0f}"
+                      + (f" K {row['named_k']:.2e} z {row['named_z']:+.2f}"
+                         if row.get("named_k", math.nan) == row.get("named_k", math.nan) else "")
                       + f"  q_max/q_class {row['q_max_over_class']:.1f}", flush=True)
                 seed += 1
     print()
     print(f"gyro bias random walk: detections at half chi^2_1 > {CRIT:.1f} (ALPHA {ALPHA:g}), "
           f"seeds {args.base}-{seed - 1}")
-    print(f"{'gen':5s} {'K deg/s/rt(s)':>13s} {'n':>3s} {'lambda':>7s} {'P pred':>6s} {'oracle':>7s} {'class':>6s} "
-          f"{'q true':>6s} {'q refit':>7s} {'share':>6s} {'class-b':>7s} {'named':>6s}")
-    keys = ("oracle", "class", "gain_qtrue", "gain_prof", "gain_share", "gain")
+    cols = [(key, label) for key, label in COLUMNS]
+    print(f"{'gen':5s} {'K deg/s/rt(s)':>13s} {'n':>3s} {'lambda':>7s} {'P pred':>6s} "
+          + " ".join(f"{label:>{max(len(label), 5)}s}" for _, label in cols) + f" {'named':>6s}")
+    keys = [key for key, _ in cols]
     for (gen, mult), rows in table.items():
         n = len(rows)
         lam = float(np.median([r["lambda"] for r in rows]))
         pred = float(np.mean([stats.norm.sf(math.sqrt(CRIT) - math.sqrt(r["lambda"])) for r in rows]))
         det = [f"{sum(r[key] > CRIT for r in rows):d}/{n}" for key in keys]
         named = f"{sum(r['named'] > 0 for r in rows)}/{n}" if not args.no_diagnose else "-"
-        print(f"{gen:5s} {mult * K_GEN_DPS:13.2e} {n:3d} {lam:7.1f} {pred:6.2f} {det[0]:>7s} {det[1]:>6s} {det[2]:>6s} "
-              f"{det[3]:>7s} {det[4]:>6s} {det[5]:>7s} {named:>6s}")
+        print(f"{gen:5s} {mult * K_GEN_DPS:13.2e} {n:3d} {lam:7.1f} {pred:6.2f} "
+              + " ".join(f"{d:>{max(len(label), 5)}s}" for d, (_, label) in zip(det, cols, strict=True))
+              + f" {named:>6s}")
+    zs = [(gen, mult, r["named_z"]) for (gen, mult), rows in table.items() for r in rows
+          if r.get("named_z", math.nan) == r.get("named_z", math.nan)]
+    if zs:
+        print("named walks' size against the truth, (K - truth) / std: " + ", ".join(
+            f"{g} {m * K_GEN_DPS:.0e} {z:+.2f}" for g, m, z in zs)
+              + f"; within 3 std {sum(abs(z) <= 3.0 for _, _, z in zs)}/{len(zs)}")
     nulls = [r for (g, m), rows in table.items() if m == 0.0 for r in rows]
     if nulls:
         print("nulls: gains above 2.71 (5 % of half chi^2_1): " + ", ".join(

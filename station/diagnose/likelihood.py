@@ -84,6 +84,13 @@ Q_BOUND = 10.0
 #: is above its class then gets a walk named (the real OpenAXES BMI160 recording judged against Table 1, where the
 #: locator reports that drift noise as unexplained). Off: the test as it was (docs/measurements/diagnosis.md).
 WALK_NULL_CLASS_BOUND = False
+#: Whether the bias random walk's test is a full profile likelihood ratio: eq. 3's warm-up T_c and drift noise q per
+#: axis re-fitted in both hypotheses (:meth:`SensorProblem._walk_profiled_gain`), where the default keeps the null's T_c
+#: and q in the alternative (conservative). See docs/measurements/diagnosis.md for what it gains and costs.
+WALK_PROFILE_TC = False
+#: T_c factors of one round of the walk test's T_c re-fit (:meth:`SensorProblem._walk_refit_tc`) and its most rounds.
+WALK_TC_FACTORS = (0.5, 0.7, 1.4, 2.0)
+WALK_TC_ROUNDS = 4
 #: A bias random walk's increments are the same everywhere in the record: its K^2 estimated from the
 #: settled blocks' increments in the first and the second half of the record, and from pairs of blocks inside
 #: one segment and across a segment boundary, must agree within this many standard errors
@@ -288,6 +295,8 @@ class SensorProblem:
         self.q_class: np.ndarray | None = None
         #: the walk's test bounds q in its null by :attr:`q_class` too (:data:`WALK_NULL_CLASS_BOUND`)
         self.walk_null_class_bound = WALK_NULL_CLASS_BOUND
+        #: the walk's test re-fits T_c and q in both hypotheses (:data:`WALK_PROFILE_TC`)
+        self.walk_profile_tc = WALK_PROFILE_TC
         self._fit_q()
         self.refit_drift()
 
@@ -845,6 +854,8 @@ class SensorProblem:
         alt = self._profile_k2(qs, extra)
         best_nll, k2, k_std = alt
         gain = max(0.0, 2.0 * (nll0 - best_nll))
+        if self.walk_profile_tc:
+            gain = self._walk_profiled_gain(extra, q_max, k2, nll0, best_nll)
         # K^2 >= 0 sits on the boundary: the null distribution is half chi^2_1
         crit = float(stats.chi2.isf(2.0 * ALPHA, 1))
         k_walk = math.sqrt(k2)
@@ -853,6 +864,52 @@ class SensorProblem:
         return Test(effect="bias_random_walk", sensor=self.sd.sensor, gain=gain, params=1,
                     bic_gain=gain - math.log(self.n_rows), critical=crit, theta=np.array([k_walk]),
                     cov=np.array([[k_std**2]]))
+
+    def _walk_profiled_gain(self, extra: list[np.ndarray | None], q_max: list[float], k2: float, nll0: float,
+                            nll1: float) -> float:
+        """The walk's gain with eq. 3's nuisance re-fitted in both hypotheses: per axis the warm-up's T_c (in the
+        class's range) and q (0 <= q <= ``q_max``, the same bound in both), at K^2 = 0 for the null and at the
+        profiled K^2 for the alternative (T_c and K^2 in turn, twice). The default test's null T_c was fitted with q
+        unbounded (:meth:`refit_drift`), and its alternative keeps it. ``nll0``, ``nll1``: the default test's null
+        and alternative (points of the same spaces: each hypothesis takes the better). Leaves T_c changed (the
+        caller restores it)."""
+        start = self.tc.copy()
+        null = min(nll0, self._walk_refit_tc(extra, q_max, 0.0))
+        for k in range(3):
+            self._set_tc(k, float(start[k]))
+        u = math.log(k2)
+        alt = nll1
+        for _ in range(2):
+            alt = min(alt, self._walk_refit_tc(extra, q_max, math.exp(u)))
+            res = optimize.minimize_scalar(
+                lambda v: sum(self._profile_q(k, math.exp(v), extra[k], q_max=q_max[k])[1] for k in range(3)),
+                bounds=(u - 2.0, u + 2.0), method="bounded", options={"xatol": 0.1, "maxiter": 12})
+            if float(res.fun) < alt:
+                alt, u = float(res.fun), float(res.x)
+        return max(0.0, 2.0 * (null - alt))
+
+    def _walk_refit_tc(self, extra: list[np.ndarray | None], q_max: list[float], k2: float) -> float:
+        """Per axis, T_c by a grid search around the current one (:data:`WALK_TC_FACTORS`, the class's range; rounds
+        until none moves, at most :data:`WALK_TC_ROUNDS`) with q profiled (0 <= q <= ``q_max``) at K^2 = ``k2``: the
+        summed negative log-likelihood at the best T_c (set)."""
+        total = 0.0
+        for k in range(3):
+            best = (self._profile_q(k, k2, extra[k], q_max=q_max[k])[1], float(self.tc[k]))
+            for _ in range(WALK_TC_ROUNDS):
+                tc0 = best[1]
+                for f in WALK_TC_FACTORS:
+                    tc = max(float(self.sd.clip_tc(tc0 * f)), TC_FLOOR_S)
+                    if tc == tc0:
+                        continue
+                    self._set_tc(k, tc)
+                    val = self._profile_q(k, k2, extra[k], q_max=q_max[k])[1]
+                    if val < best[0]:
+                        best = (val, tc)
+                if best[1] == tc0:
+                    break
+            self._set_tc(k, best[1])
+            total += best[0]
+        return total
 
     def _walk_size(self, extra: list[np.ndarray | None], q_max: list[float], k2: float) -> tuple[float, float]:
         """(K, std of K) of an accepted random walk with eq. 3's drift noise profiled beside it (0 <= q <= q_max per
