@@ -46,8 +46,12 @@ Two parts, one command, one table each:
 ``--rack-orientation +z`` (parts 2 and 4): the rack holds every unit +z up, tilted by up to ``--rack-tilt-deg``
 (station.sim: a tilt angle uniform in [0, max] about a random horizontal axis; the independent generator: rotation
 vector components uniform in +-max), and the line's joint fit ties the rack's level along gravity to its norm
-(``fit_joint(..., rack_orientation="+z")``); the row "line, free offsets" fits the same recordings as a rack of any
-orientation. The validation's power-on rest is also +z up: that comparison is the one this rack is built for.
+(``fit_joint(..., rack_orientation="+z")``); the row "line, free offsets" fits the same recordings with free rack
+offsets on every axis (``rack_orientation="free"``). The validation's power-on rest is also +z up: that comparison
+is the one this rack is built for. With the default rack of any orientation the "line" row is the fit of ``"any"``
+(the level along gravity tied to its norm when the rest is found on a face, see :mod:`station.fit.joint`) and part 2
+also prints "line, free offsets"; ``--any-tilt-deg`` tilts part 2's slots up to that against their face (the
+simulated rack is level).
 
 6. **Overhead** (``--parts overhead``, not in the default parts): rig time at N=1 of the line's rig part with
    the rate axes in the order x, y, z and z-first (one tumble less), against the trajectory's duration, at the

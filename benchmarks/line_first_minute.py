@@ -11,7 +11,12 @@ against their stated stds, their correlation, and the correlation of the bias er
 ``M g`` in the validation's orientation (how much the two cancel in the corrected output).
 
     PYTHONPATH=. python benchmarks/line_first_minute.py --units 30 --seed0 3359000
-        [--rack-orientation +z --rack-tilt-deg 3 [--no-fine]] [--indep]
+        [--rack-orientation +z --rack-tilt-deg 3 [--no-fine]] [--any-tilt-deg 3] [--indep]
+
+The row "line" has free rack offsets (``rack_orientation="free"``) and the rows with parts from the truth are built
+on it; with the default rack of any orientation the fit of ``"any"`` (a rest found on a face tied to the norm of
+gravity) is its own row, and ``--any-tilt-deg`` tilts the slots against their face (the simulated rack is level).
+"M and b_stat true" leaves the warm-up's shape alone, "b_drift and T_c true" the rig's level at +z alone.
 
 ``--rack-orientation +z``: the rack holds every unit +z up, tilted up to ``--rack-tilt-deg``, and the line is
 also fitted with the rack's level along gravity tied to its norm (``fit_joint(..., rack_orientation="+z")``).

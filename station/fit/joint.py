@@ -33,6 +33,14 @@ not in the stated uncertainties). The two axes across up keep their free offsets
 nothing measures. A rest whose ``c`` is farther than ``rack_tilt_tolerance_deg`` from the nominal orientation
 is refused (:class:`~station.kernel.errors.RackOrientationError`: the unit was put in its slot another way).
 
+A rack of any orientation (``"any"``, the default) uses the same tie when the first pass finds the rest within
+``rack_tilt_tolerance_deg`` of one of the six faces up (:func:`nearest_face`: a box-shaped unit put down in a tray
+lies on a face), and keeps the free offsets otherwise (no refusal: any orientation is allowed); the face found is
+recorded (``rack_face``, ``rack_face_angle_deg``). ``"free"`` (:data:`FREE_OFFSETS`) keeps the free offsets always
+(the fit of ``"any"`` before this tie; for comparisons). The tie helps the first minute after a power-on in the
+rack's own orientation, on the axis along gravity; it cannot help across gravity (above), nor the warm-up's shape,
+which is the rack's first minutes' white noise whatever the tie (docs/line.md, *The first minute after power-on*).
+
 A power interruption between rack and rig (:func:`check_power`) breaks the shared time base: the fit
 is refused, and the line gives the unit the full rig plan or sends it back to the rack.
 """
@@ -299,9 +307,10 @@ def fit_joint(
     session); thermal terms and g-sensitivity are not fitted here; the gyro's IEEE 952 scale polynomial and the
     time offset are, as ``options.scale_nonlinearity`` and ``options.time_offset`` ask
     (:mod:`station.fit.joint_found`).
-    ``rack_orientation``: ``"any"`` (the rack's rest has free offsets) or the pose the rack holds its units in
-    (``"+z"``...), within ``rack_tilt_tolerance_deg``: the accelerometer's rack level along up is then tied to
-    the norm of gravity (module docstring); a rest farther from it raises
+    ``rack_orientation``: ``"any"`` (the rack's rest has free offsets, but a rest found within
+    ``rack_tilt_tolerance_deg`` of a face up gets the norm tie along it), ``"free"`` (free offsets always), or the
+    pose the rack holds its units in (``"+z"``...), within ``rack_tilt_tolerance_deg``: the accelerometer's rack
+    level along up is then tied to the norm of gravity (module docstring); a rest farther from it raises
     :class:`~station.kernel.errors.RackOrientationError`.
 
     Raises :class:`~station.kernel.errors.FitError` with a one-line reason when the recordings cannot
@@ -456,5 +465,5 @@ def _fit_joint(rack: Session, rig: Session, options: FitOptions, max_transfer_s:
     return assess(params, float(merged.t_s[-1]))
 
 
-__all__ = ["BOOT_KEY", "FREE_OFFSETS", "OFFSET_KEY", "WALL_KEY", "PowerContinuity", "check_power", "fit_joint", "nearest_face",
-           "power_continuity", "tied_rack_force"]
+__all__ = ["BOOT_KEY", "FREE_OFFSETS", "OFFSET_KEY", "WALL_KEY", "PowerContinuity", "check_power", "fit_joint",
+           "nearest_face", "power_continuity", "tied_rack_force"]
