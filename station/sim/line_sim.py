@@ -9,7 +9,8 @@ power-on, as a real unit's two recordings do.
 The rack's orientation: with the plan's ``rack_orientation`` ``"any"`` one of the six poses at random, level;
 with a pose name (``"+z"``: every slot holds its unit that way up) that pose tilted by a random angle up to
 ``rack_tilt_deg`` about a random horizontal axis (a slot is never quite level; the station does not know the
-tilt). Both drawn from the seed.
+tilt). Both drawn from the seed. ``simulate_line(..., any_tilt_deg=...)`` tilts the slots of a rack of any orientation
+the same way against the face the unit lies on.
 
 ``power_cycled=True``: the unit loses power during the transfer; the rig recording is then a new
 power-on of the same unit (its sensor time restarts at 0, its warm-up starts again).
