@@ -30,6 +30,7 @@ from __future__ import annotations
 import argparse
 import itertools
 import sys
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -130,6 +131,7 @@ def main() -> None:
     ap.add_argument("--rack-tilt-deg", type=float, default=3.0)
     ap.add_argument("--any-tilt-deg", type=float, default=0.0,
                     help="with --rack-orientation any: slots tilted up to this (deg) against the face the unit lies on")
+    ap.add_argument("--pose-hold-s", type=float, default=25.0, help="the line's rig poses' hold (s; the line's: 25)")
     ap.add_argument("--no-fine", action="store_true", help="skip the rack-in-5-s-runs variant")
     ap.add_argument("--indep", action="store_true", help="per-axis figures on the independent generator instead")
     args = ap.parse_args()
@@ -143,8 +145,8 @@ def main() -> None:
     t30 = np.array([30.0])
     for i in range(args.units):
         seed = args.seed0 + 1000 * i
-        line = simulate_line(seed, plan=LinePlan(rack_s=3600.0, rig=bl.line_rig(0.0),
-                                                 rack_orientation=args.rack_orientation),
+        rig = replace(bl.line_rig(0.0), pose_hold_s=args.pose_hold_s)
+        line = simulate_line(seed, plan=LinePlan(rack_s=3600.0, rig=rig, rack_orientation=args.rack_orientation),
                              rack_tilt_deg=args.rack_tilt_deg, any_tilt_deg=args.any_tilt_deg)
         truth = line.truth.accel
         full_s = simulate_session(seed + 101, plan=default_plan(), unit=line.truth).session
