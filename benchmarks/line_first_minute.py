@@ -11,7 +11,7 @@ against their stated stds, their correlation, and the correlation of the bias er
 ``M g`` in the validation's orientation (how much the two cancel in the corrected output).
 
     PYTHONPATH=. python benchmarks/line_first_minute.py --units 30 --seed0 3359000
-        [--rack-orientation +z --rack-tilt-deg 3 [--no-fine]] [--any-tilt-deg 3] [--indep]
+        [--rack-orientation +z --rack-tilt-deg 3 [--no-fine]] [--any-tilt-deg 3] [--pose-hold-s 45] [--indep]
 
 The row "line" has free rack offsets (``rack_orientation="free"``) and the rows with parts from the truth are built
 on it; with the default rack of any orientation the fit of ``"any"`` (a rest found on a face tied to the norm of
