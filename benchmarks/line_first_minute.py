@@ -11,7 +11,12 @@ against their stated stds, their correlation, and the correlation of the bias er
 ``M g`` in the validation's orientation (how much the two cancel in the corrected output).
 
     PYTHONPATH=. python benchmarks/line_first_minute.py --units 30 --seed0 3359000
-        [--rack-orientation +z --rack-tilt-deg 3 [--no-fine]] [--indep]
+        [--rack-orientation +z --rack-tilt-deg 3 [--no-fine]] [--any-tilt-deg 3] [--pose-hold-s 45] [--indep]
+
+The row "line" has free rack offsets (``rack_orientation="free"``) and the rows with parts from the truth are built
+on it; with the default rack of any orientation the fit of ``"any"`` (a rest found on a face tied to the norm of
+gravity) is its own row, and ``--any-tilt-deg`` tilts the slots against their face (the simulated rack is level).
+"M and b_stat true" leaves the warm-up's shape alone, "b_drift and T_c true" the rig's level at +z alone.
 
 ``--rack-orientation +z``: the rack holds every unit +z up, tilted up to ``--rack-tilt-deg``, and the line is
 also fitted with the rack's level along gravity tied to its norm (``fit_joint(..., rack_orientation="+z")``).
@@ -25,6 +30,7 @@ from __future__ import annotations
 import argparse
 import itertools
 import sys
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -96,7 +102,7 @@ def indep_axes(seed0: int, units: int, tilt_deg: float, opts: FitOptions) -> Non
         u = gen_line_indep.generate_unit(seed, rack_tilt_deg=tilt_deg)
         truth = bl._Truth(u.unit.accel.m, u.unit.accel.b_stat, u.unit.accel.b_drift, u.unit.accel.tc)
         fits = {"full": fit_session(u.full, opts).accel,
-                "line, free offsets": joint.fit_joint(u.rack, u.rig, opts).accel,
+                "line, free offsets": joint.fit_joint(u.rack, u.rig, opts, rack_orientation=joint.FREE_OFFSETS).accel,
                 "line, tied": joint.fit_joint(u.rack, u.rig, opts, rack_orientation="+z",
                                               rack_tilt_tolerance_deg=bl._tolerance(tilt_deg)).accel}
         g = u.val_full.ref_accel_mps2[u.val_full.segments_of(Kind.REST)[0].start]
@@ -123,6 +129,9 @@ def main() -> None:
                          "such as '+z' (that pose, tilted up to --rack-tilt-deg); the line is also fitted with the "
                          "rack's level tied to gravity's norm then")
     ap.add_argument("--rack-tilt-deg", type=float, default=3.0)
+    ap.add_argument("--any-tilt-deg", type=float, default=0.0,
+                    help="with --rack-orientation any: slots tilted up to this (deg) against the face the unit lies on")
+    ap.add_argument("--pose-hold-s", type=float, default=25.0, help="the line's rig poses' hold (s; the line's: 25)")
     ap.add_argument("--no-fine", action="store_true", help="skip the rack-in-5-s-runs variant")
     ap.add_argument("--indep", action="store_true", help="per-axis figures on the independent generator instead")
     args = ap.parse_args()
@@ -136,14 +145,18 @@ def main() -> None:
     t30 = np.array([30.0])
     for i in range(args.units):
         seed = args.seed0 + 1000 * i
-        line = simulate_line(seed, plan=LinePlan(rack_s=3600.0, rig=bl.line_rig(0.0),
-                                                 rack_orientation=args.rack_orientation),
-                             rack_tilt_deg=args.rack_tilt_deg)
+        rig = replace(bl.line_rig(0.0), pose_hold_s=args.pose_hold_s)
+        line = simulate_line(seed, plan=LinePlan(rack_s=3600.0, rig=rig, rack_orientation=args.rack_orientation),
+                             rack_tilt_deg=args.rack_tilt_deg, any_tilt_deg=args.any_tilt_deg)
         truth = line.truth.accel
         full_s = simulate_session(seed + 101, plan=default_plan(), unit=line.truth).session
         val = simulate_session(seed + 202, plan=default_plan(), unit=line.truth).session
-        fits = {"full": fit_session(full_s, opts).accel, "line": joint.fit_joint(line.rack, line.rig, opts).accel}
-        if args.rack_orientation != "any":
+        fits = {"full": fit_session(full_s, opts).accel,
+                "line": joint.fit_joint(line.rack, line.rig, opts, rack_orientation=joint.FREE_OFFSETS).accel}
+        if args.rack_orientation == "any":
+            fits["line, the face found up, its level tied to gravity's norm (the default 'any')"] = \
+                joint.fit_joint(line.rack, line.rig, opts).accel
+        else:
             fits["line, rack level along gravity tied to its norm"] = joint.fit_joint(
                 line.rack, line.rig, opts, rack_orientation=args.rack_orientation,
                 rack_tilt_tolerance_deg=max(5.0, args.rack_tilt_deg)).accel
@@ -151,7 +164,8 @@ def main() -> None:
             original = joint._rack_runs
             joint._rack_runs = fine_rack_runs  # type: ignore[assignment]
             try:
-                fits["line, rack in 5 s runs for 300 s"] = joint.fit_joint(line.rack, line.rig, opts).accel
+                fits["line, rack in 5 s runs for 300 s"] = joint.fit_joint(
+                    line.rack, line.rig, opts, rack_orientation=joint.FREE_OFFSETS).accel
             finally:
                 joint._rack_runs = original  # type: ignore[assignment]
         # what a rack of known orientation would give: its rest with the true gravity vector as a reference, both
@@ -160,8 +174,13 @@ def main() -> None:
             _with_known_rack(line.rack, line.rig, line.rack_specific_force()), opts).accel
         rows: dict[str, Any] = dict(fits)
         for label, names in (("line, b_drift and T_c true", ("bias_drift", "correlation_time_s")),
-                             ("line, M true", ("misalignment",)), ("line, b_stat true", ("bias_static",))):
+                             ("line, b_drift true", ("bias_drift",)), ("line, T_c true", ("correlation_time_s",)),
+                             ("line, M true", ("misalignment",)), ("line, b_stat true", ("bias_static",)),
+                             ("line, M and b_stat true (the warm-up's shape alone)",
+                              ("misalignment", "bias_static"))):
             rows[label] = _Mixed(fits["line"], truth, names)
+        rows["full, M and b_stat true (the warm-up's shape alone)"] = _Mixed(fits["full"], truth,
+                                                                           ("misalignment", "bias_static"))
         g = val.ref_accel_mps2[val.segments_of(Kind.REST)[0].start]
         for label, p in rows.items():
             fig.setdefault(label, []).append(bl.minute_model_mm(p, truth, val))

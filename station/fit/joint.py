@@ -33,6 +33,14 @@ not in the stated uncertainties). The two axes across up keep their free offsets
 nothing measures. A rest whose ``c`` is farther than ``rack_tilt_tolerance_deg`` from the nominal orientation
 is refused (:class:`~station.kernel.errors.RackOrientationError`: the unit was put in its slot another way).
 
+A rack of any orientation (``"any"``, the default) uses the same tie when the first pass finds the rest within
+``rack_tilt_tolerance_deg`` of one of the six faces up (:func:`nearest_face`: a box-shaped unit put down in a tray
+lies on a face), and keeps the free offsets otherwise (no refusal: any orientation is allowed); the face found is
+recorded (``rack_face``, ``rack_face_angle_deg``). ``"free"`` (:data:`FREE_OFFSETS`) keeps the free offsets always
+(the fit of ``"any"`` before this tie; for comparisons). The tie helps the first minute after a power-on in the
+rack's own orientation, on the axis along gravity; it cannot help across gravity (above), nor the warm-up's shape,
+which is the rack's first minutes' white noise whatever the tie (docs/line.md, *The first minute after power-on*).
+
 A power interruption between rack and rig (:func:`check_power`) breaks the shared time base: the fit
 is refused, and the line gives the unit the full rig plan or sends it back to the rack.
 """
@@ -77,6 +85,9 @@ BOOT_KEY = "boot_count"
 OFFSET_KEY = "clock_offset_s"
 #: Offset added to the rig's segment indices in the merged recording (rack segments keep theirs).
 _RIG_SEGMENT_OFFSET = 1_000_000
+#: ``rack_orientation`` of :func:`fit_joint` that keeps the rack's free offsets on every axis whatever the rest's
+#: orientation (the fit of ``"any"`` before it tied a rest found on a face; for comparisons).
+FREE_OFFSETS = "free"
 #: First rack run length (s); each later run is twice as long (see the module docstring).
 _FIRST_RUN_S = 10.0
 
@@ -272,6 +283,17 @@ def tied_rack_force(force: np.ndarray, up: str, gravity_mps2: float, tolerance_d
     return tied, angle
 
 
+def nearest_face(force: np.ndarray) -> tuple[str, float]:
+    """The pose (``"+z"``, ``"-x"``, ...) whose up axis is nearest the direction of ``force`` (a rest's specific
+    force in the sensor frame, m/s^2), and the angle between them (deg)."""
+    norm = float(np.linalg.norm(force))
+    if not norm > 0:
+        return "+z", 180.0
+    k = int(np.argmax(np.abs(force)))
+    pose = ("+" if force[k] > 0 else "-") + "xyz"[k]
+    return pose, math.degrees(math.acos(float(np.clip(abs(force[k]) / norm, -1.0, 1.0))))
+
+
 def fit_joint(
     rack: Session, rig: Session, options: FitOptions | None = None, *, max_transfer_s: float = 1800.0,
     max_blocks: int = 140, clock_slack_s: float = 2.0, rack_orientation: str = ANY_ORIENTATION,
@@ -285,9 +307,10 @@ def fit_joint(
     session); thermal terms and g-sensitivity are not fitted here; the gyro's IEEE 952 scale polynomial and the
     time offset are, as ``options.scale_nonlinearity`` and ``options.time_offset`` ask
     (:mod:`station.fit.joint_found`).
-    ``rack_orientation``: ``"any"`` (the rack's rest has free offsets) or the pose the rack holds its units in
-    (``"+z"``...), within ``rack_tilt_tolerance_deg``: the accelerometer's rack level along up is then tied to
-    the norm of gravity (module docstring); a rest farther from it raises
+    ``rack_orientation``: ``"any"`` (the rack's rest has free offsets, but a rest found within
+    ``rack_tilt_tolerance_deg`` of a face up gets the norm tie along it), ``"free"`` (free offsets always), or the
+    pose the rack holds its units in (``"+z"``...), within ``rack_tilt_tolerance_deg``: the accelerometer's rack
+    level along up is then tied to the norm of gravity (module docstring); a rest farther from it raises
     :class:`~station.kernel.errors.RackOrientationError`.
 
     Raises :class:`~station.kernel.errors.FitError` with a one-line reason when the recordings cannot
@@ -302,8 +325,8 @@ def fit_joint(
 def _fit_joint(rack: Session, rig: Session, options: FitOptions, max_transfer_s: float,
                max_blocks: int, clock_slack_s: float, rack_orientation: str,
                rack_tilt_tolerance_deg: float) -> ParameterSet:
-    if rack_orientation != ANY_ORIENTATION and rack_orientation not in POSE_ANGLES_DEG:
-        raise ValueError(f"rack_orientation must be 'any' or a pose name, got {rack_orientation!r}")
+    if rack_orientation not in (ANY_ORIENTATION, FREE_OFFSETS) and rack_orientation not in POSE_ANGLES_DEG:
+        raise ValueError(f"rack_orientation must be 'any', 'free' or a pose name, got {rack_orientation!r}")
     check_time(rack)
     check_finite(rack)
     if not rack.segments_of(Kind.REST, Kind.POSE):
@@ -329,7 +352,20 @@ def _fit_joint(rack: Session, rig: Session, options: FitOptions, max_transfer_s:
     accel_ref = merged.ref_accel_mps2
     rule = "rack rest: M c + b_stat + b_drift exp(-t/T_c) with M c one free offset per axis and rack segment"
     tie: dict[str, Any] = {}
-    if rack_orientation != ANY_ORIENTATION:
+    up = "" if rack_orientation == FREE_OFFSETS else rack_orientation
+    if rack_orientation == ANY_ORIENTATION:
+        try:
+            first = np.linalg.solve(a.p["misalignment"], a.offsets).T  # per rack segment: M^-1 o
+        except np.linalg.LinAlgError:
+            raise FitError("the accelerometer's M from the rig is singular: no rack orientation to check") from None
+        found = [nearest_face(c) for c in first]
+        faces = {f for f, _ in found}
+        up = faces.pop() if len(faces) == 1 and all(angle <= rack_tilt_tolerance_deg for _, angle in found) else ""
+        tie = {"rack_face": up or None, "rack_face_angle_deg": [round(angle, 4) for _, angle in found]}
+        if not up:  # not on one face within the tolerance: the free offsets stand
+            rule += (f" (the rest was not within {rack_tilt_tolerance_deg:g} deg of one face up: no tie to the norm "
+                     "of gravity)")
+    if up:
         gravity = rig.gravity_mps2  # the local gravity the rig's references are made with
         try:
             first = np.linalg.solve(a.p["misalignment"], a.offsets).T  # per rack segment: M^-1 o
@@ -338,18 +374,20 @@ def _fit_joint(rack: Session, rig: Session, options: FitOptions, max_transfer_s:
         accel_ref = merged.ref_accel_mps2.copy()
         angles = []
         for j, seg in enumerate(rack_segments):
-            tied, angle = tied_rack_force(first[j], rack_orientation, gravity, rack_tilt_tolerance_deg)
+            tied, angle = tied_rack_force(first[j], up, gravity, rack_tilt_tolerance_deg)
             accel_ref[:n_rack][rack.segment == seg] = tied
             angles.append(round(angle, 4))
-        k_up = AXIS_INDEX[rack_orientation[1]]
+        k_up = AXIS_INDEX[up[1]]
         with numerics("accelerometer joint fit, second pass (the rack's level along gravity tied to its norm)"):
             a = _fit_triad(merged, merged.accel_mps2, accel_ref, shift, rack_runs, indicator, options, "accel",
                            tied_axis=k_up)
-        rule = (f"rack rest, held {rack_orientation} up within {rack_tilt_tolerance_deg:g} deg: M c' + b_stat + "
-                f"b_drift exp(-t/T_c), c' the first pass's M^-1 o across {rack_orientation} and sqrt(g^2 - "
+        held = (f"held {up} up" if up == rack_orientation else
+                f"in any orientation, found lying on a face ({up} up)")
+        rule = (f"rack rest, {held} within {rack_tilt_tolerance_deg:g} deg: M c' + b_stat + "
+                f"b_drift exp(-t/T_c), c' the first pass's M^-1 o across {up} and sqrt(g^2 - "
                 f"|c' across|^2) along it (g = {gravity:.5f} m/s^2, the rig recording's gravity), free offsets on the "
-                f"two axes across {rack_orientation}; the gyro's rest one free offset per axis")
-        tie = {"rack_orientation": rack_orientation, "rack_tilt_tolerance_deg": rack_tilt_tolerance_deg,
+                f"two axes across {up}; the gyro's rest one free offset per axis")
+        tie = {**tie, "rack_orientation": rack_orientation, "rack_tilt_tolerance_deg": rack_tilt_tolerance_deg,
                "rack_tilt_deg": angles, "gravity_mps2": round(gravity, 9)}
     g_shift = [(s + _RIG_SEGMENT_OFFSET, a0 + n_rack, b0 + n_rack) for s, a0, b0 in
                settled_runs(rig, (Kind.REST, Kind.POSE, Kind.RATE), rig.ref_gyro_radps)]
@@ -427,5 +465,5 @@ def _fit_joint(rack: Session, rig: Session, options: FitOptions, max_transfer_s:
     return assess(params, float(merged.t_s[-1]))
 
 
-__all__ = ["BOOT_KEY", "OFFSET_KEY", "WALL_KEY", "PowerContinuity", "check_power", "fit_joint", "power_continuity",
-           "tied_rack_force"]
+__all__ = ["BOOT_KEY", "FREE_OFFSETS", "OFFSET_KEY", "WALL_KEY", "PowerContinuity", "check_power", "fit_joint",
+           "nearest_face", "power_continuity", "tied_rack_force"]

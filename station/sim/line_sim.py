@@ -9,7 +9,8 @@ power-on, as a real unit's two recordings do.
 The rack's orientation: with the plan's ``rack_orientation`` ``"any"`` one of the six poses at random, level;
 with a pose name (``"+z"``: every slot holds its unit that way up) that pose tilted by a random angle up to
 ``rack_tilt_deg`` about a random horizontal axis (a slot is never quite level; the station does not know the
-tilt). Both drawn from the seed.
+tilt). Both drawn from the seed. ``simulate_line(..., any_tilt_deg=...)`` tilts the slots of a rack of any orientation
+the same way against the face the unit lies on.
 
 ``power_cycled=True``: the unit loses power during the transfer; the rig recording is then a new
 power-on of the same unit (its sensor time restarts at 0, its warm-up starts again).
@@ -100,11 +101,13 @@ def simulate_line(
     unit: UnitTruth | None = None,
     power_cycled: bool = False,
     rack_tilt_deg: float = 3.0,
+    any_tilt_deg: float = 0.0,
     effects: Effects | None = None,
     effect_truth: EffectTruth | None = None,
 ) -> LineSim:
     """Simulate a unit's rack and rig recordings (the unit drawn with ``seed`` unless given); ``rack_tilt_deg``:
-    the largest tilt of a slot when the plan's rack holds its units in one orientation; ``effects`` and
+    the largest tilt of a slot when the plan's rack holds its units in one orientation; ``any_tilt_deg``: the same
+    for a rack of any orientation (its unit on one of its faces at random, tilted up to that; 0: level); ``effects`` and
     ``effect_truth`` as :func:`~station.sim.session_sim.simulate_session` takes them (e.g. a time offset, the gyro's
     IEEE 952 polynomial), the same in the rack and on the rig."""
     plan = plan if plan is not None else default_line_plan()
@@ -114,6 +117,8 @@ def simulate_line(
         rack_up = _POSES[int(np.random.default_rng(np.random.SeedSequence([seed, 7])).integers(len(_POSES)))]
     else:
         rack_up = plan.rack_orientation
+    if plan.rack_orientation != ANY_ORIENTATION or any_tilt_deg > 0.0:
+        rack_tilt_deg = rack_tilt_deg if plan.rack_orientation != ANY_ORIENTATION else any_tilt_deg
         u = np.random.default_rng(np.random.SeedSequence([seed, 8])).uniform(size=2)
         k = AXIS_INDEX[rack_up[1]]
         axis = np.zeros(3)
