@@ -57,7 +57,7 @@ from scipy import linalg, stats
 from scipy.ndimage import uniform_filter1d
 from scipy.signal import lfilter
 
-from station.diagnose import empirical, robust
+from station.diagnose import covariate_choice, empirical, robust
 from station.diagnose.reporting import OUTLIER_ALLOWANCE
 from station.diagnose.residuals import OUTLIER_SIGMA
 from station.diagnose.results import CovariateTest, EmpiricalModel, LocatorEvidence, Unexplained
@@ -446,6 +446,19 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
                 extended.extend(covariates_by_axis(baseline, sd, extended=True))
             return extended[k]
 
+        power_on = sd.block_mean(np.asarray(baseline.session.t_s, dtype=float))
+        made_groups: dict[str, dict[str, np.ndarray]] = {}
+
+        def heading() -> dict[str, np.ndarray]:
+            if "heading" not in made_groups:
+                made_groups["heading"] = covariate_choice.heading_columns(baseline.session, sd)
+            return made_groups["heading"]
+
+        def oscillation() -> dict[str, np.ndarray]:
+            if "oscillation" not in made_groups:
+                made_groups["oscillation"] = covariate_choice.oscillation_columns(baseline.session, sd)
+            return made_groups["oscillation"]
+
         # --- covariate per axis ---
         tests: list[CovariateTest] = []
         chosen: list[tuple[str, str]] = []
@@ -465,12 +478,21 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
             in_cells = np.isin(sd.kind, kinds_k)
             excess = max(float(np.sum(rk[in_cells] ** 2)) - float(in_cells.sum()), 1e-9)
             best: tuple[str, float, float] = ("none", 0.0, 0.0)
-            for name, cw, coef, gain in gains[k]:
+            # the dictionary's terms and, for the naming only, the time since power-on (a proxy of the temperature
+            # and of the warm-up: said beside them where inseparable, covariate_choice)
+            naming = [*gains[k], *covariate_gains({"time since power-on": power_on}, chols[k], x[rows], rk)]
+            best_term = None
+            for term in naming:
+                name, cw, coef, gain = term
                 new_r = rk - coef * cw
                 share = (float(np.sum(rk[in_cells] ** 2)) - float(np.sum(new_r[in_cells] ** 2))) / excess
                 tests.append(CovariateTest(AX[k], name, gain, share))
                 if share >= COVARIATE_SHARE and stats.chi2.sf(gain, 1) < ALPHA_LOCATED and gain > best[1]:
                     best = (name, gain, share)
+                    best_term = term
+            if best_term is not None:  # said with the correlated terms the recording cannot tell from it
+                ties = covariate_choice.inseparable(best_term, naming, rk, ALPHA_LOCATED)
+                best = (covariate_choice.with_family([best[0], *ties]), best[1], best[2])
             if best[0] == "none" and fitted is not None:
                 chi, dof, share, _amp = _spin_periodic(baseline.session, sd, sd.residual_less(fitted), k)
                 tests.append(CovariateTest(AX[k], "periodic at the spin frequency", chi, share))
@@ -481,6 +503,15 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
                 tests.append(CovariateTest(AX[k], "jumps (two-level)", float(count), count / max(total, 1)))
                 if count >= JUMP_MIN and count >= JUMP_MIN_SHARE * total:
                     best = ("two-level", float(count), 0.0)
+            if best[0] == "none":  # terms of several parameters: a world-fixed direction, a slow oscillation
+                qk = _basis(x[rows])
+                for groups in (heading, oscillation):
+                    got = covariate_choice.best_group(groups(), chols[k], qk, rk, in_cells, excess, COVARIATE_SHARE,
+                                                      ALPHA_LOCATED)
+                    if got is not None:
+                        tests.append(CovariateTest(AX[k], got[0], got[1], got[2]))
+                        best = (covariate_choice.with_family([got[0]]), got[1], got[2])
+                        break
             chosen.append((AX[k], best[0]))
             models.append(empirical.fit(sd.sensor, AX[k], prob.y[:, k] - _mean_fit(prob, beta, nbase, k),
                                         1.0 / prob.white[:, k], sd.segment,
@@ -520,8 +551,7 @@ def covariate_gains(values: Mapping[str, np.ndarray], chol: np.ndarray, xk: np.n
     """One axis's covariate tests: per covariate block values in ``values`` (name -> (m,), :func:`covariates_by_axis`)
     (name, its values whitened by the axis's Cholesky factor ``chol`` and residualized against the axis's whitened
     design ``xk`` (m, p), its least-squares coefficient on the whitened residual ``rk`` (m,), the chi^2 it takes)."""
-    xk = xk[:, np.any(xk != 0, axis=0)]
-    qk = linalg.qr(xk, mode="economic", check_finite=False)[0] if xk.shape[1] else np.zeros((len(rk), 0))
+    qk = _basis(xk)
     out: list[tuple[str, np.ndarray, float, float]] = []
     if not values:
         return out
@@ -538,6 +568,13 @@ def covariate_gains(values: Mapping[str, np.ndarray], chol: np.ndarray, xk: np.n
         coef = float(dots[i]) / nn
         out.append((name, cws[:, i], coef, coef**2 * nn))
     return out
+
+
+def _basis(xk: np.ndarray) -> np.ndarray:
+    """An orthonormal basis (m, r) of the non-zero columns of an axis's whitened design ``xk`` (m, p)."""
+    xk = xk[:, np.any(xk != 0, axis=0)]
+    return np.asarray(linalg.qr(xk, mode="economic", check_finite=False)[0] if xk.shape[1]
+                      else np.zeros((len(xk), 0)))
 
 
 def _targeted_cells(sd: Any, gains: Mapping[int, list[tuple[str, np.ndarray, float, float]]], res: np.ndarray,
@@ -600,11 +637,12 @@ def _text(name: str) -> str:
         return ("none: no covariate of the dictionary (rate, |rate|, rate^2, rate^3, angular acceleration, specific "
                 "force and its square and size, temperature, its direction and rate, time since the last rate step, "
                 "force and rate through lags, the direction of the last rotation, a delay growing with time, "
-                "rate times force or temperature, force times temperature) "
+                "rate times force or temperature, force times temperature, time since power-on, a horizontal "
+                "direction fixed in the world, a slow oscillation in time) "
                 f"takes {COVARIATE_SHARE:.0%} of it, and it is not two-level")
     if name == "periodic":
-        return ("periodic at the rate table's spin frequency: a cos/sin of the table's angle takes most of the "
-                "structure inside the rate holds")
+        return ("periodic at the rate table's spin frequency: follows the spin phase (a cos/sin of the table's angle "
+                "takes most of the structure inside the rate holds) [spin phase]")
     if name == "two-level":
         return ("two-level: the bias jumps between levels inside still segments (increments far from Gaussian), not "
                 "eq. 3's Gaussian drift, and follows no covariate")
