@@ -39,6 +39,8 @@ from typing import Any
 import numpy as np
 from scipy import linalg, stats
 
+from station.session.model import Kind
+
 #: How many of the strongest other terms are refitted beside the best one for the inseparability test.
 TIE_CANDIDATES = 8
 #: At most this many inseparable alternatives are said beside the best term (the strongest first).
@@ -47,6 +49,9 @@ TIE_SAY = 3
 OSC_MIN_PERIOD_S = 30.0
 #: The longest period is this share of the recording (at least 1.5 cycles).
 OSC_MAX_SHARE = 2.0 / 3.0
+
+#: Rate setpoints are told apart to this (deg/s) for the level-per-rate test.
+RATE_LEVEL_DPS = 1.0
 
 #: Families by the words a dictionary term's name holds (first match of each family; a product has two).
 _FAMILY_WORDS: tuple[tuple[str, str], ...] = (
@@ -201,6 +206,53 @@ def oscillation_columns(session: Any, sd: Any) -> dict[str, np.ndarray]:
     return out
 
 
+def rate_level_columns(session: Any, sd: Any) -> dict[str, np.ndarray]:
+    """Indicators (m, d) of the rate-hold blocks at each of the table's ``d`` rate setpoints (the rate reference's
+    block mean to :data:`RATE_LEVEL_DPS`): a level per rate, a function of the rate that no power of it need fit (a
+    converter's nonlinearity periodic in the output, a resonance at one rate). Empty with fewer than two setpoints."""
+
+    rate = sd.block_mean(np.nan_to_num(np.asarray(session.ref_gyro_radps, dtype=float))) * (180.0 / math.pi)
+    hold = sd.kind == int(Kind.RATE)
+    if hold.sum() < 3:
+        return {}
+    keys = np.round(rate[hold] / RATE_LEVEL_DPS).astype(int)
+    levels, which = np.unique(keys, axis=0, return_inverse=True)
+    if len(levels) < 2:
+        return {}
+    cols = np.zeros((len(rate), len(levels)))
+    cols[np.flatnonzero(hold), np.asarray(which).ravel()] = 1.0
+    return {"the table rate, nonlinearly: one level per rate setpoint (a function of the rate no power of it fits)":
+            cols}
+
+
+def spin_scatter(session: Any, residual: Any, k: int, censored: np.ndarray | None = None) -> tuple[float, float]:
+    """Axis ``k``'s scatter inside the rate holds against the still segments' (rest, pose): per segment the variance of
+    ``residual`` (n, 3) about its own straight line (a bias and a slow drift gone); the largest hold's over the still
+    segments' pooled one. Returns (that ratio, its F tail with the hold's and the still segments' degrees of freedom,
+    times the number of holds: Bonferroni over the holds). A table's vibration (largest through a resonance, at one
+    rate) or a noise that grows with the rate makes a hold's samples scatter more; white or coloured noise and a bias
+    do not change the ratio. (nan, 1) without both kinds of segment."""
+    still = [0.0, 0]
+    holds: list[tuple[float, int]] = []
+    for seg in session.segments():
+        if seg.kind == Kind.MOVE or len(seg) < 10 or (censored is not None and censored[seg.start]):
+            continue
+        x = np.asarray(residual[seg.start:seg.stop, k], dtype=float)
+        u = np.arange(len(x), dtype=float)
+        u -= u.mean()
+        e = x - x.mean() - u * (float(u @ x) / float(u @ u))
+        if seg.kind == Kind.RATE:
+            holds.append((float(e @ e), len(x) - 2))
+        else:
+            still[0] += float(e @ e)
+            still[1] += len(x) - 2
+    if not holds or still[1] < 10 or still[0] <= 0.0:
+        return math.nan, 1.0
+    ref = still[0] / still[1]
+    ratio, dof = max(((v / n) / ref, n) for v, n in holds)
+    return ratio, min(1.0, len(holds) * float(stats.f.sf(ratio, dof, still[1])))
+
+
 def best_group(groups: Mapping[str, np.ndarray], chol: np.ndarray, qk: np.ndarray, rk: np.ndarray,
                in_cells: np.ndarray, excess: float, share_min: float, alpha: float) -> tuple[str, float, float] | None:
     """The group of ``groups`` (name -> (m, d) block covariates) with the largest chi^2 on ``rk``, when it is beyond
@@ -219,5 +271,6 @@ def best_group(groups: Mapping[str, np.ndarray], chol: np.ndarray, qk: np.ndarra
     return (name, gain, share) if share >= share_min else None
 
 
-__all__ = ["OSC_MIN_PERIOD_S", "TIE_CANDIDATES", "TIE_SAY", "best_group", "families", "group_gain",
-           "heading_columns", "inseparable", "oscillation_columns", "with_family", "world_directions"]
+__all__ = ["OSC_MIN_PERIOD_S", "RATE_LEVEL_DPS", "TIE_CANDIDATES", "TIE_SAY", "best_group", "families", "group_gain",
+           "heading_columns", "inseparable", "oscillation_columns", "rate_level_columns", "spin_scatter", "with_family",
+           "world_directions"]

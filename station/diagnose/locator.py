@@ -459,6 +459,11 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
                 made_groups["oscillation"] = covariate_choice.oscillation_columns(baseline.session, sd)
             return made_groups["oscillation"]
 
+        def rate_levels() -> dict[str, np.ndarray]:
+            if "rate" not in made_groups:
+                made_groups["rate"] = covariate_choice.rate_level_columns(baseline.session, sd)
+            return made_groups["rate"]
+
         # --- covariate per axis ---
         tests: list[CovariateTest] = []
         chosen: list[tuple[str, str]] = []
@@ -498,6 +503,13 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
                 tests.append(CovariateTest(AX[k], "periodic at the spin frequency", chi, share))
                 if dof and share >= COVARIATE_SHARE and stats.chi2.sf(chi, dof) < ALPHA_LOCATED:
                     best = ("periodic", chi, share)
+            if best[0] == "none" and fitted is not None:  # the noise itself grows in a rate hold (before the jumps:
+                # their increments assume the same noise in the holds as in the still segments)
+                ratio, tail = covariate_choice.spin_scatter(baseline.session, sd.residual_less(fitted), k,
+                                                            sd.censored)
+                tests.append(CovariateTest(AX[k], "scatter in a rate hold over the still segments'", ratio, 0.0))
+                if ratio >= PHI_LOCATED and tail < ALPHA_LOCATED:
+                    best = (f"scatter {ratio:.1f}", ratio, 0.0)
             if best[0] == "none" and fitted is not None:
                 count, total = _jumps(baseline.session, sd.residual_less(fitted), k, sd.censored)
                 tests.append(CovariateTest(AX[k], "jumps (two-level)", float(count), count / max(total, 1)))
@@ -505,7 +517,7 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
                     best = ("two-level", float(count), 0.0)
             if best[0] == "none":  # terms of several parameters: a world-fixed direction, a slow oscillation
                 qk = _basis(x[rows])
-                for groups in (heading, oscillation):
+                for groups in (heading, oscillation, rate_levels):
                     got = covariate_choice.best_group(groups(), chols[k], qk, rk, in_cells, excess, COVARIATE_SHARE,
                                                       ALPHA_LOCATED)
                     if got is not None:
@@ -646,6 +658,9 @@ def _text(name: str) -> str:
     if name == "two-level":
         return ("two-level: the bias jumps between levels inside still segments (increments far from Gaussian), not "
                 "eq. 3's Gaussian drift, and follows no covariate")
+    if name.startswith("scatter "):
+        return (f"noise that grows in the rate holds: the scatter in one is {name[8:]} times the still segments' (a "
+                "vibration of the spinning table, or a noise that follows the rate) [rate / vibration]")
     if name.startswith(MOVE_SAMPLES):
         return name
     return f"follows {name}"
