@@ -55,9 +55,11 @@ RATE_LEVEL_DPS = 1.0
 
 #: Families by the words a dictionary term's name holds (first match of each family; a product has two).
 _FAMILY_WORDS: tuple[tuple[str, str], ...] = (
-    ("delay growing with time", "sample clock"),
+    ("delay growing with time (sample clock rate)", "sample clock"),
     ("time since power-on", "time (since power-on)"),
     ("time since the last rate step", "time since a rate step"),
+    ("creep since the last step", "time since a step (creep)"),
+    ("settling since the last rate step", "time since a rate step (settling)"),
     ("direction of the last rotation", "rotation history"),
     ("angular acceleration", "angular acceleration"),
     ("temperature", "temperature"),
@@ -86,7 +88,8 @@ def with_family(names: Sequence[str]) -> str:
     fam = f" [{' / '.join(fams)}]" if fams else ""
     if len(names) == 1:
         return f"{names[0]}{fam}"
-    return f"{' or '.join(names)} (inseparable on this recording: neither adds to the other){fam}"
+    return (f"{' or '.join(names)} (inseparable on this recording: the first adds nothing significant to the others)"
+            f"{fam}")
 
 
 def inseparable(best: tuple[str, np.ndarray, float, float], tests: Sequence[tuple[str, np.ndarray, float, float]],

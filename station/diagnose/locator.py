@@ -483,11 +483,8 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
             in_cells = np.isin(sd.kind, kinds_k)
             excess = max(float(np.sum(rk[in_cells] ** 2)) - float(in_cells.sum()), 1e-9)
             best: tuple[str, float, float] = ("none", 0.0, 0.0)
-            # the dictionary's terms and, for the naming only, the time since power-on (a proxy of the temperature
-            # and of the warm-up: said beside them where inseparable, covariate_choice)
-            naming = [*gains[k], *covariate_gains({"time since power-on": power_on}, chols[k], x[rows], rk)]
             best_term = None
-            for term in naming:
+            for term in gains[k]:
                 name, cw, coef, gain = term
                 new_r = rk - coef * cw
                 share = (float(np.sum(rk[in_cells] ** 2)) - float(np.sum(new_r[in_cells] ** 2))) / excess
@@ -496,7 +493,10 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
                     best = (name, gain, share)
                     best_term = term
             if best_term is not None:  # said with the correlated terms the recording cannot tell from it
-                ties = covariate_choice.inseparable(best_term, naming, rk, ALPHA_LOCATED)
+                # the time since power-on only as a proxy said beside the term it cannot be told from (a proxy of
+                # the temperature and the warm-up: never named alone, everything slow follows it)
+                proxies = [*gains[k], *covariate_gains({"time since power-on": power_on}, chols[k], x[rows], rk)]
+                ties = covariate_choice.inseparable(best_term, proxies, rk, ALPHA_LOCATED)
                 best = (covariate_choice.with_family([best[0], *ties]), best[1], best[2])
             if best[0] == "none" and fitted is not None:
                 chi, dof, share, _amp = _spin_periodic(baseline.session, sd, sd.residual_less(fitted), k)
