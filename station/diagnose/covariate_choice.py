@@ -62,6 +62,7 @@ _FAMILY_WORDS: tuple[tuple[str, str], ...] = (
     ("settling since the last rate step", "time since a rate step (settling)"),
     ("direction of the last rotation", "rotation history"),
     ("angular acceleration", "angular acceleration"),
+    ("temperature rate dT/dt", "temperature (its rate of change)"),
     ("temperature", "temperature"),
     ("specific force", "specific force"),
     ("rate", "rate"),
