@@ -33,7 +33,10 @@ else treats as a symptom. Here, per sensor, after the selection:
    that share of the structure inside the rate holds (sample level, :func:`_spin_periodic`); otherwise a test of the
    drift model's own consequence: its increments are Gaussian; a bias that jumps between levels (telegraph) has a
    few increments of the 0.5 s window means in the still and rate-hold segments beyond 6 robust sigmas
-   (:func:`_jumps`); otherwise "none".
+   (:func:`_jumps`); otherwise "none". How the chosen covariate is said (its family, the correlated terms the
+   recording cannot tell from it), the scatter test before the jumps and the several-parameter families after them
+   (a world-fixed direction, a slow oscillation in time, a level per table rate):
+   :mod:`station.diagnose.covariate_choice`.
 4. **Empirical model** per flagged axis (:mod:`station.diagnose.empirical`): a sparse model over the covariate
    dictionary chosen on held-out segments, reported as "empirical, not in the library".
 5. **Stand-ins.** An accepted effect whose fitted signal lies mostly (:data:`STAND_IN_SHARE`) in the
