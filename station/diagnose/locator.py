@@ -640,7 +640,8 @@ def _samples_text(count: int, total: int, held: int, allowance: float) -> str:
     # with noise above the LSB a reading equal to the one before on all three axes does not happen by chance: a few
     # such repeats among the far samples are a converter that holds (the rest are their neighbours: the local mean
     # of the library's rule is pulled by the held samples)
-    what = (f"{held} of them repeat the sample before on every axis (held samples: the converter repeats a reading)"
+    what = (f"{held} of them repeat the sample before on every axis (held samples: a sample-and-hold, the converter "
+            "repeats a reading)"
             if held >= JUMP_MIN else "no repeats of the sample before among them (glitches or sharp structure)")
     return (f"{MOVE_SAMPLES}: {count} of {total} samples beyond {OUTLIER_SIGMA:g} noise sigmas of their local mean "
             f"(the library's allowance {allowance:g} a sample); {what}; "
