@@ -132,6 +132,9 @@ def test_inseparable_proxies_are_said_together_separable_ones_are_not() -> None:
     best, t_proxy, t_other = term("temperature", a), term("time since power-on", proxy), term("rate x", 0.3 * a + other)
     said = covariate_choice.inseparable(best, [best, t_proxy, t_other], r, 1e-6)
     assert said == ["time since power-on"]
+    # the test does not depend on the columns' units (a separable term in other units is still separable)
+    t_small = term("temperature rate dT/dt", 1e-7 * (0.3 * a + other))
+    assert covariate_choice.inseparable(best, [best, t_small], r, 1e-6) == []
     text = covariate_choice.with_family(["temperature", *said])
     assert text.startswith("temperature or time since power-on (inseparable on this recording")
     assert "[temperature / time (since power-on)]" in text

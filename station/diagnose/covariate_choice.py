@@ -106,9 +106,12 @@ def inseparable(best: tuple[str, np.ndarray, float, float], tests: Sequence[tupl
     for name_c, cc, _, gain_c in others:
         if gain_c <= 0.0:
             continue
-        x = np.column_stack([cb, cc])
+        nc = float(cc @ cc)
+        if nb <= 0.0 or nc <= 0.0:
+            continue
+        x = np.column_stack([cb / math.sqrt(nb), cc / math.sqrt(nc)])  # unit columns: the test is scale-free
         g = x.T @ x
-        if nb <= 0.0 or np.linalg.cond(g) > 1e12:  # the same column: inseparable by construction
+        if np.linalg.cond(g) > 1e12:  # the same column: inseparable by construction
             out.append(name_c)
             continue
         beta = np.linalg.solve(g, x.T @ rk)
