@@ -33,7 +33,10 @@ else treats as a symptom. Here, per sensor, after the selection:
    that share of the structure inside the rate holds (sample level, :func:`_spin_periodic`); otherwise a test of the
    drift model's own consequence: its increments are Gaussian; a bias that jumps between levels (telegraph) has a
    few increments of the 0.5 s window means in the still and rate-hold segments beyond 6 robust sigmas
-   (:func:`_jumps`); otherwise "none".
+   (:func:`_jumps`); otherwise "none". How the chosen covariate is said (its family, the correlated terms the
+   recording cannot tell from it), the scatter test before the jumps and the several-parameter families after them
+   (a world-fixed direction, a slow oscillation in time, a level per table rate):
+   :mod:`station.diagnose.covariate_choice`.
 4. **Empirical model** per flagged axis (:mod:`station.diagnose.empirical`): a sparse model over the covariate
    dictionary chosen on held-out segments, reported as "empirical, not in the library".
 5. **Stand-ins.** An accepted effect whose fitted signal lies mostly (:data:`STAND_IN_SHARE`) in the
@@ -57,7 +60,7 @@ from scipy import linalg, stats
 from scipy.ndimage import uniform_filter1d
 from scipy.signal import lfilter
 
-from station.diagnose import empirical, robust
+from station.diagnose import covariate_choice, empirical, robust
 from station.diagnose.reporting import OUTLIER_ALLOWANCE
 from station.diagnose.residuals import OUTLIER_SIGMA
 from station.diagnose.results import CovariateTest, EmpiricalModel, LocatorEvidence, Unexplained
@@ -446,6 +449,24 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
                 extended.extend(covariates_by_axis(baseline, sd, extended=True))
             return extended[k]
 
+        power_on = sd.block_mean(np.asarray(baseline.session.t_s, dtype=float))
+        made_groups: dict[str, dict[str, np.ndarray]] = {}
+
+        def heading() -> dict[str, np.ndarray]:
+            if "heading" not in made_groups:
+                made_groups["heading"] = covariate_choice.heading_columns(baseline.session, sd)
+            return made_groups["heading"]
+
+        def oscillation() -> dict[str, np.ndarray]:
+            if "oscillation" not in made_groups:
+                made_groups["oscillation"] = covariate_choice.oscillation_columns(baseline.session, sd)
+            return made_groups["oscillation"]
+
+        def rate_levels() -> dict[str, np.ndarray]:
+            if "rate" not in made_groups:
+                made_groups["rate"] = covariate_choice.rate_level_columns(baseline.session, sd)
+            return made_groups["rate"]
+
         # --- covariate per axis ---
         tests: list[CovariateTest] = []
         chosen: list[tuple[str, str]] = []
@@ -465,22 +486,47 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
             in_cells = np.isin(sd.kind, kinds_k)
             excess = max(float(np.sum(rk[in_cells] ** 2)) - float(in_cells.sum()), 1e-9)
             best: tuple[str, float, float] = ("none", 0.0, 0.0)
-            for name, cw, coef, gain in gains[k]:
+            best_term = None
+            for term in gains[k]:
+                name, cw, coef, gain = term
                 new_r = rk - coef * cw
                 share = (float(np.sum(rk[in_cells] ** 2)) - float(np.sum(new_r[in_cells] ** 2))) / excess
                 tests.append(CovariateTest(AX[k], name, gain, share))
                 if share >= COVARIATE_SHARE and stats.chi2.sf(gain, 1) < ALPHA_LOCATED and gain > best[1]:
                     best = (name, gain, share)
+                    best_term = term
+            if best_term is not None:  # said with the correlated terms the recording cannot tell from it
+                # the time since power-on only as a proxy said beside the term it cannot be told from (a proxy of
+                # the temperature and the warm-up: never named alone, everything slow follows it)
+                proxies = [*gains[k], *covariate_gains({"time since power-on": power_on}, chols[k], x[rows], rk)]
+                ties = covariate_choice.inseparable(best_term, proxies, rk, ALPHA_LOCATED)
+                best = (covariate_choice.with_family([best[0], *ties]), best[1], best[2])
             if best[0] == "none" and fitted is not None:
                 chi, dof, share, _amp = _spin_periodic(baseline.session, sd, sd.residual_less(fitted), k)
                 tests.append(CovariateTest(AX[k], "periodic at the spin frequency", chi, share))
                 if dof and share >= COVARIATE_SHARE and stats.chi2.sf(chi, dof) < ALPHA_LOCATED:
                     best = ("periodic", chi, share)
+            if best[0] == "none" and fitted is not None:  # the noise itself grows in a rate hold (before the jumps:
+                # their increments assume the same noise in the holds as in the still segments)
+                ratio, tail = covariate_choice.spin_scatter(baseline.session, sd.residual_less(fitted), k,
+                                                            sd.censored)
+                tests.append(CovariateTest(AX[k], "scatter in a rate hold over the still segments'", ratio, 0.0))
+                if ratio >= PHI_LOCATED and tail < ALPHA_LOCATED:
+                    best = (f"scatter {ratio:.1f}", ratio, 0.0)
             if best[0] == "none" and fitted is not None:
                 count, total = _jumps(baseline.session, sd.residual_less(fitted), k, sd.censored)
                 tests.append(CovariateTest(AX[k], "jumps (two-level)", float(count), count / max(total, 1)))
                 if count >= JUMP_MIN and count >= JUMP_MIN_SHARE * total:
                     best = ("two-level", float(count), 0.0)
+            if best[0] == "none":  # terms of several parameters: a world-fixed direction, a slow oscillation
+                qk = _basis(x[rows])
+                for groups in (heading, oscillation, rate_levels):
+                    got = covariate_choice.best_group(groups(), chols[k], qk, rk, in_cells, excess, COVARIATE_SHARE,
+                                                      ALPHA_LOCATED)
+                    if got is not None:
+                        tests.append(CovariateTest(AX[k], got[0], got[1], got[2]))
+                        best = (covariate_choice.with_family([got[0]]), got[1], got[2])
+                        break
             chosen.append((AX[k], best[0]))
             models.append(empirical.fit(sd.sensor, AX[k], prob.y[:, k] - _mean_fit(prob, beta, nbase, k),
                                         1.0 / prob.white[:, k], sd.segment,
@@ -520,8 +566,7 @@ def covariate_gains(values: Mapping[str, np.ndarray], chol: np.ndarray, xk: np.n
     """One axis's covariate tests: per covariate block values in ``values`` (name -> (m,), :func:`covariates_by_axis`)
     (name, its values whitened by the axis's Cholesky factor ``chol`` and residualized against the axis's whitened
     design ``xk`` (m, p), its least-squares coefficient on the whitened residual ``rk`` (m,), the chi^2 it takes)."""
-    xk = xk[:, np.any(xk != 0, axis=0)]
-    qk = linalg.qr(xk, mode="economic", check_finite=False)[0] if xk.shape[1] else np.zeros((len(rk), 0))
+    qk = _basis(xk)
     out: list[tuple[str, np.ndarray, float, float]] = []
     if not values:
         return out
@@ -538,6 +583,13 @@ def covariate_gains(values: Mapping[str, np.ndarray], chol: np.ndarray, xk: np.n
         coef = float(dots[i]) / nn
         out.append((name, cws[:, i], coef, coef**2 * nn))
     return out
+
+
+def _basis(xk: np.ndarray) -> np.ndarray:
+    """An orthonormal basis (m, r) of the non-zero columns of an axis's whitened design ``xk`` (m, p)."""
+    xk = xk[:, np.any(xk != 0, axis=0)]
+    return np.asarray(linalg.qr(xk, mode="economic", check_finite=False)[0] if xk.shape[1]
+                      else np.zeros((len(xk), 0)))
 
 
 def _targeted_cells(sd: Any, gains: Mapping[int, list[tuple[str, np.ndarray, float, float]]], res: np.ndarray,
@@ -588,7 +640,8 @@ def _samples_text(count: int, total: int, held: int, allowance: float) -> str:
     # with noise above the LSB a reading equal to the one before on all three axes does not happen by chance: a few
     # such repeats among the far samples are a converter that holds (the rest are their neighbours: the local mean
     # of the library's rule is pulled by the held samples)
-    what = (f"{held} of them repeat the sample before on every axis (held samples: the converter repeats a reading)"
+    what = (f"{held} of them repeat the sample before on every axis (held samples: a sample-and-hold, the converter "
+            "repeats a reading)"
             if held >= JUMP_MIN else "no repeats of the sample before among them (glitches or sharp structure)")
     return (f"{MOVE_SAMPLES}: {count} of {total} samples beyond {OUTLIER_SIGMA:g} noise sigmas of their local mean "
             f"(the library's allowance {allowance:g} a sample); {what}; "
@@ -600,14 +653,18 @@ def _text(name: str) -> str:
         return ("none: no covariate of the dictionary (rate, |rate|, rate^2, rate^3, angular acceleration, specific "
                 "force and its square and size, temperature, its direction and rate, time since the last rate step, "
                 "force and rate through lags, the direction of the last rotation, a delay growing with time, "
-                "rate times force or temperature, force times temperature) "
+                "rate times force or temperature, force times temperature, time since power-on, a horizontal "
+                "direction fixed in the world, a slow oscillation in time) "
                 f"takes {COVARIATE_SHARE:.0%} of it, and it is not two-level")
     if name == "periodic":
-        return ("periodic at the rate table's spin frequency: a cos/sin of the table's angle takes most of the "
-                "structure inside the rate holds")
+        return ("periodic at the rate table's spin frequency: follows the spin phase (a cos/sin of the table's angle "
+                "takes most of the structure inside the rate holds) [spin phase]")
     if name == "two-level":
         return ("two-level: the bias jumps between levels inside still segments (increments far from Gaussian), not "
                 "eq. 3's Gaussian drift, and follows no covariate")
+    if name.startswith("scatter "):
+        return (f"noise that grows in the rate holds: the scatter in one is {name[8:]} times the still segments' (a "
+                "vibration of the spinning table, or a noise that follows the rate) [rate / vibration]")
     if name.startswith(MOVE_SAMPLES):
         return name
     return f"follows {name}"
