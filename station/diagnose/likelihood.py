@@ -93,6 +93,9 @@ WALK_CONSISTENCY_Z = 4.0
 #: Shortest warm-up T_c (s) the diagnosis considers: a faster "warm-up" is no drift of eq. 3 at the blocks'
 #: resolution (and its block means overflow).
 TC_FLOOR_S = 1.0
+#: T_c values (log-spaced over the class's range) over which a warm-up-like effect's size is integrated
+#: (:meth:`SensorProblem.tc_marginal`).
+TC_MARGINAL_POINTS = 9
 #: Candidates that look like the warm-up drift: tested with the drift's T_c re-fitted.
 PROFILE_TC = tuple(e.name for e in EFFECTS if e.identifiability.profile_tc)
 #: Candidates a bias random walk can imitate (a function of time alone): tested with the walk allowed too.
@@ -665,6 +668,70 @@ class SensorProblem:
         if test.passes:
             test.heldout_before, test.heldout_after, test.heldout_change_se = self.heldout(zb)
         return test
+
+    def tc_marginal(self, index: int, q_max: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray] | None:
+        """The size of accepted effect ``index`` with eq. 3's warm-up T_c integrated out, per axis: (mean, std) of
+        its parameters (p,), or None where a parameter is not one axis's alone (the axes' fits are separate here).
+
+        A size conditional on one T_c (:meth:`test_mean`'s ``pinv(X^T X)``) leaves out the trade-off between the
+        effect and the warm-up ``b_drift exp(-t/T_c)``: a temperature course ``1 - exp(-t/tau_h)`` and the warm-up
+        have nearly the same shape, and the T_c the re-fit settles on (:meth:`refit_drift`, a search at fixed q) is
+        often a bound of the class's range. Here every T_c of :data:`TC_MARGINAL_POINTS` log-spaced over the class's
+        range (or 1 % to 10 x the record without one) is weighted by its likelihood: q profiled at each T_c (at most
+        ``q_max`` per axis), the linear terms integrated out with a flat prior (the restricted likelihood's
+        ``1/2 log det X^T C^-1 X``, Patterson & Thompson 1971), a flat prior in log T_c. The mean and the
+        variance are those of the mixture: ``sum w_i theta_i`` and ``sum w_i (var_i + (theta_i - mean)^2)``.
+        """
+        zb = self._accepted[index]
+        p = zb.shape[2]
+        owner = np.any(zb != 0, axis=0)  # (3, p): the axes whose rows carry each parameter
+        if not np.all(owner.sum(axis=0) == 1):
+            return None
+        span = float(self.sd.t_s.max())
+        lo, hi = self.sd.tc_range_s if self.sd.tc_range_s else (0.01 * span, 10.0 * span)
+        grid = np.geomspace(max(lo, TC_FLOOR_S), max(hi, TC_FLOOR_S), TC_MARGINAL_POINTS)
+        mean, std = np.zeros(p), np.zeros(p)
+        saved = self._snapshot()
+        try:
+            for k in range(3):
+                mine = np.flatnonzero(owner[k])
+                if not len(mine):
+                    continue
+                blocks = [a[:, k, :] for a in self._accepted]
+                cols = np.concatenate(blocks, axis=1)
+                start = sum(a.shape[2] for a in self._accepted[:index])
+                keep = np.any(cols != 0, axis=0)
+                pos = np.cumsum(keep) - 1  # column of each kept parameter in the reduced design
+                vals, vars_, nlls = [], [], []
+                for tc in grid:
+                    self._set_tc(k, float(tc))
+                    extra = cols[:, keep]
+                    qk = math.inf if q_max is None else float(q_max[k])
+                    q, _ = self._profile_q(k, self.k2, extra, q_max=qk)
+                    ch = self.chol(k, q, self.k2)
+                    x = np.column_stack([self.base[k], extra])
+                    xw = linalg.solve_triangular(ch, x, lower=True, check_finite=False)
+                    yw = linalg.solve_triangular(ch, self.y[:, k], lower=True, check_finite=False)
+                    beta, *_ = linalg.lstsq(xw, yw, check_finite=False)
+                    r = yw - xw @ beta
+                    sv = np.linalg.svd(xw, compute_uv=False)
+                    nlls.append(0.5 * float(r @ r) + float(np.log(np.diag(ch)).sum())
+                                + float(np.log(sv[sv > RCOND ** 0.5 * sv[0]]).sum()))
+                    cov = linalg.pinv(xw.T @ xw)
+                    j = self.base[k].shape[1] + pos[start + mine]
+                    vals.append(beta[j])
+                    vars_.append(np.diag(cov)[j])
+                nll = np.asarray(nlls)
+                w = np.exp(-(nll - nll.min()))
+                w /= w.sum()
+                v, s2 = np.asarray(vals), np.asarray(vars_)
+                m = w @ v
+                mean[mine] = m
+                std[mine] = np.sqrt(w @ (s2 + (v - m) ** 2))
+                self._restore(saved)
+        finally:
+            self._restore(saved)
+        return mean, std
 
     def _snapshot(self) -> _State:
         """The drift's current T_c, base columns, GM correlations and q (see :meth:`_restore`)."""
