@@ -457,14 +457,17 @@ def _retested(f: Finding, size: retest.SizeCheck | None) -> Finding:
     spread = size.spread
     if not np.any(spread > 0) and not size.integrated:
         return f
-    # an effect sized with the warm-up's T_c integrated out (retest.py) states that value and its uncertainty
+    # an effect sized with the warm-up's T_c integrated out (retest.py) states that value and its uncertainty; the
+    # bootstrap's spread over segments was taken at the one T_c of the re-fit, where the misfit of a wrong T_c
+    # widens it (it stays in the finding's bootstrap entry)
     theta = size.final if size.integrated else f.theta
-    std = size.stated_std(np.maximum(size.std, f.theta_std) if size.integrated else f.theta_std)
+    std = size.stated_std(size.std if size.integrated else f.theta_std)
     params = dict(f.parameters)
     params.setdefault("std_fit", params.get("std"))  # the fit's own (the bootstrap's step keeps it where it widened)
     if size.integrated:
         params["value"] = engineering(f.effect, f.sensor, theta, np.diag(std**2))["value"]
         params["value_selection_step"] = engineering(f.effect, f.sensor, f.theta, np.diag(std**2))["value"]
+        params["std_from"] = ["fit, T_c integrated"] * len(theta)
     params["std"] = engineering(f.effect, f.sensor, theta, np.diag(std**2))["std"]
     params["std_spread"] = engineering(f.effect, f.sensor, theta, np.diag(spread**2))["std"]
     return replace(f, parameters=params, theta=np.asarray(theta, dtype=float), theta_std=std)
