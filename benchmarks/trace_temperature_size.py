@@ -51,7 +51,7 @@ def main() -> None:
             out = prob.tc_marginal(len(prob.accepted) - 1)
             if out is None:
                 continue
-            mean, std = out
+            mean, std, _ = out
             zc = (test.theta - truth) / np.sqrt(np.diag(test.cov))
             zm = (mean - truth) / std
             lo, hi = sd.tc_range_s or (np.nan, np.nan)

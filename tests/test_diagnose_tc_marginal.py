@@ -41,7 +41,7 @@ def test_the_size_with_tc_integrated_out_covers_the_truth_where_the_one_at_the_r
     assert np.max(np.abs(z_fixed)) > 4.0  # the T_c-conditional size misses the truth by far
     out = prob.tc_marginal(0)
     assert out is not None
-    mean, std = out
+    mean, std, _ = out
     z = (mean - truth) / std
     assert np.all(np.abs(z) < 3.0)
     assert np.all(np.abs(mean - truth) < np.abs(test.theta - truth))

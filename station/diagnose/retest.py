@@ -126,10 +126,9 @@ def sizes(prob: Any, names: list[str], reported: dict[str, tuple[np.ndarray, np.
         theta, stated = reported[name]
         final, final_c = beta[sl].copy(), beta_c[sl].copy()
         std = np.sqrt(np.clip(np.diag(cov)[sl], 0.0, None))
-        integrated = name in PROFILE_TC and (free := prob.tc_marginal(index)) is not None
+        integrated = name in PROFILE_TC and (marginal := prob.tc_marginal(index, q_class)) is not None
         if integrated:
-            final, std = free
-            final_c = prob.tc_marginal(index, q_class)[0]
+            final, std, final_c = marginal
         if stated is not None and len(stated) == p:
             std = np.maximum(std, np.asarray(stated, dtype=float))
         out[name] = SizeCheck(name, prob.sd.sensor, np.asarray(theta, dtype=float), final, final_c, std,
