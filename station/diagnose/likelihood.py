@@ -100,6 +100,9 @@ WALK_CONSISTENCY_Z = 4.0
 #: Shortest warm-up T_c (s) the diagnosis considers: a faster "warm-up" is no drift of eq. 3 at the blocks'
 #: resolution (and its block means overflow).
 TC_FLOOR_S = 1.0
+#: T_c values (log-spaced over the class's range) over which a warm-up-like effect's size is integrated
+#: (:meth:`SensorProblem.tc_marginal`).
+TC_MARGINAL_POINTS = 9
 #: Candidates that look like the warm-up drift: tested with the drift's T_c re-fitted.
 PROFILE_TC = tuple(e.name for e in EFFECTS if e.identifiability.profile_tc)
 #: Candidates a bias random walk can imitate (a function of time alone): tested with the walk allowed too.
@@ -674,6 +677,82 @@ class SensorProblem:
         if test.passes:
             test.heldout_before, test.heldout_after, test.heldout_change_se = self.heldout(zb)
         return test
+
+    def tc_marginal(self, index: int, q_max: np.ndarray | None = None
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """The size of accepted effect ``index`` with eq. 3's warm-up T_c integrated out, per axis: (mean, std) of
+        its parameters (p,) with the drift noise q free, and the mean with q at most ``q_max`` per axis (the same
+        as the first where the free q stays below it at every T_c); None where a parameter is not one axis's alone
+        (the axes' fits are separate here).
+
+        A size conditional on one T_c (:meth:`test_mean`'s ``pinv(X^T X)``) leaves out the trade-off between the
+        effect and the warm-up ``b_drift exp(-t/T_c)``: a temperature course ``1 - exp(-t/tau_h)`` and the warm-up
+        have nearly the same shape, and the T_c the re-fit settles on (:meth:`refit_drift`, a search at fixed q) is
+        often a bound of the class's range. Here every T_c of :data:`TC_MARGINAL_POINTS` log-spaced over the class's
+        range (or 1 % to 10 x the record without one) is weighted by its likelihood: q profiled at each T_c, the
+        linear terms integrated out with a flat prior (the restricted likelihood's
+        ``1/2 log det X^T C^-1 X``, Patterson & Thompson 1971), a flat prior in log T_c. The mean and the
+        variance are those of the mixture: ``sum w_i theta_i`` and ``sum w_i (var_i + (theta_i - mean)^2)``.
+        """
+        zb = self._accepted[index]
+        p = zb.shape[2]
+        owner = np.any(zb != 0, axis=0)  # (3, p): the axes whose rows carry each parameter
+        if not np.all(owner.sum(axis=0) == 1):
+            return None
+        span = float(self.sd.t_s.max())
+        lo, hi = self.sd.tc_range_s if self.sd.tc_range_s else (0.01 * span, 10.0 * span)
+        grid = np.geomspace(max(lo, TC_FLOOR_S), max(hi, TC_FLOOR_S), TC_MARGINAL_POINTS)
+        mean, std, mean_c = np.zeros(p), np.zeros(p), np.zeros(p)
+        saved = self._snapshot()
+        try:
+            for k in range(3):
+                mine = np.flatnonzero(owner[k])
+                if not len(mine):
+                    continue
+                cols = np.concatenate([a[:, k, :] for a in self._accepted], axis=1)
+                start = sum(a.shape[2] for a in self._accepted[:index])
+                keep = np.any(cols != 0, axis=0)
+                pos = np.cumsum(keep) - 1  # column of each kept parameter in the reduced design
+                extra = cols[:, keep]
+                j = self.base[k].shape[1] + pos[start + mine]
+                qk = math.inf if q_max is None else float(q_max[k])
+                # (nll, value, variance) per T_c: q free, q bounded
+                fits: list[list[tuple[float, np.ndarray, np.ndarray]]] = [[], []]
+                for tc in grid:
+                    self._set_tc(k, float(tc))
+                    q, _ = self._profile_q(k, self.k2, extra)
+                    fits[0].append(self._restricted_fit(k, q, extra, j))
+                    fits[1].append(fits[0][-1] if q <= qk else
+                                   self._restricted_fit(k, self._profile_q(k, self.k2, extra, q_max=qk)[0], extra, j))
+                for out_mean, out_std, fit in ((mean, std, fits[0]), (mean_c, None, fits[1])):
+                    nll = np.array([f[0] for f in fit])
+                    w = np.exp(-(nll - nll.min()))
+                    w /= w.sum()
+                    v, s2 = np.array([f[1] for f in fit]), np.array([f[2] for f in fit])
+                    m = w @ v
+                    out_mean[mine] = m
+                    if out_std is not None:
+                        out_std[mine] = np.sqrt(w @ (s2 + (v - m) ** 2))
+                self._restore(saved)
+        finally:
+            self._restore(saved)
+        return mean, std, mean_c
+
+    def _restricted_fit(self, k: int, q: float, extra: np.ndarray, j: np.ndarray
+                        ) -> tuple[float, np.ndarray, np.ndarray]:
+        """Axis k's restricted negative log-likelihood at drift noise q (the linear terms integrated out with a flat
+        prior, see :meth:`_axis_nll`), and the GLS values and variances of its design's columns ``j`` (base columns,
+        then ``extra``)."""
+        ch = self.chol(k, q, self.k2)
+        x = np.column_stack([self.base[k], extra])
+        xw = linalg.solve_triangular(ch, x, lower=True, check_finite=False)
+        yw = linalg.solve_triangular(ch, self.y[:, k], lower=True, check_finite=False)
+        beta, *_ = linalg.lstsq(xw, yw, check_finite=False)
+        r = yw - xw @ beta
+        sv = np.linalg.svd(xw, compute_uv=False)
+        nll = (0.5 * float(r @ r) + float(np.log(np.diag(ch)).sum())
+               + float(np.log(sv[sv > RCOND ** 0.5 * sv[0]]).sum()))
+        return nll, beta[j], np.diag(linalg.pinv(xw.T @ xw))[j]
 
     def _snapshot(self) -> _State:
         """The drift's current T_c, base columns, GM correlations and q (see :meth:`_restore`)."""

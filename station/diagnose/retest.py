@@ -12,6 +12,12 @@
   is added in quadrature to the finding's stated standard deviation (its ``parameters``' ``std``): how much the
   value depends on the model around it is part of its uncertainty. When the three values differ by more than the
   finding's uncertainty, the finding is also not stated at ``high`` confidence (``evidence.retest`` holds them).
+* **Warm-up-like sizes with T_c integrated out.** For an effect that competes with eq. 3's warm-up (``PROFILE_TC``:
+  the temperature bias and scale), the final model's value and its uncertainty are taken over the warm-up's T_c
+  (:meth:`station.diagnose.likelihood.SensorProblem.tc_marginal`), not at the one T_c the drift's re-fit settled on
+  (often a bound of the class's range: a self-heating course and the warm-up have nearly the same shape, and the
+  value at a wrong T_c is biased by about its whole stated uncertainty). That value replaces the selection step's,
+  and the spread is taken between the two integrated values (drift noise free and bounded by the class).
 """
 
 from __future__ import annotations
@@ -24,6 +30,7 @@ from scipy import linalg
 from scipy.ndimage import uniform_filter1d
 
 from station.diagnose.effect_registry import engineering
+from station.diagnose.likelihood import PROFILE_TC
 from station.diagnose.locator import class_drift_noise
 from station.diagnose.residuals import OUTLIER_SIGMA, SensorData
 from station.diagnose.results import SizeRetest
@@ -58,11 +65,17 @@ class SizeCheck:
     final: np.ndarray
     final_class_q: np.ndarray
     std: np.ndarray
+    #: the final values are integrated over the warm-up's T_c (:meth:`SensorProblem.tc_marginal`): they replace the
+    #: selection step's value, which is conditional on one T_c and left out of the spread
+    integrated: bool = False
 
     @property
     def spread(self) -> np.ndarray:
-        """Per parameter, the range of the three values (SI): how much the value depends on the model around it."""
-        return np.ptp(np.stack([self.reported, self.final, self.final_class_q]), axis=0)
+        """Per parameter, the range of the three values (SI; of the two integrated ones where :attr:`integrated`):
+        how much the value depends on the model around it."""
+        values = [self.final, self.final_class_q] if self.integrated else [self.reported, self.final,
+                                                                             self.final_class_q]
+        return np.ptp(np.stack(values), axis=0)
 
     @property
     def change_over_std(self) -> float:
@@ -99,22 +112,27 @@ def sizes(prob: Any, names: list[str], reported: dict[str, tuple[np.ndarray, np.
     if not names:
         return {}
     beta, cov, nbase = _joint(prob)
-    with prob.drift_noise_at_most(class_drift_noise(prob.sd.sensor, prob.sd.params.bias_drift)):
+    q_class = class_drift_noise(prob.sd.sensor, prob.sd.params.bias_drift)
+    with prob.drift_noise_at_most(q_class):
         beta_c, _, _ = _joint(prob)
     out: dict[str, SizeCheck] = {}
     col = nbase
-    for name, zb in zip(names, prob.accepted, strict=True):
+    for index, (name, zb) in enumerate(zip(names, prob.accepted, strict=True)):
         p = zb.shape[2]
         sl = slice(col, col + p)
         col += p
         if name.startswith(NUISANCE) or name not in reported or len(reported[name][0]) != p:
             continue
         theta, stated = reported[name]
+        final, final_c = beta[sl].copy(), beta_c[sl].copy()
         std = np.sqrt(np.clip(np.diag(cov)[sl], 0.0, None))
+        integrated = name in PROFILE_TC and (marginal := prob.tc_marginal(index, q_class)) is not None
+        if integrated:
+            final, std, final_c = marginal
         if stated is not None and len(stated) == p:
             std = np.maximum(std, np.asarray(stated, dtype=float))
-        out[name] = SizeCheck(name, prob.sd.sensor, np.asarray(theta, dtype=float), beta[sl].copy(),
-                              beta_c[sl].copy(), std)
+        out[name] = SizeCheck(name, prob.sd.sensor, np.asarray(theta, dtype=float), final, final_c, std,
+                              integrated)
     return out
 
 

@@ -455,14 +455,22 @@ def _retested(f: Finding, size: retest.SizeCheck | None) -> Finding:
     if f.theta is None or f.theta_std is None or REGISTRY[f.effect].engineering is not None:
         return f  # (pose_tilt: its entry per pose pair is made from the full covariance, left as fitted)
     spread = size.spread
-    if not np.any(spread > 0):
+    if not np.any(spread > 0) and not size.integrated:
         return f
-    std = size.stated_std(f.theta_std)
+    # an effect sized with the warm-up's T_c integrated out (retest.py) states that value and its uncertainty; the
+    # bootstrap's spread over segments was taken at the one T_c of the re-fit, where the misfit of a wrong T_c
+    # widens it (it stays in the finding's bootstrap entry)
+    theta = size.final if size.integrated else f.theta
+    std = size.stated_std(size.std if size.integrated else f.theta_std)
     params = dict(f.parameters)
     params.setdefault("std_fit", params.get("std"))  # the fit's own (the bootstrap's step keeps it where it widened)
-    params["std"] = engineering(f.effect, f.sensor, f.theta, np.diag(std**2))["std"]
-    params["std_spread"] = engineering(f.effect, f.sensor, f.theta, np.diag(spread**2))["std"]
-    return replace(f, parameters=params, theta_std=std)
+    if size.integrated:
+        params["value"] = engineering(f.effect, f.sensor, theta, np.diag(std**2))["value"]
+        params["value_selection_step"] = engineering(f.effect, f.sensor, f.theta, np.diag(std**2))["value"]
+        params["std_from"] = ["fit, T_c integrated"] * len(theta)
+    params["std"] = engineering(f.effect, f.sensor, theta, np.diag(std**2))["std"]
+    params["std_spread"] = engineering(f.effect, f.sensor, theta, np.diag(spread**2))["std"]
+    return replace(f, parameters=params, theta=np.asarray(theta, dtype=float), theta_std=std)
 
 
 def _kind_codes(labels: Collection[str]) -> list[int]:
