@@ -1049,9 +1049,10 @@ class SensorProblem:
         return u, vals[u]
 
     def _profile_k2(self, qs: list[float], extra: list[np.ndarray | None], *,
-                    reml: bool = False) -> tuple[float, float, float]:
+                    reml: bool = False, with_std: bool = True) -> tuple[float, float, float]:
         """(nll, K^2, std of K) with a random walk ``K^2 min(t_i, t_j)`` shared by the three axes profiled at the
-        current T_c and the drift noise ``qs``; ``extra``: per axis the mean columns besides the base terms."""
+        current T_c and the drift noise ``qs``; ``extra``: per axis the mean columns besides the base terms;
+        ``with_std`` False: the std is not computed (nan; two profile points fewer, the same nll and K^2)."""
         k2_0 = float(np.median(self.white)) / max(float(self.sd.t_s.max()), 1.0)
         grid = [k2_0 * 10.0 ** e for e in np.arange(-2.0, 3.01, 1.0)]
 
@@ -1064,6 +1065,8 @@ class SensorProblem:
         res = optimize.minimize_scalar(lambda u: total(math.exp(u)), bounds=(lo, hi), method="bounded",
                                        options={"xatol": 0.2, "maxiter": 10})
         nll, k2 = (float(res.fun), math.exp(float(res.x))) if res.fun < vals[i] else (vals[i], grid[i])
+        if not with_std:
+            return nll, k2, math.nan
         # uncertainty of K from the curvature of the profile in log K^2
         h = 0.3
         curv = (total(k2 * math.exp(h)) - 2.0 * nll + total(k2 * math.exp(-h))) / h**2
@@ -1078,7 +1081,7 @@ class SensorProblem:
         extra = [self._accepted_axis(k) for k in range(3)]
         best = self.total_nll()
         for start in ([float(q) for q in self.q], [0.0, 0.0, 0.0]):
-            _, k2, _ = self._profile_k2(start, extra)
+            _, k2, _ = self._profile_k2(start, extra, with_std=False)
             fits = [self._profile_q(k, k2, extra[k]) for k in range(3)]
             best = min(best, sum(v for _, v in fits))
         return best
@@ -1170,7 +1173,7 @@ class SensorProblem:
         qs = [float(q) for q in self.q]
         if self.q_class is not None:  # eq. 3's drift noise at most the class's: it must not take up one axis's part
             qs = [min(a, float(b)) for a, b in zip(qs, self.q_class, strict=True)]
-        shared, _, _ = self._profile_k2(qs, extra)
+        shared, _, _ = self._profile_k2(qs, extra, with_std=False)
         k2_0 = float(np.median(self.white)) / max(float(self.sd.t_s.max()), 1.0)
         separate = 0.0
         for k in range(3):
