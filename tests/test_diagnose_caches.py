@@ -99,3 +99,17 @@ def test_stated_std_holds_the_spread_of_the_size_between_the_fits() -> None:
     stable = SizeCheck("lever_arm", "accel", reported=np.ones(3), final=np.ones(3), final_class_q=np.ones(3),
                        std=np.full(3, 0.1))
     np.testing.assert_array_equal(stable.stated_std(np.full(3, 0.1)), np.full(3, 0.1))
+
+
+def test_covariance_built_in_place_is_the_plain_sum_bit_for_bit(baseline: Baseline) -> None:
+    # SensorProblem._covariance leaves out the walk's term where K^2 = 0: the same bytes as q GM + K^2 tmin + white,
+    # signed zeros included (q = 0 makes -0 of GM's tiny negative entries; the plain sum turns them into +0)
+    prob = SensorProblem(baseline, baseline.gyro)
+    for k, q, k2 in ((0, float(prob.q[0]), 0.0), (1, 0.0, 0.0), (2, float(prob.q[2]), 1e-9), (0, 0.0, 3e-8)):
+        plain = q * prob.gm[k] + k2 * prob.tmin
+        plain[np.diag_indices_from(plain)] += prob.white[:, k]
+        built = prob._covariance(k, q, k2)
+        np.testing.assert_array_equal(built, plain)
+        np.testing.assert_array_equal(np.signbit(built), np.signbit(plain))
+        assert built.tobytes() == plain.tobytes()
+    assert prob._tmin_nonneg

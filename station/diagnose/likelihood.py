@@ -65,8 +65,11 @@ REFIT_ROUNDS = 8
 #: Drift-noise correlation matrices kept per T_c (each (m, m) for m blocks).
 GM_CACHE = 48
 #: Cholesky factors of the block covariance kept (each (m, m), the most recently used): the T_c re-fit of a nested
-#: test factors the same covariances for the null and the alternative (the candidate changes the mean, not C).
-CHOL_CACHE = 24
+#: test factors the same covariances for the null and the alternative (the candidate changes the mean, not C), and
+#: the random walk's K^2 profile (:meth:`SensorProblem._profile_k2`) visits the same (q = 0, K^2) grid for both. 64
+#: of 390 blocks hold 78 MB per sensor; 24 missed about a third of the repeats on a 15-minute recording
+#: (docs/measurements/diagnosis.md).
+CHOL_CACHE = 64
 #: Outcomes of the drift's T_c re-fit kept (:meth:`SensorProblem.refit_drift`).
 REFIT_CACHE = 4
 #: Whether the drift noise q of eq. 3 is bounded in every fit (off: the base model as before):
@@ -268,6 +271,7 @@ class SensorProblem:
         # modelled K^2 w_i / 3 too large and K comes out low
         self.tmin = np.minimum(t[:, None], t[None, :])
         self.tmin[np.diag_indices(self.m)] -= sd.width_s / 6.0
+        self._tmin_nonneg = bool(np.all(self.tmin >= 0.0))  # see _covariance
         self.d_temp = sd.block_mean(baseline.d_temp)  # temperature rise per block (K)
         self.temp_direction = temperature_direction(baseline, sd)  # heating +1 / cooling -1 per block
         # eq. 3's T_c inside the sensor class's range, where one is given (SensorData.tc_range_s)
@@ -471,9 +475,7 @@ class SensorProblem:
             key = (k, float(self.tc[k]), float(q), float(k2), self._white_key)
             hit = self._chol_cache.pop(key, None)
             if hit is None:
-                c = q * self.gm[k] + k2 * self.tmin
-                c[np.diag_indices_from(c)] += self.white[:, k]
-                hit = linalg.cholesky(c, lower=True, check_finite=False)
+                hit = linalg.cholesky(self._covariance(k, q, k2), lower=True, check_finite=False)
                 hit.flags.writeable = False
                 if len(self._chol_cache) >= CHOL_CACHE:
                     self._chol_cache.pop(next(iter(self._chol_cache)))
@@ -481,12 +483,24 @@ class SensorProblem:
             return hit
         white = self.white if white is None else white
         if rows is None:
-            c = q * self.gm[k] + k2 * self.tmin
-            c[np.diag_indices_from(c)] += white[:, k]
+            c = self._covariance(k, q, k2, white)
         else:
             c = q * self.gm[k][np.ix_(rows, rows)] + k2 * self.tmin[np.ix_(rows, rows)]
             c[np.diag_indices_from(c)] += white[rows, k]
         return linalg.cholesky(c, lower=True, check_finite=False)
+
+    def _covariance(self, k: int, q: float, k2: float, white: np.ndarray | None = None) -> np.ndarray:
+        """Axis ``k``'s block covariance ``q GM + K^2 min(t_i, t_j) + diag(white)`` (a new array).
+
+        Built in place, and without the walk's term where K^2 = 0: the same bytes as the plain expression
+        (``0 * tmin`` is +0 where ``tmin >= 0``, and adding the scalar +0 turns a -0 into +0 as that sum does)."""
+        c = q * self.gm[k]
+        if k2 != 0.0 or not self._tmin_nonneg:
+            c += k2 * self.tmin
+        else:
+            c += 0.0
+        c[np.diag_indices_from(c)] += (self.white if white is None else white)[:, k]
+        return c
 
     def _axis_nll(self, k: int, q: float, k2: float, extra: np.ndarray | None, *, reml: bool = False) -> float:
         """Negative log-likelihood of axis k with the mean columns profiled out; ``reml``: the restricted
@@ -792,11 +806,7 @@ class SensorProblem:
         """:meth:`_heldout_folds` without the kept folds."""
         seg = self.sd.segment % FOLDS
         seg[self.sd.segment == self.sd.segment.min()] = -1
-        covs = []
-        for k in range(3):
-            c = float(self.q[k]) * self.gm[k] + self.k2 * self.tmin
-            c[np.diag_indices_from(c)] += self.white[:, k]
-            covs.append(c)
+        covs = [self._covariance(k, float(self.q[k]), self.k2) for k in range(3)]
         out = []
         for f in range(FOLDS):
             te = seg == f
@@ -1039,9 +1049,10 @@ class SensorProblem:
         return u, vals[u]
 
     def _profile_k2(self, qs: list[float], extra: list[np.ndarray | None], *,
-                    reml: bool = False) -> tuple[float, float, float]:
+                    reml: bool = False, with_std: bool = True) -> tuple[float, float, float]:
         """(nll, K^2, std of K) with a random walk ``K^2 min(t_i, t_j)`` shared by the three axes profiled at the
-        current T_c and the drift noise ``qs``; ``extra``: per axis the mean columns besides the base terms."""
+        current T_c and the drift noise ``qs``; ``extra``: per axis the mean columns besides the base terms;
+        ``with_std`` False: the std is not computed (nan; two profile points fewer, the same nll and K^2)."""
         k2_0 = float(np.median(self.white)) / max(float(self.sd.t_s.max()), 1.0)
         grid = [k2_0 * 10.0 ** e for e in np.arange(-2.0, 3.01, 1.0)]
 
@@ -1054,6 +1065,8 @@ class SensorProblem:
         res = optimize.minimize_scalar(lambda u: total(math.exp(u)), bounds=(lo, hi), method="bounded",
                                        options={"xatol": 0.2, "maxiter": 10})
         nll, k2 = (float(res.fun), math.exp(float(res.x))) if res.fun < vals[i] else (vals[i], grid[i])
+        if not with_std:
+            return nll, k2, math.nan
         # uncertainty of K from the curvature of the profile in log K^2
         h = 0.3
         curv = (total(k2 * math.exp(h)) - 2.0 * nll + total(k2 * math.exp(-h))) / h**2
@@ -1068,7 +1081,7 @@ class SensorProblem:
         extra = [self._accepted_axis(k) for k in range(3)]
         best = self.total_nll()
         for start in ([float(q) for q in self.q], [0.0, 0.0, 0.0]):
-            _, k2, _ = self._profile_k2(start, extra)
+            _, k2, _ = self._profile_k2(start, extra, with_std=False)
             fits = [self._profile_q(k, k2, extra[k]) for k in range(3)]
             best = min(best, sum(v for _, v in fits))
         return best
@@ -1160,7 +1173,7 @@ class SensorProblem:
         qs = [float(q) for q in self.q]
         if self.q_class is not None:  # eq. 3's drift noise at most the class's: it must not take up one axis's part
             qs = [min(a, float(b)) for a, b in zip(qs, self.q_class, strict=True)]
-        shared, _, _ = self._profile_k2(qs, extra)
+        shared, _, _ = self._profile_k2(qs, extra, with_std=False)
         k2_0 = float(np.median(self.white)) / max(float(self.sd.t_s.max()), 1.0)
         separate = 0.0
         for k in range(3):
