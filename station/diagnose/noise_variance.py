@@ -16,7 +16,8 @@ loses Q as the die warms, vibration in the rate holds). Here, per sensor and axi
    correlation of first differences, unlike Bartlett's test with its nominal degrees of freedom). Level: the
    locator's :data:`station.diagnose.locator.ALPHA_LOCATED` shared by the three axes (Bonferroni). An axis whose
    noise is below one converter step (:func:`quantum`) is not tested (the quantized differences' variance depends
-   on where the segment's mean falls between steps); a segment with fewer than :data:`MIN_CHUNKS` chunks is left
+   on where the segment's mean falls between steps), nor one with a chunk of differences all zero (an output standing
+   still is no white noise); a segment with fewer than :data:`MIN_CHUNKS` chunks is left
    out.
 4. **Covariate, or none.** The segments' mean log-variances (weighted by their chunk counts) are regressed on one
    covariate at a time (the die temperature, ``|rate|``, time since power-on); one whose F-test passes at the
