@@ -46,6 +46,7 @@ from dataclasses import replace
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from station.diagnose import noise_variance
 from station.diagnose.bootstrap import RESAMPLES, SEED
 from station.diagnose.censoring import Censoring, censor
 from station.diagnose.diagnosis_progress import DONE, STAGES, Progress, Stage
@@ -134,7 +135,8 @@ def diagnose(session: Session, *, warmup_tc_s: Mapping[str, tuple[float, float]]
                      for f, part, c in zip(decision.findings, parts, calibration, strict=True))
     report = DiagnosisReport(
         serial=session.serial, findings=findings, rejected=decision.rejected, inseparable=decision.inseparable,
-        unexplained=decision.unexplained + censoring.unexplained(), location=locate(baseline),
+        unexplained=decision.unexplained + noise_variance.unexplained(session) + censoring.unexplained(),
+        location=locate(baseline),
         warmup_tc_range_s=warmup_ranges(baseline),
         base_fit=BaseFitNoise.of(baseline), rerun=section)
     tell(len(STAGES))
