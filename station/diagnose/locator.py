@@ -450,22 +450,15 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
             return extended[k]
 
         power_on = sd.block_mean(np.asarray(baseline.session.t_s, dtype=float))
-        made_groups: dict[str, dict[str, np.ndarray]] = {}
+        # the several-parameter families, in the order they are tried, each built once per sensor when first needed
+        group_builders = (covariate_choice.heading_columns, covariate_choice.oscillation_columns,
+                          covariate_choice.rate_level_columns)
+        made_groups: dict[int, dict[str, np.ndarray]] = {}
 
-        def heading() -> dict[str, np.ndarray]:
-            if "heading" not in made_groups:
-                made_groups["heading"] = covariate_choice.heading_columns(baseline.session, sd)
-            return made_groups["heading"]
-
-        def oscillation() -> dict[str, np.ndarray]:
-            if "oscillation" not in made_groups:
-                made_groups["oscillation"] = covariate_choice.oscillation_columns(baseline.session, sd)
-            return made_groups["oscillation"]
-
-        def rate_levels() -> dict[str, np.ndarray]:
-            if "rate" not in made_groups:
-                made_groups["rate"] = covariate_choice.rate_level_columns(baseline.session, sd)
-            return made_groups["rate"]
+        def group(i: int) -> dict[str, np.ndarray]:
+            if i not in made_groups:
+                made_groups[i] = group_builders[i](baseline.session, sd)
+            return made_groups[i]
 
         # --- covariate per axis ---
         tests: list[CovariateTest] = []
@@ -520,8 +513,8 @@ def locate(prob: Any, baseline: Any, names: list[str], extra_cells: set[tuple[in
                     best = ("two-level", float(count), 0.0)
             if best[0] == "none":  # terms of several parameters: a world-fixed direction, a slow oscillation
                 qk = _basis(x[rows])
-                for groups in (heading, oscillation, rate_levels):
-                    got = covariate_choice.best_group(groups(), chols[k], qk, rk, in_cells, excess, COVARIATE_SHARE,
+                for i in range(len(group_builders)):
+                    got = covariate_choice.best_group(group(i), chols[k], qk, rk, in_cells, excess, COVARIATE_SHARE,
                                                       ALPHA_LOCATED)
                     if got is not None:
                         tests.append(CovariateTest(AX[k], got[0], got[1], got[2]))
